@@ -118,3 +118,38 @@ class StereoFrame:
     def with_(self, **changes: Any) -> "StereoFrame":
         """A shallow copy with some fields replaced."""
         return replace(self, **changes)
+
+
+@dataclass
+class FusionResult:
+    """What the pipeline produces for one frame and hands to every sink.
+
+    Attributes
+    ----------
+    frame : StereoFrame
+        The input frame (images, calibration, sparse points, ground truth if known).
+    disparity : ndarray
+        H x W float32 dense disparity of the left view; NaN = invalid.
+    depth : ndarray or None
+        H x W float32 metric depth (metres, NaN = invalid) when calibrated.
+    left_vpp, right_vpp : ndarray or None
+        The painted pair fed to the matcher (None when VPP was disabled).
+    occluded : ndarray or None
+        H x W bool, sparse points classified occluded by VPP.
+    vpp_stats : dict
+        VPP counters for the frame (points given/projected/occluded/...).
+    timing_ms : dict
+        Per-stage wall time in milliseconds (e.g. decode, vpp, match, total).
+    metrics : dict
+        Accuracy vs ground truth when the frame has it (bad2, avg, ...).
+    """
+
+    frame: StereoFrame
+    disparity: np.ndarray
+    depth: np.ndarray | None = None
+    left_vpp: np.ndarray | None = None
+    right_vpp: np.ndarray | None = None
+    occluded: np.ndarray | None = None
+    vpp_stats: dict[str, Any] = field(default_factory=dict)
+    timing_ms: dict[str, float] = field(default_factory=dict)
+    metrics: dict[str, float] = field(default_factory=dict)

@@ -1,0 +1,95 @@
+"""The sink plugin interface and registry.
+
+A sink receives every :class:`~vpp_service.frame.FusionResult` the pipeline
+produces. The pipeline calls, in order:
+
+1. ``cls.Options`` -- a frozen dataclass of the sink's options; the whole
+   service config is parsed with :func:`vpp_service.settings.from_mapping`
+   before anything opens, so a bad key fails the start, not frame 1000.
+2. ``sink = cls(options, context)`` then ``sink.open()`` -- acquire resources.
+3. ``sink.write(result)`` from the pipeline's sink thread, once per frame. It
+   must not block for long: a slow consumer (a Rerun viewer, the network) is
+   decoupled inside the sink (own thread + bounded queue) and drops are counted.
+4. ``sink.close(timeout)`` -- flush and release within ``timeout`` seconds,
+   even when a peer or viewer is gone.
+
+``sink.stats()`` returns counters (``written``, ``dropped``, ``errors``) that
+the service reports in its ``@status`` reply.
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Mapping
+
+from vpp_service.frame import FusionResult
+from vpp_service.registry import Registry
+from vpp_service.settings import from_mapping
+
+#: Registered sink classes by name ("zenoh", "rerun", "files").
+SINKS: Registry["Sink"] = Registry("sink")
+
+
+@dataclass
+class SinkContext:
+    """Service-wide facts a sink may need.
+
+    Attributes
+    ----------
+    rig : str
+        Rig name (used in topic names and entity paths).
+    prefix : str
+        Zenoh key prefix (default ``"vpp"``).
+    session : Any
+        The service's open ``zenoh.Session`` when one exists, else None.
+    """
+
+    rig: str = "rig0"
+    prefix: str = "vpp"
+    session: Any = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class Sink(ABC):
+    """Base class of result sinks (see the module docstring for the life cycle)."""
+
+    #: Frozen dataclass describing the options; override in subclasses.
+    Options: ClassVar[type] = None  # type: ignore[assignment]
+
+    def __init__(self, options: Any, context: SinkContext) -> None:
+        self.options = options
+        self.context = context
+        self._counters = {"written": 0, "dropped": 0, "errors": 0}
+
+    def open(self) -> None:  # noqa: B027 - optional hook
+        """Acquire resources (files, sessions, threads)."""
+
+    @abstractmethod
+    def write(self, result: FusionResult) -> None:
+        """Consume one result; never blocks indefinitely."""
+
+    def close(self, timeout: float = 5.0) -> None:  # noqa: B027 - optional hook
+        """Flush and release resources within ``timeout`` seconds."""
+
+    def stats(self) -> dict[str, int]:
+        """Counters: written, dropped, errors (and sink-specific extras)."""
+        return dict(self._counters)
+
+    def __enter__(self) -> "Sink":
+        self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def parse_sink_options(name: str, options: Mapping[str, Any] | None, section: str | None = None) -> Any:
+    """Validate ``options`` for sink ``name`` without building it."""
+    cls = SINKS.get(name)
+    return from_mapping(cls.Options, options or {}, section or f"sinks.{name}")
+
+
+def build_sink(name: str, options: Mapping[str, Any] | None = None, context: SinkContext | None = None) -> Sink:
+    """Build (not open) the sink registered as ``name`` from a plain options mapping."""
+    cls = SINKS.get(name)
+    return cls(parse_sink_options(name, options), context or SinkContext())
