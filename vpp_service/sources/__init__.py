@@ -1,0 +1,1 @@
+"""Frame sources (Zenoh, files, simulator) and the depth-sensor / synthetic-scene simulators."""
