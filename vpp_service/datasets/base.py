@@ -1,0 +1,161 @@
+"""The dataset interface, the ``DATASETS`` registry and :func:`open_dataset`.
+
+A dataset is a folder of rectified stereo scenes. Readers subclass
+:class:`Dataset`, register under a name, describe their layout (used in the
+"nothing matched" error of auto-detection) and implement :meth:`Dataset.detect`
+and :meth:`Dataset._load`. Frames are read lazily, one per ``__getitem__``.
+"""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+from vpp_service.frame import StereoFrame
+from vpp_service.registry import Registry
+
+log = logging.getLogger(__name__)
+
+#: Reader classes by name (``middlebury2014``, ``kitti2012``, ``folder``, ...).
+DATASETS: Registry["Dataset"] = Registry("dataset")
+
+#: Order in which ``open_dataset("auto", ...)`` tries the readers (more specific first).
+AUTO_ORDER: list[str] = []
+
+
+def scene_dirs(root: Path, predicate: Callable[[Path], bool]) -> list[Path]:
+    """Scene folders of ``root``: ``[root]`` if it is a scene itself, else its matching sub-folders (sorted)."""
+    if predicate(root):
+        return [root]
+    return sorted((p for p in root.iterdir() if p.is_dir() and predicate(p)), key=lambda p: p.name)
+
+
+class Dataset:
+    """A lazily loaded sequence of :class:`~vpp_service.frame.StereoFrame`.
+
+    Parameters
+    ----------
+    root : str or Path
+        The dataset folder (or one scene folder).
+
+    Attributes
+    ----------
+    name : str
+        Registry name of the reader.
+    layout : str
+        Human description of the files the reader expects.
+    root : Path
+        The folder given.
+    scenes : list of str
+        Scene names, in loading order.
+    max_disparity : float or None
+        An upper bound of the disparities in the set when known.
+    """
+
+    name: str = ""
+    layout: str = ""
+
+    def __init__(self, root: str | Path) -> None:
+        if not isinstance(root, (str, Path)):
+            raise TypeError(f"root: must be a path, got {type(root).__name__}")
+        self.root = Path(root)
+        if not self.root.is_dir():
+            raise FileNotFoundError(f"root: dataset folder not found: {self.root}")
+        self.scenes: list[str] = []
+        self.max_disparity: float | None = None
+
+    @classmethod
+    def detect(cls, root: Path) -> bool:
+        """True if ``root`` looks like this reader's layout."""
+        raise NotImplementedError
+
+    def _load(self, index: int) -> StereoFrame:
+        raise NotImplementedError
+
+    def __len__(self) -> int:
+        return len(self.scenes)
+
+    def __getitem__(self, index: int | str) -> StereoFrame:
+        """Load frame ``index`` (int, negative allowed) or the scene named ``index``."""
+        if isinstance(index, str):
+            if index not in self.scenes:
+                raise KeyError(f"index: no scene {index!r}; scenes: {', '.join(self.scenes)}")
+            index = self.scenes.index(index)
+        if isinstance(index, bool) or not isinstance(index, int):
+            raise TypeError(f"index: must be an int or a scene name, got {type(index).__name__}")
+        n = len(self.scenes)
+        if not -n <= index < n:
+            raise IndexError(f"index: {index} out of range for {n} scenes")
+        return self._load(index % n)
+
+    def __iter__(self) -> Iterator[StereoFrame]:
+        for i in range(len(self.scenes)):
+            yield self._load(i)
+
+    def select(self, names: list[str] | None = None, limit: int | None = None) -> "Dataset":
+        """Restrict to the scenes in ``names`` (in that order) and/or the first ``limit``; returns self."""
+        if names is not None:
+            unknown = [s for s in names if s not in self.scenes]
+            if unknown:
+                raise ValueError(f"scenes: unknown {unknown}; known: {', '.join(self.scenes)}")
+            keep = [self.scenes.index(s) for s in names]
+            self._subset(keep)
+        if limit is not None:
+            if limit < 1:
+                raise ValueError(f"limit: must be >= 1, got {limit}")
+            self._subset(list(range(min(limit, len(self.scenes)))))
+        return self
+
+    def _subset(self, keep: list[int]) -> None:
+        """Keep the scenes at ``keep`` (subclasses with per-scene lists extend this)."""
+        for attr in ("scenes", "_dirs"):
+            if hasattr(self, attr):
+                seq = getattr(self, attr)
+                setattr(self, attr, [seq[i] for i in keep])
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(root={str(self.root)!r}, scenes={len(self.scenes)})"
+
+
+def open_dataset(name: str, root: str | Path, **opts: Any) -> Dataset:
+    """Open a dataset folder with a named reader, or detect the layout.
+
+    Parameters
+    ----------
+    name : str
+        A registered reader (see ``DATASETS.names()``) or ``"auto"``.
+    root : str or Path
+        The dataset folder (e.g. ``../shared/data/middlebury2005_2006_thirdsize``)
+        or a single scene folder.
+    **opts
+        Reader options (e.g. ``scale=3`` for ``middlebury2006``).
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``root`` is not a folder.
+    ValueError
+        Unknown reader, or (``auto``) no layout matched: the message lists the
+        layouts looked for. Also when the matched folder has no usable scene.
+    """
+    if not isinstance(name, str):
+        raise TypeError(f"name: must be a string, got {type(name).__name__}")
+    if not isinstance(root, (str, Path)):
+        raise TypeError(f"root: must be a path, got {type(root).__name__}")
+    root = Path(root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"root: dataset folder not found: {root}")
+    if name == "auto":
+        order = AUTO_ORDER + [n for n in DATASETS.names() if n not in AUTO_ORDER]
+        for candidate in order:
+            cls = DATASETS.get(candidate)
+            if cls.detect(root):
+                log.info("dataset at %s detected as %s", root, candidate)
+                return cls(root, **opts)
+        looked = "\n".join(f"  - {n}: {DATASETS.get(n).layout}" for n in order)
+        raise ValueError(f"root: no known dataset layout found in {root}; looked for:\n{looked}")
+    cls = DATASETS.get(name)
+    return cls(root, **opts)
+
+
+__all__ = ["DATASETS", "AUTO_ORDER", "Dataset", "open_dataset", "scene_dirs"]

@@ -1,0 +1,54 @@
+"""Reader of the ETH3D two-view stereo set.
+
+Layout: ``<scene>/im0.png``, ``im1.png`` (gray stored as RGB; kept RGB),
+``calib.txt`` (Middlebury-style, without ``vmin``/``vmax``), ground truth
+``disp0GT.pfm`` or ``disp0.pfm`` (+inf invalid -> NaN) and optionally
+``mask0nocc.png`` (255 = non-occluded).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from vpp_service.datasets.base import AUTO_ORDER, DATASETS, scene_dirs
+from vpp_service.datasets.calibfile import parse_middlebury_calib
+from vpp_service.datasets.middlebury import Middlebury2014
+
+
+@DATASETS.register("eth3d")
+class ETH3D(Middlebury2014):
+    """ETH3D two-view scenes (``im0.png``, ``im1.png``, ``calib.txt``, ``disp0GT.pfm``).
+
+    Parameters
+    ----------
+    root : str or Path
+        Folder of scene folders (or one scene folder).
+
+    Notes
+    -----
+    ``max_disparity`` is ``None``: ETH3D's ``ndisp`` is the image width, no useful hint.
+    """
+
+    name = "eth3d"
+    layout = "<scene>/im0.png, im1.png, calib.txt without vmin, disp0GT.pfm or disp0.pfm [mask0nocc.png]"
+
+    @classmethod
+    def _is_mine(cls, p: Path) -> bool:
+        if not cls._is_scene(p):
+            return False
+        try:
+            return "vmin" not in parse_middlebury_calib(p / "calib.txt")
+        except (ValueError, OSError):
+            return False
+
+    @classmethod
+    def detect(cls, root: Path) -> bool:
+        return bool(scene_dirs(root, cls._is_mine))
+
+    def __init__(self, root: str | Path) -> None:
+        super().__init__(root)
+        self.max_disparity = None
+
+
+AUTO_ORDER.insert(0, "eth3d")
+
+__all__ = ["ETH3D"]
