@@ -1,0 +1,682 @@
+"""Wire format v1: msgpack messages between cameras, the service and its clients.
+
+The format is documented (with a byte-level worked example) in
+``docs/wire-format.md``; this module is its reference implementation.
+
+Every decoder validates everything before touching the data: the message size,
+msgpack container limits, the version, the type of every field, image sizes
+against ``h * w * c``, encoded-image headers against the declared size (so a
+hostile PNG/JPEG cannot make us allocate a huge buffer), finite calibration,
+and sparse points inside the image. A violation raises :class:`WireError`
+naming the field. Unknown keys are ignored (forward compatibility).
+
+Topics (``prefix`` defaults to ``"vpp"``)::
+
+    <prefix>/<rig>/in/frame          StereoFrame (left, right, calib, depth?)
+    <prefix>/<rig>/in/left|right     Image topic message (separate-topics mode)
+    <prefix>/<rig>/in/depth          depth topic message (separate-topics mode)
+    <prefix>/<rig>/out/disparity     dense disparity, float32 px, NaN = invalid
+    <prefix>/<rig>/out/depth         dense depth, float32 metres, NaN = invalid
+    <prefix>/<rig>/out/left_vpp|right_vpp   painted pair, as Images
+    <prefix>/<rig>/@status           queryable, JSON
+    <prefix>/<rig>/@alive            liveliness token
+"""
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import cv2
+import msgpack
+import numpy as np
+
+from vpp_service.frame import Calibration, FusionResult, StereoFrame
+
+#: Wire format version written and accepted.
+VERSION = 1
+#: Default key prefix.
+DEFAULT_PREFIX = "vpp"
+#: Output names a sink may publish.
+OUTPUTS = ("disparity", "depth", "left_vpp", "right_vpp")
+
+
+class WireError(ValueError):
+    """A message does not follow the wire format (the message names the field)."""
+
+
+@dataclass(frozen=True)
+class WireLimits:
+    """Hard limits applied while decoding untrusted messages.
+
+    Attributes
+    ----------
+    max_message_bytes : int
+        Largest accepted message (checked before unpacking).
+    max_side : int
+        Largest accepted image height or width.
+    max_pixels : int
+        Largest accepted ``h * w``.
+    max_points : int
+        Largest accepted number of sparse depth points.
+    """
+
+    max_message_bytes: int = 256 * 1024 * 1024
+    max_side: int = 16384
+    max_pixels: int = 64 * 1024 * 1024
+    max_points: int = 16 * 1024 * 1024
+
+
+DEFAULT_LIMITS = WireLimits()
+
+
+# --------------------------------------------------------------------- keys
+def topic(prefix: str, rig: str, name: str) -> str:
+    """Key expression ``<prefix>/<rig>/<name>`` after validating the parts.
+
+    Raises
+    ------
+    ValueError
+        If ``prefix`` or ``rig`` is empty or contains wildcards / ``$`` / ``#`` / ``?``,
+        or ``rig`` contains ``/``.
+    """
+    for arg, value in (("prefix", prefix), ("rig", rig)):
+        if not isinstance(value, str) or not value:
+            raise ValueError(f"{arg} must be a non-empty string, got {value!r}")
+        if any(ch in value for ch in "*$#?") or value.startswith("/") or value.endswith("/"):
+            raise ValueError(f"{arg} must be a plain key expression (no *, $, #, ?, leading/trailing /), got {value!r}")
+    if "/" in rig:
+        raise ValueError(f"rig must not contain '/', got {rig!r}")
+    return f"{prefix}/{rig}/{name}"
+
+
+# ------------------------------------------------------------ small helpers
+def _req(msg: Mapping[str, Any], key: str, path: str) -> Any:
+    if key not in msg:
+        raise WireError(f"{path}{key}: missing")
+    return msg[key]
+
+
+def _int(msg: Mapping[str, Any], key: str, path: str, lo: int, hi: int) -> int:
+    v = _req(msg, key, path)
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise WireError(f"{path}{key}: must be an integer, got {type(v).__name__}")
+    if not lo <= v <= hi:
+        raise WireError(f"{path}{key}: must be in [{lo}, {hi}], got {v}")
+    return v
+
+
+def _float(msg: Mapping[str, Any], key: str, path: str, default: float | None = None) -> float:
+    if key not in msg and default is not None:
+        return default
+    v = _req(msg, key, path)
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise WireError(f"{path}{key}: must be a number, got {type(v).__name__}")
+    if not math.isfinite(v):
+        raise WireError(f"{path}{key}: must be finite, got {v}")
+    return float(v)
+
+
+def _str(msg: Mapping[str, Any], key: str, path: str, choices: tuple[str, ...] | None = None) -> str:
+    v = _req(msg, key, path)
+    if not isinstance(v, str):
+        raise WireError(f"{path}{key}: must be a string, got {type(v).__name__}")
+    if choices is not None and v not in choices:
+        raise WireError(f"{path}{key}: must be one of {list(choices)}, got {v!r}")
+    return v
+
+
+def _bytes(msg: Mapping[str, Any], key: str, path: str) -> bytes:
+    v = _req(msg, key, path)
+    if not isinstance(v, (bytes, bytearray, memoryview)):
+        raise WireError(f"{path}{key}: must be binary (msgpack bin), got {type(v).__name__}")
+    return bytes(v) if not isinstance(v, bytes) else v
+
+
+def _map(v: Any, path: str) -> Mapping[str, Any]:
+    if not isinstance(v, dict):
+        raise WireError(f"{path}: must be a map, got {type(v).__name__}")
+    return v
+
+
+def _f32(data: bytes, count: int, field: str) -> np.ndarray:
+    if len(data) != 4 * count:
+        raise WireError(f"{field}: expected {4 * count} bytes ({count} float32), got {len(data)}")
+    return np.frombuffer(data, dtype="<f4", count=count)
+
+
+def unpack(payload: bytes | bytearray | memoryview, limits: WireLimits = DEFAULT_LIMITS) -> dict[str, Any]:
+    """Unpack one msgpack message with hard container limits.
+
+    Raises
+    ------
+    WireError
+        Too large, truncated/malformed msgpack, or the top level is not a map.
+    """
+    if not isinstance(payload, (bytes, bytearray, memoryview)):
+        raise WireError(f"message: must be bytes, got {type(payload).__name__}")
+    n = len(payload)
+    if n == 0:
+        raise WireError("message: empty")
+    if n > limits.max_message_bytes:
+        raise WireError(f"message: {n} bytes exceeds the limit of {limits.max_message_bytes}")
+    try:
+        msg = msgpack.unpackb(
+            payload, raw=False, strict_map_key=True, use_list=True,
+            max_bin_len=n, max_str_len=min(n, 1 << 20), max_array_len=min(n, 1 << 16),
+            max_map_len=min(n, 1 << 12), max_ext_len=0,
+        )
+    except Exception as exc:  # msgpack raises several unrelated types
+        raise WireError(f"message: not valid msgpack ({type(exc).__name__}: {exc})") from None
+    if not isinstance(msg, dict):
+        raise WireError(f"message: top level must be a map, got {type(msg).__name__}")
+    return msg
+
+
+def _check_version(msg: Mapping[str, Any]) -> None:
+    v = _int(msg, "v", "", 0, 1 << 31)
+    if v != VERSION:
+        raise WireError(f"v: unsupported wire version {v} (this build speaks {VERSION})")
+
+
+# ------------------------------------------------------------------- images
+def _png_size(data: bytes) -> tuple[int, int]:
+    if len(data) < 24 or data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR":
+        raise WireError("data: not a PNG stream")
+    w, h = struct.unpack(">II", data[16:24])
+    return h, w
+
+
+def _jpeg_size(data: bytes) -> tuple[int, int]:
+    if len(data) < 4 or data[:2] != b"\xff\xd8":
+        raise WireError("data: not a JPEG stream")
+    i = 2
+    while i + 4 <= len(data):
+        if data[i] != 0xFF:
+            raise WireError("data: corrupt JPEG marker")
+        marker = data[i + 1]
+        if marker == 0xFF:  # fill byte
+            i += 1
+            continue
+        if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
+            i += 2
+            continue
+        seg = struct.unpack(">H", data[i + 2:i + 4])[0]
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+            if i + 9 > len(data):
+                break
+            h, w = struct.unpack(">HH", data[i + 5:i + 9])
+            return h, w
+        i += 2 + seg
+    raise WireError("data: JPEG without a frame header")
+
+
+def encode_image(img: np.ndarray, enc: str = "raw", quality: int = 90) -> dict[str, Any]:
+    """Wire ``Image`` map of an H x W or H x W x C (C = 1 or 3, RGB) uint8 array.
+
+    Parameters
+    ----------
+    img : ndarray
+        uint8 image.
+    enc : {"raw", "png", "jpeg"}
+        Payload encoding.
+    quality : int
+        JPEG quality (1..100).
+
+    Raises
+    ------
+    TypeError, ValueError
+        Wrong dtype / shape / encoding.
+    """
+    if not isinstance(img, np.ndarray):
+        raise TypeError(f"img must be a numpy array, got {type(img).__name__}")
+    if img.dtype != np.uint8:
+        raise TypeError(f"img must be uint8, got {img.dtype}")
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3) or img.size == 0:
+        raise ValueError(f"img must be non-empty H x W or H x W x 3, got shape {img.shape}")
+    h, w = img.shape[:2]
+    c = 1 if img.ndim == 2 else 3
+    if enc == "raw":
+        data = np.ascontiguousarray(img).tobytes()
+    elif enc in ("png", "jpeg"):
+        bgr = img if c == 1 else cv2.cvtColor(img, cv2.COLOR_RGB2BGR)
+        params = [cv2.IMWRITE_JPEG_QUALITY, int(quality)] if enc == "jpeg" else [cv2.IMWRITE_PNG_COMPRESSION, 1]
+        ok, buf = cv2.imencode(".png" if enc == "png" else ".jpg", bgr, params)
+        if not ok:
+            raise ValueError(f"could not encode image as {enc}")
+        data = buf.tobytes()
+    else:
+        raise ValueError(f"enc must be 'raw', 'png' or 'jpeg', got {enc!r}")
+    return {"h": h, "w": w, "c": c, "dtype": "u8", "enc": enc, "data": data}
+
+
+def decode_image(m: Any, path: str = "image", limits: WireLimits = DEFAULT_LIMITS) -> np.ndarray:
+    """Validate and decode a wire ``Image`` map to an H x W (c=1) or H x W x 3 uint8 array.
+
+    Raises
+    ------
+    WireError
+        Any field missing / of the wrong type, sizes over the limits, data length
+        not ``h * w * c`` (raw), or an encoded header disagreeing with ``h``/``w``.
+    """
+    m = _map(m, path)
+    p = path + "."
+    h = _int(m, "h", p, 1, limits.max_side)
+    w = _int(m, "w", p, 1, limits.max_side)
+    if h * w > limits.max_pixels:
+        raise WireError(f"{p}h: h*w = {h * w} exceeds the limit of {limits.max_pixels}")
+    c = _int(m, "c", p, 1, 3)
+    if c == 2:
+        raise WireError(f"{p}c: must be 1 or 3, got 2")
+    _str(m, "dtype", p, ("u8",))
+    enc = _str(m, "enc", p, ("raw", "png", "jpeg"))
+    data = _bytes(m, "data", p)
+    if enc == "raw":
+        if len(data) != h * w * c:
+            raise WireError(f"{p}data: expected h*w*c = {h * w * c} bytes, got {len(data)}")
+        arr = np.frombuffer(data, dtype=np.uint8).reshape((h, w) if c == 1 else (h, w, 3))
+        return arr
+    try:
+        hh, ww = _png_size(data) if enc == "png" else _jpeg_size(data)
+    except WireError as exc:
+        raise WireError(f"{p}{exc}") from None
+    if (hh, ww) != (h, w):
+        raise WireError(f"{p}data: encoded image is {hh}x{ww}, declared {h}x{w}")
+    flag = cv2.IMREAD_GRAYSCALE if c == 1 else cv2.IMREAD_COLOR
+    arr = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), flag)
+    if arr is None or arr.shape[:2] != (h, w):
+        raise WireError(f"{p}data: could not decode the {enc} stream")
+    if c == 3:
+        arr = cv2.cvtColor(arr, cv2.COLOR_BGR2RGB)
+    return arr
+
+
+# ------------------------------------------------------------ sparse depth
+def encode_depth(frame: StereoFrame, kind: str = "auto") -> dict[str, Any] | None:
+    """Wire ``SparseDepth`` map of a frame's sparse depth, or None when it has none.
+
+    Parameters
+    ----------
+    frame : StereoFrame
+        Uses ``sensor_depth`` (metres) or ``sparse_disparity`` (pixels).
+    kind : {"auto", "points", "disparity_points", "map"}
+        ``auto`` sends metric points when the frame has ``sensor_depth``,
+        else disparity points. ``map`` sends the full float32 map.
+    """
+    if kind not in ("auto", "points", "disparity_points", "map"):
+        raise ValueError(f"kind must be auto, points, disparity_points or map, got {kind!r}")
+    metric = frame.sensor_depth
+    disp = frame.sparse_disparity
+    if kind == "auto":
+        kind = "points" if metric is not None else "disparity_points"
+    if kind in ("points",) and metric is None:
+        raise ValueError("kind='points' needs frame.sensor_depth")
+    src = metric if kind == "points" or (kind == "map" and metric is not None) else disp
+    if src is None:
+        return None
+    src = np.asarray(src, dtype=np.float32)
+    if kind == "map":
+        return {"kind": "map", "h": int(src.shape[0]), "w": int(src.shape[1]),
+                "unit": "m" if src is metric else "px",
+                "data": np.ascontiguousarray(src, dtype="<f4").tobytes()}
+    ys, xs = np.nonzero(np.isfinite(src) & (src > 0))
+    uv = np.stack([xs, ys], axis=1).astype("<f4")
+    vals = src[ys, xs].astype("<f4")
+    out = {"kind": kind, "n": int(len(vals)), "uv": uv.tobytes()}
+    out["z" if kind == "points" else "d"] = vals.tobytes()
+    return out
+
+
+def _splat(h: int, w: int, uv: np.ndarray, vals: np.ndarray, keep: str) -> np.ndarray:
+    """Scatter values at rounded (x, y) into an H x W map (NaN = none), resolving collisions."""
+    out = np.full((h, w), np.nan, dtype=np.float32)
+    if len(vals) == 0:
+        return out
+    x = np.rint(uv[:, 0]).astype(np.int64)
+    y = np.rint(uv[:, 1]).astype(np.int64)
+    # sort so that the winner is written last: nearest point wins
+    order = np.argsort(-vals if keep == "min" else vals, kind="stable")
+    out[y[order], x[order]] = vals[order]
+    return out
+
+
+def decode_depth(m: Any, h: int, w: int, path: str = "depth",
+                 limits: WireLimits = DEFAULT_LIMITS) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Validate a ``SparseDepth`` map; return ``(sensor_depth_m, sparse_disparity_px)``.
+
+    Exactly one of the two is not None. Points are rounded to the nearest pixel;
+    when two land on one pixel the nearest (smaller depth / larger disparity) wins.
+
+    Raises
+    ------
+    WireError
+        Bad kind, counts, byte lengths, non-finite or non-positive values,
+        points outside the ``h`` x ``w`` image, map size not ``h`` x ``w``.
+    """
+    m = _map(m, path)
+    p = path + "."
+    kind = _str(m, "kind", p, ("points", "disparity_points", "map"))
+    if kind == "map":
+        mh = _int(m, "h", p, 1, limits.max_side)
+        mw = _int(m, "w", p, 1, limits.max_side)
+        if (mh, mw) != (h, w):
+            raise WireError(f"{p}h: depth map is {mh}x{mw}, image is {h}x{w}")
+        unit = _str(m, "unit", p, ("m", "px"))
+        arr = _f32(_bytes(m, "data", p), h * w, p + "data").reshape(h, w)
+        if np.isinf(arr).any() or (arr < 0).any():
+            raise WireError(f"{p}data: values must be >= 0 or NaN (0/NaN = none)")
+        arr = arr.astype(np.float32)
+        arr[arr == 0] = np.nan
+        return (arr, None) if unit == "m" else (None, arr)
+    n = _int(m, "n", p, 0, min(limits.max_points, h * w * 4))
+    uv = _f32(_bytes(m, "uv", p), 2 * n, p + "uv").reshape(n, 2)
+    key = "z" if kind == "points" else "d"
+    vals = _f32(_bytes(m, key, p), n, p + key)
+    if n:
+        if not np.isfinite(uv).all():
+            raise WireError(f"{p}uv: coordinates must be finite")
+        if (uv[:, 0] < -0.5).any() or (uv[:, 0] >= w - 0.5).any() or (uv[:, 1] < -0.5).any() or (uv[:, 1] >= h - 0.5).any():
+            raise WireError(f"{p}uv: points must lie inside the {w}x{h} left image")
+        if not np.isfinite(vals).all() or (vals <= 0).any():
+            raise WireError(f"{p}{key}: values must be finite and > 0")
+    arr = _splat(h, w, uv, vals.astype(np.float32), "min" if kind == "points" else "max")
+    return (arr, None) if kind == "points" else (None, arr)
+
+
+def _encode_gt(gt: np.ndarray) -> dict[str, Any]:
+    gt = np.asarray(gt, dtype="<f4")
+    return {"h": int(gt.shape[0]), "w": int(gt.shape[1]), "data": np.ascontiguousarray(gt).tobytes()}
+
+
+def _decode_gt(m: Any, h: int, w: int) -> np.ndarray:
+    m = _map(m, "gt")
+    gh = _int(m, "h", "gt.", 1, 1 << 16)
+    gw = _int(m, "w", "gt.", 1, 1 << 16)
+    if (gh, gw) != (h, w):
+        raise WireError(f"gt.h: ground truth is {gh}x{gw}, image is {h}x{w}")
+    arr = _f32(_bytes(m, "data", "gt."), h * w, "gt.data").reshape(h, w).astype(np.float32)
+    arr[~np.isfinite(arr) | (arr <= 0)] = np.nan
+    return arr
+
+
+def _decode_calib(m: Any) -> Calibration:
+    m = _map(m, "calib")
+    f = _float(m, "f", "calib.")
+    b = _float(m, "baseline", "calib.")
+    doffs = _float(m, "doffs", "calib.", 0.0)
+    if f <= 0:
+        raise WireError(f"calib.f: must be > 0, got {f}")
+    if b <= 0:
+        raise WireError(f"calib.baseline: must be > 0, got {b}")
+    cx = _float(m, "cx", "calib.") if "cx" in m else None
+    cy = _float(m, "cy", "calib.") if "cy" in m else None
+    return Calibration(f=f, baseline=b, doffs=doffs, cx=cx, cy=cy)
+
+
+def _header(msg: Mapping[str, Any]) -> tuple[str, int, int]:
+    _check_version(msg)
+    rig = _str(msg, "rig", "")
+    if not rig or len(rig) > 256:
+        raise WireError("rig: must be a non-empty string of at most 256 characters")
+    seq = _int(msg, "seq", "", 0, (1 << 63) - 1)
+    stamp = _int(msg, "stamp_ns", "", 0, (1 << 63) - 1)
+    return rig, seq, stamp
+
+
+# ------------------------------------------------------------------- frames
+def encode_frame(frame: StereoFrame, enc: str = "raw", depth_kind: str = "auto",
+                 include_gt: bool = True) -> bytes:
+    """Serialize a :class:`StereoFrame` as a v1 ``in/frame`` message.
+
+    Parameters
+    ----------
+    frame : StereoFrame
+        Needs ``calib``; sparse depth and ground truth are optional.
+    enc : {"raw", "png", "jpeg"}
+        Image encoding.
+    depth_kind : str
+        See :func:`encode_depth`.
+    include_gt : bool
+        Send ``frame.gt_disparity`` in the ``gt`` extension field.
+
+    Raises
+    ------
+    TypeError, ValueError
+        Not a frame, missing calibration, mismatched shapes.
+    """
+    if not isinstance(frame, StereoFrame):
+        raise TypeError(f"frame must be a StereoFrame, got {type(frame).__name__}")
+    if frame.calib is None:
+        raise ValueError("frame.calib is required on the wire")
+    if frame.left.shape != frame.right.shape:
+        raise ValueError(f"frame.left {frame.left.shape} and frame.right {frame.right.shape} differ")
+    msg: dict[str, Any] = {
+        "v": VERSION, "rig": frame.rig, "seq": int(frame.seq), "stamp_ns": int(frame.stamp_ns),
+        "left": encode_image(frame.left, enc), "right": encode_image(frame.right, enc),
+        "calib": frame.calib.to_dict(),
+    }
+    depth = encode_depth(frame, depth_kind)
+    if depth is not None:
+        msg["depth"] = depth
+    if include_gt and frame.gt_disparity is not None:
+        msg["gt"] = _encode_gt(frame.gt_disparity)
+    return msgpack.packb(msg, use_bin_type=True)
+
+
+def decode_frame(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> StereoFrame:
+    """Parse and fully validate an ``in/frame`` message into a :class:`StereoFrame`.
+
+    Metric depth arrives as ``sensor_depth`` (the pipeline converts it to
+    disparity with the calibration); disparity points/maps as ``sparse_disparity``.
+
+    Raises
+    ------
+    WireError
+        Anything wrong, naming the field.
+    """
+    msg = unpack(payload, limits)
+    rig, seq, stamp = _header(msg)
+    left = decode_image(_req(msg, "left", ""), "left", limits)
+    right = decode_image(_req(msg, "right", ""), "right", limits)
+    if left.shape != right.shape:
+        raise WireError(f"right: shape {right.shape} differs from left {left.shape}")
+    calib = _decode_calib(_req(msg, "calib", ""))
+    h, w = left.shape[:2]
+    sensor = disp = gt = None
+    if msg.get("depth") is not None:
+        sensor, disp = decode_depth(msg["depth"], h, w, "depth", limits)
+    if msg.get("gt") is not None:
+        gt = _decode_gt(msg["gt"], h, w)
+    return StereoFrame(left=left, right=right, calib=calib, sparse_disparity=disp, sensor_depth=sensor,
+                       gt_disparity=gt, rig=rig, seq=seq, stamp_ns=stamp)
+
+
+# -------------------------------------------- separate-topics part messages
+def encode_part(frame: StereoFrame, part: str, enc: str = "raw", depth_kind: str = "auto") -> bytes | None:
+    """One separate-topics message (``part`` = "left", "right" or "depth").
+
+    ``left`` carries the calibration (and ground truth, as an extension);
+    ``depth`` returns None when the frame has no sparse depth.
+    """
+    base: dict[str, Any] = {"v": VERSION, "rig": frame.rig, "seq": int(frame.seq), "stamp_ns": int(frame.stamp_ns)}
+    if part in ("left", "right"):
+        base["image"] = encode_image(frame.left if part == "left" else frame.right, enc)
+        if part == "left":
+            if frame.calib is None:
+                raise ValueError("frame.calib is required on the wire")
+            base["calib"] = frame.calib.to_dict()
+            if frame.gt_disparity is not None:
+                base["gt"] = _encode_gt(frame.gt_disparity)
+    elif part == "depth":
+        d = encode_depth(frame, depth_kind)
+        if d is None:
+            return None
+        base["depth"] = d
+        base["h"], base["w"] = int(frame.left.shape[0]), int(frame.left.shape[1])
+    else:
+        raise ValueError(f"part must be 'left', 'right' or 'depth', got {part!r}")
+    return msgpack.packb(base, use_bin_type=True)
+
+
+@dataclass
+class Part:
+    """A decoded separate-topics message (one of left / right / depth)."""
+
+    part: str
+    rig: str
+    seq: int
+    stamp_ns: int
+    image: np.ndarray | None = None
+    calib: Calibration | None = None
+    gt: np.ndarray | None = None
+    sensor_depth: np.ndarray | None = None
+    sparse_disparity: np.ndarray | None = None
+
+
+def decode_part(payload: bytes, part: str, limits: WireLimits = DEFAULT_LIMITS) -> Part:
+    """Parse and validate a separate-topics message for ``part``.
+
+    Raises
+    ------
+    WireError
+        Anything wrong, naming the field.
+    """
+    if part not in ("left", "right", "depth"):
+        raise ValueError(f"part must be 'left', 'right' or 'depth', got {part!r}")
+    msg = unpack(payload, limits)
+    rig, seq, stamp = _header(msg)
+    out = Part(part=part, rig=rig, seq=seq, stamp_ns=stamp)
+    if part in ("left", "right"):
+        out.image = decode_image(_req(msg, "image", ""), "image", limits)
+        if part == "left":
+            out.calib = _decode_calib(_req(msg, "calib", ""))
+            if msg.get("gt") is not None:
+                out.gt = _decode_gt(msg["gt"], *out.image.shape[:2])
+    else:
+        h = _int(msg, "h", "", 1, limits.max_side)
+        w = _int(msg, "w", "", 1, limits.max_side)
+        out.sensor_depth, out.sparse_disparity = decode_depth(_req(msg, "depth", ""), h, w, "depth", limits)
+    return out
+
+
+def assemble(left: Part, right: Part, depth: Part | None) -> StereoFrame:
+    """Join synchronized parts into a :class:`StereoFrame` (left's seq/stamp win).
+
+    Raises
+    ------
+    WireError
+        Image shapes differ, or the depth size differs from the images.
+    """
+    if left.image.shape != right.image.shape:
+        raise WireError(f"right.image: shape {right.image.shape} differs from left {left.image.shape}")
+    sensor = disp = None
+    if depth is not None:
+        dm = depth.sensor_depth if depth.sensor_depth is not None else depth.sparse_disparity
+        if dm.shape != left.image.shape[:2]:
+            raise WireError(f"depth.h: depth is {dm.shape}, image is {left.image.shape[:2]}")
+        sensor, disp = depth.sensor_depth, depth.sparse_disparity
+    return StereoFrame(left=left.image, right=right.image, calib=left.calib, sparse_disparity=disp,
+                       sensor_depth=sensor, gt_disparity=left.gt, rig=left.rig, seq=left.seq,
+                       stamp_ns=left.stamp_ns)
+
+
+# ------------------------------------------------------------------ outputs
+def _map_message(result: FusionResult, arr: np.ndarray, extra: Mapping[str, Any]) -> bytes:
+    fr = result.frame
+    msg = {
+        "v": VERSION, "rig": fr.rig, "seq": int(fr.seq), "stamp_ns": int(fr.stamp_ns),
+        "h": int(arr.shape[0]), "w": int(arr.shape[1]), "dtype": "f32",
+        "data": np.ascontiguousarray(arr, dtype="<f4").tobytes(),
+        "calib": fr.calib.to_dict() if fr.calib is not None else None,
+        "timing_ms": {str(k): float(v) for k, v in result.timing_ms.items()},
+    }
+    msg.update(extra)
+    return msgpack.packb(msg, use_bin_type=True)
+
+
+def encode_output(result: FusionResult, name: str, enc: str = "raw") -> bytes | None:
+    """Serialize one output (``disparity``, ``depth``, ``left_vpp``, ``right_vpp``).
+
+    Returns None when the result does not have that output (e.g. no depth
+    without calibration, no painted pair when VPP was skipped). The
+    ``disparity`` message also carries ``metrics`` (vs ground truth) and
+    ``vpp`` (VPP counters) as extensions when known.
+    """
+    if name not in OUTPUTS:
+        raise ValueError(f"name must be one of {OUTPUTS}, got {name!r}")
+    fr = result.frame
+    if name == "disparity":
+        extra = {}
+        if result.metrics:
+            extra["metrics"] = {k: float(v) for k, v in result.metrics.items()}
+        if result.vpp_stats:
+            extra["vpp"] = {k: (int(v) if isinstance(v, (int, np.integer)) else float(v))
+                            for k, v in result.vpp_stats.items() if isinstance(v, (int, float, np.number))}
+        return _map_message(result, result.disparity, extra)
+    if name == "depth":
+        return None if result.depth is None else _map_message(result, result.depth, {})
+    img = result.left_vpp if name == "left_vpp" else result.right_vpp
+    if img is None:
+        return None
+    msg = {"v": VERSION, "rig": fr.rig, "seq": int(fr.seq), "stamp_ns": int(fr.stamp_ns),
+           "image": encode_image(img, enc)}
+    return msgpack.packb(msg, use_bin_type=True)
+
+
+@dataclass
+class OutputMap:
+    """A decoded ``out/disparity`` or ``out/depth`` message."""
+
+    rig: str
+    seq: int
+    stamp_ns: int
+    data: np.ndarray
+    calib: Calibration | None
+    timing_ms: dict[str, float]
+    metrics: dict[str, float]
+    extra: dict[str, Any]
+
+
+def decode_output(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> OutputMap:
+    """Parse and validate an ``out/disparity`` or ``out/depth`` message.
+
+    Raises
+    ------
+    WireError
+        Anything wrong, naming the field.
+    """
+    msg = unpack(payload, limits)
+    rig, seq, stamp = _header(msg)
+    h = _int(msg, "h", "", 1, limits.max_side)
+    w = _int(msg, "w", "", 1, limits.max_side)
+    _str(msg, "dtype", "", ("f32",))
+    data = _f32(_bytes(msg, "data", ""), h * w, "data").reshape(h, w)
+    calib = _decode_calib(msg["calib"]) if msg.get("calib") is not None else None
+    timing = _map(msg.get("timing_ms", {}), "timing_ms")
+    metrics = _map(msg.get("metrics", {}), "metrics")
+    for k, v in list(timing.items()) + list(metrics.items()):
+        if not isinstance(k, str) or isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise WireError(f"timing_ms/metrics.{k}: must map names to numbers")
+    extra = {k: v for k, v in msg.items() if k not in
+             ("v", "rig", "seq", "stamp_ns", "h", "w", "dtype", "data", "calib", "timing_ms", "metrics")}
+    return OutputMap(rig=rig, seq=seq, stamp_ns=stamp, data=data, calib=calib,
+                     timing_ms={k: float(v) for k, v in timing.items()},
+                     metrics={k: float(v) for k, v in metrics.items()}, extra=extra)
+
+
+def decode_output_image(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> tuple[int, np.ndarray]:
+    """Parse an ``out/left_vpp`` / ``out/right_vpp`` message; returns ``(seq, image)``."""
+    msg = unpack(payload, limits)
+    _, seq, _ = _header(msg)
+    return seq, decode_image(_req(msg, "image", ""), "image", limits)
+
+
+__all__ = [
+    "VERSION", "DEFAULT_PREFIX", "OUTPUTS", "WireError", "WireLimits", "DEFAULT_LIMITS", "topic", "unpack",
+    "encode_image", "decode_image", "encode_depth", "decode_depth", "encode_frame", "decode_frame",
+    "encode_part", "decode_part", "Part", "assemble", "encode_output", "decode_output", "OutputMap",
+    "decode_output_image",
+]

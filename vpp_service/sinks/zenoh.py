@@ -1,0 +1,144 @@
+"""Zenoh sink: publish results on ``<prefix>/<rig>/out/<name>`` (wire format v1).
+
+Outputs (``outputs`` option, lazy: only the listed ones are serialized):
+``disparity`` and ``depth`` (float32 maps) are published with
+``CongestionControl.BLOCK`` at ``Priority.DATA`` on purpose: Zenoh's default
+``DROP`` can silently lose large fragmented messages, and these are the
+product. ``left_vpp`` / ``right_vpp`` (visualization images) go at
+``Priority.DATA_LOW`` with ``CongestionControl.DROP``: under load they give way.
+
+``write`` never blocks the pipeline: results go through a bounded queue
+(``queue_size``, oldest dropped and counted) to this sink's own thread, which
+serializes and publishes. ``close(timeout)`` flushes what is queued within the
+timeout, then undeclares the publishers (the session belongs to the service).
+"""
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from vpp_service.frame import FusionResult
+from vpp_service.service import wire
+from vpp_service.sinks.base import SINKS, Sink, SinkContext
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ZenohSinkOptions:
+    """Options of the ``zenoh`` sink.
+
+    Attributes
+    ----------
+    outputs : list of str
+        Which of ``disparity``, ``depth``, ``left_vpp``, ``right_vpp`` to publish.
+    image_enc : {"raw", "png", "jpeg"}
+        Encoding of the ``left_vpp`` / ``right_vpp`` images.
+    queue_size : int
+        Results buffered between the pipeline and the publishing thread.
+    """
+
+    outputs: list[str] = field(default_factory=lambda: ["disparity", "depth"])
+    image_enc: Literal["raw", "png", "jpeg"] = "png"
+    queue_size: int = 4
+
+    def __post_init__(self) -> None:
+        if not self.outputs:
+            raise ValueError("outputs: must list at least one output")
+        for name in self.outputs:
+            if name not in wire.OUTPUTS:
+                raise ValueError(f"outputs: unknown output {name!r}; known: {', '.join(wire.OUTPUTS)}")
+        if len(set(self.outputs)) != len(self.outputs):
+            raise ValueError("outputs: duplicates")
+        if self.queue_size < 1:
+            raise ValueError(f"queue_size must be >= 1, got {self.queue_size}")
+
+
+@SINKS.register("zenoh")
+class ZenohSink(Sink):
+    """Publish results over Zenoh (see the module docstring). Needs ``context.session``."""
+
+    Options = ZenohSinkOptions
+
+    def __init__(self, options: ZenohSinkOptions, context: SinkContext) -> None:
+        super().__init__(options, context)
+        self._pubs: dict[str, Any] = {}
+        self._queue: queue.Queue[FusionResult | None] = queue.Queue(maxsize=options.queue_size)
+        self._thread: threading.Thread | None = None
+        self._abort = threading.Event()
+
+    def open(self) -> None:
+        """Declare one publisher per output and start the publishing thread."""
+        import zenoh
+
+        session = self.context.session
+        if session is None:
+            raise ValueError("sinks.zenoh: needs an open zenoh session (service.zenoh section)")
+        for name in self.options.outputs:
+            visual = name in ("left_vpp", "right_vpp")
+            self._pubs[name] = session.declare_publisher(
+                wire.topic(self.context.prefix, self.context.rig, f"out/{name}"),
+                congestion_control=zenoh.CongestionControl.DROP if visual else zenoh.CongestionControl.BLOCK,
+                priority=zenoh.Priority.DATA_LOW if visual else zenoh.Priority.DATA,
+            )
+        self._thread = threading.Thread(target=self._loop, name="sink-zenoh", daemon=True)
+        self._thread.start()
+
+    def write(self, result: FusionResult) -> None:
+        """Queue ``result`` for publishing; drops (and counts) the oldest when full."""
+        while True:
+            try:
+                self._queue.put_nowait(result)
+                return
+            except queue.Full:
+                try:
+                    self._queue.get_nowait()
+                    self._counters["dropped"] += 1
+                except queue.Empty:
+                    pass
+
+    def _loop(self) -> None:
+        while True:
+            result = self._queue.get()
+            if result is None or self._abort.is_set():
+                return
+            try:
+                for name, pub in self._pubs.items():
+                    payload = wire.encode_output(result, name, self.options.image_enc)
+                    if payload is not None:
+                        pub.put(payload)
+                self._counters["written"] += 1
+            except Exception as exc:  # a closed session, a bad result: count, keep going
+                self._counters["errors"] += 1
+                log.warning("zenoh sink: %s", exc)
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Flush the queue within ``timeout`` seconds, then undeclare the publishers."""
+        if self._thread is not None:
+            deadline = time.monotonic() + timeout
+            while True:
+                try:
+                    self._queue.put(None, timeout=0.05)
+                    break
+                except queue.Full:
+                    if time.monotonic() > deadline:
+                        self._abort.set()
+                        break
+            self._thread.join(max(0.0, deadline - time.monotonic()))
+            if self._thread.is_alive():
+                self._abort.set()
+                log.warning("zenoh sink: publishing thread did not finish within %.1f s", timeout)
+            self._thread = None
+        for pub in self._pubs.values():
+            try:
+                pub.undeclare()
+            except Exception:  # session already closed
+                pass
+        self._pubs.clear()
+
+
+__all__ = ["ZenohSink", "ZenohSinkOptions"]

@@ -1,0 +1,165 @@
+"""The frame-source plugin interface and registry.
+
+A source produces :class:`~vpp_service.frame.StereoFrame` objects for the
+pipeline. Life cycle, mirroring :mod:`vpp_service.sinks.base`:
+
+1. ``cls.Options`` -- a frozen dataclass of the source's options, validated with
+   :func:`vpp_service.settings.from_mapping` before anything opens.
+2. ``src = cls(options, context)`` then ``src.open()`` -- acquire resources
+   (files, Zenoh subscribers, the simulator's scene).
+3. ``src.start(emit, reject)`` -- start producing from the source's own thread:
+   ``emit(frame)`` hands over a frame (the pipeline's queue policy decides what
+   happens when it is full), ``reject(reason)`` reports a bad input message,
+   which the pipeline counts and logs (rate-limited). When a finite source has
+   nothing left it sets :attr:`Source.finished`.
+4. ``src.stop(timeout)`` -- stop producing and release, within ``timeout`` seconds.
+
+``src.stats()`` returns counters (``emitted``, ``rejected`` and extras) for ``@status``.
+"""
+from __future__ import annotations
+
+import threading
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, Callable, ClassVar, Mapping
+
+from vpp_service.frame import StereoFrame
+from vpp_service.registry import Registry
+from vpp_service.settings import from_mapping
+
+#: Registered source classes by name ("zenoh", "files", "sim").
+SOURCES: Registry["Source"] = Registry("source")
+
+#: ``emit(frame)`` callback type; returns False when the frame was dropped.
+Emit = Callable[[StereoFrame], bool]
+#: ``reject(reason)`` callback type.
+Reject = Callable[[str], None]
+
+
+@dataclass
+class SourceContext:
+    """Service-wide facts a source may need.
+
+    Attributes
+    ----------
+    rig : str
+        Rig name (topic names; frames get this rig unless the wire says otherwise).
+    prefix : str
+        Zenoh key prefix (default ``"vpp"``).
+    session : Any
+        The service's open ``zenoh.Session`` when one exists, else None.
+    """
+
+    rig: str = "rig0"
+    prefix: str = "vpp"
+    session: Any = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class Source(ABC):
+    """Base class of frame sources (see the module docstring for the life cycle)."""
+
+    #: Frozen dataclass describing the options; override in subclasses.
+    Options: ClassVar[type] = None  # type: ignore[assignment]
+
+    def __init__(self, options: Any, context: SourceContext) -> None:
+        self.options = options
+        self.context = context
+        self._counters: dict[str, int] = {"emitted": 0, "rejected": 0}
+        #: Set when a finite source has produced its last frame.
+        self.finished = threading.Event()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def open(self) -> None:  # noqa: B027 - optional hook
+        """Acquire resources."""
+
+    def start(self, emit: Emit, reject: Reject | None = None) -> None:
+        """Start producing frames from a daemon thread running :meth:`run`."""
+        if self._thread is not None:
+            raise RuntimeError("source already started")
+        reject = reject or (lambda reason: None)
+
+        def body() -> None:
+            try:
+                self.run(emit, reject)
+            finally:
+                self.finished.set()
+
+        self._stop.clear()
+        self._thread = threading.Thread(target=body, name=f"source-{type(self).__name__}", daemon=True)
+        self._thread.start()
+
+    @abstractmethod
+    def run(self, emit: Emit, reject: Reject) -> None:
+        """Produce frames until :meth:`stopping` or the source is exhausted."""
+
+    def stopping(self) -> bool:
+        """True once :meth:`stop` was called."""
+        return self._stop.is_set()
+
+    def wait(self, seconds: float) -> bool:
+        """Sleep up to ``seconds``; returns True when asked to stop meanwhile."""
+        return self._stop.wait(seconds)
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Stop producing and join the thread within ``timeout`` seconds."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+        self.close()
+
+    def close(self) -> None:  # noqa: B027 - optional hook
+        """Release resources (called by :meth:`stop`)."""
+
+    def stats(self) -> dict[str, int]:
+        """Counters: emitted, rejected (and source-specific extras)."""
+        return dict(self._counters)
+
+
+def parse_source_options(name: str, options: Mapping[str, Any] | None, section: str | None = None) -> Any:
+    """Validate ``options`` for source ``name`` without building it."""
+    cls = SOURCES.get(name)
+    return from_mapping(cls.Options, options or {}, section or f"source.{name}")
+
+
+def build_source(name: str, options: Mapping[str, Any] | None = None,
+                 context: SourceContext | None = None) -> Source:
+    """Build (not open) the source registered as ``name`` from a plain options mapping."""
+    cls = SOURCES.get(name)
+    return cls(parse_source_options(name, options), context or SourceContext())
+
+
+__all__ = ["SOURCES", "Source", "SourceContext", "Emit", "Reject", "build_source", "parse_source_options"]
+
+
+class Pacer:
+    """Release frames at ``rate_hz`` (0 = as fast as possible) without drift.
+
+    Parameters
+    ----------
+    rate_hz : float
+        Target rate; 0 disables pacing.
+    """
+
+    def __init__(self, rate_hz: float) -> None:
+        if not rate_hz >= 0:
+            raise ValueError(f"rate_hz must be >= 0, got {rate_hz!r}")
+        self.period = 1.0 / rate_hz if rate_hz > 0 else 0.0
+        self._next: float | None = None
+
+    def wait(self, source: Source) -> bool:
+        """Sleep until the next slot; True when ``source`` was asked to stop meanwhile."""
+        import time
+
+        if self.period == 0:
+            return source.stopping()
+        now = time.monotonic()
+        if self._next is None:
+            self._next = now
+        delay = self._next - now
+        self._next = max(self._next + self.period, now - self.period)  # no burst after a stall
+        return source.wait(delay) if delay > 0 else source.stopping()
+
+
+__all__ += ["Pacer"]

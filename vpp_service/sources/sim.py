@@ -1,0 +1,211 @@
+"""Simulator source: a scene with ground truth plus a simulated sparse depth sensor.
+
+The default source of ``vpp-service run``. Scenes:
+
+- ``motorcycle`` (default): Middlebury 2014 *Motorcycle* as shipped by
+  scikit-image (``skimage.data.stereo_motorcycle()``, 741 x 500, the left
+  view's disparity with +inf = invalid, turned into NaN). scikit-image ships no
+  calibration, so a nominal one is used: Middlebury's own ``calib.txt`` for
+  Motorcycle scaled to this quarter resolution (:data:`MOTORCYCLE_CALIB`:
+  f = 3979.911 / 4 px, baseline = 0.193 m, doffs = 124.343 / 4 px). Depths
+  derived from it are plausible, not measured.
+- ``synthetic``: :func:`vpp_service.sources.synthetic.make_scene` (options in ``scene_options``).
+- ``dataset``: the ground truth of a dataset read with
+  :func:`vpp_service.datasets.open_dataset` (``dataset``, ``root``), frames in turn.
+
+Every frame gets a new ``seq`` (0, 1, ...), a wall-clock ``stamp_ns`` and a fresh
+simulated sensor draw (seed = ``seed + seq``) from
+:func:`vpp_service.sources.sensors.build_sensor` (``uniform`` 5 % by default).
+Frames are paced at ``rate_hz`` (0 = as fast as possible); ``count = 0`` runs forever.
+"""
+from __future__ import annotations
+
+import functools
+import time
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import cv2
+import numpy as np
+
+from vpp_service.frame import Calibration, StereoFrame
+from vpp_service.sources.base import SOURCES, Emit, Pacer, Reject, Source, SourceContext
+
+#: Nominal calibration of scikit-image's quarter-size Motorcycle (see the module docstring).
+MOTORCYCLE_CALIB = Calibration(f=3979.911 / 4, baseline=0.193001, doffs=124.343 / 4)
+
+
+@functools.lru_cache(maxsize=1)
+def _motorcycle_arrays() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    from skimage import data
+
+    left, right, disp = data.stereo_motorcycle()
+    disp = np.asarray(disp, dtype=np.float32).copy()
+    disp[~np.isfinite(disp) | (disp <= 0)] = np.nan
+    for a in (left, right, disp):
+        a.setflags(write=False)
+    return left, right, disp
+
+
+def scale_frame(frame: StereoFrame, scale: float) -> StereoFrame:
+    """Resize a frame (images, ground truth, calibration) by ``scale`` in (0, 1].
+
+    Disparities scale with the image width; ground truth is resampled with
+    nearest neighbour (no mixing across depth edges).
+
+    Raises
+    ------
+    ValueError
+        ``scale`` outside (0, 1].
+    """
+    if not 0 < scale <= 1:
+        raise ValueError(f"scale must be in (0, 1], got {scale!r}")
+    if scale == 1:
+        return frame
+    h, w = frame.shape
+    size = (max(8, round(w * scale)), max(8, round(h * scale)))
+    sx = size[0] / w
+    left = cv2.resize(frame.left, size, interpolation=cv2.INTER_AREA)
+    right = cv2.resize(frame.right, size, interpolation=cv2.INTER_AREA)
+    gt = None
+    if frame.gt_disparity is not None:
+        gt = cv2.resize(frame.gt_disparity, size, interpolation=cv2.INTER_NEAREST) * np.float32(sx)
+    calib = frame.calib
+    if calib is not None:
+        calib = Calibration(f=calib.f * sx, baseline=calib.baseline, doffs=calib.doffs * sx,
+                            cx=None if calib.cx is None else calib.cx * sx,
+                            cy=None if calib.cy is None else calib.cy * sx)
+    nocc = None
+    if frame.nocc_mask is not None:
+        nocc = cv2.resize(frame.nocc_mask.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST).astype(bool)
+    return frame.with_(left=left, right=right, gt_disparity=gt, calib=calib, nocc_mask=nocc,
+                       sparse_disparity=None, sensor_depth=None)
+
+
+def motorcycle_frame(scale: float = 1.0) -> StereoFrame:
+    """The scikit-image Motorcycle pair as a :class:`StereoFrame` with ground truth.
+
+    Parameters
+    ----------
+    scale : float
+        Resize factor in (0, 1] (disparities and calibration scale with it).
+    """
+    left, right, disp = _motorcycle_arrays()
+    frame = StereoFrame(left=left, right=right, calib=MOTORCYCLE_CALIB, gt_disparity=disp,
+                        name="motorcycle")
+    return scale_frame(frame, scale)
+
+
+@dataclass(frozen=True)
+class SimSourceOptions:
+    """Options of the ``sim`` source.
+
+    Attributes
+    ----------
+    scene : {"motorcycle", "synthetic", "dataset"}
+        What to simulate (see the module docstring).
+    scene_options : dict
+        Keyword arguments of ``make_scene`` (synthetic scene).
+    dataset, root : str
+        Dataset name (or "auto") and folder for ``scene = "dataset"``.
+    scale : float
+        Resize factor in (0, 1] applied to every frame.
+    sensor : str
+        Sensor simulator name (``uniform``, ``lidar``, ``tof``) or ``"none"``.
+    sensor_options : dict
+        Options of the sensor simulator (e.g. ``{density = 0.05}``).
+    rate_hz : float
+        Frame rate; 0 = as fast as possible.
+    count : int
+        Frames to produce; 0 = forever.
+    seed : int
+        Base seed; frame ``seq`` uses ``seed + seq``.
+    """
+
+    scene: Literal["motorcycle", "synthetic", "dataset"] = "motorcycle"
+    scene_options: dict = field(default_factory=dict)
+    dataset: str = "auto"
+    root: str = ""
+    scale: float = 1.0
+    sensor: str = "uniform"
+    sensor_options: dict = field(default_factory=lambda: {"density": 0.05})
+    rate_hz: float = 10.0
+    count: int = 0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not 0 < self.scale <= 1:
+            raise ValueError(f"scale must be in (0, 1], got {self.scale}")
+        if not 0 <= self.rate_hz <= 10000:
+            raise ValueError(f"rate_hz must be in [0, 10000], got {self.rate_hz}")
+        if self.count < 0:
+            raise ValueError(f"count must be >= 0, got {self.count}")
+        if self.scene == "dataset" and not self.root:
+            raise ValueError("root: required when scene = 'dataset'")
+
+
+def build_sensor_or_none(name: str, options: dict) -> Any:
+    """The named sensor simulator, or None for ``"none"``."""
+    if name == "none":
+        return None
+    from vpp_service.sources.sensors import build_sensor
+
+    return build_sensor(name, options)
+
+
+@SOURCES.register("sim")
+class SimSource(Source):
+    """Simulated camera rig (see the module docstring)."""
+
+    Options = SimSourceOptions
+
+    def __init__(self, options: SimSourceOptions, context: SourceContext) -> None:
+        super().__init__(options, context)
+        self._scenes: list[StereoFrame] | None = None
+        self._dataset: Any = None
+        self.sensor: Any = None
+
+    def open(self) -> None:
+        """Load the scene and build the sensor (fails early on bad options)."""
+        o = self.options
+        self.sensor = build_sensor_or_none(o.sensor, dict(o.sensor_options))
+        if o.scene == "motorcycle":
+            self._scenes = [motorcycle_frame(o.scale)]
+        elif o.scene == "synthetic":
+            from vpp_service.sources.synthetic import make_scene
+
+            opts = {"height": 240, "width": 320, **dict(o.scene_options)}
+            self._scenes = [scale_frame(make_scene(seed=o.seed, **opts), o.scale)]
+        else:
+            from vpp_service.datasets import open_dataset
+
+            self._dataset = open_dataset(o.dataset, o.root)
+            if len(self._dataset) == 0:
+                raise ValueError(f"source.root: no frames in dataset {o.dataset!r} at {o.root}")
+
+    def frame(self, seq: int) -> StereoFrame:
+        """Frame number ``seq`` (scene, sensor draw, identity), without pacing."""
+        o = self.options
+        if self._scenes is not None:
+            base = self._scenes[seq % len(self._scenes)]
+        else:
+            base = scale_frame(self._dataset[seq % len(self._dataset)], o.scale)
+        base = base.with_(rig=self.context.rig, seq=seq, stamp_ns=time.time_ns(), meta=dict(base.meta))
+        if self.sensor is not None:
+            base = self.sensor.simulate(base, o.seed + seq)
+        return base
+
+    def run(self, emit: Emit, reject: Reject) -> None:
+        """Emit frames at ``rate_hz`` until ``count`` or stopped."""
+        pacer = Pacer(self.options.rate_hz)
+        seq = 0
+        while self.options.count == 0 or seq < self.options.count:
+            if pacer.wait(self):
+                return
+            frame = self.frame(seq)
+            self._counters["emitted"] += 1
+            emit(frame)
+            seq += 1
+
+
+__all__ = ["SimSource", "SimSourceOptions", "MOTORCYCLE_CALIB", "motorcycle_frame", "scale_frame"]

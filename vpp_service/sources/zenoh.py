@@ -1,0 +1,160 @@
+"""Zenoh source: receive wire-format v1 frames from cameras on the network.
+
+Subscribes with ring-channel handlers (the Zenoh callback thread only pushes
+into a bounded ring: no decoding, no blocking there; when the service falls
+behind the oldest samples are overwritten). This source's thread drains the
+rings, decodes and validates every message (:mod:`vpp_service.service.wire`)
+and emits frames; a bad message is rejected (counted, reason reported) and the
+source keeps serving.
+
+Topics: ``<prefix>/<rig>/in/frame`` (default), or with ``topics = "separate"``
+``in/left``, ``in/right`` and ``in/depth`` joined by
+:class:`vpp_service.service.sync.Synchronizer` (``sync = "exact"`` by seq or
+``"approximate"`` by stamp within ``sync_threshold_ms``).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from vpp_service.service import wire
+from vpp_service.service.sync import Synchronizer
+from vpp_service.sources.base import SOURCES, Emit, Reject, Source, SourceContext
+
+
+@dataclass(frozen=True)
+class ZenohSourceOptions:
+    """Options of the ``zenoh`` source.
+
+    Attributes
+    ----------
+    topics : {"frame", "separate"}
+        One message per frame on ``in/frame``, or separate ``in/left``,
+        ``in/right``, ``in/depth`` topics.
+    with_depth : bool
+        In separate mode, whether ``in/depth`` is part of every set (False:
+        frames are assembled from left + right only and carry no depth).
+    sync : {"exact", "approximate"}
+        Separate-topics matching rule.
+    sync_queue_size : int
+        Messages kept per topic while waiting for partners.
+    sync_threshold_ms : float
+        Approximate sync: largest stamp difference inside a set.
+    ring_size : int
+        Zenoh ring-channel capacity per subscriber (oldest overwritten).
+    max_message_mb : float
+        Messages larger than this are rejected before unpacking.
+    poll_s : float
+        Idle poll period of the receive thread.
+    """
+
+    topics: Literal["frame", "separate"] = "frame"
+    with_depth: bool = True
+    sync: Literal["exact", "approximate"] = "exact"
+    sync_queue_size: int = 10
+    sync_threshold_ms: float = 20.0
+    ring_size: int = 4
+    max_message_mb: float = 256.0
+    poll_s: float = 0.002
+
+    def __post_init__(self) -> None:
+        if self.sync_queue_size < 1:
+            raise ValueError(f"sync_queue_size must be >= 1, got {self.sync_queue_size}")
+        if not self.sync_threshold_ms >= 0:
+            raise ValueError(f"sync_threshold_ms must be >= 0, got {self.sync_threshold_ms}")
+        if self.ring_size < 1:
+            raise ValueError(f"ring_size must be >= 1, got {self.ring_size}")
+        if not 0 < self.max_message_mb <= 4096:
+            raise ValueError(f"max_message_mb must be in (0, 4096], got {self.max_message_mb}")
+        if not 0 < self.poll_s <= 1:
+            raise ValueError(f"poll_s must be in (0, 1], got {self.poll_s}")
+
+
+@SOURCES.register("zenoh")
+class ZenohSource(Source):
+    """Frames from Zenoh (see the module docstring). Needs ``context.session``."""
+
+    Options = ZenohSourceOptions
+
+    def __init__(self, options: ZenohSourceOptions, context: SourceContext) -> None:
+        super().__init__(options, context)
+        self._subs: dict[str, Any] = {}
+        self._limits = wire.WireLimits(max_message_bytes=int(options.max_message_mb * 1024 * 1024))
+        self.sync: Synchronizer | None = None
+        self._counters.update({"received": 0, "sync_dropped": 0})
+
+    def open(self) -> None:
+        """Declare the subscribers on the service's session."""
+        import zenoh
+
+        session = self.context.session
+        if session is None:
+            raise ValueError("source.zenoh: needs an open zenoh session (service.zenoh section)")
+        o = self.options
+        parts = ["frame"] if o.topics == "frame" else (["left", "right", "depth"] if o.with_depth else ["left", "right"])
+        for part in parts:
+            key = wire.topic(self.context.prefix, self.context.rig, f"in/{part}")
+            self._subs[part] = session.declare_subscriber(key, zenoh.handlers.RingChannel(o.ring_size))
+        if o.topics == "separate":
+            self.sync = Synchronizer(parts, o.sync, o.sync_queue_size, int(o.sync_threshold_ms * 1e6))
+
+    def run(self, emit: Emit, reject: Reject) -> None:
+        """Drain the rings, decode, validate, synchronize and emit until stopped."""
+        while not self.stopping():
+            got = False
+            for part, sub in self._subs.items():
+                try:
+                    sample = sub.try_recv()
+                except Exception:  # subscriber undeclared during shutdown
+                    return
+                if sample is None:
+                    continue
+                got = True
+                self._counters["received"] += 1
+                self._handle(part, sample, emit, reject)
+            if not got:
+                self.wait(self.options.poll_s)
+
+    def _handle(self, part: str, sample: Any, emit: Emit, reject: Reject) -> None:
+        recv_ns = time.time_ns()
+        t0 = time.perf_counter()
+        try:
+            payload = sample.payload.to_bytes()
+            if part == "frame":
+                frame = wire.decode_frame(payload, self._limits)
+            else:
+                p = wire.decode_part(payload, part, self._limits)
+                assert self.sync is not None
+                before = self.sync.dropped
+                joined = self.sync.add(part, p.seq, p.stamp_ns, p)
+                self._counters["sync_dropped"] += self.sync.dropped - before
+                if joined is None:
+                    return
+                frame = wire.assemble(joined["left"], joined["right"], joined.get("depth"))
+        except wire.WireError as exc:
+            self._counters["rejected"] += 1
+            reject(f"{sample.key_expr}: {exc}")
+            return
+        frame.meta["recv_ns"] = recv_ns
+        frame.meta["timing_ms"] = {"decode": (time.perf_counter() - t0) * 1e3}
+        self._counters["emitted"] += 1
+        emit(frame)
+
+    def close(self) -> None:
+        """Undeclare the subscribers (the session belongs to the service)."""
+        for sub in self._subs.values():
+            try:
+                sub.undeclare()
+            except Exception:  # session already closed
+                pass
+        self._subs.clear()
+
+    def stats(self) -> dict[str, Any]:
+        out: dict[str, Any] = dict(self._counters)
+        if self.sync is not None:
+            out["sync"] = self.sync.stats()
+        return out
+
+
+__all__ = ["ZenohSource", "ZenohSourceOptions"]
