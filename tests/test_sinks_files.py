@@ -1,0 +1,225 @@
+"""Tests of the ``files`` sink (real files in tmp_path, read back with OpenCV/numpy)."""
+from __future__ import annotations
+
+import os
+
+import cv2
+import numpy as np
+import pytest
+
+from vpp_service.datasets.pfm import read_pfm
+from vpp_service.frame import Calibration, FusionResult, StereoFrame
+from vpp_service.settings import SettingsError
+from vpp_service.sinks import SINKS, build_sink
+from vpp_service.sinks.base import SinkContext
+from vpp_service.sinks.files import FilesSink, decode_png16, encode_png16
+
+H, W = 24, 32
+
+
+@pytest.fixture
+def result() -> FusionResult:
+    rng = np.random.default_rng(7)
+    left = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    right = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    disp = rng.uniform(0.5, 200.0, (H, W)).astype(np.float32)
+    disp[3, 4] = np.nan
+    disp[10, :5] = np.nan
+    disp[0, 0] = np.inf
+    calib = Calibration(f=500.0, baseline=0.1)
+    depth = (calib.f * calib.baseline / disp).astype(np.float32)
+    depth[~np.isfinite(disp)] = np.nan
+    frame = StereoFrame(left, right, calib, rig="rigA", seq=42, stamp_ns=123, name="scene")
+    return FusionResult(frame, disp, depth=depth, left_vpp=left // 2, right_vpp=right // 2)
+
+
+def make_sink(tmp_path, **opts) -> FilesSink:
+    opts.setdefault("dir", str(tmp_path))
+    sink = build_sink("files", opts, SinkContext(rig="ctxrig"))
+    sink.open()
+    return sink
+
+
+def test_registered():
+    assert SINKS.get("files") is FilesSink
+
+
+def test_png16_round_trip(tmp_path, result):
+    sink = make_sink(tmp_path, formats=["png16"])
+    sink.write(result)
+    path = tmp_path / "rigA_000042_disparity.png"
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    assert img.dtype == np.uint16 and img.shape == (H, W)
+    valid = np.isfinite(result.disparity)
+    assert np.all(img[~valid] == 0)
+    assert np.all(img[valid] > 0)
+    err = np.abs(img[valid] / 256.0 - result.disparity[valid])
+    assert err.max() <= 1.0 / 256
+    back = decode_png16(path.read_bytes())
+    assert np.array_equal(np.isnan(back), ~valid)
+    assert sink.stats() == {"written": 1, "dropped": 0, "errors": 0, "files": 1}
+
+
+def test_pfm_round_trip_and_layout(tmp_path, result):
+    sink = make_sink(tmp_path, formats=["pfm"])
+    sink.write(result)
+    path = tmp_path / "rigA_000042_disparity.pfm"
+    back = read_pfm(path)
+    valid = np.isfinite(result.disparity)
+    assert np.array_equal(back[valid], result.disparity[valid])
+    assert np.all(np.isposinf(back[~valid]))  # NaN and inf are written as +inf
+    raw = path.read_bytes()
+    header = b"Pf\n%d %d\n-1\n" % (W, H)
+    assert raw.startswith(header)
+    rows = np.frombuffer(raw[len(header):], "<f4").reshape(H, W)
+    assert np.array_equal(rows[0], result.disparity[-1])  # stored bottom-up, little-endian
+
+
+def test_npy_and_depth_round_trip(tmp_path, result):
+    sink = make_sink(tmp_path, formats=["npy"], depth=True)
+    sink.write(result)
+    d = np.load(tmp_path / "rigA_000042_disparity.npy")
+    assert d.dtype == np.float32
+    valid = np.isfinite(result.disparity)
+    assert np.array_equal(np.isnan(d), ~valid)  # inf becomes NaN too
+    assert np.array_equal(d[valid], result.disparity[valid])
+    z = np.load(tmp_path / "rigA_000042_depth.npy")
+    assert np.array_equal(z, result.depth, equal_nan=True)
+
+
+def test_painted_pngs(tmp_path, result):
+    sink = make_sink(tmp_path, formats=["png16"], painted=True)
+    sink.write(result)
+    for side, img in (("left", result.left_vpp), ("right", result.right_vpp)):
+        bgr = cv2.imread(str(tmp_path / f"rigA_000042_{side}_vpp.png"), cv2.IMREAD_COLOR)
+        assert np.array_equal(bgr[..., ::-1], img)
+
+
+def test_missing_optional_data_is_skipped(tmp_path, result):
+    result.left_vpp = result.right_vpp = result.depth = None
+    sink = make_sink(tmp_path, formats=["npy"], painted=True, depth=True)
+    sink.write(result)
+    assert sorted(os.listdir(tmp_path)) == ["rigA_000042_disparity.npy"]
+    assert sink.stats()["errors"] == 0
+
+
+def test_all_formats_no_temp_leftovers(tmp_path, result):
+    sink = make_sink(tmp_path, formats=["png16", "pfm", "npy"], painted=True, depth=True)
+    for seq in range(3):
+        result.frame.seq = seq
+        sink.write(result)
+    sink.close()
+    names = sorted(os.listdir(tmp_path))
+    assert len(names) == 3 * 6
+    assert not [n for n in names if n.startswith(".")]
+    assert sink.stats()["written"] == 3 and sink.stats()["files"] == 18
+
+
+def test_pattern_and_context_rig(tmp_path, result):
+    result.frame.rig = ""
+    sink = make_sink(tmp_path, formats=["npy"], pattern="{name}-{rig}-{stamp_ns}")
+    paths = sink.output_paths(result)
+    assert paths == {"npy": tmp_path / "scene-ctxrig-123_disparity.npy"}
+    sink.write(result)
+    assert paths["npy"].is_file()
+
+
+@pytest.mark.parametrize("overwrite", [False, True])
+def test_overwrite(tmp_path, result, overwrite):
+    sink = make_sink(tmp_path, formats=["npy"], overwrite=overwrite)
+    sink.write(result)
+    result.disparity = result.disparity + 1.0
+    sink.write(result)  # errors are counted, never raised
+    d = np.load(tmp_path / "rigA_000042_disparity.npy")
+    expected = result.disparity if overwrite else result.disparity - 1.0
+    valid = np.isfinite(expected)
+    assert np.array_equal(d[valid], expected[valid]) and np.all(np.isnan(d[~valid]))
+    assert sink.stats()["errors"] == (0 if overwrite else 1)
+    assert sink.stats()["written"] == (2 if overwrite else 1)
+    assert not [n for n in os.listdir(tmp_path) if n.startswith(".")]
+
+
+def test_bad_result_arrays_are_counted(tmp_path, result):
+    result.disparity = np.zeros((H, W, 2), np.float32)
+    sink = make_sink(tmp_path, formats=["png16", "pfm", "npy"])
+    sink.write(result)
+    assert sink.stats()["errors"] == 3 and sink.stats()["written"] == 0
+    assert os.listdir(tmp_path) == []
+
+
+def test_write_type_and_state_errors(tmp_path, result):
+    sink = build_sink("files", {"dir": str(tmp_path)})
+    with pytest.raises(RuntimeError, match="before open"):
+        sink.write(result)
+    sink.open()
+    with pytest.raises(TypeError, match="result"):
+        sink.write("not a result")
+
+
+def test_open_missing_dir(tmp_path):
+    sink = build_sink("files", {"dir": str(tmp_path / "nope")})
+    with pytest.raises(FileNotFoundError, match="sinks.files.dir.*does not exist"):
+        sink.open()
+
+
+def test_open_create_dir(tmp_path, result):
+    sink = make_sink(tmp_path, dir=str(tmp_path / "a" / "b"), create_dir=True, formats=["npy"])
+    sink.write(result)
+    assert (tmp_path / "a" / "b" / "rigA_000042_disparity.npy").is_file()
+
+
+def test_open_not_a_dir(tmp_path):
+    f = tmp_path / "file"
+    f.write_text("x")
+    with pytest.raises(NotADirectoryError, match="sinks.files.dir"):
+        build_sink("files", {"dir": str(f)}).open()
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0, reason="root can write anywhere")
+def test_open_unwritable_dir(tmp_path):
+    d = tmp_path / "ro"
+    d.mkdir(mode=0o500)
+    with pytest.raises(PermissionError, match="not writable"):
+        build_sink("files", {"dir": str(d)}).open()
+
+
+@pytest.mark.parametrize(
+    "opts, key",
+    [
+        ({}, "dir"),
+        ({"dir": ""}, "dir"),
+        ({"dir": "x", "formats": ["tiff"]}, "formats[0]"),
+        ({"dir": "x", "formats": []}, "formats"),
+        ({"dir": "x", "formats": ["npy", "npy"]}, "formats"),
+        ({"dir": "x", "formats": "npy"}, "formats"),
+        ({"dir": "x", "pattern": "{bogus}"}, "pattern"),
+        ({"dir": "x", "pattern": "a/{seq}"}, "pattern"),
+        ({"dir": "x", "overwrite": "yes"}, "overwrite"),
+        ({"dir": "x", "colour": True}, "colour"),
+    ],
+)
+def test_bad_options(opts, key):
+    with pytest.raises(SettingsError, match=rf"sinks\.files.*{key.replace('[', '.').replace(']', '.')}"):
+        build_sink("files", opts)
+
+
+def test_encode_png16_reference():
+    d = np.array([[np.nan, 0.0, -1.0, 1e-4], [1.0, 2.5, 255.99, 300.0]], np.float32)
+    img = cv2.imdecode(np.frombuffer(encode_png16(d), np.uint8), cv2.IMREAD_UNCHANGED)
+    expected = np.array([[0, 0, 0, 1], [256, 640, 65533, 65535]], np.uint16)
+    assert np.array_equal(img, expected)
+
+
+@pytest.mark.parametrize(
+    "bad, exc",
+    [("x", TypeError), (np.zeros((2, 2), bool), TypeError), (np.zeros((2, 2, 2)), ValueError), (np.zeros((0, 3)), ValueError)],
+)
+def test_encode_png16_errors(bad, exc):
+    with pytest.raises(exc, match="disparity"):
+        encode_png16(bad)
+
+
+@pytest.mark.parametrize("bad", [b"", b"not a png", cv2.imencode(".png", np.zeros((2, 2), np.uint8))[1].tobytes()])
+def test_decode_png16_errors(bad):
+    with pytest.raises(ValueError, match="data"):
+        decode_png16(bad)

@@ -1,0 +1,353 @@
+"""The ``files`` sink: write every result to disk as image/array files.
+
+Disparity formats (``formats`` option, any subset):
+
+``png16``
+    16-bit PNG, value = round(disparity * 256) (KITTI convention), 0 = invalid.
+    Valid disparities are clamped to ``[1, 65535]`` so a tiny valid value never
+    reads back as invalid and values above 255.996 px saturate.
+``pfm``
+    float32 little-endian PFM, rows stored bottom-up (Middlebury convention);
+    invalid pixels (NaN) are written as ``+inf``, as in Middlebury ground truth.
+``npy``
+    float32 ``.npy``; invalid = NaN (exactly the in-memory convention).
+
+Extras: ``painted`` saves the VPP-painted pair as 8-bit PNGs and ``depth`` saves
+metric depth (metres, NaN invalid) as float32 ``.npy``.
+
+File names are ``<pattern>_<what>.<ext>`` where ``pattern`` (default
+``{rig}_{seq:06d}``) may use ``rig``, ``seq``, ``stamp_ns`` and ``name``, and
+``<what>`` is ``disparity``, ``depth``, ``left_vpp`` or ``right_vpp``.
+
+Every file is written to a temporary name in the same folder and then renamed
+into place, so readers never see a partial file. After :meth:`FilesSink.open`
+succeeded, write failures (disk full, existing file with ``overwrite = false``,
+bad arrays) are logged and counted in ``stats()["errors"]``, never raised.
+"""
+from __future__ import annotations
+
+import io
+import logging
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from vpp_service.datasets.pfm import write_pfm
+from vpp_service.frame import FusionResult
+from vpp_service.sinks.base import SINKS, Sink, SinkContext
+
+log = logging.getLogger(__name__)
+
+#: Supported disparity formats.
+FORMATS = ("png16", "pfm", "npy")
+_EXT = {"png16": ".png", "pfm": ".pfm", "npy": ".npy"}
+_PATTERN_FIELDS = {"rig": "rig0", "seq": 0, "stamp_ns": 0, "name": "scene"}
+
+
+@dataclass(frozen=True)
+class FilesSinkOptions:
+    """Options of the ``files`` sink.
+
+    Attributes
+    ----------
+    dir : str
+        Output folder (required); must exist and be writable unless
+        ``create_dir`` is true.
+    formats : tuple of str
+        Non-empty subset of ``("png16", "pfm", "npy")``; default ``("png16",)``.
+    painted : bool
+        Also save the painted pair (``left_vpp``/``right_vpp``) as PNG when present.
+    depth : bool
+        Also save metric depth as float32 ``.npy`` when present.
+    pattern : str
+        File name stem, a ``str.format`` pattern over ``rig``, ``seq``,
+        ``stamp_ns``, ``name``; must not contain path separators.
+    overwrite : bool
+        Replace existing files (default false: an existing file is an error,
+        counted, and the new file is not written).
+    create_dir : bool
+        Create ``dir`` (with parents) at open instead of failing when missing.
+    """
+
+    dir: str
+    formats: tuple[str, ...] = ("png16",)
+    painted: bool = False
+    depth: bool = False
+    pattern: str = "{rig}_{seq:06d}"
+    overwrite: bool = False
+    create_dir: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.dir.strip():
+            raise ValueError("dir: must not be empty")
+        if not self.formats:
+            raise ValueError(f"formats: must name at least one of {list(FORMATS)}")
+        for i, f in enumerate(self.formats):
+            if f not in FORMATS:
+                raise ValueError(f"formats[{i}]: must be one of {list(FORMATS)}, got {f!r}")
+        if len(set(self.formats)) != len(self.formats):
+            raise ValueError(f"formats: duplicate entries in {list(self.formats)}")
+        try:
+            stem = self.pattern.format(**_PATTERN_FIELDS)
+        except (KeyError, IndexError, ValueError) as exc:
+            raise ValueError(
+                f"pattern: {self.pattern!r} is not a valid pattern over {sorted(_PATTERN_FIELDS)} ({exc!r})"
+            ) from None
+        if not stem or "/" in stem or "\\" in stem or stem in (".", ".."):
+            raise ValueError(f"pattern: {self.pattern!r} must give a plain file name, got {stem!r}")
+
+
+def _check_disparity(disparity: Any) -> np.ndarray:
+    if not isinstance(disparity, np.ndarray):
+        raise TypeError(f"disparity: must be a numpy ndarray, got {type(disparity).__name__}")
+    if not (np.issubdtype(disparity.dtype, np.floating) or np.issubdtype(disparity.dtype, np.integer)):
+        raise TypeError(f"disparity: must have a real numeric dtype, got {disparity.dtype}")
+    if disparity.ndim != 2 or disparity.size == 0:
+        raise ValueError(f"disparity: must be a non-empty H x W array, got shape {disparity.shape}")
+    return disparity
+
+
+def encode_png16(disparity: np.ndarray) -> bytes:
+    """Encode a disparity map as a KITTI-style 16-bit PNG.
+
+    Parameters
+    ----------
+    disparity : ndarray
+        H x W real array; NaN, inf and values <= 0 are invalid.
+
+    Returns
+    -------
+    bytes
+        PNG file contents; pixel = clip(round(d * 256), 1, 65535), 0 = invalid.
+
+    Raises
+    ------
+    TypeError, ValueError
+        If ``disparity`` is not a non-empty 2-D real array.
+    """
+    d = _check_disparity(disparity).astype(np.float64, copy=False)
+    valid = np.isfinite(d) & (d > 0)
+    q = np.zeros(d.shape, np.uint16)
+    q[valid] = np.clip(np.rint(d[valid] * 256.0), 1, 65535).astype(np.uint16)
+    ok, buf = cv2.imencode(".png", q)
+    if not ok:  # pragma: no cover - OpenCV always encodes uint16 PNG
+        raise RuntimeError("OpenCV failed to encode a 16-bit PNG")
+    return buf.tobytes()
+
+
+def decode_png16(data: bytes) -> np.ndarray:
+    """Decode :func:`encode_png16` output back to float32 disparity (NaN invalid).
+
+    Parameters
+    ----------
+    data : bytes
+        PNG file contents (16-bit, one channel).
+
+    Returns
+    -------
+    ndarray
+        H x W float32, ``value / 256``; 0 becomes NaN.
+
+    Raises
+    ------
+    ValueError
+        If ``data`` is not a single-channel 16-bit PNG.
+    """
+    if not isinstance(data, (bytes, bytearray, memoryview)) or len(data) == 0:
+        raise ValueError("data: must be non-empty PNG bytes")
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None or img.dtype != np.uint16 or img.ndim != 2:
+        raise ValueError("data: not a single-channel 16-bit PNG")
+    out = img.astype(np.float32) / np.float32(256.0)
+    out[img == 0] = np.nan
+    return out
+
+
+def _float_nan(a: np.ndarray) -> np.ndarray:
+    """float32 copy with every non-finite value set to NaN."""
+    out = np.array(a, dtype=np.float32, copy=True)
+    out[~np.isfinite(out)] = np.nan
+    return out
+
+
+@SINKS.register("files")
+class FilesSink(Sink):
+    """Write disparity (and optionally painted pair and depth) files per result.
+
+    Parameters
+    ----------
+    options : FilesSinkOptions
+        Parsed options (see :func:`vpp_service.sinks.base.build_sink`).
+    context : SinkContext
+        Service context; ``context.rig`` is used when a frame has no rig name.
+
+    Examples
+    --------
+    >>> sink = build_sink("files", {"dir": "/tmp/out", "formats": ["png16", "npy"]})  # doctest: +SKIP
+    >>> with sink:
+    ...     sink.write(result)
+    """
+
+    Options = FilesSinkOptions
+
+    def __init__(self, options: FilesSinkOptions, context: SinkContext | None = None) -> None:
+        if not isinstance(options, FilesSinkOptions):
+            raise TypeError(f"options: must be FilesSinkOptions, got {type(options).__name__}")
+        super().__init__(options, context or SinkContext())
+        self._dir = Path(options.dir).expanduser()
+        self._open = False
+        self._counters["files"] = 0
+
+    # -- life cycle -----------------------------------------------------------------
+    def open(self) -> None:
+        """Check that ``dir`` exists (or create it) and is writable.
+
+        Raises
+        ------
+        FileNotFoundError
+            ``dir`` is missing and ``create_dir`` is false.
+        NotADirectoryError
+            ``dir`` exists but is not a folder.
+        PermissionError
+            ``dir`` cannot be written to.
+        """
+        d = self._dir
+        if self.options.create_dir and not d.exists():
+            try:
+                d.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise PermissionError(f"sinks.files.dir: cannot create {str(d)!r}: {exc}") from None
+        if not d.exists():
+            raise FileNotFoundError(
+                f"sinks.files.dir: output folder {str(d)!r} does not exist (create it or set create_dir = true)"
+            )
+        if not d.is_dir():
+            raise NotADirectoryError(f"sinks.files.dir: {str(d)!r} is not a folder")
+        try:  # os.access lies for root and on read-only mounts; really try
+            fd, probe = tempfile.mkstemp(prefix=".vpp-probe-", dir=d)
+            os.close(fd)
+            os.unlink(probe)
+        except OSError as exc:
+            raise PermissionError(f"sinks.files.dir: output folder {str(d)!r} is not writable: {exc}") from None
+        self._open = True
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Nothing is buffered (writes are synchronous); marks the sink closed."""
+        self._open = False
+
+    # -- writing --------------------------------------------------------------------
+    def output_paths(self, result: FusionResult) -> dict[str, Path]:
+        """The files :meth:`write` would produce for ``result``, by kind.
+
+        Keys are ``png16``/``pfm``/``npy`` (the enabled formats), and
+        ``depth``, ``left_vpp``, ``right_vpp`` when enabled (whether or not the
+        result carries that data).
+
+        Raises
+        ------
+        TypeError
+            If ``result`` is not a FusionResult.
+        """
+        if not isinstance(result, FusionResult):
+            raise TypeError(f"result: must be a FusionResult, got {type(result).__name__}")
+        fr = result.frame
+        stem = self.options.pattern.format(
+            rig=fr.rig or self.context.rig, seq=fr.seq, stamp_ns=fr.stamp_ns, name=fr.name or "frame"
+        )
+        paths = {f: self._dir / f"{stem}_disparity{_EXT[f]}" for f in self.options.formats}
+        if self.options.depth:
+            paths["depth"] = self._dir / f"{stem}_depth.npy"
+        if self.options.painted:
+            paths["left_vpp"] = self._dir / f"{stem}_left_vpp.png"
+            paths["right_vpp"] = self._dir / f"{stem}_right_vpp.png"
+        return paths
+
+    def write(self, result: FusionResult) -> None:
+        """Write the files for one result (synchronously, each atomically).
+
+        Raises
+        ------
+        TypeError
+            If ``result`` is not a FusionResult.
+        RuntimeError
+            If the sink is not open.
+        """
+        if not self._open:
+            raise RuntimeError("files sink: write() before open() or after close()")
+        paths = self.output_paths(result)
+        failures = 0
+        for kind, path in paths.items():
+            try:
+                writer = self._writer(kind, result)
+                if writer is None:
+                    continue
+                self._atomic_write(path, writer)
+                self._counters["files"] += 1
+            except Exception as exc:  # noqa: BLE001 - counted, logged, never raised
+                failures += 1
+                log.warning("files sink: cannot write %s: %s", path, exc)
+        self._counters["errors"] += failures
+        if failures == 0:
+            self._counters["written"] += 1
+
+    def _writer(self, kind: str, result: FusionResult):
+        """A ``f(tmp_path)`` writing ``kind`` for ``result``, or None when absent."""
+        if kind == "png16":
+            data = encode_png16(result.disparity)
+            return lambda p: Path(p).write_bytes(data)
+        if kind == "pfm":
+            d = _check_disparity(result.disparity)
+            pfm = np.array(d, dtype=np.float32, copy=True)
+            pfm[~np.isfinite(pfm)] = np.inf
+            return lambda p: write_pfm(p, pfm)
+        if kind in ("npy", "depth"):
+            arr = result.disparity if kind == "npy" else result.depth
+            if arr is None:
+                return None
+            if kind == "npy":
+                _check_disparity(arr)
+            buf = io.BytesIO()
+            np.save(buf, _float_nan(arr), allow_pickle=False)
+            data = buf.getvalue()
+            return lambda p: Path(p).write_bytes(data)
+        img = result.left_vpp if kind == "left_vpp" else result.right_vpp
+        if img is None:
+            return None
+        if not isinstance(img, np.ndarray) or img.dtype != np.uint8 or img.ndim not in (2, 3):
+            raise ValueError(f"{kind}: must be an H x W (x C) uint8 image")
+        bgr = img[..., ::-1] if img.ndim == 3 and img.shape[2] == 3 else img
+        ok, buf = cv2.imencode(".png", np.ascontiguousarray(bgr))
+        if not ok:
+            raise ValueError(f"{kind}: OpenCV could not encode shape {img.shape}")
+        data = buf.tobytes()
+        return lambda p: Path(p).write_bytes(data)
+
+    def _atomic_write(self, path: Path, writer) -> None:
+        """Write via a temp file in the same folder, then rename into place."""
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        os.close(fd)
+        try:
+            writer(tmp)
+            if self.options.overwrite:
+                os.replace(tmp, path)
+            else:
+                # link() fails if the target exists: atomic no-clobber.
+                try:
+                    os.link(tmp, path)
+                except FileExistsError:
+                    raise FileExistsError(f"{path} exists and overwrite = false") from None
+                except OSError:  # file system without hard links: check, then rename
+                    if path.exists():
+                        raise FileExistsError(f"{path} exists and overwrite = false") from None
+                    os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+
+
+__all__ = ["FORMATS", "FilesSink", "FilesSinkOptions", "decode_png16", "encode_png16"]
