@@ -128,10 +128,11 @@ def test_pattern_and_context_rig(tmp_path, result):
 def test_overwrite(tmp_path, result, overwrite):
     sink = make_sink(tmp_path, formats=["npy"], overwrite=overwrite)
     sink.write(result)
-    result.disparity = result.disparity + 1.0
+    first = result.disparity
+    result.disparity = first + 1.0
     sink.write(result)  # errors are counted, never raised
     d = np.load(tmp_path / "rigA_000042_disparity.npy")
-    expected = result.disparity if overwrite else result.disparity - 1.0
+    expected = result.disparity if overwrite else first
     valid = np.isfinite(expected)
     assert np.array_equal(d[valid], expected[valid]) and np.all(np.isnan(d[~valid]))
     assert sink.stats()["errors"] == (0 if overwrite else 1)
