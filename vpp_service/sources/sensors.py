@@ -1,0 +1,379 @@
+"""Sparse depth-sensor simulators: ground-truth disparity -> what a sensor would measure.
+
+None of the benchmark scenes ships a raw single-sweep scan, so the sparse input
+of VPP is simulated from the ground truth. Every sensor returns a copy of the
+frame with ``sparse_disparity`` (H x W float32, NaN = no point) and, when the
+frame has a calibration, ``sensor_depth`` (metres, 0 = no point). Without a
+calibration the metric models (range limits, range noise) use a nominal focal
+length and baseline (options ``nominal_f``, ``nominal_baseline``).
+
+Depth and disparity are related by ``Z = f * b / (d + doffs)``.
+
+Sensors (``SENSORS.names()``):
+
+* ``uniform`` - the paper's protocol: a fraction ``density`` of the valid
+  ground-truth pixels, drawn uniformly at random (seeded), values = ground
+  truth plus optional Gaussian disparity noise ``noise_px``.
+* ``lidar`` - a spinning multi-beam LiDAR at the left camera centre: ``beams``
+  elevations evenly spread over ``[fov_down, fov_up]`` degrees and azimuths every
+  ``azimuth_step`` degrees; each ray hits the image at
+  ``u = cx + f tan(az)``, ``v = cy - f tan(el) / cos(az)`` (so beams are slightly
+  curved rows), measures the range there with Gaussian noise ``noise_m`` and
+  drops returns outside ``[min_range, max_range]`` or with probability ``dropout``.
+* ``tof`` - a low-resolution time-of-flight camera: a ``grid_w`` x ``grid_h``
+  grid of cell centres over the image, depth noise ``sigma = noise_k * z**2``,
+  returns beyond ``max_range`` (or below ``min_range``) lost, ``dropout``.
+
+All randomness comes from ``numpy.random.default_rng(seed)``: the same frame and
+seed give the same points.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+
+from vpp_service.frame import StereoFrame
+from vpp_service.registry import Registry
+from vpp_service.settings import from_mapping
+
+#: Sensor classes by name.
+SENSORS: Registry["Sensor"] = Registry("sensor")
+
+
+def _positive(name: str, v: float) -> None:
+    if not np.isfinite(v) or v <= 0:
+        raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
+
+
+def _non_negative(name: str, v: float) -> None:
+    if not np.isfinite(v) or v < 0:
+        raise ValueError(f"{name}: must be a finite number >= 0, got {v!r}")
+
+
+def _probability(name: str, v: float) -> None:
+    if not np.isfinite(v) or not 0 <= v < 1:
+        raise ValueError(f"{name}: must be in [0, 1), got {v!r}")
+
+
+class Sensor:
+    """Base class: turns a frame's ground truth into sparse measurements.
+
+    Parameters
+    ----------
+    options : Options dataclass of the subclass
+        Built by :func:`build_sensor` (validated).
+    """
+
+    Options: type = object
+    name = ""
+
+    def __init__(self, options: Any = None) -> None:
+        if options is None:
+            options = self.Options()
+        if not isinstance(options, self.Options):
+            raise TypeError(f"options: must be a {self.Options.__name__}, got {type(options).__name__}")
+        self.options = options
+
+    def _geometry(self, frame: StereoFrame) -> tuple[float, float, float, float, float]:
+        """(f, baseline, doffs, cx, cy) of the frame, nominal values when uncalibrated."""
+        h, w = frame.shape
+        c = frame.calib
+        if c is None:
+            return (self.options.nominal_f, self.options.nominal_baseline, 0.0, (w - 1) / 2.0, (h - 1) / 2.0)
+        cx = c.cx if c.cx is not None else (w - 1) / 2.0
+        cy = c.cy if c.cy is not None else (h - 1) / 2.0
+        return (float(c.f), float(c.baseline), float(c.doffs), float(cx), float(cy))
+
+    @staticmethod
+    def _gt(frame: StereoFrame) -> np.ndarray:
+        if not isinstance(frame, StereoFrame):
+            raise TypeError(f"frame: must be a StereoFrame, got {type(frame).__name__}")
+        gt = frame.gt_disparity
+        if gt is None:
+            raise ValueError(f"frame.gt_disparity: frame {frame.name!r} has no ground truth to simulate a sensor from")
+        if not isinstance(gt, np.ndarray) or gt.shape != frame.shape:
+            raise ValueError(f"frame.gt_disparity: must be an H x W array matching the images {frame.shape}")
+        gt = gt.astype(np.float32, copy=False)
+        return np.where(np.isfinite(gt) & (gt > 0), gt, np.nan).astype(np.float32)
+
+    @staticmethod
+    def _check_seed(seed: int) -> None:
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed: must be an integer >= 0, got {seed!r}")
+
+    def _output(self, frame: StereoFrame, rows: np.ndarray, cols: np.ndarray, disp: np.ndarray,
+                depth: np.ndarray | None) -> StereoFrame:
+        """Assemble the sparse maps; drops non-positive disparities/depths."""
+        h, w = frame.shape
+        keep = np.isfinite(disp) & (disp > 0)
+        if depth is not None:
+            keep &= np.isfinite(depth) & (depth > 0)
+        sparse = np.full((h, w), np.nan, np.float32)
+        sparse[rows[keep], cols[keep]] = disp[keep]
+        sensor_depth = None
+        if frame.calib is not None:
+            f, b, doffs, _, _ = self._geometry(frame)
+            sensor_depth = np.zeros((h, w), np.float32)
+            z = depth[keep] if depth is not None else f * b / (disp[keep] + doffs)
+            sensor_depth[rows[keep], cols[keep]] = z
+        meta = dict(frame.meta)
+        meta["sensor"] = self.name
+        return frame.with_(sparse_disparity=sparse, sensor_depth=sensor_depth, meta=meta)
+
+    def simulate(self, frame: StereoFrame, seed: int = 0) -> StereoFrame:
+        """Simulate one measurement of ``frame`` (a copy; the input is unchanged).
+
+        Parameters
+        ----------
+        frame : StereoFrame
+            Must carry ``gt_disparity``.
+        seed : int
+            Seed of every random choice (>= 0).
+
+        Returns
+        -------
+        StereoFrame
+            Copy with ``sparse_disparity`` and (calibrated frames) ``sensor_depth``.
+        """
+        raise NotImplementedError
+
+
+@SENSORS.register("uniform")
+class UniformSensor(Sensor):
+    """Uniform random sampling of valid ground-truth pixels (the paper's protocol)."""
+
+    name = "uniform"
+
+    @dataclass(frozen=True)
+    class Options:
+        """Options of the ``uniform`` sensor.
+
+        Attributes
+        ----------
+        density : float
+            Fraction of the *valid* ground-truth pixels sampled, in (0, 1]. Default 0.05.
+        noise_px : float
+            Std of Gaussian noise added to the sampled disparities (px). Default 0.
+        nominal_f, nominal_baseline : float
+            Used for ``sensor_depth`` only when the frame has no calibration (it is then not written).
+        """
+
+        density: float = 0.05
+        noise_px: float = 0.0
+        nominal_f: float = 1000.0
+        nominal_baseline: float = 0.1
+
+        def __post_init__(self) -> None:
+            if not np.isfinite(self.density) or not 0 < self.density <= 1:
+                raise ValueError(f"density: must be in (0, 1], got {self.density!r}")
+            _non_negative("noise_px", self.noise_px)
+            _positive("nominal_f", self.nominal_f)
+            _positive("nominal_baseline", self.nominal_baseline)
+
+    def simulate(self, frame: StereoFrame, seed: int = 0) -> StereoFrame:
+        gt = self._gt(frame)
+        self._check_seed(seed)
+        rng = np.random.default_rng(seed)
+        valid = np.flatnonzero(np.isfinite(gt).ravel())
+        n = int(round(self.options.density * valid.size))
+        pick = np.sort(rng.choice(valid, size=n, replace=False)) if n else valid[:0]
+        rows, cols = np.divmod(pick, frame.shape[1])
+        disp = gt.ravel()[pick].astype(np.float64)
+        if self.options.noise_px > 0:
+            disp = disp + rng.normal(0.0, self.options.noise_px, size=disp.size)
+        return self._output(frame, rows, cols, disp.astype(np.float32), None)
+
+
+@SENSORS.register("lidar")
+class LidarSensor(Sensor):
+    """Spinning multi-beam LiDAR sharing the left camera's centre (see module docs)."""
+
+    name = "lidar"
+
+    @dataclass(frozen=True)
+    class Options:
+        """Options of the ``lidar`` sensor.
+
+        Attributes
+        ----------
+        beams : int
+            Number of laser beams (elevations). Default 64.
+        fov_up, fov_down : float
+            Elevation of the top and bottom beam, degrees (up positive). Default +2 / -24.8.
+        azimuth_step : float
+            Horizontal angular resolution, degrees. Default 0.2.
+        min_range, max_range : float
+            Returns outside this range (metres) are lost. Default 0.5 / 120.
+        dropout : float
+            Probability that a return is lost, in [0, 1). Default 0.
+        noise_m : float
+            Std of Gaussian range noise, metres. Default 0.
+        nominal_f, nominal_baseline : float
+            Focal length (px) and baseline (m) assumed for uncalibrated frames.
+        """
+
+        beams: int = 64
+        fov_up: float = 2.0
+        fov_down: float = -24.8
+        azimuth_step: float = 0.2
+        min_range: float = 0.5
+        max_range: float = 120.0
+        dropout: float = 0.0
+        noise_m: float = 0.0
+        nominal_f: float = 1000.0
+        nominal_baseline: float = 0.1
+
+        def __post_init__(self) -> None:
+            if self.beams < 1:
+                raise ValueError(f"beams: must be >= 1, got {self.beams}")
+            if not (-90 < self.fov_down < self.fov_up < 90):
+                raise ValueError(f"fov_up/fov_down: need -90 < fov_down < fov_up < 90, got {self.fov_down}, {self.fov_up}")
+            if not np.isfinite(self.azimuth_step) or not 0 < self.azimuth_step <= 10:
+                raise ValueError(f"azimuth_step: must be in (0, 10] degrees, got {self.azimuth_step!r}")
+            _non_negative("min_range", self.min_range)
+            _positive("max_range", self.max_range)
+            if self.max_range <= self.min_range:
+                raise ValueError(f"max_range: must exceed min_range ({self.min_range}), got {self.max_range}")
+            _probability("dropout", self.dropout)
+            _non_negative("noise_m", self.noise_m)
+            _positive("nominal_f", self.nominal_f)
+            _positive("nominal_baseline", self.nominal_baseline)
+
+    def elevations(self) -> np.ndarray:
+        """Beam elevations in degrees, top beam first."""
+        o = self.options
+        return np.linspace(o.fov_up, o.fov_down, o.beams) if o.beams > 1 else np.array([o.fov_up])
+
+    def simulate(self, frame: StereoFrame, seed: int = 0) -> StereoFrame:
+        gt = self._gt(frame)
+        self._check_seed(seed)
+        o = self.options
+        rng = np.random.default_rng(seed)
+        h, w = frame.shape
+        f, b, doffs, cx, cy = self._geometry(frame)
+        step = np.deg2rad(o.azimuth_step)
+        az_lo, az_hi = np.arctan((-0.5 - cx) / f), np.arctan((w - 0.5 - cx) / f)
+        az = np.arange(np.ceil(az_lo / step), np.floor(az_hi / step) + 1) * step
+        el = np.deg2rad(self.elevations())
+        u = cx + f * np.tan(az)[None, :]
+        v = cy - f * np.tan(el)[:, None] / np.cos(az)[None, :]
+        u, v = np.broadcast_arrays(u, v)
+        cols = np.floor(u + 0.5).astype(np.int64).ravel()
+        rows = np.floor(v + 0.5).astype(np.int64).ravel()
+        inside = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h)
+        rows, cols = rows[inside], cols[inside]
+        # one return per pixel (the first beam/azimuth that lands there)
+        _, first = np.unique(rows * w + cols, return_index=True)
+        rows, cols = rows[np.sort(first)], cols[np.sort(first)]
+        d = gt[rows, cols].astype(np.float64)
+        hit = np.isfinite(d)
+        rows, cols, d = rows[hit], cols[hit], d[hit]
+        z = f * b / (d + doffs)
+        ray = np.sqrt(1.0 + ((cols - cx) / f) ** 2 + ((rows - cy) / f) ** 2)
+        r = z * ray
+        keep = (r >= o.min_range) & (r <= o.max_range) & np.isfinite(r) & (z > 0)
+        drop = rng.random(r.size) < o.dropout
+        noise = rng.normal(0.0, o.noise_m, size=r.size) if o.noise_m > 0 else np.zeros(r.size)
+        keep &= ~drop
+        r_meas = r + noise
+        keep &= r_meas > 0
+        z_meas = r_meas / ray
+        d_meas = f * b / np.where(keep, z_meas, 1.0) - doffs
+        rows, cols = rows[keep], cols[keep]
+        return self._output(frame, rows, cols, d_meas[keep].astype(np.float32), z_meas[keep].astype(np.float32))
+
+
+@SENSORS.register("tof")
+class ToFSensor(Sensor):
+    """Low-resolution time-of-flight camera registered to the left view (see module docs)."""
+
+    name = "tof"
+
+    @dataclass(frozen=True)
+    class Options:
+        """Options of the ``tof`` sensor.
+
+        Attributes
+        ----------
+        grid_w, grid_h : int
+            Sensor resolution; one measurement at the centre of each cell of a
+            ``grid_w`` x ``grid_h`` grid over the image. Default 80 x 60.
+        min_range, max_range : float
+            Depth limits (metres). Default 0.1 / 8.
+        noise_k : float
+            Depth noise ``sigma = noise_k * z**2`` (1/m). Default 0.
+        dropout : float
+            Probability that a measurement is lost, in [0, 1). Default 0.
+        nominal_f, nominal_baseline : float
+            Focal length (px) and baseline (m) assumed for uncalibrated frames.
+        """
+
+        grid_w: int = 80
+        grid_h: int = 60
+        min_range: float = 0.1
+        max_range: float = 8.0
+        noise_k: float = 0.0
+        dropout: float = 0.0
+        nominal_f: float = 1000.0
+        nominal_baseline: float = 0.1
+
+        def __post_init__(self) -> None:
+            if self.grid_w < 1 or self.grid_h < 1:
+                raise ValueError(f"grid_w/grid_h: must be >= 1, got {self.grid_w} x {self.grid_h}")
+            _non_negative("min_range", self.min_range)
+            _positive("max_range", self.max_range)
+            if self.max_range <= self.min_range:
+                raise ValueError(f"max_range: must exceed min_range ({self.min_range}), got {self.max_range}")
+            _non_negative("noise_k", self.noise_k)
+            _probability("dropout", self.dropout)
+            _positive("nominal_f", self.nominal_f)
+            _positive("nominal_baseline", self.nominal_baseline)
+
+    def simulate(self, frame: StereoFrame, seed: int = 0) -> StereoFrame:
+        gt = self._gt(frame)
+        self._check_seed(seed)
+        o = self.options
+        rng = np.random.default_rng(seed)
+        h, w = frame.shape
+        f, b, doffs, _, _ = self._geometry(frame)
+        cs = np.minimum(((np.arange(o.grid_w) + 0.5) * w / o.grid_w).astype(np.int64), w - 1)
+        rs = np.minimum(((np.arange(o.grid_h) + 0.5) * h / o.grid_h).astype(np.int64), h - 1)
+        rows, cols = (a.ravel() for a in np.meshgrid(rs, cs, indexing="ij"))
+        flat = np.unique(rows * w + cols)
+        rows, cols = np.divmod(flat, w)
+        d = gt[rows, cols].astype(np.float64)
+        hit = np.isfinite(d)
+        rows, cols, d = rows[hit], cols[hit], d[hit]
+        z = f * b / (d + doffs)
+        keep = (z >= o.min_range) & (z <= o.max_range)
+        keep &= ~(rng.random(z.size) < o.dropout)
+        noise = rng.normal(0.0, 1.0, size=z.size) * o.noise_k * z**2 if o.noise_k > 0 else np.zeros(z.size)
+        z_meas = z + noise
+        keep &= z_meas > 0
+        d_meas = f * b / np.where(keep, z_meas, 1.0) - doffs
+        return self._output(frame, rows[keep], cols[keep], d_meas[keep].astype(np.float32), z_meas[keep].astype(np.float32))
+
+
+def build_sensor(name: str, options: Mapping[str, Any] | None = None) -> Sensor:
+    """Build a registered sensor from an option mapping.
+
+    Parameters
+    ----------
+    name : str
+        ``uniform``, ``lidar`` or ``tof`` (see ``SENSORS.names()``).
+    options : Mapping or None
+        Option values (see each sensor's ``Options``); validated with
+        :func:`vpp_service.settings.from_mapping` under section ``sensor.<name>``.
+
+    Raises
+    ------
+    ValueError
+        Unknown sensor (lists the known ones) or invalid option (``SettingsError``).
+    """
+    cls = SENSORS.get(name)
+    return cls(from_mapping(cls.Options, options, f"sensor.{name}"))
+
+
+__all__ = ["SENSORS", "Sensor", "UniformSensor", "LidarSensor", "ToFSensor", "build_sensor"]
