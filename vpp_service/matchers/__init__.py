@@ -1,0 +1,21 @@
+"""Stereo matchers registered by name, hole filling and guided stereo.
+
+>>> from vpp_service.matchers import MATCHERS, build_matcher, fill_holes
+>>> MATCHERS.names()
+['bm', 'census-sgm', 'sgbm']
+
+- ``sgbm`` / ``bm``: OpenCV (:mod:`~vpp_service.matchers.opencv`);
+- ``census-sgm``: the paper's rSGM recipe in Cython, with guided stereo
+  (:mod:`~vpp_service.matchers.census_sgm`, :mod:`~vpp_service.matchers.guided`);
+- :func:`fill_holes`: the evaluation protocol's background interpolation
+  (:mod:`~vpp_service.matchers.holes`).
+
+See :mod:`vpp_service.matchers.base` for the conventions all matchers share.
+"""
+from vpp_service.matchers.base import MATCHERS, Matcher, MatcherOptions, build_matcher
+from vpp_service.matchers.holes import fill_holes
+from vpp_service.matchers.guided import modulate_cost
+from vpp_service.matchers import opencv as _opencv  # noqa: F401  (registers sgbm, bm)
+from vpp_service.matchers import census_sgm as _census_sgm  # noqa: F401  (registers census-sgm)
+
+__all__ = ["MATCHERS", "Matcher", "MatcherOptions", "build_matcher", "fill_holes", "modulate_cost"]

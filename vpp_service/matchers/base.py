@@ -1,0 +1,235 @@
+"""The matcher interface, its registry, and the input contract every matcher shares.
+
+A matcher turns a rectified pair into a dense disparity map of the left view:
+
+>>> from vpp_service.matchers import build_matcher
+>>> m = build_matcher("sgbm", {"max_disparity": 64})      # doctest: +SKIP
+>>> disp = m.compute(left, right)                          # doctest: +SKIP
+
+Conventions (all matchers)
+--------------------------
+* ``left``/``right``: C-contiguous uint8 arrays, H x W or H x W x C with
+  C = 1 or 3 (RGB), the same shape.
+* Output: H x W float32 disparity of the left view (``x_right = x - d``),
+  NaN = invalid. ``options.fill`` fills the NaN holes with
+  :func:`~vpp_service.matchers.holes.fill_holes` before returning.
+* ``max_disparity`` is the number of disparity hypotheses ``D``: the search
+  range is ``0 .. D - 1`` and ``D`` must be smaller than the image width.
+* Guided stereo: matchers with ``supports_guidance`` accept ``hints``, an
+  H x W float32 sparse disparity map (NaN or <= 0 = no hint).
+"""
+from __future__ import annotations
+
+import os
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, ClassVar, Mapping
+
+import cv2
+import numpy as np
+
+from vpp_service.registry import Registry
+from vpp_service.settings import from_mapping
+
+#: Registered matcher classes by name ("sgbm", "bm", "census-sgm").
+MATCHERS: Registry["Matcher"] = Registry("matcher")
+
+
+@dataclass(frozen=True)
+class MatcherOptions:
+    """Options common to every matcher.
+
+    Attributes
+    ----------
+    max_disparity : int
+        Number of disparity hypotheses D (search range ``0 .. D-1``), > 0 and
+        smaller than the image width (checked at ``compute``). OpenCV matchers
+        round it up to a multiple of 16. Default 128.
+    fill : bool
+        Fill invalid pixels with background interpolation
+        (:func:`~vpp_service.matchers.holes.fill_holes`). Default False.
+    """
+
+    max_disparity: int = 128
+    fill: bool = False
+
+    def __post_init__(self) -> None:
+        if isinstance(self.max_disparity, bool) or not isinstance(self.max_disparity, int):
+            raise ValueError(f"max_disparity must be an integer, got {self.max_disparity!r}")
+        if self.max_disparity <= 0:
+            raise ValueError(f"max_disparity must be > 0, got {self.max_disparity}")
+        if self.max_disparity > 4096:
+            raise ValueError(f"max_disparity must be <= 4096, got {self.max_disparity}")
+        if not isinstance(self.fill, bool):
+            raise ValueError(f"fill must be a bool, got {self.fill!r}")
+
+
+def resolve_threads(threads: int | None) -> int:
+    """Number of OpenMP threads for a kernel: ``threads`` if > 0, else all usable cores.
+
+    ``None`` or 0 means ``OMP_NUM_THREADS`` when set, else the CPUs this
+    process may run on.
+    """
+    if threads is not None:
+        if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)):
+            raise TypeError(f"threads must be an integer or None, got {threads!r}")
+        if threads < 0:
+            raise ValueError(f"threads must be >= 0, got {threads}")
+        if threads > 0:
+            return int(threads)
+    env = os.environ.get("OMP_NUM_THREADS", "").split(",")[0].strip()
+    if env.isdigit() and int(env) > 0:
+        return int(env)
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def check_image(img: Any, name: str) -> np.ndarray:
+    """Validate one image: C-contiguous uint8, H x W or H x W x C (C = 1 | 3), non-empty.
+
+    Returns the array unchanged. Raises TypeError (not an array / wrong dtype)
+    or ValueError (shape, emptiness, contiguity) naming ``name``.
+    """
+    if not isinstance(img, np.ndarray):
+        raise TypeError(f"{name} must be a numpy array, got {type(img).__name__}")
+    if img.dtype != np.uint8:
+        raise TypeError(f"{name} must be uint8, got dtype {img.dtype}")
+    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 3)):
+        raise ValueError(f"{name} must be H x W or H x W x C with C in (1, 3), got shape {img.shape}")
+    if img.shape[0] == 0 or img.shape[1] == 0:
+        raise ValueError(f"{name} is empty (shape {img.shape})")
+    if not img.flags.c_contiguous:
+        raise ValueError(f"{name} must be C-contiguous (use np.ascontiguousarray)")
+    return img
+
+
+def check_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Validate a stereo pair: both pass :func:`check_image` and have the same shape."""
+    check_image(left, "left")
+    check_image(right, "right")
+    if left.shape != right.shape:
+        raise ValueError(f"left and right must have the same shape, got {left.shape} and {right.shape}")
+    return left, right
+
+
+def check_max_disparity(max_disparity: int, width: int, name: str = "max_disparity") -> None:
+    """Raise ValueError unless ``0 < max_disparity < width``."""
+    if isinstance(max_disparity, bool) or not isinstance(max_disparity, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, got {max_disparity!r}")
+    if not 0 < max_disparity < width:
+        raise ValueError(f"{name} must be > 0 and < the image width {width}, got {max_disparity}")
+
+
+def check_hints(hints: Any, shape: tuple[int, int]) -> np.ndarray:
+    """Validate a sparse-disparity hint map; return it as C-contiguous float32.
+
+    NaN or values <= 0 mean "no hint"; +-inf is rejected.
+    """
+    if not isinstance(hints, np.ndarray):
+        raise TypeError(f"hints must be a numpy array, got {type(hints).__name__}")
+    if hints.dtype.kind != "f":
+        raise TypeError(f"hints must be a float array, got dtype {hints.dtype}")
+    if hints.shape != tuple(shape):
+        raise ValueError(f"hints must have shape {tuple(shape)}, got {hints.shape}")
+    if np.isinf(hints).any():
+        raise ValueError("hints contains +-inf; use NaN (or <= 0) for 'no hint'")
+    return np.ascontiguousarray(hints, dtype=np.float32)
+
+
+def to_gray(img: np.ndarray) -> np.ndarray:
+    """H x W uint8 luminance of a checked image (RGB weights 0.299/0.587/0.114)."""
+    if img.ndim == 2:
+        return img
+    if img.shape[2] == 1:
+        return np.ascontiguousarray(img[:, :, 0])
+    return cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+
+
+class Matcher(ABC):
+    """Base class of stereo matchers.
+
+    Subclasses define ``Options`` (a frozen dataclass deriving from
+    :class:`MatcherOptions`), ``name``, optionally ``supports_guidance``, and
+    implement :meth:`_compute`.
+
+    Parameters
+    ----------
+    options : Options, Mapping or None
+        An ``Options`` instance, a mapping validated with
+        :func:`vpp_service.settings.from_mapping`, or None for the defaults.
+    """
+
+    #: Registered name.
+    name: ClassVar[str] = ""
+    #: Frozen dataclass of options.
+    Options: ClassVar[type] = MatcherOptions
+    #: True when :meth:`compute` accepts ``hints`` (guided stereo).
+    supports_guidance: ClassVar[bool] = False
+
+    def __init__(self, options: Any = None) -> None:
+        if options is None or isinstance(options, Mapping):
+            options = from_mapping(self.Options, options, f"matcher.{self.name}")
+        elif not isinstance(options, self.Options):
+            raise TypeError(
+                f"options must be a {self.Options.__name__}, a mapping or None, got {type(options).__name__}"
+            )
+        self.options = options
+
+    def compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None = None) -> np.ndarray:
+        """Dense disparity of the left view.
+
+        Parameters
+        ----------
+        left, right : ndarray
+            Rectified pair, C-contiguous uint8, H x W or H x W x C (C = 1 | 3, RGB).
+        hints : ndarray or None
+            H x W float sparse disparity (NaN or <= 0 = none); only for
+            matchers with ``supports_guidance``.
+
+        Returns
+        -------
+        ndarray
+            H x W float32 disparity, NaN = invalid (no NaN when ``fill``,
+            except on rows without any valid pixel).
+
+        Raises
+        ------
+        TypeError, ValueError
+            Bad images (dtype, shape, contiguity), ``max_disparity`` not below
+            the width, or ``hints`` given to a matcher without guidance.
+        """
+        check_pair(left, right)
+        check_max_disparity(self.options.max_disparity, left.shape[1])
+        if hints is not None:
+            if not self.supports_guidance:
+                raise ValueError(f"matcher {self.name!r} does not support guidance (hints)")
+            hints = check_hints(hints, left.shape[:2])
+        disp = self._compute(left, right, hints)
+        if self.options.fill:
+            from vpp_service.matchers.holes import fill_holes
+
+            disp = fill_holes(disp)
+        return disp
+
+    @abstractmethod
+    def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
+        """Matcher-specific work on validated inputs; returns H x W float32, NaN = invalid."""
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.options!r})"
+
+
+def build_matcher(name: str, options: Mapping[str, Any] | None = None) -> Matcher:
+    """Build the matcher registered as ``name`` from a plain options mapping.
+
+    Raises
+    ------
+    ValueError
+        Unknown matcher name (lists the known ones).
+    vpp_service.settings.SettingsError
+        Unknown option key or bad value (a ValueError naming ``matcher.<name>.<key>``).
+    """
+    cls = MATCHERS.get(name)
+    return cls(from_mapping(cls.Options, options, f"matcher.{name}"))

@@ -1,0 +1,436 @@
+"""Census-SGM, the rSGM recipe used as the paper's classical matcher, in Cython.
+
+Pipeline (each step is a public, validated function so it can be tested and
+reused; the :class:`CensusSGM` matcher chains them):
+
+1. :func:`census_transform` -- 5 x 5 census on the gray image: 24 bits, bit set
+   where the neighbour is darker than the centre, window scanned row-major
+   (MSB first) skipping the centre, border pixels replicated.
+2. :func:`hamming_cost_volume` -- ``C(y, x, d) = popcount(cL(y, x) ^ cR(y, x - d))``
+   as uint16 H x W x D; ``x < d`` (no match) gets the maximum cost, 24.
+3. optional guided stereo (:func:`~vpp_service.matchers.guided.modulate_cost`)
+   on the hinted pixels, before aggregation.
+4. :func:`aggregate_costs` -- SGM over 8 paths (or 4: horizontal + vertical)
+   with ``P1 = 11`` and the adaptive ``P2 = max(P2min, floor(gamma - alpha |I(p) - I(p - r)|), P1)``
+   of Banz et al. (P2min = 17, alpha = 0.5, gamma = 35). Integer arithmetic:
+   costs are clamped to :data:`COST_CAP` (4095) and P1, P2 <= 4095, so path
+   costs fit int16 and the 8-path sum fits uint16 without overflow.
+5. :func:`select_disparity` -- winner-takes-all (lowest ``d`` on ties) with a
+   uniqueness test ``S_best < ratio * S_second`` (``S_second`` = min over
+   ``|d - d_best| > 1``) and parabola sub-pixel refinement.
+6. :func:`right_disparity` + :func:`left_right_check` -- the right view's WTA
+   from the same aggregated volume, ``d_R(x) = argmin_d S(x + d, d)``; a left
+   disparity survives if ``|d_L(x) - d_R(x - round(d_L(x)))| <= tolerance``.
+7. :func:`median_filter3x3` -- 3 x 3 median over the valid neighbours.
+
+Everything invalid is NaN. Threads: every function takes ``threads``
+(None/0 = all usable cores, ``OMP_NUM_THREADS`` respected).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from vpp_service.matchers import _census_sgm as _k
+from vpp_service.matchers.base import (
+    MATCHERS,
+    Matcher,
+    MatcherOptions,
+    check_hints,
+    check_image,
+    check_max_disparity,
+    check_pair,
+    resolve_threads,
+    to_gray,
+)
+from vpp_service.matchers.guided import modulate_cost
+
+#: Census bits (5 x 5 window minus the centre) = the largest Hamming cost.
+CENSUS_BITS = 24
+#: Cost assigned where ``x < d`` (no right pixel to match).
+INVALID_COST = CENSUS_BITS
+#: Costs are clamped to this before aggregation (keeps the arithmetic exact).
+COST_CAP = 4095
+#: Largest allowed P1 / P2.
+PENALTY_CAP = 4095
+
+
+def _check_gray(img: Any, name: str) -> np.ndarray:
+    check_image(img, name)
+    if img.ndim != 2:
+        raise ValueError(f"{name} must be a 2-D (H x W) gray image, got shape {img.shape}")
+    return img
+
+
+def _check_volume(vol: Any, name: str, dtype: type = np.uint16) -> np.ndarray:
+    if not isinstance(vol, np.ndarray):
+        raise TypeError(f"{name} must be a numpy array, got {type(vol).__name__}")
+    if vol.dtype != dtype:
+        raise TypeError(f"{name} must be {np.dtype(dtype).name}, got dtype {vol.dtype}")
+    if vol.ndim != 3:
+        raise ValueError(f"{name} must be H x W x D, got shape {vol.shape}")
+    if vol.size == 0:
+        raise ValueError(f"{name} is empty (shape {vol.shape})")
+    if not vol.flags.c_contiguous:
+        raise ValueError(f"{name} must be C-contiguous (use np.ascontiguousarray)")
+    return vol
+
+
+def _check_disparity(disp: Any, name: str) -> np.ndarray:
+    if not isinstance(disp, np.ndarray):
+        raise TypeError(f"{name} must be a numpy array, got {type(disp).__name__}")
+    if disp.dtype != np.float32:
+        raise TypeError(f"{name} must be float32, got dtype {disp.dtype}")
+    if disp.ndim != 2 or disp.size == 0:
+        raise ValueError(f"{name} must be a non-empty H x W map, got shape {disp.shape}")
+    if not disp.flags.c_contiguous:
+        raise ValueError(f"{name} must be C-contiguous (use np.ascontiguousarray)")
+    if np.isinf(disp).any():
+        raise ValueError(f"{name} contains +-inf; use NaN for invalid")
+    return disp
+
+
+def census_transform(gray: np.ndarray, threads: int | None = None) -> np.ndarray:
+    """5 x 5 census transform.
+
+    Parameters
+    ----------
+    gray : ndarray
+        H x W uint8, C-contiguous.
+    threads : int or None
+        OpenMP threads (None/0 = all usable cores).
+
+    Returns
+    -------
+    ndarray
+        H x W uint32 codes: for the 24 window offsets (dy, dx) in row-major
+        order without (0, 0), ``code = code << 1 | (I(y+dy, x+dx) < I(y, x))``,
+        coordinates clamped to the image.
+    """
+    _check_gray(gray, "gray")
+    out = np.empty(gray.shape, np.uint32)
+    _k.census5x5(gray, out, resolve_threads(threads))
+    return out
+
+
+def hamming_cost_volume(
+    census_left: np.ndarray, census_right: np.ndarray, max_disparity: int, threads: int | None = None
+) -> np.ndarray:
+    """Hamming matching cost between census codes.
+
+    Parameters
+    ----------
+    census_left, census_right : ndarray
+        H x W uint32 codes (same shape, C-contiguous).
+    max_disparity : int
+        Number of disparities D (0 < D < W).
+
+    Returns
+    -------
+    ndarray
+        H x W x D uint16, ``popcount(cL[y, x] ^ cR[y, x - d])``; :data:`INVALID_COST` where ``x < d``.
+    """
+    for name, a in (("census_left", census_left), ("census_right", census_right)):
+        if not isinstance(a, np.ndarray):
+            raise TypeError(f"{name} must be a numpy array, got {type(a).__name__}")
+        if a.dtype != np.uint32:
+            raise TypeError(f"{name} must be uint32, got dtype {a.dtype}")
+        if a.ndim != 2 or a.size == 0:
+            raise ValueError(f"{name} must be a non-empty H x W array, got shape {a.shape}")
+        if not a.flags.c_contiguous:
+            raise ValueError(f"{name} must be C-contiguous (use np.ascontiguousarray)")
+    if census_left.shape != census_right.shape:
+        raise ValueError(
+            f"census_left and census_right must have the same shape, got {census_left.shape} and {census_right.shape}"
+        )
+    check_max_disparity(max_disparity, census_left.shape[1])
+    h, w = census_left.shape
+    out = np.empty((h, w, int(max_disparity)), np.uint16)
+    _k.hamming_volume(census_left, census_right, out, INVALID_COST, resolve_threads(threads))
+    return out
+
+
+def p2_table(p1: int = 11, p2_min: int = 17, alpha: float = 0.5, gamma: float = 35.0) -> np.ndarray:
+    """Adaptive-P2 lookup: ``P2[g] = min(4095, max(p2_min, p1, floor(gamma - alpha * g)))`` for g = 0..255.
+
+    ``g = |I(p) - I(p - r)|`` is the gray-level step along the path.
+    """
+    g = np.arange(256, dtype=np.float64)
+    p2 = np.floor(gamma - alpha * g)
+    p2 = np.maximum(p2, max(p2_min, p1))
+    return np.minimum(p2, PENALTY_CAP).astype(np.int16)
+
+
+def _check_penalties(p1: int, p2_min: int, alpha: float, gamma: float) -> None:
+    for name, v in (("p1", p1), ("p2_min", p2_min)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 <= v <= PENALTY_CAP:
+            raise ValueError(f"{name} must be an integer in [0, {PENALTY_CAP}], got {v!r}")
+    for name, v in (("alpha", alpha), ("gamma", gamma)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ValueError(f"{name} must be a finite number, got {v!r}")
+    if alpha < 0:
+        raise ValueError(f"alpha must be >= 0, got {alpha}")
+
+
+def aggregate_costs(
+    cost: np.ndarray,
+    gray: np.ndarray,
+    paths: int = 8,
+    p1: int = 11,
+    p2_min: int = 17,
+    alpha: float = 0.5,
+    gamma: float = 35.0,
+    threads: int | None = None,
+) -> np.ndarray:
+    """Semi-global aggregation over 4 or 8 paths.
+
+    ``L_r(p, d) = C(p, d) + min(L_r(p-r, d), L_r(p-r, d+-1) + P1, min_k L_r(p-r, k) + P2) - min_k L_r(p-r, k)``
+    with ``L_r = C`` at the first pixel of a path and ``P2`` from :func:`p2_table`
+    using the gray step between ``p`` and ``p - r``. Returns ``S = sum_r L_r``.
+
+    Parameters
+    ----------
+    cost : ndarray
+        H x W x D uint16 (values above :data:`COST_CAP` are clamped to it).
+    gray : ndarray
+        H x W uint8 left image (for the adaptive P2).
+    paths : int
+        8 (horizontal, vertical and diagonals; rSGM default) or 4 (horizontal, vertical).
+    p1, p2_min, alpha, gamma
+        Penalties, see :func:`p2_table`.
+
+    Returns
+    -------
+    ndarray
+        H x W x D uint16 aggregated cost.
+    """
+    _check_volume(cost, "cost")
+    _check_gray(gray, "gray")
+    if gray.shape != cost.shape[:2]:
+        raise ValueError(f"gray must have shape {cost.shape[:2]}, got {gray.shape}")
+    if paths not in (4, 8) or isinstance(paths, bool):
+        raise ValueError(f"paths must be 4 or 8, got {paths!r}")
+    _check_penalties(p1, p2_min, alpha, gamma)
+    if cost.max() > COST_CAP:
+        cost = np.minimum(cost, COST_CAP)
+    out = np.empty_like(cost)
+    _k.aggregate(cost, gray, out, int(paths), int(p1), p2_table(p1, p2_min, alpha, gamma), resolve_threads(threads))
+    return out
+
+
+def select_disparity(
+    aggregated: np.ndarray, uniqueness: float = 0.95, subpixel: bool = True, threads: int | None = None
+) -> np.ndarray:
+    """Winner-takes-all with uniqueness test and parabola sub-pixel refinement.
+
+    Parameters
+    ----------
+    aggregated : ndarray
+        H x W x D uint16 aggregated cost.
+    uniqueness : float
+        In (0, 1]: keep ``d_best`` only if ``S_best < uniqueness * S_second``,
+        ``S_second`` being the best cost with ``|d - d_best| > 1`` (no such
+        ``d`` -> kept). 1.0 only rejects ties.
+    subpixel : bool
+        For ``0 < d < D - 1`` with ``S(d-1) - 2 S(d) + S(d+1) > 0`` add
+        ``(S(d-1) - S(d+1)) / (2 (S(d-1) - 2 S(d) + S(d+1)))``.
+
+    Returns
+    -------
+    ndarray
+        H x W float32 disparity, NaN where the uniqueness test fails.
+    """
+    _check_volume(aggregated, "aggregated")
+    if isinstance(uniqueness, bool) or not isinstance(uniqueness, (int, float)) or not 0 < uniqueness <= 1:
+        raise ValueError(f"uniqueness must be in (0, 1], got {uniqueness!r}")
+    out = np.empty(aggregated.shape[:2], np.float32)
+    _k.winner_takes_all(aggregated, out, float(uniqueness), bool(subpixel), resolve_threads(threads))
+    return out
+
+
+def right_disparity(aggregated: np.ndarray, threads: int | None = None) -> np.ndarray:
+    """Integer disparity of the right view from the left-referenced volume.
+
+    ``d_R(y, x) = argmin_d S(y, x + d, d)`` over ``x + d < W`` (lowest ``d`` on
+    ties), as H x W float32 (always valid).
+    """
+    _check_volume(aggregated, "aggregated")
+    out = np.empty(aggregated.shape[:2], np.float32)
+    _k.right_disparity(aggregated, out, resolve_threads(threads))
+    return out
+
+
+def left_right_check(
+    disp_left: np.ndarray, disp_right: np.ndarray, tolerance: float = 1.0, threads: int | None = None
+) -> np.ndarray:
+    """Invalidate left disparities that the right view does not confirm.
+
+    Keeps ``d = disp_left(y, x)`` iff ``x_r = x - floor(d + 0.5)`` is inside the
+    image, ``disp_right(y, x_r)`` is valid and ``|d - disp_right(y, x_r)| <= tolerance``.
+
+    Returns
+    -------
+    ndarray
+        New H x W float32 map, NaN where rejected or already invalid.
+    """
+    _check_disparity(disp_left, "disp_left")
+    _check_disparity(disp_right, "disp_right")
+    if disp_left.shape != disp_right.shape:
+        raise ValueError(f"disp_left and disp_right must have the same shape, got {disp_left.shape} and {disp_right.shape}")
+    if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not tolerance >= 0 or math.isinf(tolerance):
+        raise ValueError(f"tolerance must be a finite number >= 0, got {tolerance!r}")
+    out = np.empty_like(disp_left)
+    _k.left_right_check(disp_left, disp_right, out, float(tolerance), resolve_threads(threads))
+    return out
+
+
+def median_filter3x3(disparity: np.ndarray, threads: int | None = None) -> np.ndarray:
+    """3 x 3 median of each valid pixel over its valid (non-NaN) neighbours.
+
+    Even counts take the mean of the two middle values (as ``np.median``);
+    NaN pixels stay NaN. Returns a new H x W float32 map.
+    """
+    _check_disparity(disparity, "disparity")
+    out = np.empty_like(disparity)
+    _k.median3x3(disparity, out, resolve_threads(threads))
+    return out
+
+
+@dataclass(frozen=True)
+class CensusSGMOptions(MatcherOptions):
+    """Options of the ``census-sgm`` matcher (rSGM defaults).
+
+    Attributes
+    ----------
+    paths : int
+        SGM paths, 8 (default) or 4.
+    p1, p2_min, p2_alpha, p2_gamma : int, int, float, float
+        Penalties: P1 = 11, adaptive P2 = max(17, floor(35 - 0.5 |dI|)).
+    uniqueness : float
+        WTA uniqueness ratio in (0, 1], default 0.95.
+    subpixel : bool
+        Parabola refinement (default True).
+    lr_check : bool
+        Left-right consistency check (default True).
+    lr_tolerance : float
+        Allowed left-right difference in pixels (default 1).
+    median : bool
+        3 x 3 median of the result (default True).
+    guided_k, guided_c : float
+        Guided-stereo modulation height and width (10 and 1) used with ``hints``.
+    threads : int
+        OpenMP threads, 0 = all usable cores (default).
+    """
+
+    paths: int = 8
+    p1: int = 11
+    p2_min: int = 17
+    p2_alpha: float = 0.5
+    p2_gamma: float = 35.0
+    uniqueness: float = 0.95
+    subpixel: bool = True
+    lr_check: bool = True
+    lr_tolerance: float = 1.0
+    median: bool = True
+    guided_k: float = 10.0
+    guided_c: float = 1.0
+    threads: int = 0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.paths not in (4, 8) or isinstance(self.paths, bool):
+            raise ValueError(f"paths must be 4 or 8, got {self.paths!r}")
+        _check_penalties(self.p1, self.p2_min, self.p2_alpha, self.p2_gamma)
+        if not 0 < self.uniqueness <= 1:
+            raise ValueError(f"uniqueness must be in (0, 1], got {self.uniqueness}")
+        if not (math.isfinite(self.lr_tolerance) and self.lr_tolerance >= 0):
+            raise ValueError(f"lr_tolerance must be a finite number >= 0, got {self.lr_tolerance}")
+        for name in ("guided_k", "guided_c"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a finite number > 0, got {v}")
+        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 0:
+            raise ValueError(f"threads must be an integer >= 0, got {self.threads!r}")
+
+
+@MATCHERS.register("census-sgm")
+class CensusSGM(Matcher):
+    """Census 5 x 5 + Hamming + 8-path SGM (rSGM recipe), with guided stereo.
+
+    Colour inputs are converted to gray (census needs one channel). The cost
+    volume is exposed (:meth:`cost_volume`, :meth:`compute_from_cost`) so
+    guided stereo or other cost manipulations can be inserted.
+    """
+
+    name = "census-sgm"
+    Options = CensusSGMOptions
+    supports_guidance = True
+
+    def cost_volume(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        """H x W x D uint16 Hamming cost of the 5 x 5 census of the gray pair."""
+        check_pair(left, right)
+        check_max_disparity(self.options.max_disparity, left.shape[1])
+        t = self.options.threads
+        return hamming_cost_volume(
+            census_transform(to_gray(left), t), census_transform(to_gray(right), t), self.options.max_disparity, t
+        )
+
+    def compute_from_cost(
+        self, cost: np.ndarray, left_gray: np.ndarray, hints: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Disparity from a cost volume (steps 3-7; ``fill`` is not applied here).
+
+        Parameters
+        ----------
+        cost : ndarray
+            H x W x D uint16 cost volume, lower = better (e.g. :meth:`cost_volume`). Not modified.
+        left_gray : ndarray
+            The left image (H x W uint8, or H x W x C, converted to gray) for the adaptive P2.
+        hints : ndarray or None
+            Sparse disparity for guided stereo (NaN or <= 0 = none).
+
+        Returns
+        -------
+        ndarray
+            H x W float32, NaN = invalid.
+        """
+        _check_volume(cost, "cost")
+        check_image(left_gray, "left_gray")
+        gray = to_gray(left_gray)
+        if gray.shape != cost.shape[:2]:
+            raise ValueError(f"left_gray must be {cost.shape[:2]} (H x W), got {left_gray.shape}")
+        o = self.options
+        t = o.threads
+        if hints is not None:
+            hints = check_hints(hints, cost.shape[:2])
+            cost = modulate_cost(cost, hints, o.guided_k, o.guided_c, threads=t)
+        agg = aggregate_costs(cost, gray, o.paths, o.p1, o.p2_min, o.p2_alpha, o.p2_gamma, t)
+        disp = select_disparity(agg, o.uniqueness, o.subpixel, t)
+        if o.lr_check:
+            disp = left_right_check(disp, right_disparity(agg, t), o.lr_tolerance, t)
+        if o.median:
+            disp = median_filter3x3(disp, t)
+        return disp
+
+    def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
+        return self.compute_from_cost(self.cost_volume(left, right), left, hints)
+
+
+__all__ = [
+    "CENSUS_BITS",
+    "COST_CAP",
+    "INVALID_COST",
+    "CensusSGM",
+    "CensusSGMOptions",
+    "aggregate_costs",
+    "census_transform",
+    "hamming_cost_volume",
+    "left_right_check",
+    "median_filter3x3",
+    "p2_table",
+    "right_disparity",
+    "select_disparity",
+]

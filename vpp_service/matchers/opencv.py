@@ -1,0 +1,223 @@
+"""OpenCV block matchers: ``sgbm`` (cv2.StereoSGBM) and ``bm`` (cv2.StereoBM).
+
+Conventions shared with the other matchers (see :mod:`vpp_service.matchers.base`):
+OpenCV returns fixed-point disparities (x16, int16); they are divided by 16
+into float32 and every value below ``min_disparity`` (OpenCV's "invalid",
+``(min_disparity - 1) * 16``) becomes NaN. OpenCV needs ``numDisparities`` to be
+a multiple of 16: ``max_disparity`` is rounded **up** to the next multiple of
+16 (e.g. 100 -> 112), and the rounded value must still be below the width.
+OpenCV leaves the leftmost ``numDisparities`` columns (no full search range)
+invalid.
+
+Colour: ``sgbm`` matches the colour image directly (StereoSGBM sums the
+per-channel costs, and the default penalties scale with the channel count
+``cn``), which keeps the colour information VPP paints; ``bm`` only takes gray,
+so RGB is converted with the usual luminance weights.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import cv2
+import numpy as np
+
+from vpp_service.matchers.base import MATCHERS, Matcher, MatcherOptions, to_gray
+
+_SGBM_MODES = {
+    "sgbm": cv2.STEREO_SGBM_MODE_SGBM,
+    "hh": cv2.STEREO_SGBM_MODE_HH,
+    "3way": cv2.STEREO_SGBM_MODE_SGBM_3WAY,
+    "hh4": cv2.STEREO_SGBM_MODE_HH4,
+}
+
+
+def opencv_num_disparities(max_disparity: int) -> int:
+    """``max_disparity`` rounded up to a multiple of 16 (OpenCV's numDisparities)."""
+    return int(-(-int(max_disparity) // 16) * 16)
+
+
+def _check_odd(name: str, v: int, lo: int, hi: int) -> None:
+    if isinstance(v, bool) or not isinstance(v, int) or v < lo or v > hi or v % 2 == 0:
+        raise ValueError(f"{name} must be an odd integer in [{lo}, {hi}], got {v!r}")
+
+
+def _check_nonneg(name: str, v: int) -> None:
+    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+        raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
+
+
+def _to_float(raw: np.ndarray, min_disparity: int) -> np.ndarray:
+    disp = raw.astype(np.float32) / 16.0
+    disp[raw < min_disparity * 16] = np.nan
+    return disp
+
+
+def _check_width(max_disparity: int, min_disparity: int, width: int) -> int:
+    nd = opencv_num_disparities(max_disparity)
+    if min_disparity + nd >= width:
+        raise ValueError(
+            f"max_disparity {max_disparity} (rounded up to {nd} for OpenCV) + min_disparity "
+            f"{min_disparity} must be < the image width {width}"
+        )
+    return nd
+
+
+@dataclass(frozen=True)
+class SGBMOptions(MatcherOptions):
+    """Options of the ``sgbm`` matcher (cv2.StereoSGBM).
+
+    Attributes
+    ----------
+    mode : {"3way", "sgbm", "hh", "hh4"}
+        OpenCV mode: SGBM 3-way (default, 5 directions, fast), SGBM
+        (5 directions), HH (full 8 directions) or HH4.
+    block_size : int
+        Odd matching block size in [1, 11], default 5.
+    p1, p2 : int
+        Smoothness penalties; 0 = OpenCV's usual ``8 cn bs^2`` and ``32 cn bs^2``
+        (cn = channel count, bs = block size). ``p2`` must exceed ``p1``.
+    min_disparity : int
+        Smallest disparity searched (>= 0; default 0).
+    uniqueness : int
+        Uniqueness ratio in percent (default 10).
+    speckle_window, speckle_range : int
+        Speckle filter: max region size (0 = off, default 100) and max
+        disparity variation inside it (pixels, default 2).
+    disp12_max_diff : int
+        Left-right check tolerance in pixels (default 1; -1 = off).
+    pre_filter_cap : int
+        Pre-filter truncation (default 63).
+    """
+
+    mode: Literal["3way", "sgbm", "hh", "hh4"] = "3way"
+    block_size: int = 5
+    p1: int = 0
+    p2: int = 0
+    min_disparity: int = 0
+    uniqueness: int = 10
+    speckle_window: int = 100
+    speckle_range: int = 2
+    disp12_max_diff: int = 1
+    pre_filter_cap: int = 63
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.mode not in _SGBM_MODES:
+            raise ValueError(f"mode must be one of {sorted(_SGBM_MODES)}, got {self.mode!r}")
+        _check_odd("block_size", self.block_size, 1, 11)
+        for name in ("p1", "p2", "min_disparity", "uniqueness", "speckle_window", "speckle_range"):
+            _check_nonneg(name, getattr(self, name))
+        if (self.p1 or self.p2) and not self.p2 > self.p1:
+            raise ValueError(f"p2 must be > p1, got p1={self.p1}, p2={self.p2}")
+        if isinstance(self.disp12_max_diff, bool) or not isinstance(self.disp12_max_diff, int) or self.disp12_max_diff < -1:
+            raise ValueError(f"disp12_max_diff must be an integer >= -1, got {self.disp12_max_diff!r}")
+        if isinstance(self.pre_filter_cap, bool) or not isinstance(self.pre_filter_cap, int) or not 1 <= self.pre_filter_cap <= 63:
+            raise ValueError(f"pre_filter_cap must be an integer in [1, 63], got {self.pre_filter_cap!r}")
+
+
+@MATCHERS.register("sgbm")
+class SGBM(Matcher):
+    """OpenCV semi-global block matching on the colour (or gray) pair."""
+
+    name = "sgbm"
+    Options = SGBMOptions
+
+    def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
+        o = self.options
+        nd = _check_width(o.max_disparity, o.min_disparity, left.shape[1])
+        if left.ndim == 3 and left.shape[2] == 1:
+            left, right = left[:, :, 0], right[:, :, 0]
+        cn = 1 if left.ndim == 2 else left.shape[2]
+        bs = o.block_size
+        p1 = o.p1 or 8 * cn * bs * bs
+        p2 = o.p2 or 32 * cn * bs * bs
+        sgbm = cv2.StereoSGBM_create(
+            minDisparity=o.min_disparity,
+            numDisparities=nd,
+            blockSize=bs,
+            P1=p1,
+            P2=p2,
+            disp12MaxDiff=o.disp12_max_diff,
+            preFilterCap=o.pre_filter_cap,
+            uniquenessRatio=o.uniqueness,
+            speckleWindowSize=o.speckle_window,
+            speckleRange=o.speckle_range,
+            mode=_SGBM_MODES[o.mode],
+        )
+        return _to_float(sgbm.compute(left, right), o.min_disparity)
+
+
+@dataclass(frozen=True)
+class BMOptions(MatcherOptions):
+    """Options of the ``bm`` matcher (cv2.StereoBM, gray input).
+
+    Attributes
+    ----------
+    block_size : int
+        Odd SAD window in [5, 255], default 15.
+    pre_filter : {"xsobel", "normalized"}
+        Pre-filter: x-Sobel (default) or normalized response.
+    pre_filter_size : int
+        Odd size in [5, 255] of the normalized-response window (default 9).
+    pre_filter_cap : int
+        Pre-filter truncation in [1, 63] (default 31).
+    min_disparity, uniqueness, texture_threshold : int
+        Default 0, 15 (percent) and 10.
+    speckle_window, speckle_range, disp12_max_diff : int
+        As for ``sgbm`` (100, 2, 1).
+    """
+
+    block_size: int = 15
+    pre_filter: Literal["xsobel", "normalized"] = "xsobel"
+    pre_filter_size: int = 9
+    pre_filter_cap: int = 31
+    min_disparity: int = 0
+    uniqueness: int = 15
+    texture_threshold: int = 10
+    speckle_window: int = 100
+    speckle_range: int = 2
+    disp12_max_diff: int = 1
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _check_odd("block_size", self.block_size, 5, 255)
+        _check_odd("pre_filter_size", self.pre_filter_size, 5, 255)
+        if self.pre_filter not in ("xsobel", "normalized"):
+            raise ValueError(f"pre_filter must be 'xsobel' or 'normalized', got {self.pre_filter!r}")
+        if isinstance(self.pre_filter_cap, bool) or not isinstance(self.pre_filter_cap, int) or not 1 <= self.pre_filter_cap <= 63:
+            raise ValueError(f"pre_filter_cap must be an integer in [1, 63], got {self.pre_filter_cap!r}")
+        for name in ("min_disparity", "uniqueness", "texture_threshold", "speckle_window", "speckle_range"):
+            _check_nonneg(name, getattr(self, name))
+        if isinstance(self.disp12_max_diff, bool) or not isinstance(self.disp12_max_diff, int) or self.disp12_max_diff < -1:
+            raise ValueError(f"disp12_max_diff must be an integer >= -1, got {self.disp12_max_diff!r}")
+
+
+@MATCHERS.register("bm")
+class BM(Matcher):
+    """OpenCV block matching (SAD) on the gray pair."""
+
+    name = "bm"
+    Options = BMOptions
+
+    def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
+        o = self.options
+        nd = _check_width(o.max_disparity, o.min_disparity, left.shape[1])
+        bm = cv2.StereoBM_create(numDisparities=nd, blockSize=o.block_size)
+        bm.setPreFilterType(
+            cv2.STEREO_BM_PREFILTER_XSOBEL if o.pre_filter == "xsobel" else cv2.STEREO_BM_PREFILTER_NORMALIZED_RESPONSE
+        )
+        bm.setPreFilterSize(o.pre_filter_size)
+        bm.setPreFilterCap(o.pre_filter_cap)
+        bm.setMinDisparity(o.min_disparity)
+        bm.setUniquenessRatio(o.uniqueness)
+        bm.setTextureThreshold(o.texture_threshold)
+        bm.setSpeckleWindowSize(o.speckle_window)
+        bm.setSpeckleRange(o.speckle_range)
+        bm.setDisp12MaxDiff(o.disp12_max_diff)
+        gl = np.ascontiguousarray(to_gray(left))
+        gr = np.ascontiguousarray(to_gray(right))
+        return _to_float(bm.compute(gl, gr), o.min_disparity)
+
+
+__all__ = ["BM", "BMOptions", "SGBM", "SGBMOptions", "opencv_num_disparities"]
