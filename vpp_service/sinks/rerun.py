@@ -309,6 +309,17 @@ class RerunSink(Sink):
             if o.web_port:
                 rr.serve_web_viewer(web_port=o.web_port, open_browser=False, connect_to=self.server_uri)
 
+    def wait_ready(self, timeout: float = 5.0) -> bool:
+        """Wait until the output is attached (the server runs, the viewer is spawned).
+
+        Returns
+        -------
+        bool
+            True when attached (or attaching failed and was counted in
+            ``stats()["errors"]``), False on timeout or when not open.
+        """
+        return self._thread is not None and self._ready.wait(timeout)
+
     def write(self, result: FusionResult) -> None:
         """Enqueue ``result`` for logging (non-blocking; throttled; drop-oldest).
 

@@ -1,0 +1,321 @@
+"""Tests of the ``rerun`` sink (real .rrd files read back with rerun.chunk) and the colouriser."""
+from __future__ import annotations
+
+import math
+import socket
+import time
+from collections import defaultdict
+
+import cv2
+import numpy as np
+import pyarrow as pa
+import pytest
+from rerun.chunk import RrdReader
+
+from vpp_service.frame import Calibration, FusionResult, StereoFrame
+from vpp_service.settings import SettingsError
+from vpp_service.sinks import SINKS, build_sink
+from vpp_service.sinks.base import SinkContext
+from vpp_service.sinks.colorize import colorize_disparity, disparity_range
+from vpp_service.sinks.rerun import RerunSink, depth_stride
+
+H, W = 30, 40
+RIG = "rigA"
+
+
+def make_result(seq: int, *, painted: bool = True, calib: bool = True) -> FusionResult:
+    rng = np.random.default_rng(seq)
+    left = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    right = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    sparse = np.full((H, W), np.nan, np.float32)
+    sparse[2, 3], sparse[20, 30], sparse[7, 11] = 12.0, 25.0, 5.0
+    disp = rng.uniform(2.0, 30.0, (H, W)).astype(np.float32)
+    disp[0, :4] = np.nan
+    frame = StereoFrame(
+        left, right, Calibration(f=80.0, baseline=0.2, cx=19.0, cy=14.0) if calib else None,
+        sparse_disparity=sparse, rig=RIG, seq=seq, stamp_ns=1_700_000_000_000_000_000 + seq * 10**8,
+    )
+    return FusionResult(
+        frame, disp,
+        left_vpp=(255 - left) if painted else None, right_vpp=(255 - right) if painted else None,
+        timing_ms={"vpp": 1.5, "total": 9.0},
+    )
+
+
+def read_rrd(path) -> dict[str, dict[str, list]]:
+    """entity path -> column name -> values (rows of all chunks, sorted by seq)."""
+    rows: dict[str, list[dict]] = defaultdict(list)
+    for chunk in RrdReader(path).stream().to_chunks():
+        if chunk.is_static:
+            continue
+        rb = chunk.to_record_batch()
+        cols = {}
+        for i, field in enumerate(rb.schema):
+            col = rb.column(i)
+            if pa.types.is_timestamp(field.type) or pa.types.is_duration(field.type):
+                col = col.cast(pa.int64())  # nanoseconds, without pandas
+            cols[field.name] = col.to_pylist()
+        for r in range(rb.num_rows):
+            rows[chunk.entity_path].append({n: v[r] for n, v in cols.items()})
+    out = {}
+    for ent, rs in rows.items():
+        rs.sort(key=lambda r: r["seq"])
+        out[ent] = {n: [r[n] for r in rs] for n in rs[0]}
+    return out
+
+
+def save_sink(tmp_path, **opts) -> RerunSink:
+    opts = {"mode": "save", "path": str(tmp_path / "out.rrd"), "max_hz": 0, "queue_size": 64, **opts}
+    sink = build_sink("rerun", opts, SinkContext(rig=RIG))
+    sink.open()
+    return sink
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def image_bytes(value) -> np.ndarray:
+    return np.asarray(value[0] if isinstance(value[0], list) else value, dtype=np.uint8)
+
+
+# -- rerun sink: save mode ----------------------------------------------------------
+
+
+def test_registered():
+    assert SINKS.get("rerun") is RerunSink
+
+
+def test_save_contains_expected_entities(tmp_path):
+    sink = save_sink(tmp_path)
+    results = [make_result(i) for i in range(4)]
+    for r in results:
+        sink.write(r)
+    sink.close(timeout=10)
+    assert sink.stats()["written"] == 4 and sink.stats()["dropped"] == 0 and sink.stats()["errors"] == 0
+
+    reader = RrdReader(tmp_path / "out.rrd")
+    assert len(reader.recordings()) == 1 and len(reader.blueprints()) == 1
+    data = read_rrd(tmp_path / "out.rrd")
+    expected = {f"/{RIG}/{e}" for e in ("left", "right", "left/sparse", "disparity", "camera", "camera/depth",
+                                         "timing/vpp", "timing/total")}
+    assert set(data) == expected
+    for ent in expected:
+        assert data[ent]["seq"] == [0, 1, 2, 3], ent
+        assert data[ent]["stamp"] == [r.frame.stamp_ns for r in results], ent
+    # painted pair logged (not the raw one)
+    assert np.array_equal(image_bytes(data[f"/{RIG}/left"]["Image:buffer"][2]), results[2].left_vpp.ravel())
+    assert np.array_equal(image_bytes(data[f"/{RIG}/right"]["Image:buffer"][0]), results[0].right_vpp.ravel())
+    # sparse points at pixel centres (Rerun: +0.5), in raster order
+    pos = np.asarray(data[f"/{RIG}/left/sparse"]["Points2D:positions"][0])
+    assert np.allclose(pos, [[3.5, 2.5], [11.5, 7.5], [30.5, 20.5]])
+    # pinhole from the calibration (column-major 3x3)
+    k = np.asarray(data[f"/{RIG}/camera"]["Pinhole:image_from_camera"][0]).reshape(3, 3).T
+    assert np.allclose(k, [[80.0, 0, 19.5], [0, 80.0, 14.5], [0, 0, 1]])
+    assert np.allclose(data[f"/{RIG}/timing/total"]["Scalars:scalars"][1], [9.0])
+    # disparity image is the colourised map
+    disp_img = image_bytes(data[f"/{RIG}/disparity"]["Image:buffer"][1])
+    rng = disparity_range(results[1].disparity, results[1].frame.sparse_disparity)
+    assert np.array_equal(disp_img, colorize_disparity(results[1].disparity, *rng).ravel())
+
+
+def test_depth_image_matches_disparity(tmp_path):
+    sink = save_sink(tmp_path, max_points=400)  # 30x40 -> stride 2 -> 15x20 = 300 points
+    res = make_result(0)
+    sink.write(res)
+    sink.close(timeout=10)
+    data = read_rrd(tmp_path / "out.rrd")
+    res_wh = data[f"/{RIG}/camera"]["Pinhole:resolution"][0]
+    assert list(res_wh[0]) == [20, 15]
+    k = np.asarray(data[f"/{RIG}/camera"]["Pinhole:image_from_camera"][0]).reshape(3, 3).T
+    assert np.allclose(k, [[40.0, 0, 10.0], [0, 40.0, 7.5], [0, 0, 1]])
+    depth = np.frombuffer(bytes(image_bytes(data[f"/{RIG}/camera/depth"]["DepthImage:buffer"][0])), np.float32)
+    depth = depth.reshape(15, 20)
+    ref = (80.0 * 0.2 / res.disparity[::2, ::2]).astype(np.float32)
+    ref[~np.isfinite(ref)] = 0.0
+    assert np.allclose(depth, ref, rtol=1e-6)
+
+
+@pytest.mark.parametrize(
+    "opts, painted, calib, raw, has_camera",
+    [
+        ({"log_painted": False}, True, True, True, True),
+        ({}, False, True, True, True),  # VPP disabled -> raw pair
+        ({"point_cloud": False}, True, True, False, False),
+        ({}, True, False, False, False),  # no calibration -> no 3-D
+    ],
+)
+def test_save_variants(tmp_path, opts, painted, calib, raw, has_camera):
+    sink = save_sink(tmp_path, **opts)
+    res = make_result(5, painted=painted, calib=calib)
+    sink.write(res)
+    sink.close(timeout=10)
+    data = read_rrd(tmp_path / "out.rrd")
+    left = image_bytes(data[f"/{RIG}/left"]["Image:buffer"][0])
+    expected = res.frame.left if raw else res.left_vpp
+    assert np.array_equal(left, expected.ravel())
+    assert (f"/{RIG}/camera/depth" in data) == has_camera
+
+
+def test_throttle_drops_are_counted(tmp_path):
+    sink = save_sink(tmp_path, max_hz=0.001)  # one frame per 1000 s: only the first passes
+    for i in range(5):
+        sink.write(make_result(i))
+    sink.close(timeout=10)
+    st = sink.stats()
+    assert st["written"] == 1 and st["throttled"] == 4 and st["dropped"] == 4 and st["queue_dropped"] == 0
+    assert read_rrd(tmp_path / "out.rrd")[f"/{RIG}/left"]["seq"] == [0]
+
+
+def test_queue_drop_oldest_is_counted(tmp_path):
+    sink = save_sink(tmp_path, queue_size=1)
+    results = [make_result(i) for i in range(3)]
+    n = 60
+    for i in range(n):
+        results[i % 3].frame.seq = i
+        sink.write(results[i % 3])
+    sink.close(timeout=20)
+    st = sink.stats()
+    assert st["written"] + st["queue_dropped"] == n and st["dropped"] == st["queue_dropped"]
+    seqs = read_rrd(tmp_path / "out.rrd")[f"/{RIG}/left"]["seq"]
+    assert len(seqs) == st["written"] and seqs[-1] == n - 1  # newest frame always survives
+
+
+def test_connect_to_dead_viewer_closes_within_bound():
+    url = f"rerun+http://127.0.0.1:{free_port()}/proxy"
+    sink = build_sink("rerun", {"mode": "connect", "url": url, "max_hz": 0}, SinkContext(rig=RIG))
+    t0 = time.monotonic()
+    sink.open()
+    assert time.monotonic() - t0 < 3.0  # the connection is made on the sink's thread
+    for i in range(3):
+        sink.write(make_result(i))
+    t1 = time.monotonic()
+    sink.close(timeout=1.0)
+    assert time.monotonic() - t1 < 4.0  # Rerun itself would wait 5 s + 5 s
+    with pytest.raises(RuntimeError, match="after close"):
+        sink.write(make_result(0))
+
+
+def test_serve_listens_on_grpc_port():
+    port = free_port()
+    sink = build_sink("rerun", {"mode": "serve", "grpc_port": port, "memory_limit": "64MB"}, SinkContext(rig=RIG))
+    sink.open()
+    assert sink.wait_ready(10)
+    assert sink.server_uri and str(port) in sink.server_uri
+    sink.write(make_result(0))
+    deadline = time.monotonic() + 10
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            break
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.1)
+    sink.close(timeout=5)
+    assert sink.stats()["errors"] == 0
+
+
+def test_save_missing_folder(tmp_path):
+    sink = build_sink("rerun", {"path": str(tmp_path / "no" / "x.rrd")})
+    with pytest.raises(FileNotFoundError, match="sinks.rerun.path"):
+        sink.open()
+
+
+def test_write_errors(tmp_path):
+    sink = build_sink("rerun", {"path": str(tmp_path / "x.rrd")})
+    with pytest.raises(RuntimeError, match="before open"):
+        sink.write(make_result(0))
+    sink.open()
+    with pytest.raises(TypeError, match="result"):
+        sink.write({"disparity": 1})
+    sink.close()
+
+
+def test_bad_rig_name():
+    with pytest.raises(ValueError, match="context.rig"):
+        build_sink("rerun", {}, SinkContext(rig="a/b c"))
+
+
+@pytest.mark.parametrize(
+    "opts, key",
+    [
+        ({"mode": "tcp"}, "mode"),
+        ({"max_hz": -1}, "max_hz"),
+        ({"max_hz": "fast"}, "max_hz"),
+        ({"memory_limit": "lots"}, "memory_limit"),
+        ({"queue_size": 0}, "queue_size"),
+        ({"url": "http://127.0.0.1:9876"}, "url"),
+        ({"grpc_port": 0}, "grpc_port"),
+        ({"web_port": 70000}, "web_port"),
+        ({"max_points": 0}, "max_points"),
+        ({"path": ""}, "path"),
+        ({"log_painted": 1}, "log_painted"),
+        ({"viewer": "x"}, "viewer"),
+    ],
+)
+def test_bad_options(opts, key):
+    with pytest.raises(SettingsError, match=rf"sinks\.rerun.*{key}"):
+        build_sink("rerun", opts)
+
+
+# -- depth_stride ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("h, w, m", [(30, 40, 400), (30, 40, 1200), (30, 40, 1), (480, 640, 200_000), (7, 3, 5)])
+def test_depth_stride_reference(h, w, m):
+    ref = next(s for s in range(1, h * w + 1) if math.ceil(h / s) * math.ceil(w / s) <= m)
+    assert depth_stride(h, w, m) == ref
+
+
+@pytest.mark.parametrize("args", [(0, 4, 4), (4, -1, 4), (4, 4, 0), (4.0, 4, 4), (True, 4, 4)])
+def test_depth_stride_errors(args):
+    with pytest.raises(ValueError):
+        depth_stride(*args)
+
+
+# -- colorize ---------------------------------------------------------------------------
+
+
+def test_colorize_reference():
+    d = np.array([[np.nan, 0.0, 1.0], [5.0, 9.0, 20.0]], np.float32)
+    out = colorize_disparity(d, 1.0, 9.0)
+    assert out.shape == (2, 3, 3) and out.dtype == np.uint8
+    idx = np.clip(np.rint((np.nan_to_num(d) - 1.0) * 255.0 / 8.0), 0, 255).astype(np.uint8)
+    ref = cv2.applyColorMap(idx, cv2.COLORMAP_TURBO)[..., ::-1]
+    valid = np.isfinite(d) & (d > 0)
+    assert np.array_equal(out[valid], ref[valid])
+    assert np.all(out[~valid] == 0)
+
+
+def test_colorize_default_range_and_points():
+    d = np.array([2.0, 4.0, np.inf, 3.0], np.float32)
+    assert disparity_range(d) == (2.0, 4.0)
+    out = colorize_disparity(d)
+    assert out.shape == (4, 3)
+    assert np.array_equal(out[0], colorize_disparity(np.array([2.0]), 2.0, 4.0)[0])
+    assert np.all(out[2] == 0)
+
+
+def test_disparity_range():
+    assert disparity_range(None, np.array([np.nan, -1.0])) is None
+    assert disparity_range(np.array([3.0, 3.0])) == (3.0, 4.0)
+    assert disparity_range(np.array([1.0, 5.0]), None, np.array([0.5, np.nan])) == (0.5, 5.0)
+    with pytest.raises(TypeError, match=r"arrays\[0\]"):
+        disparity_range([1.0, 2.0])
+
+
+@pytest.mark.parametrize(
+    "args, exc, key",
+    [
+        (("x",), TypeError, "disparity"),
+        ((np.zeros(3, bool),), TypeError, "disparity"),
+        ((np.ones(3), 2.0, 1.0), ValueError, "vmax"),
+        ((np.ones(3), np.nan, 1.0), ValueError, "vmin"),
+    ],
+)
+def test_colorize_errors(args, exc, key):
+    with pytest.raises(exc, match=key):
+        colorize_disparity(*args)
