@@ -102,6 +102,10 @@ class Source(ABC):
         """Sleep up to ``seconds``; returns True when asked to stop meanwhile."""
         return self._stop.wait(seconds)
 
+    def request_stop(self) -> None:
+        """Ask the producing thread to stop, without waiting (safe from any thread)."""
+        self._stop.set()
+
     def stop(self, timeout: float = 5.0) -> None:
         """Stop producing and join the thread within ``timeout`` seconds."""
         self._stop.set()

@@ -1,0 +1,122 @@
+"""Assemble and run the service from a validated :class:`~vpp_service.service.config.ServiceConfig`.
+
+:func:`run_service` opens the Zenoh session (``with zenoh.open(...)``), builds
+the source, matcher, VPP step and sinks, runs the :class:`Pipeline` until
+``max_frames``, the end of a finite source, or ``stop`` being set (the CLI sets
+it on SIGINT/SIGTERM), prints a live one-line summary on stderr, and writes
+``<out>/summary.json``. Shutdown is bounded by ``service.shutdown_timeout_s``.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any, Iterator, TextIO
+
+from vpp_service.service.config import ServiceConfig, ZenohSection
+from vpp_service.service.fusion import Fusion
+from vpp_service.service.pipeline import Pipeline
+
+log = logging.getLogger(__name__)
+
+
+def zenoh_config(section: ZenohSection) -> Any:
+    """A ``zenoh.Config`` from the ``[zenoh]`` section (multicast scouting off unless enabled)."""
+    import zenoh
+
+    conf = zenoh.Config.from_file(section.config_file) if section.config_file else zenoh.Config()
+    conf.insert_json5("mode", json.dumps(section.mode))
+    conf.insert_json5("listen/endpoints", json.dumps(list(section.listen)))
+    conf.insert_json5("connect/endpoints", json.dumps(list(section.connect)))
+    conf.insert_json5("scouting/multicast/enabled", "true" if section.multicast_scouting else "false")
+    return conf
+
+
+@contextlib.contextmanager
+def open_session(section: ZenohSection) -> Iterator[Any]:
+    """``with open_session(cfg.zenoh) as session`` (None when zenoh is disabled)."""
+    if not section.enabled:
+        yield None
+        return
+    import zenoh
+
+    zenoh.init_log_from_env_or("error")
+    with zenoh.open(zenoh_config(section)) as session:
+        yield session
+
+
+def build_pipeline(cfg: ServiceConfig, session: Any = None) -> Pipeline:
+    """Build (not start) the pipeline described by ``cfg`` on ``session``."""
+    from vpp_service.matchers import build_matcher
+    from vpp_service.sinks.base import SINKS, SinkContext
+    from vpp_service.sources.base import SOURCES, SourceContext
+
+    s = cfg.service
+    source = SOURCES.get(cfg.source.name)(cfg.source.options, SourceContext(rig=s.rig, prefix=s.prefix,
+                                                                             session=session))
+    sink_ctx = SinkContext(rig=s.rig, prefix=s.prefix, session=session)
+    sinks = [SINKS.get(sp.name)(sp.options, sink_ctx) for sp in cfg.sinks]
+    matcher = build_matcher(cfg.matcher.name, cfg.matcher.raw)
+    fusion = Fusion(matcher, cfg.vpp, seed=s.seed)
+    q = cfg.queues
+    return Pipeline(source, fusion, sinks, input_size=q.input_size, input_policy=q.input_policy,
+                    output_size=q.output_size, output_policy=q.output_policy, max_frames=s.max_frames,
+                    session=session, prefix=s.prefix, rig=s.rig, timing_window=s.timing_window,
+                    reject_log_period_s=s.reject_log_period_s)
+
+
+def run_service(cfg: ServiceConfig, stop: threading.Event | None = None,
+                stream: TextIO | None = sys.stderr) -> dict[str, Any]:
+    """Run until done or ``stop`` is set; return the final status (also in ``<out>/summary.json``).
+
+    Parameters
+    ----------
+    cfg : ServiceConfig
+        Validated configuration.
+    stop : threading.Event or None
+        Set it to stop (signal handlers do).
+    stream : text stream or None
+        Where the live summary line goes (None = nowhere).
+    """
+    stop = stop or threading.Event()
+    s = cfg.service
+    out = Path(s.out)
+    out.mkdir(parents=True, exist_ok=True)
+    summary_path = out / "summary.json"
+    with open_session(cfg.zenoh) as session:
+        pipe = build_pipeline(cfg, session)
+        pipe.start()
+        if session is not None:
+            log.info("zenoh session %s listening on %s", session.info.zid(), list(cfg.zenoh.listen))
+        try:
+            next_report = time.monotonic() + s.summary_period_s
+            while not stop.is_set() and not pipe.done.is_set():
+                stop.wait(0.1)
+                if time.monotonic() >= next_report:
+                    next_report += s.summary_period_s
+                    if s.summary and stream is not None:
+                        print("\r" + pipe.summary_line(), end="", file=stream, flush=True)
+                    _write_json(summary_path, pipe.status())
+        finally:
+            t0 = time.monotonic()
+            pipe.stop(s.shutdown_timeout_s)
+            status = pipe.status()
+            status["shutdown_s"] = time.monotonic() - t0
+            status["config"] = cfg.to_dict()
+            _write_json(summary_path, status)
+            if s.summary and stream is not None:
+                print("\r" + pipe.summary_line(), file=stream, flush=True)
+    return status
+
+
+def _write_json(path: Path, data: dict[str, Any]) -> None:
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(data, indent=2, default=str))
+    tmp.replace(path)
+
+
+__all__ = ["zenoh_config", "open_session", "build_pipeline", "run_service"]

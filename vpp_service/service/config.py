@@ -1,0 +1,340 @@
+"""Service configuration: one TOML file, validated in full before anything starts.
+
+Sections (every key is documented in ``deploy/config.example.toml``)::
+
+    [service]   rig, prefix, max_frames, out, summary, ...      -> ServiceSection
+    [zenoh]     enabled, mode, listen, connect, multicast_scouting, config_file
+    [source]    type = "sim" | "files" | "zenoh", plus that source's options
+    [vpp]       enabled, plus VPPConfig fields
+    [matcher]   name = "sgbm" | "bm" | "census-sgm", plus that matcher's options
+    [queues]    input_size, input_policy, output_size, output_policy
+    [[sinks]]   type = "zenoh" | "rerun" | "files", plus that sink's options
+
+:func:`load_config` reads a file (or starts from :data:`DEFAULT_CONFIG`, the
+embedded default of ``vpp-service run`` with no arguments), applies overrides,
+and validates every section with :func:`vpp_service.settings.from_mapping` and
+each plugin's ``Options``. Errors are :class:`~vpp_service.settings.SettingsError`
+naming the key (``source.rate_hz: must be a number ...``).
+"""
+from __future__ import annotations
+
+import copy
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal, Mapping
+
+from vpp_service.settings import SettingsError, from_mapping
+
+#: Top-level tables a config may contain.
+SECTIONS = ("service", "zenoh", "source", "vpp", "matcher", "queues", "sinks")
+
+
+@dataclass(frozen=True)
+class ServiceSection:
+    """``[service]``: identity and run control.
+
+    Attributes
+    ----------
+    rig : str
+        Rig name: topics are ``<prefix>/<rig>/...``.
+    prefix : str
+        Zenoh key prefix.
+    max_frames : int
+        Stop after this many processed frames; 0 = run until stopped.
+    out : str
+        Folder for the run's files (summary JSON, default ``.rrd``).
+    summary : bool
+        Print a live one-line summary on stderr.
+    summary_period_s : float
+        Period of the live summary line and of the summary JSON rewrite.
+    shutdown_timeout_s : float
+        Bound on every shutdown step (source, threads, each sink).
+    timing_window : int
+        Frames in the sliding window of the timing statistics.
+    reject_log_period_s : float
+        At most one log line per this period about rejected inputs.
+    seed : int
+        Seed of the VPP pattern (frame ``seq`` is added).
+    """
+
+    rig: str = "rig0"
+    prefix: str = "vpp"
+    max_frames: int = 0
+    out: str = "vpp-run"
+    summary: bool = True
+    summary_period_s: float = 1.0
+    shutdown_timeout_s: float = 5.0
+    timing_window: int = 200
+    reject_log_period_s: float = 5.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        from vpp_service.service.wire import topic
+
+        topic(self.prefix, self.rig, "x")  # validates both
+        if self.max_frames < 0:
+            raise ValueError(f"max_frames must be >= 0, got {self.max_frames}")
+        if not self.out:
+            raise ValueError("out: must be a folder name")
+        for name in ("summary_period_s", "shutdown_timeout_s", "reject_log_period_s"):
+            if not 0 < getattr(self, name) <= 3600:
+                raise ValueError(f"{name} must be in (0, 3600], got {getattr(self, name)}")
+        if not 1 <= self.timing_window <= 100000:
+            raise ValueError(f"timing_window must be in [1, 100000], got {self.timing_window}")
+
+
+@dataclass(frozen=True)
+class ZenohSection:
+    """``[zenoh]``: the service's Zenoh session.
+
+    Attributes
+    ----------
+    enabled : bool
+        Open a session (needed by the zenoh source/sink and ``@status``).
+    mode : {"peer", "client", "router"}
+        Zenoh mode.
+    listen, connect : list of str
+        Endpoints, e.g. ``"tcp/127.0.0.1:7447"``.
+    multicast_scouting : bool
+        Multicast peer discovery; off by default (explicit endpoints only).
+    config_file : str
+        Optional Zenoh JSON5 config loaded first (the keys above override it).
+    """
+
+    enabled: bool = True
+    mode: Literal["peer", "client", "router"] = "peer"
+    listen: list[str] = field(default_factory=lambda: ["tcp/127.0.0.1:7447"])
+    connect: list[str] = field(default_factory=list)
+    multicast_scouting: bool = False
+    config_file: str = ""
+
+    def __post_init__(self) -> None:
+        for key in ("listen", "connect"):
+            for ep in getattr(self, key):
+                if "/" not in ep or not ep.split("/", 1)[1]:
+                    raise ValueError(f"{key}: endpoint must look like 'tcp/HOST:PORT', got {ep!r}")
+        if self.mode == "client" and not self.connect:
+            raise ValueError("connect: client mode needs at least one endpoint")
+        if self.config_file and not Path(self.config_file).is_file():
+            raise ValueError(f"config_file: no such file: {self.config_file}")
+
+
+@dataclass(frozen=True)
+class QueuesSection:
+    """``[queues]``: bounded queues between the pipeline stages.
+
+    Attributes
+    ----------
+    input_size, output_size : int
+        Capacity of the source -> process and process -> sinks queues.
+    input_policy, output_policy : {"latest", "block"}
+        ``latest`` drops the oldest item when full (live camera: freshest
+        frame wins; drops counted); ``block`` makes the producer wait (lossless
+        replay; the source slows down instead).
+    """
+
+    input_size: int = 2
+    input_policy: Literal["latest", "block"] = "latest"
+    output_size: int = 4
+    output_policy: Literal["latest", "block"] = "latest"
+
+    def __post_init__(self) -> None:
+        for key in ("input_size", "output_size"):
+            if not 1 <= getattr(self, key) <= 10000:
+                raise ValueError(f"{key} must be in [1, 10000], got {getattr(self, key)}")
+
+
+@dataclass(frozen=True)
+class PluginSpec:
+    """A validated plugin choice: registered name plus its parsed ``Options``."""
+
+    name: str
+    options: Any
+    raw: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class ServiceConfig:
+    """The whole validated service configuration."""
+
+    service: ServiceSection
+    zenoh: ZenohSection
+    source: PluginSpec
+    vpp: Any  # VPPConfig or None when disabled
+    vpp_raw: dict[str, Any]
+    matcher: PluginSpec
+    queues: QueuesSection
+    sinks: tuple[PluginSpec, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain mapping (the form :func:`validate_config` accepts)."""
+        from vpp_service.settings import to_mapping
+
+        return {
+            "service": to_mapping(self.service), "zenoh": to_mapping(self.zenoh),
+            "source": {"type": self.source.name, **self.source.raw},
+            "vpp": dict(self.vpp_raw), "matcher": {"name": self.matcher.name, **self.matcher.raw},
+            "queues": to_mapping(self.queues), "sinks": [{"type": s.name, **s.raw} for s in self.sinks],
+        }
+
+
+#: The embedded default of ``vpp-service run``: simulated Motorcycle + uniform 5 %,
+#: VPP + SGBM, publishing on a local Zenoh peer and saving ``<out>/vpp.rrd``.
+DEFAULT_CONFIG: dict[str, Any] = {
+    "service": {"rig": "rig0", "prefix": "vpp", "max_frames": 0, "out": "vpp-run"},
+    "zenoh": {"mode": "peer", "listen": ["tcp/127.0.0.1:7447"], "connect": [], "multicast_scouting": False},
+    "source": {"type": "sim", "scene": "motorcycle", "sensor": "uniform", "sensor_options": {"density": 0.05},
+               "rate_hz": 10.0},
+    "vpp": {"enabled": True},
+    "matcher": {"name": "sgbm", "max_disparity": 128},
+    "queues": {"input_size": 2, "input_policy": "latest", "output_size": 4, "output_policy": "latest"},
+    "sinks": [{"type": "zenoh", "outputs": ["disparity", "depth"]},
+              {"type": "rerun", "mode": "save", "path": "{out}/vpp.rrd"}],
+}
+
+
+def _table(d: Mapping[str, Any], key: str) -> Mapping[str, Any]:
+    v = d.get(key, {})
+    if not isinstance(v, Mapping):
+        raise SettingsError(f"{key}: must be a table, got {type(v).__name__}")
+    return v
+
+
+def _plugin(d: Mapping[str, Any], section: str, name_key: str, registry: Any, parse: Any) -> PluginSpec:
+    if not isinstance(d, Mapping):
+        raise SettingsError(f"{section}: must be a table, got {type(d).__name__}")
+    if name_key not in d:
+        raise SettingsError(f"{section}.{name_key}: missing; known: {', '.join(registry.names())}")
+    name = d[name_key]
+    if not isinstance(name, str):
+        raise SettingsError(f"{section}.{name_key}: must be a string, got {name!r}")
+    if name not in registry:
+        raise SettingsError(f"{section}.{name_key}: unknown {registry.kind} {name!r}; known: {', '.join(registry.names())}")
+    raw = {k: v for k, v in d.items() if k != name_key}
+    return PluginSpec(name=name, options=parse(name, raw, section), raw=raw)
+
+
+def _parse_vpp(d: Mapping[str, Any]) -> Any:
+    raw = dict(d)
+    enabled = raw.pop("enabled", True)
+    if not isinstance(enabled, bool):
+        raise SettingsError(f"vpp.enabled: must be true or false, got {enabled!r}")
+    from vpp_service.vpp import VPPConfig
+
+    try:
+        cfg = VPPConfig.from_dict(raw)
+    except SettingsError as exc:
+        msg = str(exc)
+        raise SettingsError(msg if msg.startswith("vpp") else f"vpp.{msg}") from None
+    except (TypeError, ValueError) as exc:
+        raise SettingsError(f"vpp: {exc}") from None
+    return cfg if enabled else None
+
+
+def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceConfig:
+    """Validate a whole config mapping (as read from TOML) into a :class:`ServiceConfig`.
+
+    Missing sections take their defaults (sinks default to none). ``{out}`` in
+    sink string options is replaced by ``service.out``.
+
+    Raises
+    ------
+    SettingsError
+        Unknown section or key, wrong type, unknown plugin, out-of-range value;
+        the message names the key.
+    """
+    from vpp_service.matchers import MATCHERS
+    from vpp_service.sinks import SINKS  # registers the built-in sinks
+    from vpp_service.sinks.base import parse_sink_options as _psink
+    from vpp_service.sources import SOURCES, parse_source_options
+
+    if not isinstance(data, Mapping):
+        raise SettingsError(f"config: must be a table, got {type(data).__name__}")
+    unknown = sorted(set(data) - set(SECTIONS))
+    if unknown:
+        raise SettingsError(f"{unknown[0]}: unknown section; known: {', '.join(SECTIONS)}")
+    service = from_mapping(ServiceSection, _table(data, "service"), "service")
+    zen = from_mapping(ZenohSection, _table(data, "zenoh"), "zenoh")
+    source = _plugin(data.get("source", {"type": "sim"}), "source", "type", SOURCES,
+                     lambda n, raw, sec: parse_source_options(n, raw, sec))
+
+    sensor = getattr(source.options, "sensor", "none")
+    if sensor != "none":
+        from vpp_service.sources.sensors import build_sensor
+
+        try:
+            build_sensor(sensor, dict(getattr(source.options, "sensor_options", {})))
+        except ValueError as exc:
+            raise SettingsError(f"source.sensor_options: {exc}") from None
+
+    def parse_matcher(name: str, raw: Mapping[str, Any], sec: str) -> Any:
+        cls = MATCHERS.get(name)
+        return from_mapping(cls.Options, raw, sec)
+
+    matcher = _plugin(data.get("matcher", {"name": "sgbm"}), "matcher", "name", MATCHERS, parse_matcher)
+    vpp_raw = dict(_table(data, "vpp"))
+    vpp = _parse_vpp(vpp_raw)
+    queues = from_mapping(QueuesSection, _table(data, "queues"), "queues")
+    sinks_raw = data.get("sinks", [])
+    if not isinstance(sinks_raw, list):
+        raise SettingsError(f"sinks: must be an array of tables ([[sinks]]), got {type(sinks_raw).__name__}")
+    sinks = []
+    out_dir = out or service.out
+    for i, s in enumerate(sinks_raw):
+        if isinstance(s, Mapping):
+            s = {k: (v.replace("{out}", out_dir) if isinstance(v, str) else v) for k, v in s.items()}
+        sinks.append(_plugin(s, f"sinks[{i}]", "type", SINKS, lambda n, raw, sec: _psink(n, raw, sec)))
+    uses_zenoh = source.name == "zenoh" or any(s.name == "zenoh" for s in sinks)
+    if uses_zenoh and not zen.enabled:
+        raise SettingsError("zenoh.enabled: the zenoh source/sink needs a zenoh session")
+    return ServiceConfig(service=service, zenoh=zen, source=source, vpp=vpp, vpp_raw=vpp_raw,
+                         matcher=matcher, queues=queues, sinks=tuple(sinks))
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """Read a TOML config file.
+
+    Raises
+    ------
+    FileNotFoundError
+        The file does not exist.
+    SettingsError
+        The file is not valid TOML.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"config: no such file: {p}")
+    try:
+        return tomllib.loads(p.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise SettingsError(f"config: {p}: invalid TOML: {exc}") from None
+
+
+def merge(base: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
+    """Deep-merge ``overrides`` into a copy of ``base`` (tables merge; other values replace)."""
+    out = copy.deepcopy(dict(base))
+    for k, v in overrides.items():
+        if isinstance(v, Mapping) and isinstance(out.get(k), Mapping):
+            out[k] = merge(out[k], v)
+        else:
+            out[k] = copy.deepcopy(v)
+    return out
+
+
+def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None) -> ServiceConfig:
+    """Read ``path`` (or the embedded :data:`DEFAULT_CONFIG`), apply ``overrides``, validate.
+
+    A file replaces the default entirely (its missing sections take the
+    per-section defaults, and no sinks unless it lists some).
+    """
+    data = read_toml(path) if path is not None else copy.deepcopy(DEFAULT_CONFIG)
+    if overrides:
+        data = merge(data, overrides)
+    return validate_config(data)
+
+
+__all__ = [
+    "SECTIONS", "ServiceSection", "ZenohSection", "QueuesSection", "PluginSpec", "ServiceConfig",
+    "DEFAULT_CONFIG", "validate_config", "read_toml", "merge", "load_config",
+]

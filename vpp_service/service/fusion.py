@@ -1,0 +1,102 @@
+"""The per-frame processing step: sparse depth -> VPP -> matcher -> depth, metrics.
+
+:class:`Fusion` is what the pipeline's process stage calls on every frame.
+A frame with metric depth (``sensor_depth``) and a calibration has it converted
+to disparity (``d = f * b / Z - doffs``); a frame with no sparse depth at all
+(or VPP disabled) runs the matcher on the raw pair and is counted as
+``no_depth``. When the frame carries ground truth, ``FusionResult.metrics``
+holds the error against it (:func:`vpp_service.evaluation.metrics.compute_metrics`).
+"""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from vpp_service.frame import FusionResult, StereoFrame
+
+
+class Fusion:
+    """Callable processing one :class:`StereoFrame` into a :class:`FusionResult`.
+
+    Parameters
+    ----------
+    matcher : Matcher
+        A built matcher (``vpp_service.matchers.build_matcher``).
+    vpp_config : VPPConfig or None
+        VPP settings; None disables VPP (plain stereo).
+    seed : int
+        Pattern seed; the frame's ``seq`` is added so every frame differs.
+    """
+
+    def __init__(self, matcher: Any, vpp_config: Any = None, seed: int = 0) -> None:
+        if not hasattr(matcher, "compute"):
+            raise TypeError(f"matcher must have a compute(left, right) method, got {type(matcher).__name__}")
+        self.matcher = matcher
+        self.vpp_config = vpp_config
+        self.seed = int(seed)
+        self.counters = {"vpp": 0, "no_depth": 0}
+
+    @staticmethod
+    def sparse_disparity(frame: StereoFrame) -> np.ndarray | None:
+        """The frame's sparse disparity (converting metric depth when needed), or None."""
+        if frame.sparse_disparity is not None:
+            return frame.sparse_disparity
+        if frame.sensor_depth is not None and frame.calib is not None:
+            from vpp_service.vpp import depth_to_disparity
+
+            c = frame.calib
+            return depth_to_disparity(frame.sensor_depth, c.f, c.baseline, c.doffs)
+        return None
+
+    def __call__(self, frame: StereoFrame) -> FusionResult:
+        """Process one frame.
+
+        Raises
+        ------
+        TypeError, ValueError
+            Invalid frame for the matcher/VPP (e.g. image narrower than the
+            disparity range); the pipeline counts it as rejected.
+        """
+        timing: dict[str, float] = dict(frame.meta.get("timing_ms", {}))
+        t_start = time.perf_counter()
+        left, right = np.ascontiguousarray(frame.left), np.ascontiguousarray(frame.right)
+        sparse = self.sparse_disparity(frame)
+        left_vpp = right_vpp = occluded = None
+        stats: dict[str, Any] = {}
+        has_points = sparse is not None and bool(np.any(np.isfinite(sparse) & (sparse > 0)))
+        if self.vpp_config is not None and has_points:
+            from vpp_service.vpp import project
+
+            t0 = time.perf_counter()
+            res = project(left, right, sparse, self.vpp_config, seed=self.seed + int(frame.seq))
+            timing["vpp"] = (time.perf_counter() - t0) * 1e3
+            left_vpp, right_vpp, occluded = res.left, res.right, res.occluded
+            stats = dict(getattr(res, "stats", {}) or {})
+            self.counters["vpp"] += 1
+            m_left, m_right = left_vpp, right_vpp
+        else:
+            if not has_points:
+                self.counters["no_depth"] += 1
+            m_left, m_right = left, right
+        t0 = time.perf_counter()
+        disp = np.asarray(self.matcher.compute(m_left, m_right), dtype=np.float32)
+        timing["match"] = (time.perf_counter() - t0) * 1e3
+        depth = None
+        if frame.calib is not None:
+            from vpp_service.vpp import disparity_to_depth
+
+            c = frame.calib
+            depth = np.asarray(disparity_to_depth(disp, c.f, c.baseline, c.doffs), dtype=np.float32)
+        metrics: dict[str, float] = {}
+        if frame.gt_disparity is not None:
+            from vpp_service.evaluation.metrics import compute_metrics
+
+            metrics = {k: float(v) for k, v in compute_metrics(disp, frame.gt_disparity).items()}
+        timing["process"] = (time.perf_counter() - t_start) * 1e3
+        return FusionResult(frame=frame, disparity=disp, depth=depth, left_vpp=left_vpp, right_vpp=right_vpp,
+                            occluded=occluded, vpp_stats=stats, timing_ms=timing, metrics=metrics)
+
+
+__all__ = ["Fusion"]

@@ -1,0 +1,388 @@
+"""The streaming pipeline: source -> process -> sink fan-out, in threads.
+
+::
+
+    source thread --emit--> [input queue] --> process thread --> [output queue] --> sink thread
+                                                 (Fusion)                          (every sink.write)
+
+Queues are bounded (:class:`BoundedQueue`) with a policy: ``latest`` drops the
+oldest item when full (a live camera: the freshest frame wins, drops are
+counted) or ``block`` (lossless: the producer waits). Counters (``received``,
+``rejected``, ``dropped``, ``processed``, ``published``, ``no_depth``,
+``errors``) and per-stage timings (mean, p50, p99 over a sliding window) are
+reported by :meth:`Pipeline.status`, which the service also serves as JSON on
+the ``<prefix>/<rig>/@status`` queryable; a liveliness token
+``<prefix>/<rig>/@alive`` is held while the pipeline runs.
+
+Bad input never stops the pipeline: a rejected message is counted and logged
+(at most once per ``reject_log_period_s``); a frame the process step raises
+on is counted as rejected and dropped.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+from collections import deque
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from vpp_service.frame import FusionResult, StereoFrame
+
+log = logging.getLogger(__name__)
+
+
+class BoundedQueue:
+    """A thread-safe FIFO of at most ``size`` items with a full-queue policy.
+
+    Parameters
+    ----------
+    size : int
+        Capacity (>= 1).
+    policy : {"latest", "block"}
+        ``latest``: ``put`` on a full queue drops the oldest item (counted in
+        :attr:`dropped`); ``block``: ``put`` waits for room.
+    """
+
+    def __init__(self, size: int, policy: str = "latest") -> None:
+        if isinstance(size, bool) or not isinstance(size, int) or size < 1:
+            raise ValueError(f"size must be an integer >= 1, got {size!r}")
+        if policy not in ("latest", "block"):
+            raise ValueError(f"policy must be 'latest' or 'block', got {policy!r}")
+        self.size = size
+        self.policy = policy
+        self._items: deque[Any] = deque()
+        self._cond = threading.Condition()
+        self._closed = False
+        self.dropped = 0
+        self.high_water = 0
+
+    def put(self, item: Any, timeout: float | None = None) -> bool:
+        """Add ``item``; False when it could not be queued (closed, or block timed out)."""
+        with self._cond:
+            if self.policy == "block":
+                ok = self._cond.wait_for(lambda: self._closed or len(self._items) < self.size, timeout)
+                if not ok or self._closed:
+                    return False
+            elif self._closed:
+                return False
+            elif len(self._items) >= self.size:
+                self._items.popleft()
+                self.dropped += 1
+            self._items.append(item)
+            self.high_water = max(self.high_water, len(self._items))
+            self._cond.notify_all()
+            return True
+
+    def get(self, timeout: float | None = None) -> Any:
+        """Remove and return the oldest item; None on timeout or when closed and empty."""
+        with self._cond:
+            if not self._cond.wait_for(lambda: self._items or self._closed, timeout):
+                return None
+            if not self._items:
+                return None
+            item = self._items.popleft()
+            self._cond.notify_all()
+            return item
+
+    def close(self) -> None:
+        """Refuse new items and wake every waiter (queued items can still be taken)."""
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+
+    def __len__(self) -> int:
+        with self._cond:
+            return len(self._items)
+
+
+class StageTimer:
+    """Sliding-window statistics (mean, p50, p99, last) of named durations in ms."""
+
+    def __init__(self, window: int = 200) -> None:
+        if window < 1:
+            raise ValueError(f"window must be >= 1, got {window}")
+        self.window = window
+        self._data: dict[str, deque[float]] = {}
+        self._lock = threading.Lock()
+
+    def add(self, stage: str, ms: float) -> None:
+        """Record one duration of ``stage``."""
+        with self._lock:
+            self._data.setdefault(stage, deque(maxlen=self.window)).append(float(ms))
+
+    def summary(self) -> dict[str, dict[str, float]]:
+        """``{stage: {mean, p50, p99, last, n}}``."""
+        with self._lock:
+            items = {k: np.array(v) for k, v in self._data.items() if v}
+        return {k: {"mean": float(a.mean()), "p50": float(np.percentile(a, 50)),
+                    "p99": float(np.percentile(a, 99)), "last": float(a[-1]), "n": int(a.size)}
+                for k, a in items.items()}
+
+
+class Pipeline:
+    """Threaded source -> process -> sinks pipeline (see the module docstring).
+
+    Parameters
+    ----------
+    source : Source
+        Built (not opened) source.
+    process : callable
+        ``process(frame) -> FusionResult`` (normally :class:`~vpp_service.service.fusion.Fusion`).
+    sinks : sequence of Sink
+        Built (not opened) sinks.
+    input_size, output_size : int
+        Queue capacities.
+    input_policy, output_policy : {"latest", "block"}
+        Queue policies.
+    max_frames : int
+        Stop after this many processed frames (0 = no limit).
+    session : zenoh.Session or None
+        When given, ``@status`` and ``@alive`` are declared on it.
+    prefix, rig : str
+        Key prefix and rig name for ``@status`` / ``@alive``.
+    timing_window : int
+        Window of the timing statistics.
+    reject_log_period_s : float
+        Rate limit of the rejected-input log line.
+    """
+
+    def __init__(self, source: Any, process: Callable[[StereoFrame], FusionResult], sinks: Sequence[Any] = (),
+                 *, input_size: int = 2, input_policy: str = "latest", output_size: int = 4,
+                 output_policy: str = "latest", max_frames: int = 0, session: Any = None,
+                 prefix: str = "vpp", rig: str = "rig0", timing_window: int = 200,
+                 reject_log_period_s: float = 5.0) -> None:
+        if not callable(process):
+            raise TypeError("process must be callable")
+        if max_frames < 0:
+            raise ValueError(f"max_frames must be >= 0, got {max_frames}")
+        self.source = source
+        self.process = process
+        self.sinks = list(sinks)
+        self.input = BoundedQueue(input_size, input_policy)
+        self.output = BoundedQueue(output_size, output_policy)
+        self.max_frames = max_frames
+        self.session = session
+        self.prefix, self.rig = prefix, rig
+        self.timer = StageTimer(timing_window)
+        self.reject_log_period_s = reject_log_period_s
+        self.counters = {"received": 0, "rejected": 0, "dropped": 0, "processed": 0, "published": 0,
+                         "no_depth": 0, "errors": 0}
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._enough = threading.Event()
+        self.done = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._last_reject_log = 0.0
+        self._suppressed = 0
+        self._started = 0.0
+        self._last_metrics: dict[str, float] = {}
+        self._bad2 = deque(maxlen=timing_window)
+        self._queryable = self._token = None
+        self._opened: list[Any] = []
+
+    # ----------------------------------------------------------- counters
+    def _inc(self, key: str, n: int = 1) -> None:
+        with self._lock:
+            self.counters[key] += n
+
+    def _emit(self, frame: StereoFrame) -> bool:
+        self._inc("received")
+        if self._stop.is_set() or self._enough.is_set():
+            return False
+        if self.input.policy == "block":
+            while not (self._stop.is_set() or self._enough.is_set()):
+                if self.input.put(frame, timeout=0.1):
+                    return True
+            return False
+        before = self.input.dropped
+        ok = self.input.put(frame)
+        if self.input.dropped != before:
+            self._inc("dropped", self.input.dropped - before)
+        return ok
+
+    def _source_reject(self, reason: str) -> None:
+        self._inc("received")
+        self._reject(reason)
+
+    def _reject(self, reason: str) -> None:
+        self._inc("rejected")
+        now = time.monotonic()
+        if now - self._last_reject_log >= self.reject_log_period_s:
+            extra = f" (+{self._suppressed} more since the last report)" if self._suppressed else ""
+            log.warning("rejected input: %s%s", reason, extra)
+            self._last_reject_log, self._suppressed = now, 0
+        else:
+            self._suppressed += 1
+
+    # -------------------------------------------------------------- stages
+    def _process_loop(self) -> None:
+        while True:
+            frame = self.input.get(timeout=0.05)
+            if frame is None:
+                if self._stop.is_set() or (self.source.finished.is_set() and len(self.input) == 0):
+                    break
+                continue
+            try:
+                result = self.process(frame)
+            except (TypeError, ValueError) as exc:
+                self._reject(f"frame seq={frame.seq}: {exc}")
+                continue
+            except Exception as exc:  # never let one frame kill the service
+                self._inc("errors")
+                log.exception("processing frame seq=%s failed: %s", frame.seq, exc)
+                continue
+            for stage, ms in result.timing_ms.items():
+                self.timer.add(stage, ms)
+            if result.metrics:
+                self._last_metrics = dict(result.metrics)
+                if "bad2" in result.metrics:
+                    self._bad2.append(result.metrics["bad2"])
+            if result.frame.sparse_disparity is None and result.frame.sensor_depth is None:
+                self._inc("no_depth")
+            self._inc("processed")
+            if self.output.policy == "block":
+                while not self.output.put(result, timeout=0.1):
+                    if self._stop.is_set():
+                        break
+            else:
+                before = self.output.dropped
+                self.output.put(result)
+                if self.output.dropped != before:
+                    self._inc("dropped", self.output.dropped - before)
+            if self.max_frames and self.counters["processed"] >= self.max_frames:
+                self._enough.set()
+                self.source.request_stop()  # no more input wanted
+                break
+        self.output.close()
+
+    def _sink_loop(self) -> None:
+        while True:
+            result = self.output.get(timeout=0.05)
+            if result is None:
+                if self.output._closed and len(self.output) == 0:
+                    break
+                continue
+            for sink in self.sinks:
+                try:
+                    sink.write(result)
+                except Exception as exc:  # a broken sink must not stop the others
+                    self._inc("errors")
+                    log.warning("sink %s: %s", type(sink).__name__, exc)
+            fr = result.frame
+            now_ns = time.time_ns()
+            if fr.stamp_ns > 0:
+                self.timer.add("latency", (now_ns - fr.stamp_ns) / 1e6)
+            self._inc("published")
+        self.done.set()
+
+    # ----------------------------------------------------------- lifecycle
+    def start(self) -> None:
+        """Open sinks and source, declare ``@status``/``@alive``, start the threads.
+
+        Raises
+        ------
+        Exception
+            Whatever a sink's or the source's ``open`` raises (already opened
+            parts are closed again).
+        """
+        try:
+            for sink in self.sinks:
+                sink.open()
+                self._opened.append(sink)
+            self.source.open()
+        except BaseException:
+            for sink in self._opened:
+                sink.close(1.0)
+            raise
+        if self.session is not None:
+            from vpp_service.service.wire import topic
+
+            self._queryable = self.session.declare_queryable(topic(self.prefix, self.rig, "@status"), self._on_query)
+            self._token = self.session.liveliness().declare_token(topic(self.prefix, self.rig, "@alive"))
+        self._started = time.monotonic()
+        for target, name in ((self._process_loop, "process"), (self._sink_loop, "sinks")):
+            t = threading.Thread(target=target, name=f"pipeline-{name}", daemon=True)
+            t.start()
+            self._threads.append(t)
+        self.source.start(self._emit, self._source_reject)
+
+    def _on_query(self, query: Any) -> None:
+        # runs on a Zenoh thread: build a small JSON reply, never block
+        try:
+            query.reply(query.key_expr, json.dumps(self.status()))
+        except Exception as exc:  # session closing
+            log.debug("@status reply failed: %s", exc)
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Block until the pipeline is done (source exhausted / max_frames) or ``timeout``."""
+        return self.done.wait(timeout)
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Stop the source, drain the queues, close sinks; every step bounded by ``timeout``."""
+        self.source.stop(timeout)
+        self.source.finished.set()
+        deadline = time.monotonic() + timeout
+        for t in self._threads:
+            t.join(max(0.05, deadline - time.monotonic()))
+        if any(t.is_alive() for t in self._threads):
+            log.warning("pipeline threads did not drain within %.1f s; abandoning the queued frames", timeout)
+            self._stop.set()
+            self.input.close()
+            self.output.close()
+            for t in self._threads:
+                t.join(1.0)
+        self._stop.set()
+        for sink in self._opened:
+            try:
+                sink.close(timeout)
+            except Exception as exc:
+                log.warning("closing sink %s: %s", type(sink).__name__, exc)
+        for obj in (self._queryable, self._token):
+            if obj is not None:
+                try:
+                    obj.undeclare()
+                except Exception:  # session already closed
+                    pass
+        self._queryable = self._token = None
+        self.done.set()
+
+    # -------------------------------------------------------------- status
+    def status(self) -> dict[str, Any]:
+        """Counters, queue fill, timings, source and sink stats (JSON-ready)."""
+        with self._lock:
+            counters = dict(self.counters)
+        elapsed = time.monotonic() - self._started if self._started else 0.0
+        sinks = {}
+        for s in self.sinks:
+            try:
+                sinks[type(s).__name__] = s.stats()
+            except Exception:
+                sinks[type(s).__name__] = {}
+        return {
+            "rig": self.rig, "prefix": self.prefix, "uptime_s": elapsed, "counters": counters,
+            "fps": counters["processed"] / elapsed if elapsed > 0 else 0.0,
+            "queues": {"input": {"len": len(self.input), "size": self.input.size, "policy": self.input.policy,
+                                 "dropped": self.input.dropped, "high_water": self.input.high_water},
+                       "output": {"len": len(self.output), "size": self.output.size, "policy": self.output.policy,
+                                  "dropped": self.output.dropped, "high_water": self.output.high_water}},
+            "timing_ms": self.timer.summary(), "source": self.source.stats(), "sinks": sinks,
+            "metrics": {"last": self._last_metrics,
+                        "bad2_mean": float(np.mean(self._bad2)) if self._bad2 else None},
+        }
+
+    def summary_line(self) -> str:
+        """One-line live summary: fps, latency p50/p99, bad-2 vs GT when known, counters."""
+        st = self.status()
+        c = st["counters"]
+        lat = st["timing_ms"].get("latency")
+        lat_s = f"lat p50 {lat['p50']:.0f} ms p99 {lat['p99']:.0f} ms" if lat else "lat -"
+        bad2 = st["metrics"]["bad2_mean"]
+        bad_s = f" | bad-2 {bad2:.2f} %" if bad2 is not None else ""
+        return (f"{st['fps']:.1f} fps | {lat_s}{bad_s} | recv {c['received']} proc {c['processed']} "
+                f"pub {c['published']} drop {c['dropped']} rej {c['rejected']} no-depth {c['no_depth']}")
+
+
+__all__ = ["BoundedQueue", "StageTimer", "Pipeline"]
