@@ -1,0 +1,105 @@
+"""Disparity accuracy metrics of the VPP evaluation protocol.
+
+Scored pixels are those with valid (finite, > 0) ground truth, restricted to
+``mask`` when given. Over them:
+
+* ``bad<τ>`` - percentage of scored pixels whose error ``|pred - gt|`` exceeds τ;
+* ``avg`` - mean absolute error (px); ``rms`` - root mean square error (px);
+* ``n`` - number of scored pixels.
+
+**Invalid predictions.** The protocol fills a matcher's holes before scoring
+(the evaluation runner does). Should a NaN prediction still reach this
+function, it counts as *bad for every τ* and is *left out of* ``avg`` and
+``rms`` (which are over the finite predictions only); ``invalid`` reports the
+percentage of scored pixels without a prediction. With no scored pixel,
+every value is NaN and ``n`` is 0.
+"""
+from __future__ import annotations
+
+from typing import Iterable
+
+import numpy as np
+
+
+def metric_key(tau: float) -> str:
+    """Name of the bad-τ metric: ``bad2`` for 2, ``bad0.5`` for 0.5."""
+    return f"bad{tau:g}"
+
+
+def compute_metrics(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray | None = None,
+                    taus: Iterable[float] = (1, 2, 3, 4)) -> dict[str, float]:
+    """Score a disparity map against ground truth.
+
+    Parameters
+    ----------
+    pred : ndarray
+        H x W float disparity; NaN = no prediction (+-inf rejected).
+    gt : ndarray
+        H x W float ground truth; NaN, inf or <= 0 = invalid (not scored).
+    mask : ndarray of bool, optional
+        H x W; only True pixels are scored (e.g. a non-occlusion mask).
+    taus : iterable of float
+        Error thresholds in pixels (> 0), default 1, 2, 3, 4.
+
+    Returns
+    -------
+    dict
+        ``bad<τ>`` for each τ (percent), ``avg``, ``rms`` (px), ``invalid``
+        (percent of scored pixels that are NaN in ``pred``) and ``n`` (int).
+
+    Raises
+    ------
+    TypeError
+        Non-array or non-numeric input, non-bool mask.
+    ValueError
+        Shape mismatch, non-2-D input, ``inf`` in ``pred``, bad ``taus``.
+    """
+    for name, a in (("pred", pred), ("gt", gt)):
+        if not isinstance(a, np.ndarray):
+            raise TypeError(f"{name}: must be a numpy array, got {type(a).__name__}")
+        if a.dtype.kind not in "fiu":
+            raise TypeError(f"{name}: must be numeric, got dtype {a.dtype}")
+        if a.ndim != 2:
+            raise ValueError(f"{name}: must be 2-D (H x W), got shape {a.shape}")
+    if pred.shape != gt.shape:
+        raise ValueError(f"pred: shape {pred.shape} differs from gt {gt.shape}")
+    if mask is not None:
+        if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_:
+            raise TypeError("mask: must be a bool numpy array")
+        if mask.shape != gt.shape:
+            raise ValueError(f"mask: shape {mask.shape} differs from gt {gt.shape}")
+    taus = tuple(taus)
+    if not taus:
+        raise ValueError("taus: must not be empty")
+    for t in taus:
+        if isinstance(t, bool) or not isinstance(t, (int, float, np.integer, np.floating)) or not np.isfinite(t) or t <= 0:
+            raise ValueError(f"taus: every threshold must be a finite number > 0, got {t!r}")
+    pred64 = pred.astype(np.float64, copy=False)
+    if np.isinf(pred64).any():
+        raise ValueError("pred: contains +-inf; use NaN for 'no prediction'")
+    gt64 = gt.astype(np.float64, copy=False)
+    with np.errstate(invalid="ignore"):
+        scored = np.isfinite(gt64) & (gt64 > 0)
+    if mask is not None:
+        scored &= mask
+    n = int(scored.sum())
+    out: dict[str, float] = {}
+    if n == 0:
+        for t in taus:
+            out[metric_key(t)] = float("nan")
+        out.update(avg=float("nan"), rms=float("nan"), invalid=float("nan"), n=0)
+        return out
+    err = np.abs(pred64[scored] - gt64[scored])
+    have = np.isfinite(err)
+    for t in taus:
+        bad = ~have | (err > t)  # NaN: bad for every τ
+        out[metric_key(t)] = float(100.0 * bad.sum() / n)
+    e = err[have]
+    out["avg"] = float(e.mean()) if e.size else float("nan")
+    out["rms"] = float(np.sqrt((e * e).mean())) if e.size else float("nan")
+    out["invalid"] = float(100.0 * (n - int(have.sum())) / n)
+    out["n"] = n
+    return out
+
+
+__all__ = ["compute_metrics", "metric_key"]

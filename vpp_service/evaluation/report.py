@@ -1,0 +1,192 @@
+"""Summaries and reports of evaluation results: JSON, Markdown tables, density plots.
+
+``summarize`` averages every numeric metric over scenes, per method. With one
+density the summary is ``{method: {metric: mean}}``; with a density sweep
+(several densities in the results) it is ``{method: {density: {metric: mean}}}``,
+the density written as a string key (``"0.05"``, JSON keys are strings).
+"""
+from __future__ import annotations
+
+import json
+import math
+from collections import defaultdict
+from pathlib import Path
+from typing import Any, Iterable
+
+from vpp_service.evaluation.runner import METHODS
+
+#: Row fields that are not averaged into a summary.
+_NOT_AVERAGED = {"density", "max_disparity", "n", "n_nocc"}
+#: Columns of the Markdown tables (when present).
+TABLE_METRICS = ("bad1", "bad2", "bad3", "bad4", "avg", "rms", "bad2_nocc", "avg_nocc", "n_points", "ms")
+
+
+def _method_order(rows: Iterable[dict]) -> list[str]:
+    seen = {r["method"] for r in rows}
+    return [m for m in METHODS if m in seen] + sorted(seen - set(METHODS))
+
+
+def _mean(values: list[float]) -> float:
+    vals = [v for v in values if isinstance(v, (int, float)) and not (isinstance(v, float) and math.isnan(v))]
+    return float(sum(vals) / len(vals)) if vals else float("nan")
+
+
+def _average(rows: list[dict]) -> dict[str, float]:
+    keys: list[str] = []
+    for r in rows:
+        for k, v in r.items():
+            if k not in keys and k not in _NOT_AVERAGED and isinstance(v, (int, float)) and not isinstance(v, bool):
+                keys.append(k)
+    out = {k: _mean([r.get(k) for r in rows]) for k in keys}
+    out["scenes"] = len({r["scene"] for r in rows})
+    return out
+
+
+def density_key(d: float | None) -> str:
+    """String key of a density in summaries (``"0.05"``)."""
+    return "measured" if d is None else f"{d:g}"
+
+
+def is_sweep(rows: list[dict]) -> bool:
+    """True when the results hold more than one (uniform) density."""
+    return len({r.get("density") for r in rows if r.get("sensor") == "uniform"}) > 1
+
+
+def summarize(rows: list[dict]) -> dict[str, Any]:
+    """Mean of each metric per method (and per density in a sweep); see module docs."""
+    if not isinstance(rows, list):
+        raise TypeError(f"rows: must be a list of result dicts, got {type(rows).__name__}")
+    sweep = is_sweep(rows)
+    out: dict[str, Any] = {}
+    for method in _method_order(rows):
+        mrows = [r for r in rows if r["method"] == method]
+        if not sweep:
+            out[method] = _average(mrows)
+            continue
+        groups: dict[float, list[dict]] = defaultdict(list)
+        for r in mrows:
+            groups[r["density"]].append(r)
+        out[method] = {density_key(d): _average(g) for d, g in sorted(groups.items())}
+    return out
+
+
+def _json_safe(obj: Any) -> Any:
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {str(k): _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    if hasattr(obj, "item") and callable(obj.item):  # numpy scalars
+        return _json_safe(obj.item())
+    return obj
+
+
+def write_json(path: str | Path, rows: list[dict], config: dict | None = None) -> dict[str, Any]:
+    """Write ``{"config", "results", "summary"}`` to ``path`` (NaN -> null); return the document."""
+    doc = {"config": config or {}, "results": rows, "summary": summarize(rows)}
+    doc = _json_safe(doc)
+    Path(path).write_text(json.dumps(doc, indent=2) + "\n")
+    return doc
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, bool) or v is None:
+        return "-"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "-"
+        return f"{v:.2f}"
+    return str(v)
+
+
+def _table(header: list[str], lines: list[list[str]]) -> str:
+    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    out += ["| " + " | ".join(line) + " |" for line in lines]
+    return "\n".join(out)
+
+
+def markdown_report(rows: list[dict], per_scene: bool = False, title: str = "VPP evaluation") -> str:
+    """Markdown text: one table of means per (dataset, matcher), optionally per-scene tables.
+
+    Columns: bad-1..4 (%), avg and rms error (px), non-occluded bad-2 / avg when
+    a mask exists, points and run time (ms); rows: method (x density in a sweep).
+    """
+    parts = [f"# {title}", ""]
+    groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    for r in rows:
+        groups[(r.get("dataset", ""), r.get("matcher", ""))].append(r)
+    for (dataset, matcher), grows in groups.items():
+        cols = [c for c in TABLE_METRICS if any(c in r for r in grows)]
+        sweep = is_sweep(grows)
+        n_scenes = len({r["scene"] for r in grows})
+        sensor = ", ".join(sorted({str(r.get("sensor", "")) for r in grows}))
+        parts += [f"## {dataset or 'frames'} - {matcher} ({n_scenes} scenes, sensor {sensor})", ""]
+        header = ["method", "density"] + cols
+        lines = []
+        for method in _method_order(grows):
+            mrows = [r for r in grows if r["method"] == method]
+            densities = sorted({r["density"] for r in mrows}, key=lambda d: (d is None, d or 0))
+            for d in densities:
+                avg = _average([r for r in mrows if r["density"] == d])
+                dtxt = f"{d:g}" if isinstance(d, float) else _fmt(d)
+                lines.append([method, dtxt] + [_fmt(avg.get(c)) for c in cols])
+        parts += [_table(header, lines), ""]
+        if per_scene:
+            parts += ["### Per scene", ""]
+            header = ["scene", "method", "density"] + cols
+            lines = [[r["scene"], r["method"], f"{r['density']:g}"] + [_fmt(r.get(c)) for c in cols]
+                     for r in grows]
+            parts += [_table(header, lines), ""]
+        if sweep:
+            parts += ["(bad-τ in %, errors in px; means over scenes.)", ""]
+    if len(parts) == 2:
+        parts.append("No results.")
+    return "\n".join(parts).rstrip() + "\n"
+
+
+def write_markdown(path: str | Path, rows: list[dict], per_scene: bool = False, title: str = "VPP evaluation") -> str:
+    """Write :func:`markdown_report` to ``path``; return the text."""
+    text = markdown_report(rows, per_scene=per_scene, title=title)
+    Path(path).write_text(text)
+    return text
+
+
+def plot_sweep(path: str | Path, rows: list[dict], metric: str = "bad2", title: str | None = None) -> None:
+    """Plot ``metric`` (mean over scenes) against density, one line per method; save to ``path`` (PNG).
+
+    Uses matplotlib's Agg backend (no display needed).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    uniform = [r for r in rows if r.get("density") is not None]
+    if not uniform:
+        raise ValueError("rows: no results with a density to plot")
+    if not any(metric in r for r in uniform):
+        raise ValueError(f"metric: {metric!r} is not in the results")
+    fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
+    for method in _method_order(uniform):
+        groups: dict[float, list[dict]] = defaultdict(list)
+        for r in uniform:
+            if r["method"] == method:
+                groups[r["density"]].append(r)
+        xs = sorted(groups)
+        ys = [_mean([r.get(metric) for r in groups[x]]) for x in xs]
+        ax.plot([100 * x for x in xs], ys, marker="o", label=method)
+    ax.set_xlabel("sparse points (% of valid GT pixels)")
+    ax.set_ylabel(f"{metric} (%)" if metric.startswith("bad") else f"{metric} (px)")
+    matchers = sorted({str(r.get("matcher", "")) for r in uniform})
+    ax.set_title(title or f"{metric} vs density ({', '.join(matchers)})")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(str(path), format="png")
+    plt.close(fig)
+
+
+__all__ = ["summarize", "write_json", "markdown_report", "write_markdown", "plot_sweep", "density_key", "is_sweep"]

@@ -1,0 +1,306 @@
+"""The evaluation runner: matcher alone vs guided stereo vs VPP on the same points.
+
+For every frame (and every density of a sweep) the runner
+
+1. draws the sparse points **once** with the sensor (seeded with ``seed``, the
+   same seed for every scene, so filtering scenes does not change the points);
+2. runs each method on the same frame and points:
+
+   * ``baseline`` - ``matcher.compute(left, right)`` (independent of the points,
+     so computed once per scene and repeated for each density of a sweep);
+   * ``guided`` - ``matcher.compute(left, right, hints=sparse)`` (only matchers
+     with ``supports_guidance``);
+   * ``vpp`` - ``vpp_service.vpp.project(left, right, sparse, config, seed=seed)``
+     then the matcher on the painted pair;
+
+3. fills the matcher's holes with background interpolation
+   (:func:`vpp_service.matchers.fill_holes`), as the protocol says, and scores
+   with :func:`~vpp_service.evaluation.metrics.compute_metrics` over all
+   valid-GT pixels, plus ``*_nocc`` metrics when the frame has a mask.
+
+Matcher disparity range: when the matcher is given by name, each scene gets
+``max_disparity`` = the given value, or by default the smallest multiple of 16
+strictly above the scene's largest ground-truth disparity (at least 16, at
+most width - 1).
+
+Densities apply to the ``uniform`` sensor (fraction of valid GT pixels). Other
+sensors (``lidar``, ``tof``) take one run with ``densities=None`` and report
+the measured fraction of valid-GT pixels that got a point as ``density``;
+``sensor="frame"`` uses the frame's own ``sparse_disparity`` (a real scan).
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+import numpy as np
+
+from vpp_service.evaluation.metrics import compute_metrics
+from vpp_service.frame import StereoFrame
+
+#: Methods understood by :func:`run_evaluation`, in report order.
+METHODS = ("baseline", "guided", "vpp")
+
+#: ``progress(done, total, label)`` - called before each step.
+Progress = Callable[[int, int, str], None]
+
+
+def default_max_disparity(gt: np.ndarray, width: int) -> int:
+    """Smallest multiple of 16 strictly above ``max(gt)`` (>= 16, <= width - 1)."""
+    finite = gt[np.isfinite(gt)]
+    top = float(finite.max()) if finite.size else 0.0
+    d = max(16, int(math.floor(top / 16.0) + 1) * 16)
+    return int(min(d, width - 1))
+
+
+def _frames(source: Any) -> tuple[int, Callable[[int], StereoFrame]]:
+    if isinstance(source, StereoFrame):
+        return 1, lambda i: source
+    if hasattr(source, "__len__") and hasattr(source, "__getitem__"):
+        return len(source), lambda i: source[i]
+    if isinstance(source, Iterable):
+        items = list(source)
+        return len(items), items.__getitem__
+    raise TypeError(f"frames_or_dataset: must be a Dataset, a StereoFrame or an iterable of them, got {type(source).__name__}")
+
+
+def _check_methods(methods: Sequence[str]) -> list[str]:
+    if isinstance(methods, str):
+        methods = [m.strip() for m in methods.split(",") if m.strip()]
+    methods = list(methods)
+    if not methods:
+        raise ValueError(f"methods: must name at least one of {', '.join(METHODS)}")
+    bad = [m for m in methods if m not in METHODS]
+    if bad:
+        raise ValueError(f"methods: unknown {bad}; known: {', '.join(METHODS)}")
+    if len(set(methods)) != len(methods):
+        raise ValueError(f"methods: duplicates in {methods}")
+    return methods
+
+
+def _check_densities(densities: Any, sensor_name: str | None) -> list[float | None]:
+    if densities is None:
+        return [None]
+    if isinstance(densities, (int, float)) and not isinstance(densities, bool):
+        densities = [densities]
+    densities = list(densities)
+    if not densities:
+        raise ValueError("densities: must not be empty (use None for sensors without a density)")
+    if densities == [None]:
+        if sensor_name == "uniform":
+            raise ValueError("densities: the uniform sensor needs a density")
+        return [None]
+    if sensor_name != "uniform":
+        raise ValueError(f"densities: only the uniform sensor takes densities; pass None for {sensor_name!r}")
+    for d in densities:
+        if isinstance(d, bool) or not isinstance(d, (int, float)) or not np.isfinite(d) or not 0 < d <= 1:
+            raise ValueError(f"densities: each must be in (0, 1], got {d!r}")
+    return [float(d) for d in densities]
+
+
+def run_evaluation(
+    frames_or_dataset: Any,
+    matcher: Any = "census-sgm",
+    methods: Sequence[str] = METHODS,
+    densities: Any = (0.05,),
+    sensor: Any = "uniform",
+    vpp_config: Any = None,
+    seed: int = 0,
+    progress: Progress | None = None,
+    *,
+    matcher_options: Mapping[str, Any] | None = None,
+    sensor_options: Mapping[str, Any] | None = None,
+    max_disparity: int | None = None,
+    dataset_name: str | None = None,
+) -> list[dict[str, Any]]:
+    """Evaluate methods on frames with ground truth.
+
+    Parameters
+    ----------
+    frames_or_dataset : Dataset, StereoFrame or iterable of StereoFrame
+        Frames with ``gt_disparity``. A dataset is read lazily, one frame at a time.
+    matcher : str or Matcher
+        Registered matcher name (built per scene with ``matcher_options`` and
+        the scene's ``max_disparity``) or a ready matcher (used as is).
+    methods : sequence of str or comma string
+        Subset of ``baseline``, ``guided``, ``vpp``.
+    densities : float, sequence of float or None
+        Densities of the ``uniform`` sensor (a sweep when several); None for other sensors.
+    sensor : str or Sensor
+        ``uniform``, ``lidar``, ``tof`` (built with ``sensor_options``), ``frame``
+        (the frame's own ``sparse_disparity``) or a ready sensor.
+    vpp_config : VPPConfig or None
+        VPP variant (None = defaults).
+    seed : int
+        Seed of the sensor draw and of VPP's random pattern (>= 0).
+    progress : callable or None
+        ``progress(done, total, label)``, e.g. :class:`~vpp_service.evaluation.progress.ProgressBar`.
+    matcher_options, sensor_options : Mapping or None
+        Options for building the matcher / sensor by name.
+    max_disparity : int or None
+        Matcher disparity range for every scene (None = per-scene default, see module docs).
+    dataset_name : str or None
+        Value of the ``dataset`` field (default: ``frame.meta["dataset"]``).
+
+    Returns
+    -------
+    list of dict
+        One row per (scene, density, method): ``dataset``, ``scene``, ``method``,
+        ``matcher``, ``sensor``, ``density``, ``bad1``..``bad4``, ``avg``, ``rms``,
+        ``invalid``, ``n``, ``*_nocc`` variants (when masked), ``n_points``,
+        ``max_disparity``, ``ms`` (VPP + matching wall time).
+
+    Raises
+    ------
+    TypeError, ValueError
+        Bad arguments: unknown method, ``guided`` with a matcher without
+        guidance (names the matcher), frames without ground truth, ...
+    """
+    from vpp_service.matchers import Matcher, build_matcher, fill_holes
+    from vpp_service.sources.sensors import Sensor, build_sensor
+
+    methods = _check_methods(methods)
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed: must be an integer >= 0, got {seed!r}")
+    if max_disparity is not None and (isinstance(max_disparity, bool) or not isinstance(max_disparity, int) or max_disparity < 1):
+        raise ValueError(f"max_disparity: must be a positive integer, got {max_disparity!r}")
+    if progress is not None and not callable(progress):
+        raise TypeError("progress: must be callable")
+
+    # matcher
+    if isinstance(matcher, str):
+        from vpp_service.matchers import MATCHERS
+
+        matcher_cls = MATCHERS.get(matcher)
+        matcher_name = matcher
+        base_opts = dict(matcher_options or {})
+        build_matcher(matcher_name, {k: v for k, v in base_opts.items() if k != "max_disparity"})  # validate early
+    elif isinstance(matcher, Matcher):
+        if matcher_options:
+            raise ValueError("matcher_options: only used when the matcher is given by name")
+        matcher_cls, matcher_name, base_opts = type(matcher), matcher.name, {}
+    else:
+        raise TypeError(f"matcher: must be a matcher name or a Matcher, got {type(matcher).__name__}")
+    if "guided" in methods and not matcher_cls.supports_guidance:
+        raise ValueError(f"methods: 'guided' needs a matcher with guidance support; {matcher_name!r} has none")
+
+    # sensor
+    if isinstance(sensor, str):
+        sensor_name = sensor
+        if sensor != "frame":
+            from vpp_service.sources.sensors import SENSORS
+
+            SENSORS.get(sensor)
+    elif isinstance(sensor, Sensor):
+        sensor_name = sensor.name
+        if sensor_options:
+            raise ValueError("sensor_options: only used when the sensor is given by name")
+    else:
+        raise TypeError(f"sensor: must be a sensor name or a Sensor, got {type(sensor).__name__}")
+    dens = _check_densities(densities, sensor_name if isinstance(sensor, str) else None)
+    sensors: dict[float | None, Any] = {}
+    for d in dens:
+        if isinstance(sensor, Sensor):
+            sensors[d] = sensor
+        elif sensor == "frame":
+            sensors[d] = None
+        else:
+            opts = dict(sensor_options or {})
+            if d is not None:
+                opts["density"] = d
+            sensors[d] = build_sensor(sensor, opts)
+
+    if "vpp" in methods:
+        from vpp_service.vpp import VPPConfig, project
+
+        if vpp_config is None:
+            vpp_config = VPPConfig()
+        elif not isinstance(vpp_config, VPPConfig):
+            raise TypeError(f"vpp_config: must be a VPPConfig or None, got {type(vpp_config).__name__}")
+
+    n_frames, get = _frames(frames_or_dataset)
+    if n_frames == 0:
+        raise ValueError("frames_or_dataset: no frames to evaluate")
+    per_density = [m for m in methods if m != "baseline"]
+    total = n_frames * (("baseline" in methods) + len(dens) * len(per_density))
+    done = 0
+    rows: list[dict[str, Any]] = []
+
+    def tick(label: str) -> None:
+        if progress is not None:
+            progress(done, total, label)
+
+    for i in range(n_frames):
+        frame = get(i)
+        if not isinstance(frame, StereoFrame):
+            raise TypeError(f"frames_or_dataset: item {i} is a {type(frame).__name__}, not a StereoFrame")
+        if frame.gt_disparity is None:
+            raise ValueError(f"frames_or_dataset: frame {frame.name or i!r} has no gt_disparity to score against")
+        gt = frame.gt_disparity
+        h, w = frame.shape
+        scene = frame.name or f"frame{i}"
+        if isinstance(matcher, str):
+            md = max_disparity if max_disparity is not None else default_max_disparity(gt, w)
+            m = build_matcher(matcher_name, {**base_opts, "max_disparity": int(md), "fill": False})
+        else:
+            m = matcher
+        md = int(m.options.max_disparity)
+        left, right = np.ascontiguousarray(frame.left), np.ascontiguousarray(frame.right)
+        common = {"dataset": dataset_name or frame.meta.get("dataset", ""), "scene": scene,
+                  "matcher": matcher_name, "sensor": sensor_name, "max_disparity": md}
+
+        def score(disp: np.ndarray) -> dict[str, Any]:
+            filled = fill_holes(disp)
+            out = compute_metrics(filled, gt)
+            if frame.nocc_mask is not None:
+                for k, v in compute_metrics(filled, gt, mask=frame.nocc_mask.astype(bool)).items():
+                    out[f"{k}_nocc"] = v
+            return out
+
+        baseline_row = None
+        if "baseline" in methods:
+            tick(f"{scene} {matcher_name} baseline")
+            t0 = time.perf_counter()
+            disp = m.compute(left, right)
+            ms = 1000.0 * (time.perf_counter() - t0)
+            baseline_row = {**score(disp), "ms": ms}
+            done += 1
+
+        for d in dens:
+            s = sensors[d]
+            if s is None:
+                if frame.sparse_disparity is None:
+                    raise ValueError(f"sensor: 'frame' needs sparse_disparity, frame {scene!r} has none")
+                sparse = frame.sparse_disparity.astype(np.float32)
+            else:
+                sparse = s.simulate(frame, seed=int(seed)).sparse_disparity
+            sparse = np.where(np.isfinite(sparse) & (sparse > 0), sparse, np.nan).astype(np.float32)
+            n_points = int(np.isfinite(sparse).sum())
+            n_valid = int((np.isfinite(gt) & (gt > 0)).sum())
+            density = d if d is not None else (n_points / n_valid if n_valid else 0.0)
+            base = {**common, "density": density, "n_points": n_points}
+            dlabel = f"{d:g}" if d is not None else sensor_name
+            for method in methods:
+                if method == "baseline":
+                    rows.append({**base, "method": "baseline", **baseline_row})
+                    continue
+                tick(f"{scene} {matcher_name} {method} {dlabel}")
+                extra: dict[str, Any] = {}
+                t0 = time.perf_counter()
+                if method == "guided":
+                    disp = m.compute(left, right, hints=sparse)
+                else:
+                    res = project(left, right, sparse, vpp_config, seed=int(seed))
+                    disp = m.compute(np.ascontiguousarray(res.left), np.ascontiguousarray(res.right))
+                    stats = getattr(res, "stats", None) or {}
+                    extra = {f"vpp_{k}": v for k, v in dict(stats).items() if isinstance(v, (int, float))}
+                ms = 1000.0 * (time.perf_counter() - t0)
+                rows.append({**base, "method": method, **score(disp), "ms": ms, **extra})
+                done += 1
+    if progress is not None:
+        progress(done, total, "done")
+    return rows
+
+
+__all__ = ["METHODS", "run_evaluation", "default_max_disparity"]
