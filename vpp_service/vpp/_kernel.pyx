@@ -1,0 +1,820 @@
+# distutils: language = c++
+"""Cython kernel of Virtual Pattern Projection (called by :mod:`vpp_service.vpp.project`).
+
+Pipeline (every phase is a ``prange`` over image rows, so it is parallel and
+race-free; results do not depend on the thread count):
+
+A. count the points of each row (given / valid / invalid / left-border);
+B. (serial, tiny) prefix sums give each row a slice of the key arrays;
+C. fill each row's keys and sort them with ``std::sort``:
+   paint key ``(float_bits(d) << 32) | x`` (positive float bits are monotone,
+   so the row is in (d, x) order) and occlusion key
+   ``((x - round(d) + W) << 32) | float_bits(d)`` (order (x_w, d));
+D. occlusion: a row walks its (x_w, d) keys; runs of equal x_w are collisions
+   (the last, largest d wins, the others are occluded); a winner scans the
+   ``r_y`` neighbour rows' sorted keys with one monotone pointer per row, so no
+   dense H x W grid is ever built;
+E. (histogram + uniform patch only) one value per point and channel;
+F. paint: row r of both outputs is owned by one thread; it copies the input
+   rows, k-way merges the sorted keys of source rows r-h..r+h into the global
+   order (d, y, x), computes the pattern values of that row once, blends them
+   into the right row (splatting), then into the left row (FGD reads the final
+   right row r).
+
+Histogram speed: only the occupancy of the 256 bins matters unless all are
+filled.  For a (centre row, channel) we build, per aligned 32-column block,
+prefix-OR and suffix-OR tables of 256-bit occupancy (4 uint64) over the
+``search_height`` rows; any window of length L is then ``suffix[a] | full
+middle blocks | prefix[e]`` (3 lookups for L=64).  The gap search walks the
+zero runs of the 256-bit word with ``ctz``.  If every bin is filled the window
+is counted exactly (rare).
+"""
+from cython.parallel cimport prange, parallel
+cimport openmp
+from libc.stdint cimport uint8_t, uint32_t, uint64_t, int64_t, int32_t, int8_t
+from libc.stdlib cimport malloc, free
+from libc.string cimport memcpy, memset
+from libc.math cimport floor, pow
+
+import numpy as np
+
+cdef extern from *:
+    """
+    #include <stdint.h>
+    #include <string.h>
+    static inline int vpp_ctz64(uint64_t v) { return __builtin_ctzll(v); }
+    static inline uint32_t vpp_f2u(float f) { uint32_t u; memcpy(&u, &f, 4); return u; }
+    static inline float vpp_u2f(uint32_t u) { float f; memcpy(&f, &u, 4); return f; }
+    """
+    int vpp_ctz64(uint64_t v) nogil
+    uint32_t vpp_f2u(float f) nogil
+    float vpp_u2f(uint32_t u) nogil
+
+cdef extern from "<algorithm>" namespace "std" nogil:
+    void std_sort "std::sort"(uint64_t* first, uint64_t* last)
+
+cdef uint64_t SEED_MUL = 0xD1B54A32D192ED03ULL
+cdef uint64_t KEY_MUL = 0x9E3779B97F4A7C15ULL
+cdef uint64_t ALL1 = 0xFFFFFFFFFFFFFFFFULL
+cdef uint64_t LOW32 = 0xFFFFFFFFULL
+
+
+cdef struct Ctx:
+    const uint8_t* L
+    const uint8_t* R
+    uint8_t* oL
+    uint8_t* oR
+    const uint8_t* occ
+    const uint64_t* pkey
+    const int64_t* off
+    const int8_t* hp
+    const uint8_t* uvals
+    int H
+    int W
+    int C
+    int hmax
+    int pattern
+    int uniform
+    int splat
+    int occmode
+    int bilateral
+    double two_ss
+    double two_sc
+    double neglogthr
+    double alpha
+    uint64_t wa
+    uint64_t seedmix
+    int sw_half
+    int sw_len
+    int sh_half
+
+
+cdef inline uint64_t _hash(uint64_t seedmix, uint64_t x, uint64_t y) noexcept nogil:
+    cdef uint64_t z = seedmix + ((y << 32) | x) * KEY_MUL
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL
+    return z ^ (z >> 31)
+
+
+cdef inline uint64_t _w16(double w) noexcept nogil:
+    """Weight in [0, 1] -> fixed point /65536, rounded half up."""
+    return <uint64_t>floor(w * 65536.0 + 0.5)
+
+
+cdef inline uint8_t _blend16(uint8_t a, uint8_t b, uint64_t w) noexcept nogil:
+    """round((1 - w) a + w b) with w in 1/65536 (half up)."""
+    return <uint8_t>(((<uint64_t>a) * (65536 - w) + (<uint64_t>b) * w + 32768) >> 16)
+
+
+# ----------------------------------------------------------------- histogram
+cdef inline int _next_set(const uint64_t* o, int pos) noexcept nogil:
+    cdef int w
+    cdef uint64_t bits
+    if pos >= 256:
+        return 256
+    w = pos >> 6
+    bits = o[w] >> (pos & 63)
+    if bits:
+        return pos + vpp_ctz64(bits)
+    w += 1
+    while w < 4:
+        if o[w]:
+            return (w << 6) + vpp_ctz64(o[w])
+        w += 1
+    return 256
+
+
+cdef inline int _next_zero(const uint64_t* o, int pos) noexcept nogil:
+    cdef int w
+    cdef uint64_t bits
+    if pos >= 256:
+        return 256
+    w = pos >> 6
+    bits = (~o[w]) >> (pos & 63)
+    if bits:
+        return pos + vpp_ctz64(bits)
+    w += 1
+    while w < 4:
+        if ~o[w]:
+            return (w << 6) + vpp_ctz64(~o[w])
+        w += 1
+    return 256
+
+
+cdef int _hist_pick(const uint64_t* o) noexcept nogil:
+    """Value farthest from every filled bin (ties: smallest); -1 if all filled."""
+    cdef int f1, best_i, best_d, pos, z, n, half
+    if (o[0] & o[1] & o[2] & o[3]) == ALL1:
+        return -1
+    if (o[0] | o[1] | o[2] | o[3]) == 0:
+        return 0
+    f1 = _next_set(o, 0)
+    best_i = 0
+    best_d = f1
+    pos = f1 + 1
+    while True:
+        z = _next_zero(o, pos)
+        if z >= 256:
+            break
+        n = _next_set(o, z)
+        if n >= 256:
+            if 256 - z > best_d:
+                best_i = 255
+            break
+        half = (n - z + 1) >> 1
+        if half > best_d:
+            best_d = half
+            best_i = z - 1 + half
+        pos = n + 1
+    return best_i
+
+
+cdef void _build_tables(const uint8_t* img, int H, int W, int C, int c, int r, int sh_half,
+                        uint64_t* pre, uint64_t* suf) noexcept nogil:
+    """Per aligned 32-column block, prefix/suffix OR of the bin occupancy of rows r+-sh_half."""
+    cdef int y0 = r - sh_half
+    cdef int y1 = r + sh_half
+    cdef int b0, b1, x, y, k
+    cdef uint64_t a0, a1, a2, a3
+    cdef unsigned v
+    if y0 < 0:
+        y0 = 0
+    if y1 > H - 1:
+        y1 = H - 1
+    for b0 in range(0, W, 32):
+        b1 = b0 + 32
+        if b1 > W:
+            b1 = W
+        # column bits into suf first (scratch), then prefix and suffix
+        for x in range(b0, b1):
+            a0 = 0
+            a1 = 0
+            a2 = 0
+            a3 = 0
+            for y in range(y0, y1 + 1):
+                v = img[(<int64_t>y * W + x) * C + c]
+                if v < 64:
+                    a0 |= (<uint64_t>1) << v
+                elif v < 128:
+                    a1 |= (<uint64_t>1) << (v - 64)
+                elif v < 192:
+                    a2 |= (<uint64_t>1) << (v - 128)
+                else:
+                    a3 |= (<uint64_t>1) << (v - 192)
+            suf[4 * x] = a0
+            suf[4 * x + 1] = a1
+            suf[4 * x + 2] = a2
+            suf[4 * x + 3] = a3
+        a0 = 0
+        a1 = 0
+        a2 = 0
+        a3 = 0
+        for x in range(b0, b1):
+            a0 |= suf[4 * x]
+            a1 |= suf[4 * x + 1]
+            a2 |= suf[4 * x + 2]
+            a3 |= suf[4 * x + 3]
+            pre[4 * x] = a0
+            pre[4 * x + 1] = a1
+            pre[4 * x + 2] = a2
+            pre[4 * x + 3] = a3
+        for x in range(b1 - 2, b0 - 1, -1):
+            for k in range(4):
+                suf[4 * x + k] |= suf[4 * x + 4 + k]
+
+
+cdef inline void _or4(uint64_t* o, const uint64_t* t) noexcept nogil:
+    o[0] |= t[0]
+    o[1] |= t[1]
+    o[2] |= t[2]
+    o[3] |= t[3]
+
+
+cdef void _window_or(const Ctx* cx, const uint8_t* img, int c, int r,
+                     const uint64_t* pre, const uint64_t* suf, int cen, uint64_t* o) noexcept nogil:
+    """OR the occupancy of columns [cen - L//2, cen - L//2 + L - 1] (clipped) into o."""
+    cdef int W = cx.W
+    cdef int a = cen - cx.sw_half
+    cdef int e = a + cx.sw_len - 1
+    cdef int ba, be, b, x, y, y0, y1, bend
+    cdef unsigned v
+    if a < 0:
+        a = 0
+    if e > W - 1:
+        e = W - 1
+    if a > e:
+        return
+    ba = a >> 5
+    be = e >> 5
+    if ba < be:
+        _or4(o, suf + 4 * a)
+        for b in range(ba + 1, be):
+            _or4(o, suf + 4 * (b << 5))
+        _or4(o, pre + 4 * e)
+        return
+    bend = (ba << 5) + 31
+    if bend > W - 1:
+        bend = W - 1
+    if a == (ba << 5):
+        _or4(o, pre + 4 * e)
+    elif e == bend:
+        _or4(o, suf + 4 * a)
+    else:
+        y0 = r - cx.sh_half
+        y1 = r + cx.sh_half
+        if y0 < 0:
+            y0 = 0
+        if y1 > cx.H - 1:
+            y1 = cx.H - 1
+        for y in range(y0, y1 + 1):
+            for x in range(a, e + 1):
+                v = img[(<int64_t>y * W + x) * cx.C + c]
+                o[v >> 6] |= (<uint64_t>1) << (v & 63)
+
+
+cdef void _window_count(const Ctx* cx, const uint8_t* img, int c, int r, int cen,
+                        int32_t* counts) noexcept nogil:
+    cdef int W = cx.W
+    cdef int a = cen - cx.sw_half
+    cdef int e = a + cx.sw_len - 1
+    cdef int x, y, y0, y1
+    if a < 0:
+        a = 0
+    if e > W - 1:
+        e = W - 1
+    y0 = r - cx.sh_half
+    y1 = r + cx.sh_half
+    if y0 < 0:
+        y0 = 0
+    if y1 > cx.H - 1:
+        y1 = cx.H - 1
+    for y in range(y0, y1 + 1):
+        for x in range(a, e + 1):
+            counts[img[(<int64_t>y * W + x) * cx.C + c]] += 1
+
+
+cdef uint8_t _hist_value(const Ctx* cx, int c, int r, const uint64_t* tabs, int cl, int cr) noexcept nogil:
+    """Histogram pattern value of channel c for windows centred on (cl, r) in L and (cr, r) in R.
+
+    ``tabs`` holds the tables of centre row r, channel c: preL, sufL, preR, sufR
+    (each 4*W words).
+    """
+    cdef uint64_t o[4]
+    cdef int32_t counts[256]
+    cdef int v, i, best
+    cdef int W4 = 4 * cx.W
+    o[0] = 0
+    o[1] = 0
+    o[2] = 0
+    o[3] = 0
+    _window_or(cx, cx.L, c, r, tabs, tabs + W4, cl, o)
+    _window_or(cx, cx.R, c, r, tabs + 2 * W4, tabs + 3 * W4, cr, o)
+    v = _hist_pick(o)
+    if v >= 0:
+        return <uint8_t>v
+    memset(counts, 0, sizeof(counts))
+    _window_count(cx, cx.L, c, r, cl, counts)
+    _window_count(cx, cx.R, c, r, cr, counts)
+    best = 0
+    for i in range(1, 256):
+        if counts[i] < counts[best]:
+            best = i
+    return <uint8_t>best
+
+
+cdef inline void _build_all(const Ctx* cx, int c, int r, uint64_t* tabs) noexcept nogil:
+    cdef int W4 = 4 * cx.W
+    _build_tables(cx.L, cx.H, cx.W, cx.C, c, r, cx.sh_half, tabs, tabs + W4)
+    _build_tables(cx.R, cx.H, cx.W, cx.C, c, r, cx.sh_half, tabs + 2 * W4, tabs + 3 * W4)
+
+
+# ----------------------------------------------------------------- phases
+cdef void _count_row(const float* drow, int W, int64_t* st) noexcept nogil:
+    """st = [given, valid, invalid, left-border]."""
+    cdef int x
+    cdef float v
+    cdef int64_t g = 0, ok = 0, oob = 0
+    for x in range(W):
+        v = drow[x]
+        if v != 0 and v == v:
+            g += 1
+            if v > 0 and v < W:
+                ok += 1
+                if <double>x - <double>v < 0:
+                    oob += 1
+    st[0] = g
+    st[1] = ok
+    st[2] = g - ok
+    st[3] = oob
+
+
+cdef void _fill_row(const float* drow, int W, uint64_t* pk, uint64_t* ok) noexcept nogil:
+    cdef int x, k = 0
+    cdef float v
+    cdef uint64_t bits
+    cdef int64_t xw
+    for x in range(W):
+        v = drow[x]
+        if v > 0 and v < W:
+            bits = vpp_f2u(v)
+            if pk != NULL:
+                pk[k] = (bits << 32) | <uint64_t>x
+            if ok != NULL:
+                xw = x - <int64_t>floor(<double>v + 0.5) + W
+                ok[k] = ((<uint64_t>xw) << 32) | bits
+            k += 1
+    if pk != NULL and k > 1:
+        std_sort(pk, pk + k)
+    if ok != NULL and k > 1:
+        std_sort(ok, ok + k)
+
+
+cdef int64_t _occ_row(int yo, int H, int W, const uint64_t* okey, const int64_t* off,
+                      int rx2, int ry2, const double* pen, double t, uint8_t* occ,
+                      int64_t* ptr) noexcept nogil:
+    """Classify the points of row yo; returns how many are occluded."""
+    cdef int64_t b = off[yo], e = off[yo + 1]
+    cdef int64_t i, j, q, q2, qend, cnt = 0
+    cdef int yn, jj, nrows, y_lo, y_hi, adx, ady, found
+    cdef int64_t xwk, xwn, x
+    cdef double dval, dn
+    y_lo = yo - ry2
+    if y_lo < 0:
+        y_lo = 0
+    y_hi = yo + ry2
+    if y_hi > H - 1:
+        y_hi = H - 1
+    nrows = y_hi - y_lo + 1
+    for jj in range(nrows):
+        ptr[jj] = off[y_lo + jj]
+    i = b
+    while i < e:
+        xwk = <int64_t>(okey[i] >> 32)
+        j = i
+        while j + 1 < e and <int64_t>(okey[j + 1] >> 32) == xwk:
+            j += 1
+        q = i
+        while q < j:       # collision losers
+            dval = vpp_u2f(<uint32_t>(okey[q] & LOW32))
+            x = xwk - W + <int64_t>floor(dval + 0.5)
+            occ[<int64_t>yo * W + x] = 1
+            cnt += 1
+            q += 1
+        dval = vpp_u2f(<uint32_t>(okey[j] & LOW32))
+        found = 0
+        for jj in range(nrows):
+            yn = y_lo + jj
+            qend = off[yn + 1]
+            while ptr[jj] < qend and <int64_t>(okey[ptr[jj]] >> 32) < xwk - rx2:
+                ptr[jj] += 1
+            q2 = ptr[jj]
+            ady = yn - yo
+            if ady < 0:
+                ady = -ady
+            while q2 < qend and not found:
+                xwn = <int64_t>(okey[q2] >> 32)
+                if xwn > xwk + rx2:
+                    break
+                if not (yn == yo and xwn == xwk):
+                    adx = <int>(xwn - xwk)
+                    if adx < 0:
+                        adx = -adx
+                    dn = vpp_u2f(<uint32_t>(okey[q2] & LOW32))
+                    if (dn - dval) - pen[ady * (rx2 + 1) + adx] > t:
+                        found = 1
+                q2 += 1
+            if found:
+                break
+        if found:
+            x = xwk - W + <int64_t>floor(dval + 0.5)
+            occ[<int64_t>yo * W + x] = 1
+            cnt += 1
+        i = j + 1
+    return cnt
+
+
+cdef void _uniform_hist_row(const Ctx* cx, int s, uint64_t* tabs, uint8_t* uvals) noexcept nogil:
+    """Histogram value of every point of row s (uniform patches), all channels."""
+    cdef int64_t b = cx.off[s], e = cx.off[s + 1], i
+    cdef int c, x, cr
+    cdef double d
+    if b == e:
+        return
+    for c in range(cx.C):
+        _build_all(cx, c, s, tabs)
+        for i in range(b, e):
+            x = <int>(cx.pkey[i] & LOW32)
+            d = vpp_u2f(<uint32_t>(cx.pkey[i] >> 32))
+            cr = <int>floor(<double>x - d + 0.5)
+            uvals[i * cx.C + c] = _hist_value(cx, c, s, tabs, x, cr)
+
+
+cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_t* cidx,
+                     int32_t* crow, uint8_t* vbuf, uint8_t* mbuf, uint64_t* tabs) noexcept nogil:
+    cdef int H = cx.H, W = cx.W, C = cx.C, hmax = cx.hmax
+    cdef int K = 2 * hmax + 1
+    cdef int64_t rowb = <int64_t>r * W * C
+    cdef int s_lo, s_hi, nsrc, j, jbest, s, h, x, dx, dy, c, col, fl, cn, k, ncon, n, xl
+    cdef int64_t idx
+    cdef uint64_t key, kbest, w0, w1, wb, v16, z, src, i0, i1
+    cdef double d, xp, beta, e
+    cdef int sumsq, diff, occ_pt
+    cdef uint8_t* oL = cx.oL + rowb
+    cdef uint8_t* oR = cx.oR + rowb
+    cdef const uint8_t* Lr = cx.L + rowb
+    cdef uint8_t* vals
+    cdef uint8_t* msk
+    memcpy(oL, Lr, W * C)
+    memcpy(oR, cx.R + rowb, W * C)
+    s_lo = r - hmax
+    if s_lo < 0:
+        s_lo = 0
+    s_hi = r + hmax
+    if s_hi > H - 1:
+        s_hi = H - 1
+    nsrc = s_hi - s_lo + 1
+    for j in range(nsrc):
+        heads[j] = cx.off[s_lo + j]
+        ends[j] = cx.off[s_lo + j + 1]
+    # 1. merge the source rows in global (d, y, x) order
+    ncon = 0
+    while True:
+        jbest = -1
+        kbest = 0
+        for j in range(nsrc):
+            if heads[j] < ends[j]:
+                key = cx.pkey[heads[j]]
+                if jbest < 0 or key < kbest:
+                    jbest = j
+                    kbest = key
+        if jbest < 0:
+            break
+        idx = heads[jbest]
+        heads[jbest] += 1
+        s = s_lo + jbest
+        dy = r - s
+        if dy < 0:
+            dy = -dy
+        h = hmax if cx.hp == NULL else cx.hp[idx]
+        if dy > h:
+            continue
+        x = <int>(kbest & LOW32)
+        occ_pt = 0
+        if cx.occ != NULL and cx.occmode != 2:
+            occ_pt = cx.occ[<int64_t>s * W + x]
+        if occ_pt and cx.occmode == 1:
+            continue
+        cidx[ncon] = idx
+        crow[ncon] = s if not occ_pt else -1 - s
+        ncon += 1
+    if ncon == 0:
+        return
+    # 2. masks (inside image, bilateral) and pattern values, per contribution
+    for n in range(ncon):
+        idx = cidx[n]
+        s = crow[n] if crow[n] >= 0 else -1 - crow[n]
+        x = <int>(cx.pkey[idx] & LOW32)
+        h = hmax if cx.hp == NULL else cx.hp[idx]
+        msk = mbuf + <int64_t>n * K
+        for k in range(K):
+            dx = k - hmax
+            xl = x + dx
+            if dx < -h or dx > h or xl < 0 or xl >= W:
+                msk[k] = 0
+                continue
+            msk[k] = 1
+            if cx.bilateral:
+                sumsq = 0
+                for c in range(C):
+                    diff = <int>Lr[xl * C + c] - <int>cx.L[(<int64_t>s * W + x) * C + c]
+                    sumsq = sumsq + diff * diff
+                e = <double>(dx * dx + (r - s) * (r - s)) / cx.two_ss + \
+                    (<double>sumsq / <double>C) / cx.two_sc
+                if not (e < cx.neglogthr):
+                    msk[k] = 0
+    for n in range(ncon):
+        if crow[n] < 0 and cx.occmode == 3:
+            continue        # FGD: no pattern needed
+        idx = cidx[n]
+        s = crow[n] if crow[n] >= 0 else -1 - crow[n]
+        x = <int>(cx.pkey[idx] & LOW32)
+        msk = mbuf + <int64_t>n * K
+        vals = vbuf + <int64_t>n * K * C
+        if cx.pattern == 0:
+            if cx.uniform:
+                z = _hash(cx.seedmix, <uint64_t>x, <uint64_t>s)
+                for k in range(K):
+                    if msk[k]:
+                        for c in range(C):
+                            vals[k * C + c] = <uint8_t>((z >> (8 * c)) & 255)
+            else:
+                for k in range(K):
+                    if msk[k]:
+                        z = _hash(cx.seedmix, <uint64_t>(x + k - hmax), <uint64_t>r)
+                        for c in range(C):
+                            vals[k * C + c] = <uint8_t>((z >> (8 * c)) & 255)
+        elif cx.uniform:
+            for k in range(K):
+                if msk[k]:
+                    for c in range(C):
+                        vals[k * C + c] = cx.uvals[idx * C + c]
+    if cx.pattern == 1 and not cx.uniform:
+        for c in range(C):
+            _build_all(cx, c, r, tabs)
+            for n in range(ncon):
+                if crow[n] < 0 and cx.occmode == 3:
+                    continue
+                idx = cidx[n]
+                x = <int>(cx.pkey[idx] & LOW32)
+                d = vpp_u2f(<uint32_t>(cx.pkey[idx] >> 32))
+                cn = <int>floor(<double>x - d + 0.5)
+                msk = mbuf + <int64_t>n * K
+                vals = vbuf + <int64_t>n * K * C
+                for k in range(K):
+                    if msk[k]:
+                        vals[k * C + c] = _hist_value(cx, c, r, tabs, x + k - hmax, cn + k - hmax)
+    # 3. right row: pattern of visible points (splatted)
+    for n in range(ncon):
+        if crow[n] < 0 and cx.occmode == 3:
+            continue
+        idx = cidx[n]
+        x = <int>(cx.pkey[idx] & LOW32)
+        d = vpp_u2f(<uint32_t>(cx.pkey[idx] >> 32))
+        xp = <double>x - d
+        msk = mbuf + <int64_t>n * K
+        vals = vbuf + <int64_t>n * K * C
+        if cx.splat:
+            fl = <int>floor(xp)
+            beta = xp - <double>fl
+            w0 = _w16(cx.alpha * (1.0 - beta))
+            w1 = _w16(cx.alpha * beta)
+            for k in range(K):
+                if not msk[k]:
+                    continue
+                col = fl + k - hmax
+                if col >= 0 and col < W:
+                    for c in range(C):
+                        oR[col * C + c] = _blend16(oR[col * C + c], vals[k * C + c], w0)
+                col = col + 1
+                if beta > 0 and col >= 0 and col < W:
+                    for c in range(C):
+                        oR[col * C + c] = _blend16(oR[col * C + c], vals[k * C + c], w1)
+        else:
+            cn = <int>floor(xp + 0.5)
+            for k in range(K):
+                col = cn + k - hmax
+                if msk[k] and col >= 0 and col < W:
+                    for c in range(C):
+                        oR[col * C + c] = _blend16(oR[col * C + c], vals[k * C + c], cx.wa)
+    # 4. left row: pattern, or FGD content of the final right row
+    for n in range(ncon):
+        idx = cidx[n]
+        x = <int>(cx.pkey[idx] & LOW32)
+        msk = mbuf + <int64_t>n * K
+        if crow[n] < 0 and cx.occmode == 3:
+            d = vpp_u2f(<uint32_t>(cx.pkey[idx] >> 32))
+            xp = <double>x - d
+            if cx.splat:
+                fl = <int>floor(xp)
+                beta = xp - <double>fl
+            else:
+                fl = <int>floor(xp + 0.5)
+                beta = 0.0
+            wb = _w16(beta)
+            for k in range(K):
+                if not msk[k]:
+                    continue
+                col = fl + k - hmax
+                if col < 0 or col >= W or (beta > 0 and col + 1 >= W):
+                    continue
+                xl = x + k - hmax
+                for c in range(C):
+                    i0 = oR[col * C + c]
+                    if beta > 0:
+                        i1 = oR[(col + 1) * C + c]
+                        v16 = i0 * (65536 - wb) + i1 * wb
+                    else:
+                        v16 = i0 * 65536
+                    src = oL[xl * C + c]
+                    oL[xl * C + c] = <uint8_t>((src * (65536 - cx.wa) * 65536 + v16 * cx.wa
+                                                + 2147483648ULL) >> 32)
+        else:
+            vals = vbuf + <int64_t>n * K * C
+            for k in range(K):
+                if msk[k]:
+                    xl = x + k - hmax
+                    for c in range(C):
+                        oL[xl * C + c] = _blend16(oL[xl * C + c], vals[k * C + c], cx.wa)
+
+
+# ----------------------------------------------------------------- entry points
+def _row_keys(const float[:, ::1] disp, bint want_paint, bint want_occ, int nthreads):
+    """Phases A-C: per-row stats, offsets and sorted keys."""
+    cdef int H = disp.shape[0], W = disp.shape[1]
+    cdef int y
+    stats = np.empty((H, 4), np.int64)
+    cdef int64_t[:, ::1] st = stats
+    for y in prange(H, nogil=True, num_threads=nthreads, schedule="static"):
+        _count_row(&disp[y, 0], W, &st[y, 0])
+    off_np = np.zeros(H + 1, np.int64)
+    np.cumsum(stats[:, 1], out=off_np[1:])
+    cdef int64_t n = off_np[H]
+    pkey_np = np.empty(max(n, 1), np.uint64) if want_paint else None
+    okey_np = np.empty(max(n, 1), np.uint64) if want_occ else None
+    cdef uint64_t[::1] pk
+    cdef uint64_t[::1] ok
+    cdef uint64_t* pkp = NULL
+    cdef uint64_t* okp = NULL
+    cdef int64_t[::1] off = off_np
+    if want_paint:
+        pk = pkey_np
+        pkp = &pk[0]
+    if want_occ:
+        ok = okey_np
+        okp = &ok[0]
+    for y in prange(H, nogil=True, num_threads=nthreads, schedule="guided"):
+        _fill_row(&disp[y, 0], W,
+                  (pkp + off[y]) if pkp != NULL else NULL,
+                  (okp + off[y]) if okp != NULL else NULL)
+    return stats, off_np, pkey_np, okey_np
+
+
+def _occlusions(int H, int W, uint64_t[::1] okey, int64_t[::1] off, int rx, int ry,
+                double[:, ::1] pen, double t, uint8_t[:, ::1] occ, int nthreads):
+    """Phase D; returns the per-row count of occluded points."""
+    cdef int yo
+    cdef int rx2 = rx // 2, ry2 = ry // 2
+    cnt_np = np.zeros(H, np.int64)
+    cdef int64_t[::1] cnt = cnt_np
+    cdef int64_t* ptr
+    with nogil, parallel(num_threads=nthreads):
+        ptr = <int64_t*>malloc(sizeof(int64_t) * (2 * ry2 + 1))
+        for yo in prange(H, schedule="guided"):
+            cnt[yo] = _occ_row(yo, H, W, &okey[0], &off[0], rx2, ry2, &pen[0, 0], t,
+                               &occ[0, 0], ptr)
+        free(ptr)
+    return cnt_np
+
+
+def detect_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, int rx, int ry,
+                  double[:, ::1] pen, double t, int nthreads):
+    """Occlusion mask of a disparity map (phases A-D); returns (row stats, per-row occluded)."""
+    cdef int H = disp.shape[0], W = disp.shape[1]
+    stats, off, _, okey = _row_keys(disp, False, True, nthreads)
+    cnt = _occlusions(H, W, okey, off, rx, ry, pen, t, occ, nthreads)
+    return stats, cnt
+
+
+def project_kernel(const uint8_t[:, :, ::1] left, const uint8_t[:, :, ::1] right,
+                   const float[:, ::1] disp, uint8_t[:, :, ::1] out_left,
+                   uint8_t[:, :, ::1] out_right, uint8_t[:, ::1] occ,
+                   int pattern, bint uniform, int hmax, double alpha, bint splat, int occmode,
+                   int rx, int ry, double[:, ::1] pen, double t,
+                   bint adaptive_distance, double adaptive_gamma, double adaptive_dmax,
+                   bint bilateral, double two_ss, double two_sc, double neglogthr,
+                   int search_width, int search_height, uint64_t seed, int nthreads):
+    """Phases A-F.  occmode: 0 off, 1 no, 2 bkgd, 3 fgd.  Returns (row stats, per-row occluded)."""
+    cdef int H = disp.shape[0], W = disp.shape[1], C = left.shape[2]
+    cdef int y, K = 2 * hmax + 1
+    cdef Ctx cx
+    stats, off_np, pkey_np, okey_np = _row_keys(disp, True, occmode != 0, nthreads)
+    cdef int64_t n = off_np[H]
+    if occmode != 0:
+        cnt = _occlusions(H, W, okey_np, off_np, rx, ry, pen, t, occ, nthreads)
+    else:
+        cnt = np.zeros(H, np.int64)
+    cdef uint64_t[::1] pk = pkey_np
+    cdef int64_t[::1] off = off_np
+    hp_np = None
+    cdef int8_t[::1] hp
+    cdef double dmin, dmax, u
+    cdef int64_t i
+    cx.hp = NULL
+    if adaptive_distance and n > 0:
+        hp_np = np.empty(n, np.int8)
+        hp = hp_np
+        starts, stops = off_np[:H], off_np[1:]
+        nz = stops > starts
+        firsts = pkey_np[starts[nz]] >> np.uint64(32)
+        lasts = pkey_np[stops[nz] - 1] >> np.uint64(32)
+        dmin = float(firsts.astype(np.uint32).view(np.float32).min())
+        dmax = float(lasts.astype(np.uint32).view(np.float32).max())
+        if adaptive_dmax > 0:
+            dmax = adaptive_dmax
+        for i in prange(n, nogil=True, num_threads=nthreads, schedule="static"):
+            if dmax <= dmin:
+                hp[i] = hmax
+            else:
+                u = (<double>vpp_u2f(<uint32_t>(pk[i] >> 32)) - dmin) / (dmax - dmin)
+                if u < 0:
+                    u = 0
+                if u > 1:
+                    u = 1
+                hp[i] = <int8_t>floor(pow(u, adaptive_gamma) * hmax + 0.5)
+        cx.hp = &hp[0]
+    cx.L = &left[0, 0, 0]
+    cx.R = &right[0, 0, 0]
+    cx.oL = &out_left[0, 0, 0]
+    cx.oR = &out_right[0, 0, 0]
+    cx.occ = &occ[0, 0] if occmode != 0 else NULL
+    cx.pkey = &pk[0]
+    cx.off = &off[0]
+    cx.uvals = NULL
+    cx.H = H
+    cx.W = W
+    cx.C = C
+    cx.hmax = hmax
+    cx.pattern = pattern
+    cx.uniform = uniform
+    cx.splat = splat
+    cx.occmode = occmode
+    cx.bilateral = bilateral
+    cx.two_ss = two_ss
+    cx.two_sc = two_sc
+    cx.neglogthr = neglogthr
+    cx.alpha = alpha
+    cx.wa = _w16(alpha)
+    cx.seedmix = seed * SEED_MUL
+    cx.sw_half = search_width // 2
+    cx.sw_len = search_width
+    cx.sh_half = search_height // 2
+    cdef int64_t tabsize = 16 * <int64_t>W if pattern == 1 else 1
+    cdef uint64_t* tabs
+    uvals_np = None
+    cdef uint8_t[::1] uv
+    if pattern == 1 and uniform and n > 0:
+        uvals_np = np.empty(n * C, np.uint8)
+        uv = uvals_np
+        with nogil, parallel(num_threads=nthreads):
+            tabs = <uint64_t*>malloc(sizeof(uint64_t) * tabsize)
+            for y in prange(H, schedule="guided"):
+                _uniform_hist_row(&cx, y, tabs, &uv[0])
+            free(tabs)
+        cx.uvals = &uv[0]
+    # contributions to a row come from at most K source rows
+    maxcon = max(1, min(int(n), K * int(stats[:, 1].max()) if H > 0 else 0))
+    cdef int64_t mc = maxcon
+    cdef int64_t* heads
+    cdef int64_t* ends
+    cdef int64_t* cidx
+    cdef int32_t* crow
+    cdef uint8_t* vbuf
+    cdef uint8_t* mbuf
+    with nogil, parallel(num_threads=nthreads):
+        heads = <int64_t*>malloc(sizeof(int64_t) * K)
+        ends = <int64_t*>malloc(sizeof(int64_t) * K)
+        cidx = <int64_t*>malloc(sizeof(int64_t) * mc)
+        crow = <int32_t*>malloc(sizeof(int32_t) * mc)
+        vbuf = <uint8_t*>malloc(mc * K * C)
+        mbuf = <uint8_t*>malloc(mc * K)
+        tabs = <uint64_t*>malloc(sizeof(uint64_t) * tabsize)
+        for y in prange(H, schedule="guided"):
+            _paint_row(&cx, y, heads, ends, cidx, crow, vbuf, mbuf, tabs)
+        free(heads)
+        free(ends)
+        free(cidx)
+        free(crow)
+        free(vbuf)
+        free(mbuf)
+        free(tabs)
+    return stats, cnt
