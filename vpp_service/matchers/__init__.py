@@ -15,7 +15,6 @@ See :mod:`vpp_service.matchers.base` for the conventions all matchers share.
 from vpp_service.matchers.base import MATCHERS, Matcher, MatcherOptions, build_matcher
 from vpp_service.matchers.holes import fill_holes
 from vpp_service.matchers.guided import modulate_cost
-from vpp_service.matchers import opencv as _opencv  # noqa: F401  (registers sgbm, bm)
-from vpp_service.matchers import census_sgm as _census_sgm  # noqa: F401  (registers census-sgm)
+from vpp_service.matchers import census_sgm, opencv  # noqa: F401  (register census-sgm, sgbm, bm)
 
 __all__ = ["MATCHERS", "Matcher", "MatcherOptions", "build_matcher", "fill_holes", "modulate_cost"]

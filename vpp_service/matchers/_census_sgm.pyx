@@ -28,7 +28,9 @@ cdef inline int popcount32(uint32_t v) noexcept nogil:
     v = v - ((v >> 1) & <uint32_t>0x55555555)
     v = (v & <uint32_t>0x33333333) + ((v >> 2) & <uint32_t>0x33333333)
     v = (v + (v >> 4)) & <uint32_t>0x0F0F0F0F
-    return <int>((v * <uint32_t>0x01010101) >> 24)
+    v = v + (v >> 8)
+    v = v + (v >> 16)
+    return <int>(v & 0x3F)  # shifts, not a multiply: vectorises on plain SSE2
 
 
 cdef inline int clampi(int v, int lo, int hi) noexcept nogil:
@@ -66,17 +68,23 @@ def census5x5(const uint8_t[:, ::1] img, uint32_t[:, ::1] out, int nthreads):
 
 
 # --------------------------------------------------------------- hamming ----
-cdef inline void hamming_row(const uint32_t* cl, const uint32_t* cr, uint16_t* out,
-                             int W, int D, uint16_t invalid_cost) noexcept nogil:
+cdef inline void hamming_row(const uint32_t* cl, const uint32_t* cr, uint32_t* rev,
+                             uint16_t* out, int W, int D, uint16_t invalid_cost) noexcept nogil:
+    """One row; ``rev`` (W entries) receives cr reversed so the d loop reads forwards
+    (SSE2 has no reversed loads, a forward loop vectorises)."""
     cdef int x, d, dmax
     cdef uint32_t a
     cdef uint16_t* p
+    cdef const uint32_t* q
+    for x in range(W):
+        rev[x] = cr[W - 1 - x]
     for x in range(W):
         p = out + <Py_ssize_t>x * D
         a = cl[x]
+        q = rev + (W - 1 - x)  # q[d] == cr[x - d]
         dmax = x if x < D - 1 else D - 1
         for d in range(dmax + 1):
-            p[d] = <uint16_t>popcount32(a ^ cr[x - d])
+            p[d] = <uint16_t>popcount32(a ^ q[d])
         for d in range(dmax + 1, D):
             p[d] = invalid_cost
 
@@ -85,10 +93,16 @@ def hamming_volume(const uint32_t[:, ::1] cl, const uint32_t[:, ::1] cr,
                    uint16_t[:, :, ::1] out, uint16_t invalid_cost, int nthreads):
     """out[y, x, d] = popcount(cl[y, x] ^ cr[y, x - d]); ``invalid_cost`` where x < d."""
     cdef int H = cl.shape[0], W = cl.shape[1], D = out.shape[2]
-    cdef int y
+    cdef int y, tid
+    cdef uint32_t* work = <uint32_t*>malloc(<Py_ssize_t>nthreads * W * sizeof(uint32_t))
+    if work == NULL:
+        raise MemoryError("census-sgm: cannot allocate the Hamming buffers")
     with nogil:
         for y in prange(H, schedule="static", num_threads=nthreads):
-            hamming_row(&cl[y, 0], &cr[y, 0], &out[y, 0, 0], W, D, invalid_cost)
+            tid = threadid()
+            hamming_row(&cl[y, 0], &cr[y, 0], work + <Py_ssize_t>tid * W, &out[y, 0, 0],
+                        W, D, invalid_cost)
+    free(work)
 
 
 # ------------------------------------------------------------------- SGM ----
@@ -311,27 +325,42 @@ def winner_takes_all(const uint16_t[:, :, ::1] S, float[:, ::1] out,
                 out[y, x] = wta_pixel(&S[y, x, 0], D, uniqueness, sp)
 
 
-cdef inline float right_pixel(const uint16_t[:, :, ::1] S, int y, int xr, int W,
-                              int D) noexcept nogil:
-    cdef int d, best = 0, dmax = W - 1 - xr
-    cdef int bv = S[y, xr, 0]
-    if dmax > D - 1:
-        dmax = D - 1
-    for d in range(1, dmax + 1):
-        if S[y, xr + d, d] < bv:
-            bv = S[y, xr + d, d]
-            best = d
-    return <float>best
+cdef void right_row(const uint16_t* S, float* out, int* best_cost, int W,
+                    int D) noexcept nogil:
+    """Right WTA of one row, scanning the left volume in memory order.
+
+    Candidates of right pixel xr come from x = xr + d, visited with increasing
+    d, so the strict ``<`` keeps the lowest d on ties.
+    """
+    cdef int x, d, dmax, xr
+    cdef int c
+    cdef const uint16_t* p
+    for x in range(W):
+        best_cost[x] = 1 << 30
+        out[x] = 0
+    for x in range(W):
+        p = S + <Py_ssize_t>x * D
+        dmax = x if x < D - 1 else D - 1
+        for d in range(dmax + 1):
+            xr = x - d
+            c = p[d]
+            if c < best_cost[xr]:
+                best_cost[xr] = c
+                out[xr] = <float>d
 
 
 def right_disparity(const uint16_t[:, :, ::1] S, float[:, ::1] out, int nthreads):
     """out[y, xr] = argmin_d S[y, xr + d, d] over xr + d < W (first minimum)."""
     cdef int H = S.shape[0], W = S.shape[1], D = S.shape[2]
-    cdef int y, x
+    cdef int y, tid
+    cdef int* work = <int*>malloc(<Py_ssize_t>nthreads * W * sizeof(int))
+    if work == NULL:
+        raise MemoryError("census-sgm: cannot allocate the right-WTA buffers")
     with nogil:
         for y in prange(H, schedule="static", num_threads=nthreads):
-            for x in range(W):
-                out[y, x] = right_pixel(S, y, x, W, D)
+            tid = threadid()
+            right_row(&S[y, 0, 0], &out[y, 0], work + <Py_ssize_t>tid * W, W, D)
+    free(work)
 
 
 def left_right_check(const float[:, ::1] dl, const float[:, ::1] dr, float[:, ::1] out,
