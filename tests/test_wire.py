@@ -1,0 +1,239 @@
+"""Wire format v1: round trips, the documented example, and rejection of malformed messages."""
+from __future__ import annotations
+
+import math
+
+import msgpack
+import numpy as np
+import pytest
+
+from vpp_service.frame import Calibration, FusionResult, StereoFrame
+from vpp_service.service import wire
+from vpp_service.service.wire import WireError
+
+
+def make_frame(h=6, w=8, c=3, seed=0, depth="metric"):
+    rng = np.random.default_rng(seed)
+    shape = (h, w) if c == 1 else (h, w, 3)
+    left = rng.integers(0, 256, shape, dtype=np.uint8)
+    right = rng.integers(0, 256, shape, dtype=np.uint8)
+    gt = rng.uniform(1, 5, (h, w)).astype(np.float32)
+    calib = Calibration(f=100.0, baseline=0.1, doffs=2.0)
+    sparse = np.full((h, w), np.nan, np.float32)
+    sparse[1, 2], sparse[3, 5] = 2.5, 4.0
+    z = np.full((h, w), np.nan, np.float32)
+    z[1, 2], z[3, 5] = 1.5, 3.25
+    return StereoFrame(left=left, right=right, calib=calib, gt_disparity=gt,
+                       sparse_disparity=None if depth == "metric" else sparse,
+                       sensor_depth=z if depth == "metric" else None, rig="r1", seq=7, stamp_ns=123456789)
+
+
+def raw_msg(**changes):
+    msg = msgpack.unpackb(wire.encode_frame(make_frame()), raw=False)
+    for k, v in changes.items():
+        if v is KeyError:
+            msg.pop(k)
+        else:
+            msg[k] = v
+    return msgpack.packb(msg, use_bin_type=True)
+
+
+@pytest.mark.parametrize("c", [1, 3])
+@pytest.mark.parametrize("enc", ["raw", "png"])
+def test_frame_roundtrip_metric(c, enc):
+    fr = make_frame(c=c)
+    out = wire.decode_frame(wire.encode_frame(fr, enc=enc))
+    np.testing.assert_array_equal(out.left, fr.left)
+    np.testing.assert_array_equal(out.right, fr.right)
+    assert (out.rig, out.seq, out.stamp_ns) == ("r1", 7, 123456789)
+    assert out.calib == fr.calib
+    np.testing.assert_array_equal(out.sensor_depth, fr.sensor_depth)  # NaN positions equal too
+    assert out.sparse_disparity is None
+    np.testing.assert_array_equal(out.gt_disparity, fr.gt_disparity)
+
+
+@pytest.mark.parametrize("kind", ["auto", "disparity_points", "map"])
+def test_frame_roundtrip_disparity(kind):
+    fr = make_frame(depth="disparity")
+    out = wire.decode_frame(wire.encode_frame(fr, depth_kind=kind))
+    np.testing.assert_array_equal(out.sparse_disparity, fr.sparse_disparity)
+    assert out.sensor_depth is None
+
+
+def test_jpeg_roundtrip_is_close():
+    fr = make_frame(h=32, w=48)
+    out = wire.decode_frame(wire.encode_frame(fr, enc="jpeg"))
+    assert out.left.shape == fr.left.shape
+    assert np.abs(out.left.astype(int) - fr.left.astype(int)).mean() < 60
+
+
+def test_no_depth_no_gt():
+    fr = make_frame().with_(sensor_depth=None, gt_disparity=None)
+    out = wire.decode_frame(wire.encode_frame(fr))
+    assert out.sensor_depth is None and out.sparse_disparity is None and out.gt_disparity is None
+
+
+def test_collision_keeps_nearest():
+    uv = np.array([[2.2, 1.0], [1.8, 1.0]], "<f4")
+    m = {"kind": "points", "n": 2, "uv": uv.tobytes(), "z": np.array([3.0, 1.0], "<f4").tobytes()}
+    z, d = wire.decode_depth(m, 4, 4)
+    assert d is None and z[1, 2] == 1.0 and np.isfinite(z).sum() == 1
+    m = {"kind": "disparity_points", "n": 2, "uv": uv.tobytes(), "d": np.array([3.0, 1.0], "<f4").tobytes()}
+    z, d = wire.decode_depth(m, 4, 4)
+    assert z is None and d[1, 2] == 3.0
+
+
+#: The worked example of docs/wire-format.md (2x3 gray frame, one metric depth point).
+DOC_EXAMPLE_HEX = (
+    "88a17601a3726967a172a373657101a87374616d705f6e7302a46c65667486a16802a17703a16301a56474797065a27538"
+    "a3656e63a3726177a464617461c406000102030405a5726967687486a16802a17703a16301a56474797065a27538a3656e"
+    "63a3726177a464617461c406020100050403a563616c696283a166cb4000000000000000a8626173656c696e65cb3fe000"
+    "0000000000a5646f666673cb0000000000000000a5646570746884a46b696e64a6706f696e7473a16e01a27576c4080000"
+    "803f00000000a17ac40400008040"
+)
+
+
+def test_documented_example_bytes():
+    """The 2x3 example in docs/wire-format.md: exact bytes both ways."""
+    left = np.arange(6, dtype=np.uint8).reshape(2, 3)
+    z = np.full((2, 3), np.nan, np.float32)
+    z[0, 1] = 4.0
+    fr = StereoFrame(left=left, right=left[:, ::-1].copy(), calib=Calibration(f=2.0, baseline=0.5),
+                     sensor_depth=z, rig="r", seq=1, stamp_ns=2)
+    assert wire.encode_frame(fr).hex() == DOC_EXAMPLE_HEX
+    out = wire.decode_frame(bytes.fromhex(DOC_EXAMPLE_HEX))
+    np.testing.assert_array_equal(out.left, left)
+    np.testing.assert_array_equal(out.right, [[2, 1, 0], [5, 4, 3]])
+    assert out.sensor_depth[0, 1] == 4.0 and np.isfinite(out.sensor_depth).sum() == 1
+    assert (out.rig, out.seq, out.stamp_ns, out.calib.f, out.calib.baseline) == ("r", 1, 2, 2.0, 0.5)
+
+
+def test_output_roundtrip():
+    fr = make_frame()
+    disp = np.full(fr.shape, 3.5, np.float32)
+    disp[0, 0] = np.nan
+    res = FusionResult(frame=fr, disparity=disp, depth=disp * 2, left_vpp=fr.left, right_vpp=fr.right,
+                       timing_ms={"match": 1.5}, metrics={"bad2": 4.0}, vpp_stats={"projected": 2})
+    out = wire.decode_output(wire.encode_output(res, "disparity"))
+    np.testing.assert_array_equal(out.data, disp)
+    assert out.seq == 7 and out.timing_ms == {"match": 1.5} and out.metrics == {"bad2": 4.0}
+    assert out.calib == fr.calib and out.extra["vpp"] == {"projected": 2}
+    np.testing.assert_array_equal(wire.decode_output(wire.encode_output(res, "depth")).data, disp * 2)
+    seq, img = wire.decode_output_image(wire.encode_output(res, "left_vpp", "png"))
+    np.testing.assert_array_equal(img, fr.left)
+    assert wire.encode_output(FusionResult(frame=fr, disparity=disp), "right_vpp") is None
+    with pytest.raises(ValueError, match="name"):
+        wire.encode_output(res, "bogus")
+
+
+@pytest.mark.parametrize("part", ["left", "right", "depth"])
+def test_parts_roundtrip(part):
+    fr = make_frame()
+    p = wire.decode_part(wire.encode_part(fr, part), part)
+    assert p.seq == 7 and p.stamp_ns == 123456789
+    if part == "depth":
+        np.testing.assert_array_equal(p.sensor_depth, fr.sensor_depth)
+    else:
+        np.testing.assert_array_equal(p.image, getattr(fr, part))
+
+
+def test_assemble_parts():
+    fr = make_frame()
+    parts = {k: wire.decode_part(wire.encode_part(fr, k), k) for k in ("left", "right", "depth")}
+    out = wire.assemble(parts["left"], parts["right"], parts["depth"])
+    np.testing.assert_array_equal(out.right, fr.right)
+    assert out.calib == fr.calib and out.gt_disparity is not None
+
+
+BIG = 1 << 40
+
+
+@pytest.mark.parametrize("payload,field", [
+    (b"", "message"),
+    (raw_msg()[:-10], "message"),                                  # truncated
+    (msgpack.packb([1, 2, 3]), "message"),                          # not a map
+    (b"\xc1\x00", "message"),                                       # invalid msgpack byte
+    (raw_msg(v=2), "v"),
+    (raw_msg(v="1"), "v"),
+    (raw_msg(seq=-1), "seq"),
+    (raw_msg(seq="7"), "seq"),
+    (raw_msg(rig=5), "rig"),
+    (raw_msg(left=KeyError), "left"),
+    (raw_msg(calib={"f": math.nan, "baseline": 0.1}), "calib.f"),
+    (raw_msg(calib={"f": 100.0, "baseline": math.inf}), "calib.baseline"),
+    (raw_msg(calib={"f": -1.0, "baseline": 0.1}), "calib.f"),
+    (raw_msg(calib={"f": 100.0}), "calib.baseline"),
+    (raw_msg(calib=[1, 2]), "calib"),
+    (raw_msg(left={"h": BIG, "w": BIG, "c": 3, "dtype": "u8", "enc": "raw", "data": b""}), "left.h"),
+    (raw_msg(left={"h": 16000, "w": 16000, "c": 3, "dtype": "u8", "enc": "raw", "data": b"x"}), "left.h"),
+    (raw_msg(left={"h": 6, "w": 8, "c": 3, "dtype": "u8", "enc": "raw", "data": b"x" * 10}), "left.data"),
+    (raw_msg(left={"h": 6, "w": 8, "c": 2, "dtype": "u8", "enc": "raw", "data": b"x" * 96}), "left.c"),
+    (raw_msg(left={"h": 6, "w": 8, "c": 3, "dtype": "f32", "enc": "raw", "data": b"x" * 144}), "left.dtype"),
+    (raw_msg(left={"h": 6, "w": 8, "c": 3, "dtype": "u8", "enc": "bmp", "data": b"x" * 144}), "left.enc"),
+    (raw_msg(left={"h": 6, "w": 8, "c": 3, "dtype": "u8", "enc": "raw", "data": "text"}), "left.data"),
+    (raw_msg(left={"h": 6, "w": 8, "c": 3, "dtype": "u8", "enc": "png", "data": b"notpng" * 10}), "left."),
+    (raw_msg(left=wire.encode_image(np.zeros((4, 8, 3), np.uint8))), "right"),
+    (raw_msg(depth={"kind": "points", "n": BIG, "uv": b"", "z": b""}), "depth.n"),
+    (raw_msg(depth={"kind": "points", "n": 2, "uv": b"\0" * 8, "z": b"\0" * 8}), "depth.uv"),
+    (raw_msg(depth={"kind": "points", "n": 1, "uv": np.array([8.0, 1.0], "<f4").tobytes(),
+                    "z": np.array([1.0], "<f4").tobytes()}), "depth.uv"),
+    (raw_msg(depth={"kind": "points", "n": 1, "uv": np.array([1.0, -3.0], "<f4").tobytes(),
+                    "z": np.array([1.0], "<f4").tobytes()}), "depth.uv"),
+    (raw_msg(depth={"kind": "points", "n": 1, "uv": np.array([1.0, 1.0], "<f4").tobytes(),
+                    "z": np.array([np.nan], "<f4").tobytes()}), "depth.z"),
+    (raw_msg(depth={"kind": "map", "h": 6, "w": 8, "unit": "m", "data": b"\0" * 4}), "depth.data"),
+    (raw_msg(depth={"kind": "map", "h": 5, "w": 8, "unit": "m", "data": b"\0" * 160}), "depth.h"),
+    (raw_msg(depth={"kind": "map", "h": 6, "w": 8, "unit": "ft", "data": b"\0" * 192}), "depth.unit"),
+    (raw_msg(depth={"kind": "mesh"}), "depth.kind"),
+    (raw_msg(gt={"h": 6, "w": 8, "data": b"\0" * 3}), "gt.data"),
+])
+def test_malformed_frames_are_rejected(payload, field):
+    with pytest.raises(WireError) as exc:
+        wire.decode_frame(payload)
+    assert str(exc.value).startswith(field), str(exc.value)
+
+
+def test_png_header_size_mismatch_is_rejected_before_decoding():
+    big = wire.encode_image(np.zeros((64, 64), np.uint8), "png")
+    with pytest.raises(WireError, match="declared 2x2"):
+        wire.decode_image({**big, "h": 2, "w": 2}, "left")
+    jpg = wire.encode_image(np.zeros((16, 24, 3), np.uint8), "jpeg")
+    with pytest.raises(WireError, match="declared"):
+        wire.decode_image({**jpg, "h": 24, "w": 16}, "left")
+
+
+def test_message_size_limit():
+    with pytest.raises(WireError, match="exceeds"):
+        wire.decode_frame(raw_msg(), wire.WireLimits(max_message_bytes=100))
+
+
+def test_unknown_keys_are_ignored():
+    out = wire.decode_frame(raw_msg(future_field={"x": 1}))
+    assert out.seq == 7
+
+
+@pytest.mark.parametrize("bad,exc", [(np.zeros((2, 2), np.float32), TypeError), ([1, 2], TypeError),
+                                     (np.zeros((2, 2, 4), np.uint8), ValueError),
+                                     (np.zeros((0, 3), np.uint8), ValueError)])
+def test_encode_image_bad_input(bad, exc):
+    with pytest.raises(exc, match="img"):
+        wire.encode_image(bad)
+
+
+def test_encode_frame_bad_input():
+    with pytest.raises(TypeError, match="frame"):
+        wire.encode_frame("nope")
+    with pytest.raises(ValueError, match="calib"):
+        wire.encode_frame(make_frame().with_(calib=None))
+    with pytest.raises(ValueError, match="enc"):
+        wire.encode_frame(make_frame(), enc="gif")
+
+
+@pytest.mark.parametrize("prefix,rig", [("", "r"), ("vpp", ""), ("vpp/*", "r"), ("vpp", "a/b"), ("vpp", "r$")])
+def test_topic_validation(prefix, rig):
+    with pytest.raises(ValueError):
+        wire.topic(prefix, rig, "in/frame")
+
+
+def test_topic():
+    assert wire.topic("vpp", "rig0", "out/disparity") == "vpp/rig0/out/disparity"

@@ -1,0 +1,140 @@
+"""``vpp-service publish``: play a dataset or the simulator onto Zenoh like a camera rig.
+
+Frames (with sparse depth and, as an extension, ground truth) are sent as wire
+format v1 on ``<prefix>/<rig>/in/frame`` or, with ``--separate-topics``, on
+``in/left``, ``in/right`` and ``in/depth``. Publishing uses
+``CongestionControl.BLOCK`` so large frames are never silently dropped.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import threading
+import time
+from typing import Any
+
+
+def add_parser(subparsers: Any) -> None:
+    """Register the ``publish`` sub-command."""
+    p = subparsers.add_parser("publish", help="publish frames onto Zenoh as a camera rig would",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--dataset", help="dataset name or 'auto' (default: the simulator)")
+    p.add_argument("--root", help="dataset folder (with --dataset)")
+    p.add_argument("--scene", default="motorcycle", choices=["motorcycle", "synthetic"], help="simulator scene")
+    p.add_argument("--scale", type=float, default=1.0, help="resize factor in (0, 1]")
+    p.add_argument("--sensor", default="uniform", help="sensor simulator (uniform, lidar, tof, none)")
+    p.add_argument("--density", type=float, default=0.05, help="uniform sensor density")
+    p.add_argument("--rate", type=float, default=10.0, help="frames per second (0 = as fast as possible)")
+    p.add_argument("--count", type=int, default=0, help="frames to send (0 = until interrupted / end)")
+    p.add_argument("--loop", action="store_true", help="loop over the dataset")
+    p.add_argument("--rig", default="rig0")
+    p.add_argument("--prefix", default="vpp")
+    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="connect endpoint")
+    p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT", help="listen endpoint")
+    p.add_argument("--multicast-scouting", action="store_true", help="enable multicast discovery")
+    p.add_argument("--enc", default="raw", choices=["raw", "png", "jpeg"], help="image encoding")
+    p.add_argument("--depth-kind", default="auto", choices=["auto", "points", "disparity_points", "map"])
+    p.add_argument("--no-depth", action="store_true", help="send frames without sparse depth")
+    p.add_argument("--no-gt", action="store_true", help="do not attach ground truth")
+    p.add_argument("--separate-topics", action="store_true", help="publish in/left, in/right, in/depth")
+    p.add_argument("--wait-subscriber", type=float, default=5.0, metavar="S",
+                   help="wait up to S seconds for a matching subscriber before sending (0 = don't)")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=main)
+
+
+def _source(args: argparse.Namespace) -> Any:
+    from vpp_service.sources.base import SourceContext, build_source
+
+    ctx = SourceContext(rig=args.rig, prefix=args.prefix)
+    sensor_opts = {"density": args.density} if args.sensor == "uniform" else {}
+    if args.dataset:
+        if not args.root:
+            raise ValueError("--root: required with --dataset")
+        opts = {"root": args.root, "dataset": args.dataset, "rate_hz": 0.0, "loop": args.loop,
+                "count": args.count, "scale": args.scale, "sensor": args.sensor,
+                "sensor_options": sensor_opts, "seed": args.seed}
+        return build_source("files", opts, ctx)
+    opts = {"scene": args.scene, "scale": args.scale, "sensor": args.sensor, "sensor_options": sensor_opts,
+            "rate_hz": 0.0, "count": args.count, "seed": args.seed}
+    return build_source("sim", opts, ctx)
+
+
+def main(args: argparse.Namespace) -> int:
+    """Publish until ``--count``, the end of the dataset, or SIGINT/SIGTERM."""
+    import queue as _queue
+
+    import zenoh
+
+    from vpp_service.service import wire
+    from vpp_service.service.app import open_session
+    from vpp_service.service.config import ZenohSection
+    from vpp_service.sources.base import Pacer
+
+    if not 0 < args.scale <= 1:
+        raise ValueError(f"--scale: must be in (0, 1], got {args.scale}")
+    if args.rate < 0 or args.count < 0:
+        raise ValueError("--rate and --count must be >= 0")
+    zsec = ZenohSection(mode="peer", listen=list(args.listen), connect=list(args.connect),
+                        multicast_scouting=args.multicast_scouting)
+    src = _source(args)
+    src.open()
+    frames: _queue.Queue = _queue.Queue(maxsize=2)
+    stop = threading.Event()
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, lambda *_: stop.set())
+
+    def emit(frame: Any) -> bool:
+        while not stop.is_set():
+            try:
+                frames.put(frame, timeout=0.1)
+                return True
+            except _queue.Full:
+                continue
+        return False
+
+    parts = ["left", "right", "depth"] if args.separate_topics else ["frame"]
+    sent = 0
+    with open_session(zsec) as session:
+        pubs = {p: session.declare_publisher(wire.topic(args.prefix, args.rig, f"in/{p}"),
+                                             congestion_control=zenoh.CongestionControl.BLOCK)
+                for p in parts}
+        if args.wait_subscriber > 0:
+            deadline = time.monotonic() + args.wait_subscriber
+            while time.monotonic() < deadline and not stop.is_set():
+                if all(p.matching_status.matching for p in pubs.values()):
+                    break
+                time.sleep(0.02)
+        src.start(emit)
+        pacer = Pacer(args.rate)
+        t0 = time.monotonic()
+        while not stop.is_set():
+            try:
+                frame = frames.get(timeout=0.1)
+            except _queue.Empty:
+                if src.finished.is_set() and frames.empty():
+                    break
+                continue
+            if pacer.wait(src) and stop.is_set():
+                break
+            frame = frame.with_(stamp_ns=time.time_ns())
+            if args.no_depth:
+                frame = frame.with_(sparse_disparity=None, sensor_depth=None)
+            if args.no_gt:
+                frame = frame.with_(gt_disparity=None)
+            if args.separate_topics:
+                for p in parts:
+                    payload = wire.encode_part(frame, p, args.enc, args.depth_kind)
+                    if payload is not None:
+                        pubs[p].put(payload)
+            else:
+                pubs["frame"].put(wire.encode_frame(frame, args.enc, args.depth_kind))
+            sent += 1
+        src.stop(2.0)
+        elapsed = time.monotonic() - t0
+        for p in pubs.values():
+            p.undeclare()
+    print(json.dumps({"sent": sent, "seconds": round(elapsed, 3)}), file=sys.stdout)
+    return 0
