@@ -1,0 +1,156 @@
+"""``vpp-service eval``: score matcher / guided stereo / VPP on a dataset with ground truth.
+
+Example::
+
+    vpp-service eval --dataset auto --root ../shared/data/middlebury2005_2006_thirdsize \\
+        --matcher census-sgm --methods baseline,guided,vpp --density 0.01,0.05 \\
+        --json out.json --markdown out.md
+
+``--dataset synthetic`` needs no ``--root``: it renders ``--limit`` (default 4)
+synthetic scenes (:func:`vpp_service.sources.synthetic.make_scene`, seeds 0..N-1).
+A comma list in ``--density`` runs a sweep and writes a bad-2 vs density plot
+(``--plot``, default ``<json stem>.png`` next to the JSON, or ``eval_sweep.png``).
+``--max-disparity`` defaults, per scene, to the smallest multiple of 16 above the
+largest ground-truth disparity (at least 16). Progress goes to stderr, the
+Markdown summary to stdout.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+
+def _kv(text: str) -> tuple[str, Any]:
+    if "=" not in text:
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
+    key, _, value = text.partition("=")
+    try:
+        parsed = json.loads(value)
+    except json.JSONDecodeError:
+        parsed = value
+    return key.strip(), parsed
+
+
+def _densities(text: str) -> list[float]:
+    try:
+        values = [float(t) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--density: expected numbers separated by commas, got {text!r}") from None
+    if not values or any(not 0 < v <= 1 for v in values):
+        raise argparse.ArgumentTypeError(f"--density: each value must be in (0, 1], got {text!r}")
+    return values
+
+
+def add_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Register the ``eval`` sub-command."""
+    p = subparsers.add_parser("eval", help="evaluate matcher / guided / VPP against ground truth",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    g = p.add_argument_group("data")
+    g.add_argument("--dataset", default="auto", help="reader name, 'auto' (detect) or 'synthetic' (default auto)")
+    g.add_argument("--root", type=Path, help="dataset folder (required unless --dataset synthetic)")
+    g.add_argument("--scenes", help="comma list of scene names to keep")
+    g.add_argument("--limit", type=int, help="evaluate only the first N scenes")
+    g.add_argument("--dataset-opt", action="append", type=_kv, default=[], metavar="KEY=VALUE",
+                   help="reader option, e.g. scale=2 (repeatable; VALUE parsed as JSON when possible)")
+    g = p.add_argument_group("methods")
+    g.add_argument("--matcher", default="census-sgm", help="registered matcher (default census-sgm)")
+    g.add_argument("--matcher-opt", action="append", type=_kv, default=[], metavar="KEY=VALUE",
+                   help="matcher option (repeatable)")
+    g.add_argument("--methods", default="baseline,guided,vpp", help="comma list of baseline, guided, vpp")
+    g.add_argument("--max-disparity", type=int, help="matcher disparity range (default: per scene from GT)")
+    g = p.add_argument_group("sparse points")
+    g.add_argument("--sensor", default="uniform", help="uniform | lidar | tof | frame (the dataset's own scan)")
+    g.add_argument("--sensor-opt", action="append", type=_kv, default=[], metavar="KEY=VALUE",
+                   help="sensor option (repeatable), e.g. noise_m=0.02")
+    g.add_argument("--density", type=_densities, default=[0.05],
+                   help="fraction of valid GT pixels (uniform sensor); a comma list runs a sweep")
+    g.add_argument("--seed", type=int, default=0, help="seed of the points and of the VPP pattern")
+    g = p.add_argument_group("VPP")
+    g.add_argument("--pattern", choices=("random", "histogram"))
+    g.add_argument("--patch", type=int, help="patch side (odd)")
+    g.add_argument("--uniform-patch", action="store_true", default=None, help="one value per patch")
+    g.add_argument("--alpha", type=float, help="blending weight in [0, 1]")
+    g.add_argument("--no-splat", dest="splat", action="store_false", default=None, help="no sub-pixel splatting")
+    g.add_argument("--occlusion", choices=("fgd", "no", "bkgd", "off"))
+    g.add_argument("--adaptive-patch", choices=("distance", "bilateral"))
+    g = p.add_argument_group("output")
+    g.add_argument("--json", type=Path, help="write results + summary as JSON")
+    g.add_argument("--markdown", type=Path, help="write the Markdown report")
+    g.add_argument("--plot", type=Path, help="bad-2 vs density PNG of a sweep (default next to --json)")
+    g.add_argument("--per-scene", action="store_true", help="add per-scene tables to the Markdown report")
+    g.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=run)
+    return p
+
+
+def _vpp_config(args: argparse.Namespace) -> Any:
+    from vpp_service.vpp import VPPConfig
+
+    opts = {k: getattr(args, k) for k in ("pattern", "patch", "uniform_patch", "alpha", "splat", "occlusion",
+                                          "adaptive_patch") if getattr(args, k) is not None}
+    return VPPConfig(**opts)
+
+
+def _frames(args: argparse.Namespace) -> tuple[Any, str]:
+    if args.dataset == "synthetic":
+        from vpp_service.sources.synthetic import make_scene
+
+        n = args.limit or 4
+        opts = dict(args.dataset_opt)
+        frames = [make_scene(seed=i, **opts) for i in range(n)]
+        if args.scenes:
+            keep = [s.strip() for s in args.scenes.split(",") if s.strip()]
+            frames = [f for f in frames if f.name in keep]
+            if not frames:
+                raise ValueError(f"--scenes: none of {keep} among the synthetic scenes")
+        return frames, "synthetic"
+    if args.root is None:
+        raise ValueError("--root: required (the dataset folder) unless --dataset synthetic")
+    from vpp_service.datasets import open_dataset
+
+    ds = open_dataset(args.dataset, args.root, **dict(args.dataset_opt))
+    scenes = [s.strip() for s in args.scenes.split(",") if s.strip()] if args.scenes else None
+    ds.select(scenes, args.limit)
+    return ds, ds.name
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the evaluation described by ``args``; returns the exit code."""
+    from vpp_service.evaluation import ProgressBar, markdown_report, plot_sweep, run_evaluation, write_json
+    from vpp_service.evaluation.runner import _check_methods
+
+    methods = _check_methods(args.methods)
+    if args.limit is not None and args.limit < 1:
+        raise ValueError(f"--limit: must be >= 1, got {args.limit}")
+    vpp_config = _vpp_config(args) if "vpp" in methods else None
+    frames, dataset_name = _frames(args)
+    densities = args.density if args.sensor == "uniform" else None
+    if args.sensor != "uniform" and len(args.density) > 1:
+        raise ValueError(f"--density: a sweep needs --sensor uniform, got {args.sensor!r}")
+    rows = run_evaluation(
+        frames, args.matcher, methods, densities, args.sensor, vpp_config, args.seed,
+        progress=None if args.quiet else ProgressBar(sys.stderr),
+        matcher_options=dict(args.matcher_opt), sensor_options=dict(args.sensor_opt),
+        max_disparity=args.max_disparity, dataset_name=dataset_name,
+    )
+    config = {
+        "dataset": dataset_name, "root": str(args.root) if args.root else None, "matcher": args.matcher,
+        "matcher_options": dict(args.matcher_opt), "methods": methods, "sensor": args.sensor,
+        "sensor_options": dict(args.sensor_opt), "densities": densities, "seed": args.seed,
+        "max_disparity": args.max_disparity,
+        "vpp": None if vpp_config is None else {k: getattr(vpp_config, k) for k in vpp_config.__dataclass_fields__},
+    }
+    text = markdown_report(rows, per_scene=args.per_scene, title=f"VPP evaluation: {dataset_name}")
+    if args.json:
+        write_json(args.json, rows, config)
+    if args.markdown:
+        args.markdown.write_text(text)
+    if densities is not None and len(densities) > 1:
+        plot = args.plot or (args.json.with_suffix(".png") if args.json else Path("eval_sweep.png"))
+        plot_sweep(plot, rows)
+        print(f"plot: {plot}", file=sys.stderr)
+    sys.stdout.write(text)
+    return 0
