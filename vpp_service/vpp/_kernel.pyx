@@ -483,7 +483,7 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
         kbest = 0
         for j in range(nsrc):
             if heads[j] < ends[j]:
-                key = cx.pkey[heads[j]]
+                key = cx.pkey[heads[j]] >> 32      # d bits only: ties -> smaller row
                 if jbest < 0 or key < kbest:
                     jbest = j
                     kbest = key
@@ -491,6 +491,7 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
             break
         idx = heads[jbest]
         heads[jbest] += 1
+        kbest = cx.pkey[idx]
         s = s_lo + jbest
         dy = r - s
         if dy < 0:

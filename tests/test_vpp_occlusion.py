@@ -1,0 +1,67 @@
+"""Tests of vpp_service.vpp.detect_occlusions against the dense-grid literal reference."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vpp_service.vpp import detect_occlusions
+
+from vpp_reference import ref_occlusions
+
+
+@pytest.mark.parametrize("seed", range(12))
+@pytest.mark.parametrize("params", [dict(), dict(window=(3, 1), lam=0.5, gamma=1.0, t=0.0),
+                                    dict(window=(15, 9), lam=1.0, gamma=0.2, t=2.0)])
+def test_matches_reference(seed, params):
+    rng = np.random.default_rng(seed)
+    H, W = int(rng.integers(5, 30)), int(rng.integers(10, 60))
+    disp = np.where(rng.random((H, W)) < rng.choice([0.05, 0.3, 0.8]),
+                    rng.uniform(0.1, W * 0.7, (H, W)), 0).astype(np.float32)
+    k = rng.random((H, W)) < 0.2
+    disp[k] = rng.integers(1, W // 2 + 1, k.sum())
+    disp[0, 0] = np.nan
+    occ = detect_occlusions(disp, num_threads=2, **params)
+    ref = ref_occlusions(disp, **{"window": (9, 7), "lam": 2.0, "gamma": 0.4375, "t": 1.0, **params})
+    np.testing.assert_array_equal(occ, ref)
+
+
+def test_foreground_background_pair():
+    disp = np.zeros((9, 40), np.float32)
+    disp[4, 20] = 5.0        # background, warps to 15
+    disp[4, 27] = 10.0       # foreground, warps to 17: 10 - 5 - 2*0.4375*2 > 1
+    occ = detect_occlusions(disp)
+    assert occ[4, 20] and not occ[4, 27]
+    assert occ.sum() == 1
+
+
+def test_flat_disparity_has_no_occlusion():
+    disp = np.zeros((20, 30), np.float32)
+    disp[::2, ::3] = 7.5
+    assert not detect_occlusions(disp).any()
+
+
+def test_thread_count_invariant():
+    rng = np.random.default_rng(0)
+    disp = np.where(rng.random((200, 300)) < 0.1, rng.uniform(0.5, 100, (200, 300)), 0).astype(np.float32)
+    a = detect_occlusions(disp, num_threads=1)
+    b = detect_occlusions(disp, num_threads=2)
+    np.testing.assert_array_equal(a, b)
+    assert a.any()
+
+
+@pytest.mark.parametrize("kwargs,exc", [
+    (dict(window=(8, 7)), ValueError), (dict(window=(9,)), TypeError), (dict(lam=-1.0), ValueError),
+    (dict(gamma=1.5), ValueError), (dict(t=float("nan")), ValueError), (dict(t=-1.0), ValueError),
+])
+def test_bad_parameters(kwargs, exc):
+    with pytest.raises(exc):
+        detect_occlusions(np.zeros((3, 3), np.float32), **kwargs)
+
+
+@pytest.mark.parametrize("disp,exc", [(np.zeros((3, 3), np.int16), TypeError),
+                                      (np.zeros((3,), np.float32), ValueError),
+                                      (np.zeros((0, 3), np.float32), ValueError),
+                                      ([[1.0]], TypeError)])
+def test_bad_disparity(disp, exc):
+    with pytest.raises(exc, match="disparity"):
+        detect_occlusions(disp)

@@ -1,0 +1,211 @@
+"""Slow, literal NumPy/Python reference of VPP (the semantics of ``vpp_service.vpp.project``).
+
+Shares only the RNG hash definition with the library.  Everything else is a
+direct transcription of the pinned rules (see the module docstring of
+``vpp_service/vpp/project.py``): a dense warped grid for occlusions, a global
+sort of the points, a loop over patch pixels, explicit histograms.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vpp_service.vpp.rng import pattern_bytes
+
+
+def w16(w: float) -> int:
+    return int(math.floor(w * 65536.0 + 0.5))
+
+
+def blend(i: int, a: int, w: int) -> int:
+    return (int(i) * (65536 - w) + int(a) * w + 32768) >> 16
+
+
+def valid_points(disp: np.ndarray):
+    H, W = disp.shape
+    pts = []
+    for y in range(H):
+        for x in range(W):
+            v = float(disp[y, x])
+            if v > 0 and v < W:
+                pts.append((v, y, x))
+    return pts
+
+
+def ref_occlusions(disp: np.ndarray, window=(9, 7), lam=2.0, gamma=0.4375, t=1.0) -> np.ndarray:
+    """Dense-grid literal occlusion heuristic."""
+    disp = disp.astype(np.float32)
+    H, W = disp.shape
+    rx2, ry2 = window[0] // 2, window[1] // 2
+    occ = np.zeros((H, W), bool)
+    grid = {}          # (xw, y) -> (d, x) winner
+    for d, y, x in valid_points(disp):
+        xw = x - int(math.floor(d + 0.5))
+        cur = grid.get((xw, y))
+        if cur is None or d > cur[0]:
+            if cur is not None:
+                occ[y, cur[1]] = True
+            grid[(xw, y)] = (d, x)
+        else:
+            occ[y, x] = True
+    for (xo, yo), (do, x0) in grid.items():
+        hit = False
+        for yy in range(yo - ry2, yo + ry2 + 1):
+            for xx in range(xo - rx2, xo + rx2 + 1):
+                if (xx, yy) == (xo, yo) or (xx, yy) not in grid:
+                    continue
+                dn = grid[(xx, yy)][0]
+                pen = lam * (gamma * abs(xx - xo) + (1.0 - gamma) * abs(yy - yo))
+                if (dn - do) - pen > t:
+                    hit = True
+        if hit:
+            occ[yo, x0] = True
+    return occ
+
+
+def hist_pick(counts: np.ndarray) -> int:
+    filled = np.nonzero(counts)[0]
+    if filled.size == 256:
+        return int(np.argmin(counts))
+    if filled.size == 0:
+        return 0
+    i = np.arange(256)
+    dist = np.min(np.abs(i[:, None] - filled[None, :]), axis=1)
+    return int(np.argmax(dist))          # first maximum = smallest i
+
+
+def hist_value(Lo, Ro, c, r, cl, cr, sw, sh):
+    H, W = Lo.shape[:2]
+    y0, y1 = max(0, r - sh // 2), min(H - 1, r + sh // 2)
+    counts = np.zeros(256, np.int64)
+    for img, cen in ((Lo, cl), (Ro, cr)):
+        a, e = max(0, cen - sw // 2), min(W - 1, cen - sw // 2 + sw - 1)
+        if a <= e:
+            counts += np.bincount(img[y0:y1 + 1, a:e + 1, c].ravel(), minlength=256)
+    return hist_pick(counts)
+
+
+def ref_project(left, right, disp, cfg, seed=0):
+    """Literal projection; returns (left, right, occluded)."""
+    Lo = left if left.ndim == 3 else left[:, :, None]
+    Ro = right if right.ndim == 3 else right[:, :, None]
+    disp = disp.astype(np.float32)
+    H, W, C = Lo.shape
+    oL = Lo.astype(np.int64).copy()
+    oR = Ro.astype(np.int64).copy()
+    hmax = (cfg.patch - 1) // 2
+    if cfg.occlusion != "off":
+        occ = ref_occlusions(disp, (cfg.occ_window_x, cfg.occ_window_y), cfg.occ_lambda,
+                             cfg.occ_gamma, cfg.occ_t)
+    else:
+        occ = np.zeros((H, W), bool)
+    pts = sorted(valid_points(disp))           # (d, y, x) global order
+    if not pts:
+        return Lo.astype(np.uint8).reshape(left.shape), Ro.astype(np.uint8).reshape(right.shape), occ
+    ds = [p[0] for p in pts]
+    dmin, dmax = min(ds), max(ds)
+    if cfg.adaptive_max_disparity is not None:
+        dmax = cfg.adaptive_max_disparity
+    alpha = cfg.alpha
+    wa = w16(alpha)
+    neglog = -math.log(cfg.bilateral_threshold)
+    two_ss = 2.0 * cfg.bilateral_sigma_space ** 2
+    two_sc = 2.0 * cfg.bilateral_sigma_color ** 2
+
+    def half(d):
+        if cfg.adaptive_patch != "distance":
+            return hmax
+        if dmax <= dmin:
+            return hmax
+        u = (float(d) - dmin) / (dmax - dmin)
+        u = min(max(u, 0.0), 1.0)
+        return int(math.floor(math.pow(u, cfg.adaptive_gamma) * hmax + 0.5))
+
+    def mask(x, y, dx, dy):
+        if not (0 <= x + dx < W and 0 <= y + dy < H):
+            return False
+        if cfg.adaptive_patch == "bilateral":
+            diff = Lo[y + dy, x + dx].astype(np.int64) - Lo[y, x].astype(np.int64)
+            sumsq = int((diff * diff).sum())
+            e = (dx * dx + dy * dy) / two_ss + (sumsq / C) / two_sc
+            return e < neglog
+        return True
+
+    def value(x, y, d, dx, dy):
+        cn = int(math.floor(x - float(d) + 0.5))
+        if cfg.pattern == "random":
+            if cfg.uniform_patch:
+                return pattern_bytes(seed, x, y, C)
+            return pattern_bytes(seed, x + dx, y + dy, C)
+        if cfg.uniform_patch:
+            return np.array([hist_value(Lo, Ro, c, y, x, cn, cfg.search_width, cfg.search_height)
+                             for c in range(C)])
+        return np.array([hist_value(Lo, Ro, c, y + dy, x + dx, cn + dx, cfg.search_width,
+                                    cfg.search_height) for c in range(C)])
+
+    def is_fgd(y, x):
+        return cfg.occlusion == "fgd" and occ[y, x]
+
+    def skipped(y, x):
+        return cfg.occlusion == "no" and occ[y, x]
+
+    # right view first, in global order
+    for d, y, x in pts:
+        if skipped(y, x) or is_fgd(y, x):
+            continue
+        h = half(d)
+        xp = x - float(d)
+        for dy in range(-h, h + 1):
+            for dx in range(-h, h + 1):
+                if not mask(x, y, dx, dy):
+                    continue
+                A = value(x, y, d, dx, dy)
+                r = y + dy
+                if cfg.splat:
+                    fl = math.floor(xp)
+                    beta = xp - fl
+                    targets = [(fl + dx, w16(alpha * (1.0 - beta)))]
+                    if beta > 0:
+                        targets.append((fl + dx + 1, w16(alpha * beta)))
+                else:
+                    targets = [(math.floor(xp + 0.5) + dx, wa)]
+                for col, w in targets:
+                    if 0 <= col < W:
+                        for c in range(C):
+                            oR[r, col, c] = blend(oR[r, col, c], A[c], w)
+    # then the left view (FGD reads the final right view)
+    for d, y, x in pts:
+        if skipped(y, x):
+            continue
+        h = half(d)
+        xp = x - float(d)
+        for dy in range(-h, h + 1):
+            for dx in range(-h, h + 1):
+                if not mask(x, y, dx, dy):
+                    continue
+                r, xl = y + dy, x + dx
+                if is_fgd(y, x):
+                    if cfg.splat:
+                        fl = math.floor(xp)
+                        beta = xp - fl
+                    else:
+                        fl, beta = math.floor(xp + 0.5), 0.0
+                    col = fl + dx
+                    if col < 0 or col >= W or (beta > 0 and col + 1 >= W):
+                        continue
+                    wb = w16(beta)
+                    for c in range(C):
+                        if beta > 0:
+                            v16 = int(oR[r, col, c]) * (65536 - wb) + int(oR[r, col + 1, c]) * wb
+                        else:
+                            v16 = int(oR[r, col, c]) * 65536
+                        oL[r, xl, c] = (int(oL[r, xl, c]) * (65536 - wa) * 65536 + v16 * wa
+                                        + 2 ** 31) >> 32
+                else:
+                    A = value(x, y, d, dx, dy)
+                    for c in range(C):
+                        oL[r, xl, c] = blend(oL[r, xl, c], A[c], wa)
+    outL = oL.astype(np.uint8).reshape(left.shape)
+    outR = oR.astype(np.uint8).reshape(right.shape)
+    return outL, outR, occ
