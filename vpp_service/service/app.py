@@ -99,7 +99,9 @@ def run_service(cfg: ServiceConfig, stop: threading.Event | None = None,
                 if time.monotonic() >= next_report:
                     next_report += s.summary_period_s
                     if s.summary and stream is not None:
-                        print("\r" + pipe.summary_line(), end="", file=stream, flush=True)
+                        tty = getattr(stream, "isatty", lambda: False)()
+                        print(("\r" if tty else "") + pipe.summary_line(), end="" if tty else "\n",
+                              file=stream, flush=True)
                     _write_json(summary_path, pipe.status())
         finally:
             t0 = time.monotonic()
@@ -109,7 +111,8 @@ def run_service(cfg: ServiceConfig, stop: threading.Event | None = None,
             status["config"] = cfg.to_dict()
             _write_json(summary_path, status)
             if s.summary and stream is not None:
-                print("\r" + pipe.summary_line(), file=stream, flush=True)
+                print(("\r" if getattr(stream, "isatty", lambda: False)() else "") + pipe.summary_line(),
+                      file=stream, flush=True)
     return status
 
 

@@ -9,6 +9,7 @@ holds the error against it (:func:`vpp_service.evaluation.metrics.compute_metric
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Any
 
@@ -73,7 +74,11 @@ class Fusion:
             res = project(left, right, sparse, self.vpp_config, seed=self.seed + int(frame.seq))
             timing["vpp"] = (time.perf_counter() - t0) * 1e3
             left_vpp, right_vpp, occluded = res.left, res.right, res.occluded
-            stats = dict(getattr(res, "stats", {}) or {})
+            raw_stats = getattr(res, "stats", None)
+            if dataclasses.is_dataclass(raw_stats):
+                stats = dataclasses.asdict(raw_stats)
+            elif isinstance(raw_stats, dict):
+                stats = dict(raw_stats)
             self.counters["vpp"] += 1
             m_left, m_right = left_vpp, right_vpp
         else:

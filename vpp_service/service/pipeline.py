@@ -176,6 +176,7 @@ class Pipeline:
         self.done = threading.Event()
         self._threads: list[threading.Thread] = []
         self._last_reject_log = 0.0
+        self._last_error_log = 0.0
         self._suppressed = 0
         self._started = 0.0
         self._last_metrics: dict[str, float] = {}
@@ -227,12 +228,15 @@ class Pipeline:
                 continue
             try:
                 result = self.process(frame)
-            except (TypeError, ValueError) as exc:
+            except ValueError as exc:  # a frame the matcher/VPP cannot take (size, range)
                 self._reject(f"frame seq={frame.seq}: {exc}")
                 continue
             except Exception as exc:  # never let one frame kill the service
                 self._inc("errors")
-                log.exception("processing frame seq=%s failed: %s", frame.seq, exc)
+                now = time.monotonic()
+                if now - self._last_error_log >= self.reject_log_period_s:
+                    self._last_error_log = now
+                    log.error("processing frame seq=%s failed: %r", frame.seq, exc)
                 continue
             for stage, ms in result.timing_ms.items():
                 self.timer.add(stage, ms)
