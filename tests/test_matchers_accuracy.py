@@ -78,16 +78,16 @@ def hard_scene():
 
 
 @pytest.mark.parametrize(
-    "name, opts, max_bad, min_density",
+    "name, opts, max_bad, min_density, max_bad_filled",
     [
-        ("census-sgm", {}, 0.01, 0.95),
-        ("census-sgm", {"paths": 4}, 0.01, 0.95),
-        ("sgbm", {}, 0.02, 0.7),
-        ("sgbm", {"mode": "hh"}, 0.02, 0.7),
-        ("bm", {"block_size": 11}, 0.02, 0.55),
+        ("census-sgm", {}, 0.01, 0.95, 0.01),
+        ("census-sgm", {"paths": 4}, 0.01, 0.95, 0.01),
+        ("sgbm", {}, 0.02, 0.7, 0.03),
+        ("sgbm", {"mode": "hh"}, 0.02, 0.7, 0.03),
+        ("bm", {"block_size": 11}, 0.02, 0.55, 0.2),  # BM's border rows are sparse
     ],
 )
-def test_synthetic_accuracy(scene, name, opts, max_bad, min_density):
+def test_synthetic_accuracy(scene, name, opts, max_bad, min_density, max_bad_filled):
     left, right, gt, nocc = scene
     m = build_matcher(name, {"max_disparity": 40, **opts})
     disp = m.compute(left, right)
@@ -101,7 +101,7 @@ def test_synthetic_accuracy(scene, name, opts, max_bad, min_density):
     filled = build_matcher(name, {"max_disparity": 40, "fill": True, **opts}).compute(left, right)
     has_data = ~np.isnan(disp).all(axis=1)  # rows without any estimate stay NaN (documented)
     assert not np.isnan(filled[has_data]).any()
-    assert bad(filled, gt, nocc & has_data[:, None]) < 0.05
+    assert bad(filled, gt, nocc & has_data[:, None]) < max_bad_filled
 
 
 def test_census_sgm_subpixel_on_slanted_plane(scene):
