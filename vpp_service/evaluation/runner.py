@@ -293,8 +293,9 @@ def run_evaluation(
                 else:
                     res = project(left, right, sparse, vpp_config, seed=int(seed))
                     disp = m.compute(np.ascontiguousarray(res.left), np.ascontiguousarray(res.right))
-                    stats = getattr(res, "stats", None) or {}
-                    extra = {f"vpp_{k}": v for k, v in dict(stats).items() if isinstance(v, (int, float))}
+                    stats = getattr(res, "stats", None)
+                    stats = stats.to_dict() if hasattr(stats, "to_dict") else dict(stats or {})
+                    extra = {f"vpp_{k}": v for k, v in stats.items() if isinstance(v, (int, float))}
                 ms = 1000.0 * (time.perf_counter() - t0)
                 rows.append({**base, "method": method, **score(disp), "ms": ms, **extra})
                 done += 1

@@ -1,0 +1,186 @@
+"""Evaluation runner, reports and the ``vpp-service eval`` command, end to end with real matchers."""
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from vpp_service.cli import main
+from vpp_service.datasets import open_dataset
+from vpp_service.evaluation import (ProgressBar, compute_metrics, default_max_disparity, markdown_report,
+                                    run_evaluation, summarize, write_json)
+from vpp_service.matchers import build_matcher, fill_holes
+from vpp_service.sources.sensors import build_sensor
+from vpp_service.sources.synthetic import make_scene
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+MIDD06 = DATA / "middlebury2005_2006_thirdsize"
+
+
+def need_midd06() -> Path:
+    if not MIDD06.is_dir():
+        pytest.skip(f"{MIDD06} not available")
+    return MIDD06
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    return [make_scene(120, 180, seed=s, texture="weak", noise=2.0, max_disparity=32) for s in (0, 1)]
+
+
+def test_rows_and_reference_equality(scenes):
+    rows = run_evaluation(scenes, "sgbm", ["baseline", "vpp"], [0.05], seed=3)
+    assert [(r["scene"], r["method"]) for r in rows] == [
+        ("synthetic-planes-0", "baseline"), ("synthetic-planes-0", "vpp"),
+        ("synthetic-planes-1", "baseline"), ("synthetic-planes-1", "vpp")]
+    for r, f in zip(rows, [scenes[0], scenes[0], scenes[1], scenes[1]]):
+        for k in ("bad1", "bad2", "bad3", "bad4", "avg", "rms", "n", "bad2_nocc", "n_points", "ms", "density"):
+            assert k in r
+        assert r["matcher"] == "sgbm" and r["sensor"] == "uniform" and r["dataset"] == "synthetic"
+        md = r["max_disparity"]
+        assert md % 16 == 0 and md - 16 <= np.nanmax(f.gt_disparity) < md  # next multiple of 16 above GT
+    # same points for every method
+    assert rows[0]["n_points"] == rows[1]["n_points"] > 0
+    # the baseline row equals scoring the matcher by hand (holes filled first)
+    f = scenes[0]
+    md = rows[0]["max_disparity"]
+    disp = build_matcher("sgbm", {"max_disparity": md}).compute(f.left, f.right)
+    ref = compute_metrics(fill_holes(disp), f.gt_disparity)
+    for k in ("bad2", "avg", "rms", "n"):
+        assert rows[0][k] == pytest.approx(ref[k])
+    ref_nocc = compute_metrics(fill_holes(disp), f.gt_disparity, mask=f.nocc_mask)
+    assert rows[0]["bad2_nocc"] == pytest.approx(ref_nocc["bad2"])
+    # the VPP row equals project + match on the sensor's points
+    from vpp_service.vpp import VPPConfig, project
+
+    sparse = build_sensor("uniform", {"density": 0.05}).simulate(f, 3).sparse_disparity
+    painted = project(f.left, f.right, sparse, VPPConfig(), seed=3)
+    vdisp = build_matcher("sgbm", {"max_disparity": md}).compute(painted.left, painted.right)
+    assert rows[1]["bad2"] == pytest.approx(compute_metrics(fill_holes(vdisp), f.gt_disparity)["bad2"])
+    assert rows[1]["n_points"] == int(np.isfinite(sparse).sum())
+
+
+def test_vpp_helps_on_weak_texture(scenes):
+    s = summarize(run_evaluation(scenes, "sgbm", "baseline,vpp", 0.05))
+    assert s["vpp"]["bad2"] < s["baseline"]["bad2"] - 1.0
+    assert s["vpp"]["avg"] < s["baseline"]["avg"]
+
+
+def test_guided_and_vpp_improve_on_real_scene():
+    ds = open_dataset("auto", need_midd06()).select(["Art"])
+    rows = run_evaluation(ds, "census-sgm", ["baseline", "guided", "vpp"], [0.05], seed=0)
+    by = {r["method"]: r for r in rows}
+    assert by["baseline"]["dataset"] == "middlebury2006" and by["baseline"]["max_disparity"] == 80
+    for m in ("guided", "vpp"):
+        assert by[m]["bad2"] < by["baseline"]["bad2"] - 1.0, (m, by[m]["bad2"], by["baseline"]["bad2"])
+        assert by[m]["bad2_nocc"] < by["baseline"]["bad2_nocc"]
+        assert by[m]["avg"] < by["baseline"]["avg"]
+
+
+def test_density_sweep_summary_and_progress(scenes):
+    out = io.StringIO()
+    rows = run_evaluation(scenes[:1], "sgbm", ["baseline", "vpp"], [0.01, 0.05], progress=ProgressBar(out))
+    assert len(rows) == 4 and {r["density"] for r in rows} == {0.01, 0.05}
+    base = [r for r in rows if r["method"] == "baseline"]
+    assert base[0]["bad2"] == base[1]["bad2"]  # computed once, reported per density
+    s = summarize(rows)
+    assert set(s["vpp"]) == {"0.01", "0.05"} and "bad2" in s["vpp"]["0.05"]
+    lines = out.getvalue().splitlines()
+    assert lines[0].startswith("[1/3] synthetic-planes-0 sgbm baseline")
+    assert lines[2].startswith("[3/3] synthetic-planes-0 sgbm vpp 0.05")
+    assert lines[-1].startswith("[3/3] done")
+
+
+@pytest.mark.parametrize("sensor,opts", [("lidar", {"nominal_f": 300.0}), ("tof", {"grid_w": 40, "grid_h": 30})])
+def test_other_sensors_report_measured_density(scenes, sensor, opts):
+    rows = run_evaluation(scenes[:1], "sgbm", ["vpp"], None, sensor, sensor_options=opts)
+    r = rows[0]
+    assert r["sensor"] == sensor and 0 < r["density"] < 0.2
+    assert r["n_points"] == pytest.approx(r["density"] * np.isfinite(scenes[0].gt_disparity).sum())
+
+
+def test_frame_sensor_uses_own_points(scenes):
+    f = build_sensor("uniform", {"density": 0.02}).simulate(scenes[0], 5)
+    rows = run_evaluation([f], "sgbm", ["vpp"], None, "frame")
+    assert rows[0]["n_points"] == int(np.isfinite(f.sparse_disparity).sum())
+
+
+def test_runner_errors(scenes):
+    with pytest.raises(ValueError, match="'sgbm' has none"):
+        run_evaluation(scenes, "sgbm", ["guided"], [0.05])
+    with pytest.raises(ValueError, match="methods"):
+        run_evaluation(scenes, "sgbm", ["magic"], [0.05])
+    with pytest.raises(ValueError, match="only the uniform sensor"):
+        run_evaluation(scenes, "sgbm", ["vpp"], [0.05], "lidar")
+    with pytest.raises(ValueError, match="densities"):
+        run_evaluation(scenes, "sgbm", ["vpp"], [0.0])
+    with pytest.raises(ValueError, match="gt_disparity"):
+        run_evaluation([scenes[0].with_(gt_disparity=None)], "sgbm", ["baseline"], [0.05])
+    with pytest.raises(ValueError, match="unknown matcher"):
+        run_evaluation(scenes, "nope", ["baseline"], [0.05])
+    with pytest.raises(ValueError, match="sparse_disparity"):
+        run_evaluation(scenes[:1], "sgbm", ["vpp"], None, "frame")
+    with pytest.raises(TypeError, match="frames_or_dataset"):
+        run_evaluation(3, "sgbm", ["baseline"], [0.05])
+    with pytest.raises(ValueError, match="no frames"):
+        run_evaluation([], "sgbm", ["baseline"], [0.05])
+
+
+def test_default_max_disparity():
+    assert default_max_disparity(np.array([[np.nan, 3.0]]), 500) == 16
+    assert default_max_disparity(np.array([[16.0]]), 500) == 32
+    assert default_max_disparity(np.array([[70.3]]), 500) == 80
+    assert default_max_disparity(np.array([[70.3]]), 60) == 59
+
+
+def test_reports(tmp_path, scenes):
+    rows = run_evaluation(scenes[:1], "sgbm", ["baseline", "vpp"], [0.05])
+    doc = write_json(tmp_path / "r.json", rows, {"k": 1})
+    back = json.loads((tmp_path / "r.json").read_text())
+    assert back == doc and back["config"] == {"k": 1} and len(back["results"]) == 2
+    assert back["summary"]["vpp"]["bad2"] == pytest.approx(rows[1]["bad2"])
+    md = markdown_report(rows, per_scene=True)
+    assert "## synthetic - sgbm (1 scenes, sensor uniform)" in md
+    assert md.count("\n| baseline |") == 1 and "### Per scene" in md
+
+
+def test_cli_end_to_end_real_scenes(tmp_path, capsys):
+    root = need_midd06()
+    out = tmp_path / "out.json"
+    rc = main(["eval", "--dataset", "auto", "--root", str(root), "--scenes", "Art,Wood2", "--matcher", "sgbm",
+               "--methods", "baseline,vpp", "--density", "0.01,0.05", "--seed", "1", "--json", str(out),
+               "--markdown", str(tmp_path / "out.md"), "--patch", "5", "--alpha", "0.5", "--no-splat"])
+    assert rc == 0
+    doc = json.loads(out.read_text())
+    assert {r["scene"] for r in doc["results"]} == {"Art", "Wood2"} and len(doc["results"]) == 8
+    assert doc["config"]["vpp"]["patch"] == 5 and doc["config"]["vpp"]["splat"] is False
+    assert set(doc["summary"]) == {"baseline", "vpp"} and set(doc["summary"]["vpp"]) == {"0.01", "0.05"}
+    for r in doc["results"]:
+        assert r["dataset"] == "middlebury2006" and 0 <= r["bad2"] <= 100 and r["n"] > 0
+    png = cv2.imread(str(tmp_path / "out.png"))
+    assert png is not None and png.shape[0] > 100
+    md = (tmp_path / "out.md").read_text()
+    assert "middlebury2006 - sgbm" in md and "| vpp | 0.05 |" in md
+    captured = capsys.readouterr()
+    assert "| vpp | 0.01 |" in captured.out and "[1/6] Art sgbm baseline" in captured.err
+
+
+def test_cli_synthetic_and_errors(tmp_path, capsys):
+    rc = main(["eval", "--dataset", "synthetic", "--limit", "1", "--matcher", "sgbm", "--methods", "baseline,vpp",
+               "--quiet", "--json", str(tmp_path / "s.json")])
+    assert rc == 0
+    doc = json.loads((tmp_path / "s.json").read_text())
+    assert [r["method"] for r in doc["results"]] == ["baseline", "vpp"] and "bad2" in doc["summary"]["vpp"]
+    assert capsys.readouterr().err == ""
+    assert main(["eval", "--matcher", "sgbm"]) == 2
+    assert "--root" in capsys.readouterr().err
+    assert main(["eval", "--root", str(tmp_path), "--methods", "baseline"]) == 2
+    assert "no known dataset layout" in capsys.readouterr().err
+    assert main(["eval", "--dataset", "synthetic", "--limit", "1", "--matcher", "sgbm", "--methods", "guided"]) == 2
+    assert "guidance" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["eval", "--dataset", "synthetic", "--density", "2"])
