@@ -1,0 +1,198 @@
+"""Pipeline: queue policies under a fast source and slow processing, counters, timings, errors."""
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from vpp_service.frame import FusionResult
+from vpp_service.service.fusion import Fusion
+from vpp_service.service.pipeline import BoundedQueue, Pipeline, StageTimer
+from vpp_service.sinks.base import Sink, SinkContext
+from vpp_service.sources.base import SourceContext, build_source
+
+
+class CollectSink(Sink):
+    """A real Sink implementation that keeps every result it is given."""
+
+    Options = None
+
+    def __init__(self) -> None:
+        super().__init__(None, SinkContext())
+        self.results: list[FusionResult] = []
+        self.closed = False
+
+    def write(self, result: FusionResult) -> None:
+        self.results.append(result)
+        self._counters["written"] += 1
+
+    def close(self, timeout: float = 5.0) -> None:
+        self.closed = True
+
+
+class SlowProcess:
+    """Processing step that takes ``delay`` s and tracks the input-queue length it sees."""
+
+    def __init__(self, pipe_ref: list, delay: float = 0.02) -> None:
+        self.delay, self.pipe_ref, self.max_len = delay, pipe_ref, 0
+
+    def __call__(self, frame):
+        self.max_len = max(self.max_len, len(self.pipe_ref[0].input))
+        time.sleep(self.delay)
+        return FusionResult(frame=frame, disparity=np.zeros(frame.shape, np.float32), timing_ms={"match": 1.0})
+
+
+def sim_source(count: int, rate_hz: float = 0.0, sensor: str = "none"):
+    return build_source("sim", {"scene": "synthetic", "scene_options": {"height": 48, "width": 96, "max_disparity": 16},
+                                "sensor": sensor, "sensor_options": {}, "count": count, "rate_hz": rate_hz},
+                        SourceContext(rig="t"))
+
+
+def run(pipe: Pipeline, timeout: float = 20.0) -> None:
+    pipe.start()
+    assert pipe.wait(timeout), "pipeline did not finish"
+    pipe.stop(2.0)
+
+
+def reference_queue(items, size):
+    """Plain reference of the 'latest' policy: what remains after pushing items into a size-bounded FIFO."""
+    q = []
+    dropped = 0
+    for it in items:
+        q.append(it)
+        if len(q) > size:
+            q.pop(0)
+            dropped += 1
+    return q, dropped
+
+
+@pytest.mark.parametrize("size", [1, 3, 5])
+def test_bounded_queue_latest_matches_reference(size):
+    q = BoundedQueue(size, "latest")
+    for i in range(12):
+        q.put(i)
+        assert len(q) <= size
+    ref, dropped = reference_queue(range(12), size)
+    assert [q.get(0) for _ in range(len(q))] == ref
+    assert q.dropped == dropped and q.high_water == size
+
+
+def test_bounded_queue_block_waits_for_room():
+    q = BoundedQueue(1, "block")
+    assert q.put("a")
+    assert not q.put("b", timeout=0.05)  # full: times out, nothing lost silently
+    threading.Timer(0.05, q.get).start()
+    assert q.put("b", timeout=2.0)
+    assert q.get(0) == "b" and q.dropped == 0
+
+
+def test_bounded_queue_close_wakes_getters():
+    q = BoundedQueue(2)
+    threading.Timer(0.05, q.close).start()
+    assert q.get(timeout=2.0) is None
+    assert not q.put(1)
+
+
+@pytest.mark.parametrize("size,policy", [(0, "latest"), (2, "newest"), (True, "latest")])
+def test_bounded_queue_bad_args(size, policy):
+    with pytest.raises(ValueError):
+        BoundedQueue(size, policy)
+
+
+def test_stage_timer_matches_numpy():
+    t = StageTimer(window=5)
+    vals = [5.0, 1.0, 3.0, 9.0, 2.0, 4.0, 8.0]
+    for v in vals:
+        t.add("x", v)
+    s = t.summary()["x"]
+    w = np.array(vals[-5:])
+    assert s["n"] == 5 and s["last"] == 8.0
+    assert s["mean"] == pytest.approx(w.mean()) and s["p99"] == pytest.approx(np.percentile(w, 99))
+    with pytest.raises(ValueError):
+        StageTimer(0)
+
+
+def test_latest_policy_drops_and_stays_bounded():
+    ref = []
+    proc = SlowProcess(ref, delay=0.02)
+    sink = CollectSink()
+    pipe = Pipeline(sim_source(60), proc, [sink], input_size=2, input_policy="latest")
+    ref.append(pipe)
+    run(pipe)
+    c = pipe.counters
+    assert proc.max_len <= 2 and pipe.input.high_water <= 2
+    assert c["received"] == 60
+    assert c["dropped"] > 0
+    assert c["processed"] + c["dropped"] == 60
+    assert c["published"] == c["processed"] == len(sink.results)
+    seqs = [r.frame.seq for r in sink.results]
+    assert seqs == sorted(seqs) and seqs[-1] == 59  # the freshest frame always gets through
+    assert sink.closed
+
+
+def test_block_policy_loses_nothing():
+    ref = []
+    proc = SlowProcess(ref, delay=0.005)
+    sink = CollectSink()
+    pipe = Pipeline(sim_source(40), proc, [sink], input_size=2, input_policy="block",
+                    output_size=1, output_policy="block")
+    ref.append(pipe)
+    run(pipe)
+    assert [r.frame.seq for r in sink.results] == list(range(40))
+    assert pipe.counters["dropped"] == 0 and pipe.input.high_water <= 2
+    st = pipe.status()
+    assert st["counters"]["published"] == 40
+    assert st["timing_ms"]["match"]["n"] == 40 and "latency" in st["timing_ms"]
+
+
+def test_max_frames_stops_early():
+    sink = CollectSink()
+    pipe = Pipeline(sim_source(0, rate_hz=200), lambda f: FusionResult(f, np.zeros(f.shape, np.float32)),
+                    [sink], input_policy="block", max_frames=5)
+    run(pipe)
+    assert pipe.counters["processed"] == 5 and len(sink.results) == 5
+
+
+def test_bad_frames_are_rejected_and_service_keeps_running():
+    def process(frame):
+        if frame.seq % 3 == 0:
+            raise ValueError("bad frame")
+        if frame.seq % 5 == 0:
+            raise RuntimeError("bug")
+        return FusionResult(frame, np.zeros(frame.shape, np.float32))
+
+    sink = CollectSink()
+    pipe = Pipeline(sim_source(15), process, [sink], input_policy="block")
+    run(pipe)
+    c = pipe.counters
+    assert c["rejected"] == 5  # 0, 3, 6, 9, 12
+    assert c["errors"] == 2    # 5, 10
+    assert c["processed"] == len(sink.results) == 8
+
+
+def test_real_fusion_counts_no_depth_and_scores_against_gt():
+    from vpp_service.matchers import build_matcher
+    from vpp_service.vpp import VPPConfig
+
+    sink = CollectSink()
+    src = sim_source(4, sensor="uniform")
+    fusion = Fusion(build_matcher("sgbm", {"max_disparity": 32}), VPPConfig())
+    pipe = Pipeline(src, lambda f: fusion(f if f.seq % 2 else f.with_(sparse_disparity=None, sensor_depth=None)),
+                    [sink], input_policy="block")
+    run(pipe)
+    assert pipe.counters["no_depth"] == 2 and fusion.counters == {"vpp": 2, "no_depth": 2}
+    for r in sink.results:
+        assert r.disparity.shape == r.frame.shape and "bad2" in r.metrics
+        assert (r.left_vpp is None) == (r.frame.seq % 2 == 0)
+        assert r.depth is not None and r.depth.dtype == np.float32
+
+
+def test_pipeline_bad_args():
+    with pytest.raises(TypeError):
+        Pipeline(sim_source(1), "not callable")
+    with pytest.raises(ValueError):
+        Pipeline(sim_source(1), lambda f: f, max_frames=-1)
+    with pytest.raises(TypeError):
+        Fusion(object())
