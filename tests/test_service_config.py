@@ -1,0 +1,132 @@
+"""Service config: the example file and the embedded default validate; every error names its key."""
+from __future__ import annotations
+
+import copy
+import argparse
+from pathlib import Path
+
+import pytest
+
+from vpp_service.service.config import DEFAULT_CONFIG, load_config, merge, read_toml, validate_config
+from vpp_service.settings import SettingsError
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "deploy" / "config.example.toml"
+
+
+def test_example_config_validates():
+    cfg = load_config(EXAMPLE)
+    assert cfg.service.rig == "rig0" and cfg.source.name == "sim" and cfg.matcher.name == "sgbm"
+    assert [s.name for s in cfg.sinks] == ["zenoh", "rerun"]
+    assert cfg.sinks[1].options.path == "vpp-run/vpp.rrd"  # "{out}" substituted
+    assert cfg.zenoh.multicast_scouting is False
+    assert cfg.vpp is not None and cfg.vpp.alpha == 0.4
+
+
+def test_example_documents_every_key():
+    """Every option of every section of the default plugins appears in the example file."""
+    import dataclasses
+
+    from vpp_service.service.config import QueuesSection, ServiceSection, ZenohSection
+    from vpp_service.sources.sim import SimSourceOptions
+
+    text = EXAMPLE.read_text()
+    for cls in (ServiceSection, ZenohSection, QueuesSection, SimSourceOptions):
+        for f in dataclasses.fields(cls):
+            assert f"{f.name} =" in text, f"{cls.__name__}.{f.name} undocumented"
+
+
+def test_embedded_default_validates():
+    cfg = load_config(None)
+    assert cfg.source.name == "sim" and cfg.source.options.sensor_options == {"density": 0.05}
+    assert cfg.zenoh.listen == ["tcp/127.0.0.1:7447"] and not cfg.zenoh.multicast_scouting
+    assert {s.name for s in cfg.sinks} == {"zenoh", "rerun"}
+    again = validate_config(cfg.to_dict())
+    assert again.to_dict() == cfg.to_dict()
+
+
+def test_overrides_merge():
+    cfg = load_config(None, {"service": {"rig": "front"}, "matcher": {"max_disparity": 64}})
+    assert cfg.service.rig == "front" and cfg.matcher.options.max_disparity == 64
+    assert merge({"a": {"b": 1, "c": 2}}, {"a": {"b": 3}}) == {"a": {"b": 3, "c": 2}}
+
+
+def test_vpp_disabled():
+    assert load_config(None, {"vpp": {"enabled": False}}).vpp is None
+
+
+@pytest.mark.parametrize("change,key", [
+    ({"bogus": {}}, "bogus"),
+    ({"service": {"rgi": "x"}}, "service.rgi"),
+    ({"service": {"max_frames": "10"}}, "service.max_frames"),
+    ({"service": {"max_frames": -1}}, "service"),
+    ({"service": {"rig": "a/b"}}, "service"),
+    ({"zenoh": {"mode": "mesh"}}, "zenoh.mode"),
+    ({"zenoh": {"listen": "tcp/127.0.0.1:1"}}, "zenoh.listen"),
+    ({"zenoh": {"listen": ["127.0.0.1"]}}, "zenoh"),
+    ({"zenoh": {"enabled": False}}, "zenoh.enabled"),
+    ({"source": {"type": "camera"}}, "source.type"),
+    ({"source": {"type": "sim", "rate": 3}}, "source.rate"),
+    ({"source": {"type": "sim", "rate_hz": "fast"}}, "source.rate_hz"),
+    ({"source": {"type": "sim", "sensor": "radar"}}, "source.sensor_options"),
+    ({"source": {"type": "sim", "sensor_options": {"densty": 0.1}}}, "source.sensor_options"),
+    ({"source": {"type": "files"}}, "source"),
+    ({"source": {"type": "zenoh", "sync": "fuzzy"}}, "source.sync"),
+    ({"source": {"rate_hz": 3}}, "source.type"),
+    ({"matcher": {"name": "deep"}}, "matcher.name"),
+    ({"matcher": {"name": "sgbm", "max_disp": 3}}, "matcher.max_disp"),
+    ({"vpp": {"alpah": 0.3}}, "vpp"),
+    ({"vpp": {"enabled": "yes"}}, "vpp.enabled"),
+    ({"queues": {"input_policy": "newest"}}, "queues.input_policy"),
+    ({"queues": {"input_size": 0}}, "queues"),
+    ({"sinks": [{"type": "printer"}]}, "sinks[0].type"),
+    ({"sinks": [{"type": "zenoh", "outputs": ["disparity", "normals"]}]}, "sinks[0]"),
+    ({"sinks": [{"outputs": []}]}, "sinks[0].type"),
+    ({"sinks": {"type": "zenoh"}}, "sinks"),
+])
+def test_errors_name_the_key(change, key):
+    data = copy.deepcopy(DEFAULT_CONFIG)
+    for k, v in change.items():
+        data[k] = v if k in ("source", "sinks") or not isinstance(v, dict) else merge(data.get(k, {}), v)
+    with pytest.raises(SettingsError) as exc:
+        validate_config(data)
+    assert str(exc.value).startswith(key), str(exc.value)
+
+
+def test_read_toml_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="config"):
+        read_toml(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[service\nrig = 1")
+    with pytest.raises(SettingsError, match="invalid TOML"):
+        read_toml(bad)
+
+
+def test_file_config_and_cli_overrides(tmp_path):
+    from vpp_service.cli.run import overrides_from_args
+
+    p = tmp_path / "c.toml"
+    p.write_text('[service]\nrig = "a"\n[source]\ntype = "sim"\nrate_hz = 0.0\n[matcher]\nname = "bm"\n'
+                 'max_disparity = 64\n[[sinks]]\ntype = "zenoh"\n')
+    args = argparse.Namespace(rig="b", max_frames=3, out=str(tmp_path / "o"), no_summary=True, source=None,
+                              matcher="bm", zenoh_listen=["tcp/127.0.0.1:1234"], zenoh_connect=None,
+                              sink=["zenoh", "rerun"], rerun_save=None)
+    cfg = validate_config(overrides_from_args(read_toml(p), args))
+    assert (cfg.service.rig, cfg.service.max_frames, cfg.service.summary) == ("b", 3, False)
+    assert cfg.matcher.options.max_disparity == 64  # same matcher: options kept
+    assert cfg.zenoh.listen == ["tcp/127.0.0.1:1234"]
+    assert [s.name for s in cfg.sinks] == ["zenoh", "rerun"]
+    assert cfg.sinks[1].options.path == str(tmp_path / "o" / "vpp.rrd")
+    args.rerun_save, args.sink = str(tmp_path / "x.rrd"), None
+    cfg = validate_config(overrides_from_args(read_toml(p), args))
+    assert [s.name for s in cfg.sinks] == ["zenoh", "rerun"] and cfg.sinks[1].options.path.endswith("x.rrd")
+
+
+def test_cli_check_reports_bad_key(tmp_path, capsys):
+    from vpp_service.cli import main
+
+    p = tmp_path / "c.toml"
+    p.write_text('[service]\nrigg = "a"\n')
+    assert main(["run", "--config", str(p), "--check"]) == 2
+    assert "service.rigg" in capsys.readouterr().err
+    assert main(["run", "--check", "--max-frames", "2"]) == 0
