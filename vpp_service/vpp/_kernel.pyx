@@ -464,6 +464,16 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
     cdef const uint8_t* Lr = cx.L + rowb
     cdef uint8_t* vals
     cdef uint8_t* msk
+    cdef const uint64_t* pkey = cx.pkey
+    cdef const int8_t* hp = cx.hp
+    cdef int occmode = cx.occmode
+    cdef int pattern = cx.pattern
+    cdef int uniform = cx.uniform
+    cdef int bilateral = cx.bilateral
+    cdef int splat = cx.splat
+    cdef uint64_t wa = cx.wa
+    cdef uint64_t seedmix = cx.seedmix
+    cdef double alpha = cx.alpha
     memcpy(oL, Lr, W * C)
     memcpy(oR, cx.R + rowb, W * C)
     s_lo = r - hmax
@@ -483,7 +493,7 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
         kbest = 0
         for j in range(nsrc):
             if heads[j] < ends[j]:
-                key = cx.pkey[heads[j]] >> 32      # d bits only: ties -> smaller row
+                key = pkey[heads[j]] >> 32      # d bits only: ties -> smaller row
                 if jbest < 0 or key < kbest:
                     jbest = j
                     kbest = key
@@ -491,19 +501,19 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
             break
         idx = heads[jbest]
         heads[jbest] += 1
-        kbest = cx.pkey[idx]
+        kbest = pkey[idx]
         s = s_lo + jbest
         dy = r - s
         if dy < 0:
             dy = -dy
-        h = hmax if cx.hp == NULL else cx.hp[idx]
+        h = hmax if hp == NULL else hp[idx]
         if dy > h:
             continue
         x = <int>(kbest & LOW32)
         occ_pt = 0
-        if cx.occ != NULL and cx.occmode != 2:
+        if cx.occ != NULL and occmode != 2:
             occ_pt = cx.occ[<int64_t>s * W + x]
-        if occ_pt and cx.occmode == 1:
+        if occ_pt and occmode == 1:
             continue
         cidx[ncon] = idx
         crow[ncon] = s if not occ_pt else -1 - s
@@ -514,8 +524,8 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
     for n in range(ncon):
         idx = cidx[n]
         s = crow[n] if crow[n] >= 0 else -1 - crow[n]
-        x = <int>(cx.pkey[idx] & LOW32)
-        h = hmax if cx.hp == NULL else cx.hp[idx]
+        x = <int>(pkey[idx] & LOW32)
+        h = hmax if hp == NULL else hp[idx]
         msk = mbuf + <int64_t>n * K
         for k in range(K):
             dx = k - hmax
@@ -524,7 +534,7 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
                 msk[k] = 0
                 continue
             msk[k] = 1
-            if cx.bilateral:
+            if bilateral:
                 sumsq = 0
                 for c in range(C):
                     diff = <int>Lr[xl * C + c] - <int>cx.L[(<int64_t>s * W + x) * C + c]
@@ -534,16 +544,16 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
                 if not (e < cx.neglogthr):
                     msk[k] = 0
     for n in range(ncon):
-        if crow[n] < 0 and cx.occmode == 3:
+        if crow[n] < 0 and occmode == 3:
             continue        # FGD: no pattern needed
         idx = cidx[n]
         s = crow[n] if crow[n] >= 0 else -1 - crow[n]
-        x = <int>(cx.pkey[idx] & LOW32)
+        x = <int>(pkey[idx] & LOW32)
         msk = mbuf + <int64_t>n * K
         vals = vbuf + <int64_t>n * K * C
-        if cx.pattern == 0:
-            if cx.uniform:
-                z = _hash(cx.seedmix, <uint64_t>x, <uint64_t>s)
+        if pattern == 0:
+            if uniform:
+                z = _hash(seedmix, <uint64_t>x, <uint64_t>s)
                 for k in range(K):
                     if msk[k]:
                         for c in range(C):
@@ -551,23 +561,23 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
             else:
                 for k in range(K):
                     if msk[k]:
-                        z = _hash(cx.seedmix, <uint64_t>(x + k - hmax), <uint64_t>r)
+                        z = _hash(seedmix, <uint64_t>(x + k - hmax), <uint64_t>r)
                         for c in range(C):
                             vals[k * C + c] = <uint8_t>((z >> (8 * c)) & 255)
-        elif cx.uniform:
+        elif uniform:
             for k in range(K):
                 if msk[k]:
                     for c in range(C):
                         vals[k * C + c] = cx.uvals[idx * C + c]
-    if cx.pattern == 1 and not cx.uniform:
+    if pattern == 1 and not uniform:
         for c in range(C):
             _build_all(cx, c, r, tabs)
             for n in range(ncon):
-                if crow[n] < 0 and cx.occmode == 3:
+                if crow[n] < 0 and occmode == 3:
                     continue
                 idx = cidx[n]
-                x = <int>(cx.pkey[idx] & LOW32)
-                d = vpp_u2f(<uint32_t>(cx.pkey[idx] >> 32))
+                x = <int>(pkey[idx] & LOW32)
+                d = vpp_u2f(<uint32_t>(pkey[idx] >> 32))
                 cn = <int>floor(<double>x - d + 0.5)
                 msk = mbuf + <int64_t>n * K
                 vals = vbuf + <int64_t>n * K * C
@@ -576,19 +586,19 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
                         vals[k * C + c] = _hist_value(cx, c, r, tabs, x + k - hmax, cn + k - hmax)
     # 3. right row: pattern of visible points (splatted)
     for n in range(ncon):
-        if crow[n] < 0 and cx.occmode == 3:
+        if crow[n] < 0 and occmode == 3:
             continue
         idx = cidx[n]
-        x = <int>(cx.pkey[idx] & LOW32)
-        d = vpp_u2f(<uint32_t>(cx.pkey[idx] >> 32))
+        x = <int>(pkey[idx] & LOW32)
+        d = vpp_u2f(<uint32_t>(pkey[idx] >> 32))
         xp = <double>x - d
         msk = mbuf + <int64_t>n * K
         vals = vbuf + <int64_t>n * K * C
-        if cx.splat:
+        if splat:
             fl = <int>floor(xp)
             beta = xp - <double>fl
-            w0 = _w16(cx.alpha * (1.0 - beta))
-            w1 = _w16(cx.alpha * beta)
+            w0 = _w16(alpha * (1.0 - beta))
+            w1 = _w16(alpha * beta)
             for k in range(K):
                 if not msk[k]:
                     continue
@@ -606,16 +616,16 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
                 col = cn + k - hmax
                 if msk[k] and col >= 0 and col < W:
                     for c in range(C):
-                        oR[col * C + c] = _blend16(oR[col * C + c], vals[k * C + c], cx.wa)
+                        oR[col * C + c] = _blend16(oR[col * C + c], vals[k * C + c], wa)
     # 4. left row: pattern, or FGD content of the final right row
     for n in range(ncon):
         idx = cidx[n]
-        x = <int>(cx.pkey[idx] & LOW32)
+        x = <int>(pkey[idx] & LOW32)
         msk = mbuf + <int64_t>n * K
-        if crow[n] < 0 and cx.occmode == 3:
-            d = vpp_u2f(<uint32_t>(cx.pkey[idx] >> 32))
+        if crow[n] < 0 and occmode == 3:
+            d = vpp_u2f(<uint32_t>(pkey[idx] >> 32))
             xp = <double>x - d
-            if cx.splat:
+            if splat:
                 fl = <int>floor(xp)
                 beta = xp - <double>fl
             else:
@@ -637,7 +647,7 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
                     else:
                         v16 = i0 * 65536
                     src = oL[xl * C + c]
-                    oL[xl * C + c] = <uint8_t>((src * (65536 - cx.wa) * 65536 + v16 * cx.wa
+                    oL[xl * C + c] = <uint8_t>((src * (65536 - wa) * 65536 + v16 * wa
                                                 + 2147483648ULL) >> 32)
         else:
             vals = vbuf + <int64_t>n * K * C
@@ -645,7 +655,7 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
                 if msk[k]:
                     xl = x + k - hmax
                     for c in range(C):
-                        oL[xl * C + c] = _blend16(oL[xl * C + c], vals[k * C + c], cx.wa)
+                        oL[xl * C + c] = _blend16(oL[xl * C + c], vals[k * C + c], wa)
 
 
 # ----------------------------------------------------------------- entry points

@@ -1,0 +1,79 @@
+"""Benchmark of vpp_service.vpp.project against the cost of copying the two images.
+
+Prints a table (median milliseconds) and writes JSON.  Sizes: KITTI 1242x375,
+Middlebury half 1482x994 and full 2964x1988 (RGB); densities 1 % and 5 %;
+patterns random (vi) and histogram (vii), default 3x3 / alpha 0.4 / FGD;
+threads 1 and all.  ``--quick`` runs a smaller subset.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from vpp_service.vpp import VPPConfig, project
+
+SIZES = {"kitti": (375, 1242), "midd_half": (994, 1482), "midd_full": (1988, 2964)}
+
+
+def scene(H: int, W: int, density: float, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    small = rng.integers(0, 256, (H // 8 + 1, W // 8 + 1, 3), dtype=np.uint8)
+    left = np.ascontiguousarray(np.repeat(np.repeat(small, 8, 0), 8, 1)[:H, :W])
+    left = np.clip(left.astype(np.int16) + rng.integers(-8, 9, left.shape), 0, 255).astype(np.uint8)
+    right = np.ascontiguousarray(np.roll(left, -20, axis=1))
+    gt = (20 + 60 * np.sin(np.arange(W) / 150.0)[None, :] + np.arange(H)[:, None] / 20.0)
+    disp = np.where(rng.random((H, W)) < density, gt, 0).astype(np.float32)
+    return left, right, disp
+
+
+def timeit(fn, reps: int) -> float:
+    fn()
+    ts = []
+    for _ in range(reps):
+        t = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t)
+    return float(np.median(ts) * 1e3)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--json", default="benchmarks/results/bench_vpp.json")
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--reps", type=int, default=7)
+    a = ap.parse_args(argv)
+    allt = os.cpu_count() or 1
+    sizes = ["kitti", "midd_half"] if a.quick else list(SIZES)
+    dens = [0.05] if a.quick else [0.01, 0.05]
+    threads = sorted({1, allt})
+    rows = []
+    print(f"{'size':10s} {'dens':>5s} {'pattern':10s} {'thr':>3s} {'ms':>8s} {'x copy':>7s} {'points':>8s}")
+    for name in sizes:
+        H, W = SIZES[name]
+        for density in dens:
+            left, right, disp = scene(H, W, density)
+            copy_ms = timeit(lambda: (left.copy(), right.copy()), a.reps)
+            rows.append(dict(size=name, H=H, W=W, density=density, pattern="copy", threads=1,
+                             ms=copy_ms, ratio=1.0))
+            print(f"{name:10s} {density:5.2f} {'copy':10s} {1:3d} {copy_ms:8.2f} {1.0:7.2f}")
+            for pattern in ("random", "histogram"):
+                cfg = VPPConfig(pattern=pattern)
+                for nt in threads:
+                    ms = timeit(lambda: project(left, right, disp, cfg, num_threads=nt), a.reps)
+                    npts = project(left, right, disp, cfg).stats.given
+                    rows.append(dict(size=name, H=H, W=W, density=density, pattern=pattern,
+                                     threads=nt, ms=ms, ratio=ms / copy_ms, points=npts))
+                    print(f"{name:10s} {density:5.2f} {pattern:10s} {nt:3d} {ms:8.2f} "
+                          f"{ms / copy_ms:7.2f} {npts:8d}")
+    Path(a.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(a.json).write_text(json.dumps({"cpu_count": allt, "results": rows}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
