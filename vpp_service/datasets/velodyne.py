@@ -1,8 +1,9 @@
 """Projection of a Velodyne scan (KITTI ``velodyne/*.bin``) into a camera depth map.
 
-``vpp_service.vpp.points_to_depth_map`` is used when the VPP package provides
-it; otherwise the local :func:`project_points` does the same job (keep z > 0
-and pixels inside the image; the nearest point wins a pixel).
+The projection follows the same rules as ``vpp_service.vpp.points_to_depth_map``
+(keep z > 0 and pixels inside the image, pixel ``floor(u + 0.5)``, the nearest
+point wins a pixel) but takes KITTI's full 3 x 4 rectified projection matrix:
+``P2``/``P3`` carry a translation column that a 3 x 3 ``K`` would drop.
 """
 from __future__ import annotations
 

@@ -131,13 +131,13 @@ def markdown_report(rows: list[dict], per_scene: bool = False, title: str = "VPP
             densities = sorted({r["density"] for r in mrows}, key=lambda d: (d is None, d or 0))
             for d in densities:
                 avg = _average([r for r in mrows if r["density"] == d])
-                dtxt = f"{d:g}" if isinstance(d, float) else _fmt(d)
+                dtxt = f"{d:.3g}" if isinstance(d, float) else _fmt(d)
                 lines.append([method, dtxt] + [_fmt(avg.get(c)) for c in cols])
         parts += [_table(header, lines), ""]
         if per_scene:
             parts += ["### Per scene", ""]
             header = ["scene", "method", "density"] + cols
-            lines = [[r["scene"], r["method"], f"{r['density']:g}"] + [_fmt(r.get(c)) for c in cols]
+            lines = [[r["scene"], r["method"], f"{r['density']:.3g}"] + [_fmt(r.get(c)) for c in cols]
                      for r in grows]
             parts += [_table(header, lines), ""]
         if sweep:
