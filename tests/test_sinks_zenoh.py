@@ -1,0 +1,104 @@
+"""zenoh sink over real sessions: lazy outputs, wire decoding by a subscriber, bounded close."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+import zenoh
+
+from conftest import zenoh_test_config
+from test_wire import make_frame
+from vpp_service.frame import FusionResult
+from vpp_service.service import wire
+from vpp_service.sinks.base import SinkContext, build_sink
+
+
+@pytest.fixture
+def sessions(zenoh_endpoint):
+    with zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as svc, \
+            zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as client:
+        yield svc, client
+
+
+def result(seq):
+    fr = make_frame().with_(seq=seq)
+    disp = np.full(fr.shape, 2.0 + seq, np.float32)
+    return FusionResult(frame=fr, disparity=disp, depth=disp + 1, left_vpp=fr.left, right_vpp=fr.right,
+                        timing_ms={"match": 1.0})
+
+
+def collect(sub, n, timeout=5.0):
+    out, deadline = [], time.monotonic() + timeout
+    while len(out) < n and time.monotonic() < deadline:
+        s = sub.try_recv()
+        if s is None:
+            time.sleep(0.01)
+        else:
+            out.append(s)
+    return out
+
+
+@pytest.mark.parametrize("outputs", [["disparity"], ["disparity", "depth", "left_vpp", "right_vpp"]])
+def test_publishes_selected_outputs(sessions, outputs):
+    svc, client = sessions
+    sub = client.declare_subscriber("vpp/s/out/**", zenoh.handlers.FifoChannel(64))
+    sink = build_sink("zenoh", {"outputs": outputs, "queue_size": 8}, SinkContext(rig="s", session=svc))
+    sink.open()
+    time.sleep(0.3)
+    for seq in range(3):
+        sink.write(result(seq))
+    sink.close(3.0)
+    got = collect(sub, 3 * len(outputs))
+    assert sorted({str(s.key_expr).rsplit("/", 1)[1] for s in got}) == sorted(outputs)
+    disp = [wire.decode_output(s.payload.to_bytes()) for s in got if str(s.key_expr).endswith("disparity")]
+    assert [d.seq for d in disp] == [0, 1, 2]
+    for d in disp:
+        np.testing.assert_array_equal(d.data, np.full((6, 8), 2.0 + d.seq, np.float32))
+    if "left_vpp" in outputs:
+        img = [s for s in got if str(s.key_expr).endswith("left_vpp")][0]
+        np.testing.assert_array_equal(wire.decode_output_image(img.payload.to_bytes())[1], make_frame().left)
+    assert sink.stats()["written"] == 3
+
+
+def test_congestion_settings(sessions):
+    svc, _ = sessions
+    sink = build_sink("zenoh", {"outputs": ["disparity", "left_vpp"]}, SinkContext(session=svc))
+    sink.open()
+    try:
+        assert sink._pubs["disparity"].congestion_control == zenoh.CongestionControl.BLOCK
+        assert sink._pubs["left_vpp"].congestion_control == zenoh.CongestionControl.DROP
+        assert sink._pubs["left_vpp"].priority == zenoh.Priority.DATA_LOW
+    finally:
+        sink.close(1.0)
+
+
+def test_write_never_blocks_and_counts_drops(sessions):
+    svc, _ = sessions
+    sink = build_sink("zenoh", {"queue_size": 1}, SinkContext(session=svc))
+    # not opened: nothing consumes the queue, so every extra write drops the oldest
+    for seq in range(5):
+        sink.write(result(seq))
+    assert sink.stats()["dropped"] == 4
+
+
+def test_close_is_bounded_without_peers(sessions):
+    svc, _ = sessions
+    sink = build_sink("zenoh", {}, SinkContext(session=svc))
+    sink.open()
+    sink.write(result(0))
+    t0 = time.monotonic()
+    sink.close(2.0)
+    assert time.monotonic() - t0 < 3.0
+
+
+@pytest.mark.parametrize("opts", [{"outputs": []}, {"outputs": ["normals"]}, {"outputs": ["depth", "depth"]},
+                                  {"queue_size": 0}, {"image_enc": "gif"}])
+def test_bad_options(opts):
+    with pytest.raises(ValueError, match="sinks.zenoh"):
+        build_sink("zenoh", opts)
+
+
+def test_needs_session():
+    with pytest.raises(ValueError, match="session"):
+        build_sink("zenoh", {}).open()

@@ -1,0 +1,136 @@
+"""sim and files sources: frames, seq/seed per frame, pacing, count/loop, bad files rejected."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from vpp_service.service import wire
+from vpp_service.sources.base import Pacer, SourceContext, build_source
+from vpp_service.sources.sim import MOTORCYCLE_CALIB, motorcycle_frame, scale_frame
+from vpp_service.settings import SettingsError
+
+
+def drain(src, timeout=20.0):
+    frames, rejects = [], []
+    src.open()
+    src.start(lambda f: frames.append(f) or True, rejects.append)
+    assert src.finished.wait(timeout)
+    src.stop(1.0)
+    return frames, rejects
+
+
+def test_motorcycle_default_frame():
+    fr = motorcycle_frame()
+    assert fr.left.shape == (500, 741, 3) and fr.calib == MOTORCYCLE_CALIB
+    assert np.isnan(fr.gt_disparity).mean() == pytest.approx(0.0735, abs=0.01)  # +inf became NaN
+
+
+def test_scale_frame_scales_disparity_and_calib():
+    fr = motorcycle_frame()
+    half = scale_frame(fr, 0.5)
+    assert half.left.shape[:2] == (250, 370)
+    sx = 370 / 741
+    assert half.calib.f == pytest.approx(fr.calib.f * sx) and half.calib.baseline == fr.calib.baseline
+    assert np.nanmax(half.gt_disparity) == pytest.approx(np.nanmax(fr.gt_disparity) * sx, rel=0.02)
+    with pytest.raises(ValueError, match="scale"):
+        scale_frame(fr, 1.5)
+
+
+def test_sim_default_motorcycle_uniform_5_percent():
+    src = build_source("sim", {"scale": 0.5, "rate_hz": 0, "count": 3}, SourceContext(rig="r9"))
+    frames, rejects = drain(src)
+    assert [f.seq for f in frames] == [0, 1, 2] and not rejects
+    for f in frames:
+        assert f.rig == "r9" and f.stamp_ns > 0
+        valid = np.isfinite(f.gt_disparity)
+        pts = np.isfinite(f.sparse_disparity) & (f.sparse_disparity > 0)
+        assert pts.sum() / valid.sum() == pytest.approx(0.05, rel=0.05)
+        np.testing.assert_allclose(f.sparse_disparity[pts], f.gt_disparity[pts], atol=1e-4)  # noise-free sensor
+    assert not np.array_equal(np.isfinite(frames[0].sparse_disparity), np.isfinite(frames[1].sparse_disparity))
+    assert frames[1].stamp_ns >= frames[0].stamp_ns
+
+
+def test_sim_rate_is_paced():
+    src = build_source("sim", {"scene": "synthetic", "scene_options": {"height": 32, "width": 64,
+                                                                        "max_disparity": 8},
+                               "rate_hz": 50, "count": 6}, SourceContext())
+    t0 = time.monotonic()
+    frames, _ = drain(src)
+    assert len(frames) == 6
+    assert time.monotonic() - t0 >= 5 / 50 * 0.9
+
+
+def test_pacer_zero_rate_and_errors():
+    src = build_source("sim", {"count": 1}, SourceContext())
+    assert Pacer(0).wait(src) is False
+    with pytest.raises(ValueError, match="rate_hz"):
+        Pacer(-1)
+
+
+@pytest.mark.parametrize("opts,key", [({"scale": 0}, "source.sim"), ({"rate_hz": -1}, "source.sim"),
+                                      ({"scene": "moon"}, "source.sim.scene"), ({"scene": "dataset"}, "source.sim"),
+                                      ({"count": "3"}, "source.sim.count")])
+def test_sim_bad_options(opts, key):
+    with pytest.raises(SettingsError) as exc:
+        build_source("sim", opts)
+    assert str(exc.value).startswith(key)
+
+
+@pytest.fixture
+def msgpack_folder(tmp_path):
+    src = build_source("sim", {"scene": "synthetic", "scene_options": {"height": 32, "width": 64,
+                                                                        "max_disparity": 8},
+                               "rate_hz": 0, "count": 3}, SourceContext())
+    src.open()
+    frames = [src.frame(i) for i in range(3)]
+    for i, fr in enumerate(frames):
+        (tmp_path / f"{i:03d}.msgpack").write_bytes(wire.encode_frame(fr))
+    return tmp_path, frames
+
+
+def test_files_msgpack_replay(msgpack_folder):
+    folder, ref = msgpack_folder
+    frames, rejects = drain(build_source("files", {"root": str(folder), "format": "msgpack"}))
+    assert [f.seq for f in frames] == [0, 1, 2] and not rejects
+    for f, r in zip(frames, ref):
+        np.testing.assert_array_equal(f.left, r.left)
+        np.testing.assert_array_equal(f.gt_disparity, r.gt_disparity)
+
+
+def test_files_loop_and_count(msgpack_folder):
+    folder, _ = msgpack_folder
+    frames, _ = drain(build_source("files", {"root": str(folder), "format": "msgpack", "loop": True,
+                                             "count": 7}))
+    assert [f.seq for f in frames] == list(range(7))
+
+
+def test_files_bad_file_rejected_and_skipped(msgpack_folder):
+    folder, _ = msgpack_folder
+    (folder / "001.msgpack").write_bytes(b"\x81\xa1v\x02")
+    frames, rejects = drain(build_source("files", {"root": str(folder), "format": "msgpack"}))
+    assert len(frames) == 2 and len(rejects) == 1 and "001.msgpack" in rejects[0]
+
+
+def test_files_errors(tmp_path):
+    with pytest.raises(SettingsError, match="root"):
+        build_source("files", {})
+    with pytest.raises(FileNotFoundError, match="source.root"):
+        build_source("files", {"root": str(tmp_path / "nope")}).open()
+    with pytest.raises(ValueError, match="msgpack"):
+        build_source("files", {"root": str(tmp_path), "format": "msgpack"}).open()
+
+
+SHARED = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def test_files_dataset_reader():
+    root = SHARED / "middlebury2003_quartersize"
+    if not root.is_dir():
+        pytest.skip("shared data not available")
+    frames, _ = drain(build_source("files", {"root": str(root), "count": 2, "scale": 0.5}))
+    assert len(frames) == 2
+    for f in frames:
+        pts = np.isfinite(f.sparse_disparity) & (f.sparse_disparity > 0)
+        assert pts.any() and np.allclose(f.sparse_disparity[pts], f.gt_disparity[pts], atol=1e-3)
