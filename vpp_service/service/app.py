@@ -61,7 +61,9 @@ def build_pipeline(cfg: ServiceConfig, session: Any = None) -> Pipeline:
     sink_ctx = SinkContext(rig=s.rig, prefix=s.prefix, session=session)
     sinks = [SINKS.get(sp.name)(sp.options, sink_ctx) for sp in cfg.sinks]
     matcher = build_matcher(cfg.matcher.name, cfg.matcher.raw)
-    fusion = Fusion(matcher, cfg.vpp, seed=s.seed)
+    # metric depth is computed only when a sink may use it (lazy outputs)
+    needs_depth = any(sp.name != "zenoh" or "depth" in sp.options.outputs for sp in cfg.sinks)
+    fusion = Fusion(matcher, cfg.vpp, seed=s.seed, depth=needs_depth)
     q = cfg.queues
     return Pipeline(source, fusion, sinks, input_size=q.input_size, input_policy=q.input_policy,
                     output_size=q.output_size, output_policy=q.output_policy, max_frames=s.max_frames,

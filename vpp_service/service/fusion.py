@@ -29,14 +29,17 @@ class Fusion:
         VPP settings; None disables VPP (plain stereo).
     seed : int
         Pattern seed; the frame's ``seq`` is added so every frame differs.
+    depth : bool
+        Compute metric depth (skip it when no sink uses it).
     """
 
-    def __init__(self, matcher: Any, vpp_config: Any = None, seed: int = 0) -> None:
+    def __init__(self, matcher: Any, vpp_config: Any = None, seed: int = 0, depth: bool = True) -> None:
         if not hasattr(matcher, "compute"):
             raise TypeError(f"matcher must have a compute(left, right) method, got {type(matcher).__name__}")
         self.matcher = matcher
         self.vpp_config = vpp_config
         self.seed = int(seed)
+        self.depth = bool(depth)
         self.counters = {"vpp": 0, "no_depth": 0}
 
     @staticmethod
@@ -89,7 +92,7 @@ class Fusion:
         disp = np.asarray(self.matcher.compute(m_left, m_right), dtype=np.float32)
         timing["match"] = (time.perf_counter() - t0) * 1e3
         depth = None
-        if frame.calib is not None:
+        if self.depth and frame.calib is not None:
             from vpp_service.vpp import disparity_to_depth
 
             c = frame.calib
