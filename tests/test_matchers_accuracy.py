@@ -124,7 +124,11 @@ def test_guided_improves_on_weak_texture(hard_scene):
     assert b_guided < 0.6 * b_plain
 
 
-def test_guided_helps_on_motorcycle():
+@pytest.mark.parametrize("speckle_size,min_gain", [
+    (0, 0.01),  # raw SGM output: guidance must remove >= 1 point of bad-2
+    (200, 0.003),  # default rSGM post-filter (speckles) already removes much of the error
+])
+def test_guided_helps_on_motorcycle(speckle_size, min_gain):
     skimage_data = pytest.importorskip("skimage.data")
     left, right, gt = skimage_data.stereo_motorcycle()
     size = (left.shape[1] // 2, left.shape[0] // 2)
@@ -133,9 +137,9 @@ def test_guided_helps_on_motorcycle():
     gt = gt[: 2 * size[1] : 2, : 2 * size[0] : 2] / 2.0
     valid = np.isfinite(gt)
     gt = np.where(valid, gt, np.nan).astype(np.float32)
-    m = build_matcher("census-sgm", {"max_disparity": 48, "fill": True})
+    m = build_matcher("census-sgm", {"max_disparity": 48, "fill": True, "speckle_size": speckle_size})
     plain = m.compute(left, right)
     guided = m.compute(left, right, hints=sample_hints(gt, valid, 0.05, seed=0))
     b_plain, b_guided = bad(plain, gt, valid), bad(guided, gt, valid)
     assert b_plain < 0.35  # sane baseline
-    assert b_guided < b_plain - 0.01
+    assert b_guided < b_plain - min_gain

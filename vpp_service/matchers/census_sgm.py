@@ -22,6 +22,8 @@ reused; the :class:`CensusSGM` matcher chains them):
    from the same aggregated volume, ``d_R(x) = argmin_d S(x + d, d)``; a left
    disparity survives if ``|d_L(x) - d_R(x - round(d_L(x)))| <= tolerance``.
 7. :func:`median_filter3x3` -- 3 x 3 median over the valid neighbours.
+8. :func:`~vpp_service.matchers.speckle.remove_speckles` -- invalidate small
+   blobs (rSGM's speckle filter; ``speckle_size`` 0 turns it off).
 
 Everything invalid is NaN. Threads: every function takes ``threads``
 (None/0 = all usable cores, ``OMP_NUM_THREADS`` respected); the matcher's
@@ -53,6 +55,7 @@ from vpp_service.matchers.base import (
     to_gray,
 )
 from vpp_service.matchers.guided import modulate_cost
+from vpp_service.matchers.speckle import remove_speckles
 
 #: Census bits (5 x 5 window minus the centre) = the largest Hamming cost.
 CENSUS_BITS = 24
@@ -325,6 +328,11 @@ class CensusSGMOptions(MatcherOptions):
         Allowed left-right difference in pixels (default 1).
     median : bool
         3 x 3 median of the result (default True).
+    speckle_size, speckle_diff : int, float
+        Speckle filter (:func:`~vpp_service.matchers.speckle.remove_speckles`)
+        after the median: regions of at most ``speckle_size`` pixels (default
+        200; 0 = off) whose disparity steps stay within ``speckle_diff`` px
+        (default 2) are invalidated, as in the paper's rSGM setup.
     guided_k, guided_c : float
         Guided-stereo modulation height and width (10 and 1) used with ``hints``.
     threads : int
@@ -345,6 +353,8 @@ class CensusSGMOptions(MatcherOptions):
     lr_check: bool = True
     lr_tolerance: float = 1.0
     median: bool = True
+    speckle_size: int = 200
+    speckle_diff: float = 2.0
     guided_k: float = 10.0
     guided_c: float = 1.0
     threads: int = 1
@@ -358,6 +368,10 @@ class CensusSGMOptions(MatcherOptions):
             raise ValueError(f"uniqueness must be in (0, 1], got {self.uniqueness}")
         if not (math.isfinite(self.lr_tolerance) and self.lr_tolerance >= 0):
             raise ValueError(f"lr_tolerance must be a finite number >= 0, got {self.lr_tolerance}")
+        if isinstance(self.speckle_size, bool) or self.speckle_size < 0:
+            raise ValueError(f"speckle_size must be an integer >= 0, got {self.speckle_size!r}")
+        if not (math.isfinite(self.speckle_diff) and self.speckle_diff >= 0):
+            raise ValueError(f"speckle_diff must be a finite number >= 0, got {self.speckle_diff}")
         for name in ("guided_k", "guided_c"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
@@ -423,6 +437,8 @@ class CensusSGM(Matcher):
             disp = left_right_check(disp, right_disparity(agg, t), o.lr_tolerance, t)
         if o.median:
             disp = median_filter3x3(disp, t)
+        if o.speckle_size:
+            disp = remove_speckles(disp, o.speckle_size, o.speckle_diff)
         return disp
 
     def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
