@@ -384,7 +384,11 @@ class Pipeline:
         lat = st["timing_ms"].get("latency")
         lat_s = f"lat p50 {lat['p50']:.0f} ms p99 {lat['p99']:.0f} ms" if lat else "lat -"
         bad2 = st["metrics"]["bad2_mean"]
-        bad_s = f" | bad-2 {bad2:.2f} %" if bad2 is not None else ""
+        bad_s = ""
+        if bad2 is not None:
+            # NaN (no estimate) counts as bad in bad-2; say how much of it that is.
+            invalid = (st["metrics"]["last"] or {}).get("invalid")
+            bad_s = f" | bad-2 {bad2:.2f} %" + (f" (no-estimate {invalid:.1f} %)" if invalid is not None else "")
         return (f"{st['fps']:.1f} fps | {lat_s}{bad_s} | recv {c['received']} proc {c['processed']} "
                 f"pub {c['published']} drop {c['dropped']} rej {c['rejected']} no-depth {c['no_depth']}")
 
