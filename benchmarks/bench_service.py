@@ -1,28 +1,51 @@
 """Service benchmark: frames/s and end-to-end latency over loopback Zenoh vs the matcher alone.
 
-At KITTI size (1242 x 375, a synthetic scene with exact ground truth and a
-uniform 5 % sensor) it measures
+At KITTI size (1242 x 375, a synthetic scene with a uniform 5 % sensor) it measures
 
-1. the matcher alone on the raw pair (the floor);
-2. the whole service path: encode -> Zenoh (tcp/127.0.0.1) -> decode -> VPP ->
-   SGBM -> encode -> Zenoh -> decode, at a paced rate (latency, no queueing) and
-   as fast as possible with lossless queues (throughput).
+(a) the matcher alone (SGBM, warm, in this process, before the service starts)
+    on the exact VPP-painted pairs the service will match;
+(b) end-to-end latency, paced (``--rate`` Hz and one frame in flight: no
+    queueing): camera encode-patch -> Zenoh (tcp/127.0.0.1) -> service decode ->
+    VPP -> SGBM -> encode -> Zenoh -> client;
+(c) throughput, unpaced, with lossless ``block`` queues;
+(d) the service's own stage timings, from its ``@status`` queryable and from the
+    ``timing_ms`` carried by every ``out/disparity`` message (decode, vpp, match,
+    process) and the Zenoh sink's encode / put times.
 
-The service runs in this process (its own threads and Zenoh session), the
-camera and the client in separate sessions. Overhead = (e2e p50 - matcher p50)
-/ matcher p50. Prints a table, writes JSON (``--json``).
+The service runs as its own process (``python -m vpp_service run --config
+<tmp toml>``, Zenoh listening on a free 127.0.0.1 port, multicast scouting off);
+the camera (publisher) and the result subscriber live in this process.
 
-    python benchmarks/bench_service.py --frames 30 --json bench_service.json
+Overhead = (e2e p50 - matcher p50) / matcher p50, and the breakdown
+(vpp + decode + encode/put + transport) / matcher, where transport is what is
+left of e2e p50 after the service's own stages (Zenoh both ways, queue
+hand-offs, the client).
+
+    python benchmarks/bench_service.py --frames 40
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import signal
 import socket
+import struct
+import subprocess
+import sys
+import tempfile
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+DEFAULT_JSON = REPO / "benchmarks" / "results" / "bench_service.json"
+RIG = "bench"
+#: stamp_ns placeholder written by the encoder, patched in place before each put.
+_SENTINEL = 0x7EDC_BA98_7654_3210
 
 
 def _port() -> int:
@@ -31,117 +54,241 @@ def _port() -> int:
         return s.getsockname()[1]
 
 
+def _toml(cfg: dict) -> str:
+    """Minimal TOML writer for the flat tables / arrays of tables used here."""
+    def val(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, (int, float)):
+            return repr(v)
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, list):
+            return "[" + ", ".join(val(x) for x in v) + "]"
+        raise TypeError(type(v))
+    lines = []
+    for table, body in cfg.items():
+        for entry in (body if isinstance(body, list) else [body]):
+            lines.append(f"[[{table}]]" if isinstance(body, list) else f"[{table}]")
+            lines += [f"{k} = {val(v)}" for k, v in entry.items()]
+            lines.append("")
+    return "\n".join(lines)
+
+
+def _pct(a, q):
+    return float(np.percentile(a, q)) if len(a) else float("nan")
+
+
 def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--frames", type=int, default=40, help="frames per run (paced and unpaced)")
+    ap.add_argument("--width", type=int, default=1242)
+    ap.add_argument("--height", type=int, default=375)
+    ap.add_argument("--max-disparity", type=int, default=128)
+    ap.add_argument("--rate", type=float, default=5.0, help="paced run rate (Hz)")
+    ap.add_argument("--warmup", type=int, default=3)
+    ap.add_argument("--json", default=str(DEFAULT_JSON))
+    a = ap.parse_args()
+
     import zenoh
 
     from vpp_service.matchers import build_matcher
     from vpp_service.service import wire
-    from vpp_service.service.app import build_pipeline, open_session
     from vpp_service.service.config import validate_config
     from vpp_service.sources.sensors import build_sensor
     from vpp_service.sources.synthetic import make_scene
+    from vpp_service.vpp import project
 
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--frames", type=int, default=30)
-    ap.add_argument("--width", type=int, default=1242)
-    ap.add_argument("--height", type=int, default=375)
-    ap.add_argument("--max-disparity", type=int, default=128)
-    ap.add_argument("--json", default="bench_service.json")
-    a = ap.parse_args()
-
+    n_unique = min(a.frames, 8)
     scene = make_scene(height=a.height, width=a.width, seed=0, max_disparity=96)
     sensor = build_sensor("uniform", {"density": 0.05})
-    frames = [sensor.simulate(scene.with_(seq=i), i) for i in range(a.frames)]
-    payloads = [wire.encode_frame(f, include_gt=False) for f in frames]
-
-    matcher = build_matcher("sgbm", {"max_disparity": a.max_disparity})
-    matcher.compute(scene.left, scene.right)
-    m_ms = []
-    for f in frames:
-        t0 = time.perf_counter()
-        matcher.compute(f.left, f.right)
-        m_ms.append((time.perf_counter() - t0) * 1e3)
-    m_p50 = float(np.percentile(m_ms, 50))
-
+    frames = [sensor.simulate(scene.with_(seq=i), i) for i in range(n_unique)]
+    tmp = Path(tempfile.mkdtemp(prefix="bench_service_"))
     port = _port()
     ep = f"tcp/127.0.0.1:{port}"
-    cfg = validate_config({
-        "service": {"rig": "bench", "out": "out/bench", "summary": False},
-        "zenoh": {"listen": [ep]},
+    raw_cfg = {
+        "service": {"rig": RIG, "out": str(tmp / "out"), "summary": False, "timing_window": a.frames,
+                    "seed": 0},
+        "zenoh": {"listen": [ep], "multicast_scouting": False},
         "source": {"type": "zenoh", "ring_size": 64},
         "matcher": {"name": "sgbm", "max_disparity": a.max_disparity},
         "queues": {"input_size": 64, "input_policy": "block", "output_size": 64, "output_policy": "block"},
         "sinks": [{"type": "zenoh", "outputs": ["disparity"], "queue_size": 64}],
-    })
-    results = {}
-    with open_session(cfg.zenoh) as svc_session:
-        pipe = build_pipeline(cfg, svc_session)
-        pipe.start()
-        cc = zenoh.Config()
-        cc.insert_json5("connect/endpoints", json.dumps([ep]))
-        cc.insert_json5("scouting/multicast/enabled", "false")
+    }
+    cfg = validate_config(raw_cfg)
+
+    # payloads with a placeholder stamp, patched in place before each put
+    payloads: list[tuple[bytearray, int]] = []
+    for f in frames:
+        p = bytearray(wire.encode_frame(f.with_(stamp_ns=_SENTINEL), include_gt=False))
+        off = p.find(b"\xcf" + struct.pack(">Q", _SENTINEL))
+        if off < 0:
+            raise RuntimeError("stamp placeholder not found in the encoded frame")
+        payloads.append((p, off + 1))
+
+    # (a) matcher alone, on the very pairs the service matches (VPP-painted with its seed)
+    matcher = build_matcher("sgbm", {"max_disparity": a.max_disparity})
+    painted = []
+    for f in frames:
+        sparse = f.sparse_disparity
+        if sparse is None:
+            from vpp_service.vpp import depth_to_disparity
+            sparse = depth_to_disparity(f.sensor_depth, f.calib.f, f.calib.baseline, f.calib.doffs)
+        res = project(np.ascontiguousarray(f.left), np.ascontiguousarray(f.right), sparse, cfg.vpp,
+                      seed=int(f.seq))
+        painted.append((res.left, res.right))
+    for left, right in painted[:2]:
+        matcher.compute(left, right)
+    m_ms = []
+    for i in range(a.frames):
+        left, right = painted[i % n_unique]
+        t0 = time.perf_counter()
+        matcher.compute(left, right)
+        m_ms.append((time.perf_counter() - t0) * 1e3)
+    m_p50 = _pct(m_ms, 50)
+    del matcher
+
+    # the service, as its own process
+    toml_path = tmp / "service.toml"
+    toml_path.write_text(_toml(raw_cfg))
+    log_path = tmp / "service.log"
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    with open(log_path, "w") as log:
+        proc = subprocess.Popen([sys.executable, "-m", "vpp_service", "run", "--config", str(toml_path)],
+                                cwd=str(REPO), stdout=log, stderr=subprocess.STDOUT, env=env)
+    cc = zenoh.Config()
+    cc.insert_json5("connect/endpoints", json.dumps([ep]))
+    cc.insert_json5("scouting/multicast/enabled", "false")
+    results: dict = {}
+    try:
         with zenoh.open(cc) as cli:
+            status_key = wire.topic("vpp", RIG, "@status")
+
+            def query_status(timeout: float = 3.0) -> dict | None:
+                for reply in cli.get(status_key, timeout=timeout):
+                    if reply.ok is not None:
+                        return json.loads(reply.ok.payload.to_string())
+                return None
+
+            deadline = time.monotonic() + 60
+            while query_status(1.0) is None:
+                if proc.poll() is not None or time.monotonic() > deadline:
+                    raise RuntimeError(f"service did not come up:\n{log_path.read_text()[-3000:]}")
+                time.sleep(0.2)
+
             lat: list[float] = []
+            stages: list[dict] = []
             got = threading.Semaphore(0)
+            t_last = [0.0]
 
             def on_out(sample: zenoh.Sample) -> None:
+                now = time.time_ns()
                 msg = wire.unpack(sample.payload.to_bytes())
-                lat.append((time.time_ns() - msg["stamp_ns"]) / 1e6)
+                lat.append((now - msg["stamp_ns"]) / 1e6)
+                stages.append(dict(msg.get("timing_ms", {})))
+                t_last[0] = time.perf_counter()
                 got.release()
 
-            sub = cli.declare_subscriber("vpp/bench/out/disparity", on_out)
-            pub = cli.declare_publisher("vpp/bench/in/frame", congestion_control=zenoh.CongestionControl.BLOCK)
-            time.sleep(0.5)
+            sub = cli.declare_subscriber(wire.topic("vpp", RIG, "out/disparity"), on_out)
+            pub = cli.declare_publisher(wire.topic("vpp", RIG, "in/frame"),
+                                        congestion_control=zenoh.CongestionControl.BLOCK)
 
             def send(i: int) -> None:
-                import msgpack
+                buf, off = payloads[i % n_unique]
+                buf[off:off + 8] = struct.pack(">Q", time.time_ns())
+                pub.put(bytes(buf))
 
-                msg = msgpack.unpackb(payloads[i % len(payloads)], raw=False)
-                msg["stamp_ns"], msg["seq"] = time.time_ns(), i
-                pub.put(msgpack.packb(msg, use_bin_type=True))
-
-            # paced: one frame at a time (latency without queueing)
-            for i in range(a.frames):
-                send(i)
-                got.acquire(timeout=10)
-            paced = list(lat)
-            # throughput: as fast as possible, lossless queues
+            # warm-up (also waits for the routes to be up)
+            w = 0
+            while w < a.warmup:
+                send(w)
+                if got.acquire(timeout=5.0):
+                    w += 1
+                elif proc.poll() is not None or time.monotonic() > deadline:
+                    raise RuntimeError(f"service not answering:\n{log_path.read_text()[-3000:]}")
+            time.sleep(0.3)
+            while got.acquire(timeout=0.2):
+                pass
             lat.clear()
+            stages.clear()
+
+            # (b) paced: one frame in flight at --rate Hz
+            period = 1.0 / a.rate
+            for i in range(a.frames):
+                t0 = time.perf_counter()
+                send(i)
+                if not got.acquire(timeout=10):
+                    raise RuntimeError(f"paced frame {i} lost:\n{log_path.read_text()[-3000:]}")
+                time.sleep(max(0.0, period - (time.perf_counter() - t0)))
+            paced, paced_stages = list(lat), list(stages)
+            st_paced = query_status() or {}
+
+            # (c) throughput: as fast as possible, lossless queues
+            lat.clear()
+            stages.clear()
             t0 = time.perf_counter()
             for i in range(a.frames):
-                send(a.frames + i)
+                send(i)
             for _ in range(a.frames):
-                got.acquire(timeout=30)
-            fps = len(lat) / (time.perf_counter() - t0)
+                if not got.acquire(timeout=30):
+                    break
+            fps = len(lat) / (t_last[0] - t0)
+            thr_lat = list(lat)
+            st_thr = query_status() or {}
             sub.undeclare()
-        status = pipe.status()
-        pipe.stop(5.0)
-    p50, p99 = float(np.percentile(paced, 50)), float(np.percentile(paced, 99))
-    t = status["timing_ms"]
+            pub.undeclare()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+    # ---------------------------------------------------------------- report
+    def stage_p50(rows: list[dict], key: str) -> float:
+        return _pct([r[key] for r in rows if key in r], 50)
+
+    e2e_p50, e2e_p99 = _pct(paced, 50), _pct(paced, 99)
+    dec, vpp = stage_p50(paced_stages, "decode"), stage_p50(paced_stages, "vpp")
+    match, proc_ms = stage_p50(paced_stages, "match"), stage_p50(paced_stages, "process")
+    sink_t = (st_paced.get("sinks", {}).get("ZenohSink", {}) or {}).get("timing_ms", {})
+    enc, put = sink_t.get("encode", float("nan")), sink_t.get("put", float("nan"))
+    other = proc_ms - vpp - match  # depth/metrics/conversions inside the process step
+    transport = e2e_p50 - (dec + proc_ms + enc + put)
     results = {
-        "size": [a.width, a.height], "frames": a.frames, "matcher": "sgbm", "max_disparity": a.max_disparity,
-        "matcher_alone_ms": {"p50": m_p50, "mean": float(np.mean(m_ms)), "fps": 1e3 / float(np.mean(m_ms))},
-        "service_e2e_ms": {"p50": p50, "p99": p99, "mean": float(np.mean(paced))},
+        "size": [a.width, a.height], "frames": a.frames, "rate_hz": a.rate, "matcher": "sgbm",
+        "max_disparity": a.max_disparity, "service": "separate process, loopback Zenoh tcp",
+        "matcher_alone_ms": {"p50": m_p50, "p99": _pct(m_ms, 99), "mean": float(np.mean(m_ms)),
+                             "fps": 1e3 / float(np.mean(m_ms))},
+        "service_e2e_ms": {"p50": e2e_p50, "p99": e2e_p99, "mean": float(np.mean(paced))},
         "service_fps": fps,
-        "service_stage_ms": {k: v["p50"] for k, v in t.items()},
-        "overhead_pct_vs_matcher": 100.0 * (p50 - m_p50) / m_p50,
-        "vpp_pct_vs_matcher": 100.0 * t.get("vpp", {}).get("p50", 0.0) / m_p50,
-        # service-side work besides matching (decode + VPP + conversions), vs the matcher in the same run
-        "stage_overhead_pct": 100.0 * (t["decode"]["p50"] + t["process"]["p50"] - t["match"]["p50"])
-        / t["match"]["p50"],
-        "counters": status["counters"],
+        "throughput_latency_ms": {"p50": _pct(thr_lat, 50), "p99": _pct(thr_lat, 99)},
+        "breakdown_ms_p50": {"decode": dec, "vpp": vpp, "match_in_service": match, "process_other": other,
+                             "encode": enc, "put": put, "transport": transport},
+        "overhead_pct_vs_matcher": 100.0 * (e2e_p50 - m_p50) / m_p50,
+        "overhead_breakdown_pct_vs_matcher": 100.0 * (vpp + dec + enc + put + transport + other) / m_p50,
+        "status_timing_ms_paced": {k: v["p50"] for k, v in st_paced.get("timing_ms", {}).items()},
+        "status_timing_ms_throughput": {k: v["p50"] for k, v in st_thr.get("timing_ms", {}).items()},
+        "counters": st_thr.get("counters", {}),
     }
-    print(f"{'':32s}{'p50 ms':>10s}{'p99 ms':>10s}{'fps':>8s}")
-    print(f"{'matcher alone (SGBM)':32s}{m_p50:10.1f}{np.percentile(m_ms, 99):10.1f}{1e3 / np.mean(m_ms):8.1f}")
-    print(f"{'service e2e (paced)':32s}{p50:10.1f}{p99:10.1f}{'':8s}")
-    print(f"{'service throughput':32s}{'':10s}{'':10s}{fps:8.1f}")
-    for k, v in results["service_stage_ms"].items():
-        print(f"  stage {k:24s}{v:10.1f}")
-    print(f"VPP + transport overhead vs matcher: {results['overhead_pct_vs_matcher']:.1f} % "
-          f"(VPP alone {results['vpp_pct_vs_matcher']:.1f} %; decode+VPP+conversions vs in-service "
-          f"matcher {results['stage_overhead_pct']:.1f} %)")
-    with open(a.json, "w") as fh:
-        json.dump(results, fh, indent=2)
+    print(f"SGBM, {a.width}x{a.height}, {a.max_disparity} disparities, {a.frames} frames; "
+          f"service in its own process over tcp/127.0.0.1")
+    print(f"{'':34s}{'p50 ms':>9s}{'p99 ms':>9s}{'fps':>8s}")
+    print(f"{'matcher alone (SGBM)':34s}{m_p50:9.1f}{_pct(m_ms, 99):9.1f}{1e3 / np.mean(m_ms):8.1f}")
+    print(f"{f'service e2e, paced {a.rate:g} Hz':34s}{e2e_p50:9.1f}{e2e_p99:9.1f}{'':8s}")
+    print(f"{'service unpaced (block queues)':34s}{_pct(thr_lat, 50):9.1f}{_pct(thr_lat, 99):9.1f}{fps:8.1f}")
+    print("breakdown of the paced e2e p50 (service stages from out/disparity timing_ms and @status):")
+    for k, v in results["breakdown_ms_p50"].items():
+        pct = 100.0 * v / m_p50
+        print(f"  {k:32s}{v:9.2f} ms {pct:6.1f} % of matcher")
+    print(f"overhead (e2e p50 - matcher p50) / matcher p50:     {results['overhead_pct_vs_matcher']:6.1f} %")
+    print(f"overhead (vpp+decode+encode+put+other+transport):  "
+          f"{results['overhead_breakdown_pct_vs_matcher']:6.1f} %")
+    out = Path(a.json)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(results, indent=2))
+    print(f"wrote {out}")
     return 0
 
 

@@ -337,9 +337,15 @@ def _splat(h: int, w: int, uv: np.ndarray, vals: np.ndarray, keep: str) -> np.nd
         return out
     x = np.rint(uv[:, 0]).astype(np.int64)
     y = np.rint(uv[:, 1]).astype(np.int64)
+    idx = y * w + x
+    flat = out.reshape(-1)
+    if idx.size < 2 or bool((idx[1:] > idx[:-1]).all()):
+        # row-major, one point per pixel (what encode_depth writes): no collision to resolve
+        flat[idx] = vals
+        return out
     # sort so that the winner is written last: nearest point wins
     order = np.argsort(-vals if keep == "min" else vals, kind="stable")
-    out[y[order], x[order]] = vals[order]
+    flat[idx[order]] = vals[order]
     return out
 
 

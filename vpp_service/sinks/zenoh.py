@@ -18,6 +18,7 @@ import logging
 import queue
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -70,6 +71,9 @@ class ZenohSink(Sink):
         self._queue: queue.Queue[FusionResult | None] = queue.Queue(maxsize=options.queue_size)
         self._thread: threading.Thread | None = None
         self._abort = threading.Event()
+        # per-result serialization / put durations (ms), reported by stats()
+        self._encode_ms: deque[float] = deque(maxlen=200)
+        self._put_ms: deque[float] = deque(maxlen=200)
 
     def open(self) -> None:
         """Declare one publisher per output and start the publishing thread."""
@@ -107,10 +111,17 @@ class ZenohSink(Sink):
             if result is None or self._abort.is_set():
                 return
             try:
+                enc_s = put_s = 0.0
                 for name, pub in self._pubs.items():
+                    t0 = time.perf_counter()
                     payload = wire.encode_output(result, name, self.options.image_enc)
+                    t1 = time.perf_counter()
                     if payload is not None:
                         pub.put(payload)
+                    enc_s += t1 - t0
+                    put_s += time.perf_counter() - t1
+                self._encode_ms.append(enc_s * 1e3)
+                self._put_ms.append(put_s * 1e3)
                 self._counters["written"] += 1
             except Exception as exc:  # a closed session, a bad result: count, keep going
                 self._counters["errors"] += 1
@@ -139,6 +150,17 @@ class ZenohSink(Sink):
             except Exception:  # session already closed
                 pass
         self._pubs.clear()
+
+    def stats(self) -> dict[str, Any]:
+        """Counters plus ``timing_ms``: median ``encode`` / ``put`` time per result (recent window)."""
+        out: dict[str, Any] = dict(self._counters)
+        timing = {}
+        for key, d in (("encode", self._encode_ms), ("put", self._put_ms)):
+            vals = sorted(d)
+            if vals:
+                timing[key] = vals[len(vals) // 2]
+        out["timing_ms"] = timing
+        return out
 
 
 __all__ = ["ZenohSink", "ZenohSinkOptions"]
