@@ -308,3 +308,45 @@ def test_fuzz_no_crash(H, W, C, patch, pattern, occ, adaptive, uniform, splat, s
     assert res.left.shape == shape and res.right.shape == shape
     s = res.stats
     assert s.given == s.invalid + int(((disp > 0) & (disp < W)).sum())
+
+
+# ---------------------------------------------------------------- bit-parallel histogram pick
+def _occupancies(seed: int, n: int):
+    rng = np.random.default_rng(seed)
+    for it in range(n):
+        mode = it % 5
+        if mode == 0:
+            occ = rng.random(256) < rng.random()
+        elif mode == 1:
+            occ = rng.random(256) < 0.9
+        elif mode == 2:
+            occ = np.zeros(256, bool)
+            occ[rng.integers(0, 256, rng.integers(1, 6))] = True
+        elif mode == 3:
+            occ = rng.random(256) < 0.995
+        else:
+            occ = np.ones(256, bool)
+            s = rng.integers(0, 256)
+            occ[s:s + rng.integers(0, 200)] = False
+        yield occ
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_hist_pick_bits_matches_reference(seed):
+    from vpp_reference import hist_pick
+    from vpp_service.vpp import _kernel
+    edge = [np.zeros(256, bool), np.ones(256, bool)]
+    for k in (0, 1, 63, 64, 127, 128, 191, 192, 255):
+        one = np.zeros(256, bool)
+        one[k] = True
+        edge += [one, ~one]
+    for occ in list(_occupancies(seed, 3000)) + edge:
+        bits = np.ascontiguousarray(np.packbits(occ, bitorder="little").view(np.uint64))
+        ref = -1 if occ.all() else hist_pick(occ.astype(np.int64))
+        assert _kernel.hist_pick_bits(bits) == ref, np.nonzero(~occ)[0]
+
+
+def test_hist_pick_bits_rejects_bad_length():
+    from vpp_service.vpp import _kernel
+    with pytest.raises(ValueError, match="occupancy"):
+        _kernel.hist_pick_bits(np.zeros(3, np.uint64))

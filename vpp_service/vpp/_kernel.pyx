@@ -45,10 +45,102 @@ cdef extern from *:
     static inline int vpp_ctz64(uint64_t v) { return __builtin_ctzll(v); }
     static inline uint32_t vpp_f2u(float f) { uint32_t u; memcpy(&u, &f, 4); return u; }
     static inline float vpp_u2f(uint32_t u) { float f; memcpy(&f, &u, 4); return f; }
+    /* 256-bit words: bit p is word p >> 6, bit p & 63. r = a >> s (r[p] = a[p + s]). */
+    static inline void vpp_shr256(const uint64_t* a, int s, uint64_t* r) {
+        int q = s >> 6, b = s & 63, i;
+        if (q == 0) {           /* common case, 0 < s < 64 */
+            r[0] = (a[0] >> b) | (a[1] << (64 - b));
+            r[1] = (a[1] >> b) | (a[2] << (64 - b));
+            r[2] = (a[2] >> b) | (a[3] << (64 - b));
+            r[3] = a[3] >> b;
+            return;
+        }
+        for (i = 0; i < 4; i++) {
+            uint64_t lo = (i + q < 4) ? a[i + q] : 0;
+            uint64_t hi = (i + q + 1 < 4) ? a[i + q + 1] : 0;
+            r[i] = b ? ((lo >> b) | (hi << (64 - b))) : lo;
+        }
+    }
+    static inline int vpp_ctz256(const uint64_t* a) {
+        int i;
+        for (i = 0; i < 4; i++) if (a[i]) return (i << 6) + __builtin_ctzll(a[i]);
+        return 256;
+    }
+    static inline int vpp_top256(const uint64_t* a) {   /* highest set bit, -1 if none */
+        int i;
+        for (i = 3; i >= 0; i--) if (a[i]) return (i << 6) + 63 - __builtin_clzll(a[i]);
+        return -1;
+    }
+    static inline int vpp_nz256(const uint64_t* a) { return (a[0] | a[1] | a[2] | a[3]) != 0; }
+    /* Value farthest from every filled bin of the 256-bit occupancy o (ties: smallest);
+       -1 if all filled.  Bit-parallel: P[j] marks the starts of >= 2^j zero runs
+       (interior runs only), binary lifting gives the longest run and the first run
+       reaching the best half-length. */
+    static int vpp_hist_pick(const uint64_t* o) {
+        uint64_t Z[4], P[9][4], cur[4], t[4];
+        int f1, ls, lead, trail, i, j, top, k, m, kp, rem, p0, best_i, best_d;
+        if ((o[0] & o[1] & o[2] & o[3]) == 0xFFFFFFFFFFFFFFFFULL) return -1;
+        if (!vpp_nz256(o)) return 0;
+        f1 = vpp_ctz256(o);
+        ls = vpp_top256(o);
+        lead = f1;
+        trail = 255 - ls;
+        best_i = 0;
+        best_d = lead;
+        for (i = 0; i < 4; i++) {
+            int lo = i << 6;
+            uint64_t w = ~o[i];
+            /* keep positions f1 < p < ls */
+            if (f1 + 1 > lo) w &= (f1 + 1 - lo >= 64) ? 0 : (~0ULL << (f1 + 1 - lo));
+            if (ls < lo + 64) w &= (ls - lo <= 0) ? 0 : (~0ULL >> (64 - (ls - lo)));
+            Z[i] = w;
+        }
+        if (vpp_nz256(Z)) {
+            for (i = 0; i < 4; i++) P[0][i] = Z[i];
+            top = 0;
+            while (top < 8) {
+                vpp_shr256(P[top], 1 << top, t);
+                for (i = 0; i < 4; i++) t[i] &= P[top][i];
+                if (!vpp_nz256(t)) break;
+                top++;
+                for (i = 0; i < 4; i++) P[top][i] = t[i];
+            }
+            for (i = 0; i < 4; i++) cur[i] = P[top][i];
+            k = 1 << top;
+            for (j = top - 1; j >= 0; j--) {
+                vpp_shr256(P[j], k, t);
+                for (i = 0; i < 4; i++) t[i] &= cur[i];
+                if (vpp_nz256(t)) {
+                    for (i = 0; i < 4; i++) cur[i] = t[i];
+                    k += 1 << j;
+                }
+            }
+            m = (k + 1) >> 1;
+            if (m > best_d) {
+                kp = 2 * m - 1;        /* shortest run whose half is m */
+                for (i = 0; i < 4; i++) cur[i] = Z[i];
+                k = 1;
+                rem = kp - 1;
+                for (j = 0; rem; j++, rem >>= 1) {
+                    if (rem & 1) {
+                        vpp_shr256(P[j], k, t);
+                        for (i = 0; i < 4; i++) cur[i] &= t[i];
+                        k += 1 << j;
+                    }
+                }
+                p0 = vpp_ctz256(cur);
+                best_d = m;
+                best_i = p0 - 1 + m;
+            }
+        }
+        if (trail > best_d) best_i = 255;
+        return best_i;
+    }
     """
     int vpp_ctz64(uint64_t v) nogil
     uint32_t vpp_f2u(float f) nogil
     float vpp_u2f(uint32_t u) nogil
+    int vpp_hist_pick(const uint64_t* o) nogil
 
 cdef extern from "<algorithm>" namespace "std" nogil:
     void std_sort "std::sort"(uint64_t* first, uint64_t* last)
@@ -107,76 +199,14 @@ cdef inline uint8_t _blend16(uint8_t a, uint8_t b, uint64_t w) noexcept nogil:
 
 
 # ----------------------------------------------------------------- histogram
-cdef inline int _next_set(const uint64_t* o, int pos) noexcept nogil:
-    cdef int w
-    cdef uint64_t bits
-    if pos >= 256:
-        return 256
-    w = pos >> 6
-    bits = o[w] >> (pos & 63)
-    if bits:
-        return pos + vpp_ctz64(bits)
-    w += 1
-    while w < 4:
-        if o[w]:
-            return (w << 6) + vpp_ctz64(o[w])
-        w += 1
-    return 256
-
-
-cdef inline int _next_zero(const uint64_t* o, int pos) noexcept nogil:
-    cdef int w
-    cdef uint64_t bits
-    if pos >= 256:
-        return 256
-    w = pos >> 6
-    bits = (~o[w]) >> (pos & 63)
-    if bits:
-        return pos + vpp_ctz64(bits)
-    w += 1
-    while w < 4:
-        if ~o[w]:
-            return (w << 6) + vpp_ctz64(~o[w])
-        w += 1
-    return 256
-
-
-cdef int _hist_pick(const uint64_t* o) noexcept nogil:
-    """Value farthest from every filled bin (ties: smallest); -1 if all filled."""
-    cdef int f1, best_i, best_d, pos, z, n, half
-    if (o[0] & o[1] & o[2] & o[3]) == ALL1:
-        return -1
-    if (o[0] | o[1] | o[2] | o[3]) == 0:
-        return 0
-    f1 = _next_set(o, 0)
-    best_i = 0
-    best_d = f1
-    pos = f1 + 1
-    while True:
-        z = _next_zero(o, pos)
-        if z >= 256:
-            break
-        n = _next_set(o, z)
-        if n >= 256:
-            if 256 - z > best_d:
-                best_i = 255
-            break
-        half = (n - z + 1) >> 1
-        if half > best_d:
-            best_d = half
-            best_i = z - 1 + half
-        pos = n + 1
-    return best_i
-
-
 cdef void _build_tables(const uint8_t* img, int H, int W, int C, int c, int r, int sh_half,
                         uint64_t* pre, uint64_t* suf) noexcept nogil:
     """Per aligned 32-column block, prefix/suffix OR of the bin occupancy of rows r+-sh_half."""
     cdef int y0 = r - sh_half
     cdef int y1 = r + sh_half
     cdef int b0, b1, x, y, k
-    cdef uint64_t a0, a1, a2, a3
-    cdef unsigned v
+    cdef uint64_t a0, a1, a2, a3, bit
+    cdef unsigned v, q
     if y0 < 0:
         y0 = 0
     if y1 > H - 1:
@@ -193,14 +223,12 @@ cdef void _build_tables(const uint8_t* img, int H, int W, int C, int c, int r, i
             a3 = 0
             for y in range(y0, y1 + 1):
                 v = img[(<int64_t>y * W + x) * C + c]
-                if v < 64:
-                    a0 |= (<uint64_t>1) << v
-                elif v < 128:
-                    a1 |= (<uint64_t>1) << (v - 64)
-                elif v < 192:
-                    a2 |= (<uint64_t>1) << (v - 128)
-                else:
-                    a3 |= (<uint64_t>1) << (v - 192)
+                bit = (<uint64_t>1) << (v & 63)     # branch-free: values are random
+                q = v >> 6
+                a0 |= bit & (<uint64_t>0 - <uint64_t>(q == 0))
+                a1 |= bit & (<uint64_t>0 - <uint64_t>(q == 1))
+                a2 |= bit & (<uint64_t>0 - <uint64_t>(q == 2))
+                a3 |= bit & (<uint64_t>0 - <uint64_t>(q == 3))
             suf[4 * x] = a0
             suf[4 * x + 1] = a1
             suf[4 * x + 2] = a2
@@ -309,7 +337,7 @@ cdef uint8_t _hist_value(const Ctx* cx, int c, int r, const uint64_t* tabs, int 
     o[3] = 0
     _window_or(cx, cx.L, c, r, tabs, tabs + W4, cl, o)
     _window_or(cx, cx.R, c, r, tabs + 2 * W4, tabs + 3 * W4, cr, o)
-    v = _hist_pick(o)
+    v = vpp_hist_pick(o)
     if v >= 0:
         return <uint8_t>v
     memset(counts, 0, sizeof(counts))
@@ -659,6 +687,16 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
 
 
 # ----------------------------------------------------------------- entry points
+def hist_pick_bits(const uint64_t[::1] occupancy):
+    """Histogram value of a 256-bit occupancy (4 uint64, bit v = bin v filled); -1 if all filled.
+
+    Exposed to test the bit-parallel gap search against the plain reference.
+    """
+    if occupancy.shape[0] != 4:
+        raise ValueError(f"occupancy must have 4 words, got {occupancy.shape[0]}")
+    return vpp_hist_pick(&occupancy[0])
+
+
 def _row_keys(const float[:, ::1] disp, bint want_paint, bint want_occ, int nthreads):
     """Phases A-C: per-row stats, offsets and sorted keys."""
     cdef int H = disp.shape[0], W = disp.shape[1]
