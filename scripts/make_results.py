@@ -1,0 +1,514 @@
+"""Regenerate ``docs/results.md`` and ``docs/results/``: VPP evaluation on every real dataset.
+
+Usage::
+
+    python scripts/make_results.py [--data ../shared/data] [--out docs] [--limit N] [--render-only]
+
+What it runs (in-process, one thread, seed 0, default :class:`~vpp_service.vpp.VPPConfig`
+= the paper's random per-pixel 3x3 patches, alpha 0.4, splatting, FGD occlusion handling):
+
+1. every dataset found under ``--data`` x matcher (``census-sgm``, ``sgbm``) x method
+   (baseline, guided - census-sgm only, sgbm has no cost volume -, vpp) at 5 % uniform
+   points; KITTI also with the simulated 64-beam ``lidar`` sensor (no raw scan ships);
+2. a density sweep 0.5 - 5 % (0 % = the matcher alone) on Middlebury 2005/2006 with
+   census-sgm (its 5 % rows are the main-table rows of that dataset);
+3. writes ``<out>/results/results.json`` (config, machine, git commit, every per-scene
+   row, summaries, the paper's numbers), ``<out>/results/sweep_middlebury2006.json``,
+   ``<out>/results/sweep_middlebury2006.png`` and ``<out>/results.md``.
+
+Holes of the matcher are filled before scoring (background interpolation, the paper's
+protocol); metrics cover all pixels with valid ground truth (occluded included), with
+``*_nocc`` variants where a non-occlusion mask exists. ``--render-only`` rebuilds the
+Markdown and the plot from an existing ``results.json`` without evaluating anything.
+Progress goes to stderr.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:
+    sys.path.insert(0, str(REPO))
+
+#: (folder under --data, short key, display name). Order = order of the report.
+DATASETS = (
+    ("middlebury2005_2006_thirdsize", "middlebury2006", "Middlebury 2005/2006 (third size)"),
+    ("middlebury2003_quartersize", "middlebury2003", "Middlebury 2003 (quarter size)"),
+    ("middlebury2001", "middlebury2001", "Middlebury 2001"),
+    ("eth3d_two_view_training", "eth3d", "ETH3D two-view training"),
+    ("kitti2012_training", "kitti2012", "KITTI 2012 training"),
+)
+MATCHERS = ("census-sgm", "sgbm")
+METHODS = ("baseline", "guided", "vpp")
+DENSITY = 0.05
+SWEEP = (0.005, 0.01, 0.02, 0.03, 0.04, 0.05)
+SWEEP_DATASET = "middlebury2006"
+SEED = 0
+
+#: Paper, Table 2 (5 % points, rSGM) and Table 4 (KITTI 2015, raw LiDAR); see vpp-spec.md.
+PAPER = {
+    "middlebury2006": {"label": "Middlebury 2014 training, full res", "bad2": (41.86, 30.64, 20.37),
+                       "avg": (13.62, 9.98, 7.81)},
+    "eth3d": {"label": "ETH3D training (all scenes)", "bad2": (9.11, 3.18, 0.62), "avg": (1.18, 0.76, 0.58)},
+    "kitti2012": {"label": "KITTI 2015, raw LiDAR", "bad2": (15.66, 10.00, 6.12), "avg": None},
+}
+#: Which of our rows each paper line is compared with: (dataset, sensor).
+PAPER_OURS = {"middlebury2006": ("middlebury2006", "uniform"), "eth3d": ("eth3d", "uniform"),
+              "kitti2012": ("kitti2012", "lidar")}
+
+COLS = (("bad1", "bad-1"), ("bad2", "bad-2"), ("bad4", "bad-4"), ("avg", "avg px"),
+        ("bad2_nocc", "bad-2 nocc"), ("avg_nocc", "avg nocc"))
+
+
+# --------------------------------------------------------------------------- running
+
+
+class _Progress:
+    """``progress(done, total, label)`` printing one line per step with a job prefix."""
+
+    def __init__(self, prefix: str, t0: float) -> None:
+        self.prefix, self.t0, self.tj = prefix, t0, time.perf_counter()
+
+    def __call__(self, done: int, total: int, label: str) -> None:
+        now = time.perf_counter()
+        if done >= total:
+            msg = f"done in {now - self.tj:.1f} s"
+        else:
+            msg = f"[{done + 1}/{total}] {label}"
+        print(f"{self.prefix} {msg}  (total {now - self.t0:.0f} s)", file=sys.stderr, flush=True)
+
+
+def _git(*args: str) -> str:
+    try:
+        return subprocess.run(["git", *args], cwd=REPO, capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return ""
+
+
+def _machine() -> dict[str, Any]:
+    import cv2
+    import numpy as np
+
+    cpu = platform.processor() or ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        usable = len(os.sched_getaffinity(0))
+    except AttributeError:
+        usable = os.cpu_count()
+    return {"cpu": cpu, "usable_cores": usable, "threads_used": 1, "system": platform.platform(),
+            "python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__}
+
+
+def _jobs(data: Path) -> list[dict[str, Any]]:
+    """The evaluation jobs for the datasets present under ``data``."""
+    jobs = []
+    for folder, key, _ in DATASETS:
+        if not (data / folder).is_dir():
+            print(f"skip {folder}: not found under {data}", file=sys.stderr)
+            continue
+        for matcher in MATCHERS:
+            methods = [m for m in METHODS if not (m == "guided" and matcher != "census-sgm")]
+            dens = list(SWEEP) if (key == SWEEP_DATASET and matcher == "census-sgm") else [DENSITY]
+            jobs.append({"folder": folder, "dataset": key, "matcher": matcher, "methods": methods,
+                         "sensor": "uniform", "densities": dens})
+            if key == "kitti2012":
+                jobs.append({"folder": folder, "dataset": key, "matcher": matcher, "methods": methods,
+                             "sensor": "lidar", "densities": None})
+    return jobs
+
+
+def run_all(data: Path, limit: int | None) -> dict[str, Any]:
+    """Run every job; return the results document (without summaries)."""
+    import cv2
+
+    from vpp_service.datasets import open_dataset
+    from vpp_service.evaluation import run_evaluation
+    from vpp_service.vpp import VPPConfig
+
+    cv2.setNumThreads(1)
+    vpp_config = VPPConfig()
+    jobs = _jobs(data)
+    if not jobs:
+        raise SystemExit(f"--data: no known dataset folder under {data}")
+    rows: list[dict[str, Any]] = []
+    t0 = time.perf_counter()
+    for j, job in enumerate(jobs, 1):
+        ds = open_dataset("auto", data / job["folder"])
+        ds.select(None, limit)
+        prefix = f"[job {j}/{len(jobs)} {job['dataset']} {job['matcher']} {job['sensor']}]"
+        tj = time.perf_counter()
+        out = run_evaluation(ds, job["matcher"], job["methods"], job["densities"], job["sensor"], vpp_config, SEED,
+                             progress=_Progress(prefix, t0), matcher_options={"threads": 1} if job["matcher"] == "census-sgm" else None,
+                             dataset_name=job["dataset"])
+        job["seconds"] = round(time.perf_counter() - tj, 2)
+        job["scenes"] = sorted({r["scene"] for r in out})
+        rows += out
+    total = time.perf_counter() - t0
+    config = {
+        "seed": SEED, "density": DENSITY, "sweep_densities": list(SWEEP), "sweep_dataset": SWEEP_DATASET,
+        "matchers": list(MATCHERS), "matcher_options": {"census-sgm threads": 1, "sgbm": "cv2.setNumThreads(1), defaults", "max_disparity": "per scene: "
+                                                        "smallest multiple of 16 above max GT (runner default)"},
+        "methods": list(METHODS), "guided": "census-sgm only (cost-volume modulation k=10, c=1)",
+        "vpp": {k: getattr(vpp_config, k) for k in vpp_config.__dataclass_fields__},
+        "lidar": "vpp_service.sources.sensors.LidarSensor defaults (64 beams, +2/-24.8 deg, 0.2 deg, "
+                 "0.5-120 m, no noise), sampled from the KITTI GT",
+        "holes": "filled before scoring (vpp_service.matchers.fill_holes, background interpolation)",
+        "scored": "all valid-GT pixels (occluded included); *_nocc over the dataset's non-occlusion mask",
+        "limit": limit, "data": str(data), "jobs": jobs,
+    }
+    commit = _git("rev-parse", "HEAD")
+    dirty = [line[3:] for line in _git("status", "--porcelain", "--", "vpp_service", "setup.py").splitlines()]
+    meta = {"date_utc": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+            "git_commit": commit, "git_dirty_library": dirty, "seconds": round(total, 1), **_machine()}
+    return {"meta": meta, "config": config, "paper": PAPER, "results": rows}
+
+
+# --------------------------------------------------------------------------- summarizing
+
+
+def _mean(vals: list[Any]) -> float:
+    v = [x for x in vals if isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)]
+    return sum(v) / len(v) if v else float("nan")
+
+
+def _group_means(rows: list[dict]) -> dict[str, Any]:
+    keys = ("bad1", "bad2", "bad3", "bad4", "avg", "rms", "bad2_nocc", "avg_nocc", "n_points", "density", "ms")
+    out: dict[str, Any] = {k: _mean([r.get(k) for r in rows]) for k in keys}
+    out["scenes"] = len({r["scene"] for r in rows})
+    return out
+
+
+def summaries(rows: list[dict]) -> dict[str, Any]:
+    """``{dataset: {sensor: {matcher: {method: means}}}}`` at the main density (lidar: measured)."""
+    groups: dict[tuple, list[dict]] = defaultdict(list)
+    for r in rows:
+        if r["sensor"] == "uniform" and not math.isclose(r["density"], DENSITY):
+            continue
+        groups[(r["dataset"], r["sensor"], r["matcher"], r["method"])].append(r)
+    out: dict[str, Any] = {}
+    for (ds, sensor, matcher, method), g in groups.items():
+        out.setdefault(ds, {}).setdefault(sensor, {}).setdefault(matcher, {})[method] = _group_means(g)
+    return out
+
+
+def sweep_summary(rows: list[dict]) -> dict[str, Any]:
+    """``{method: {density: means}}`` of the sweep; density 0 = the matcher alone for every method."""
+    srows = [r for r in rows if r["dataset"] == SWEEP_DATASET and r["matcher"] == "census-sgm"
+             and r["sensor"] == "uniform"]
+    base = [r for r in srows if r["method"] == "baseline" and math.isclose(r["density"], SWEEP[0])]
+    out: dict[str, Any] = {}
+    for method in METHODS:
+        per = {"0": _group_means(base)} if base else {}
+        for d in SWEEP:
+            g = [r for r in srows if r["method"] == method and math.isclose(r["density"], d)]
+            if g:
+                per[f"{d:g}"] = _group_means(g)
+        out[method] = per
+    return out
+
+
+# --------------------------------------------------------------------------- rendering
+
+
+def _f(v: Any, nd: int = 2) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "-"
+    return f"{v:.{nd}f}"
+
+
+def _table(header: list[str], lines: list[list[str]]) -> str:
+    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---:" if i else "---" for i in range(len(header))) + "|"]
+    return "\n".join(out + ["| " + " | ".join(line) + " |" for line in lines])
+
+
+def _dataset_table(block: dict[str, Any]) -> str:
+    header = ["matcher", "method"] + [c[1] for c in COLS] + ["points", "ms"]
+    lines = []
+    for matcher in MATCHERS:
+        if matcher not in block:
+            continue
+        for method in METHODS:
+            s = block[matcher].get(method)
+            if s is None:
+                lines.append([matcher, method] + ["n/a"] * (len(COLS) + 2))
+                continue
+            lines.append([matcher, method if method != "vpp" else "**vpp**"] + [_f(s.get(k)) for k, _ in COLS]
+                         + [f"{s['n_points']:.0f}" if method != "baseline" else "-", f"{s['ms']:.0f}"])
+    return _table(header, lines)
+
+
+def plot(path: Path, sweep: dict[str, Any], n_scenes: int) -> None:
+    """bad-2 and avg error vs density, one line per method."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), dpi=90)
+    style = {"baseline": ("k", "--", "census-sgm alone"), "guided": ("tab:blue", "-", "guided stereo"),
+             "vpp": ("tab:red", "-", "VPP")}
+    for ax, metric, ylabel in ((axes[0], "bad2", "bad-2 (%)"), (axes[1], "avg", "avg error (px)")):
+        for method, per in sweep.items():
+            xs = [100 * float(d) for d in per]
+            ys = [per[d][metric] for d in per]
+            c, ls, label = style[method]
+            ax.plot(xs, ys, color=c, ls=ls, marker="o", ms=4, label=label)
+        ax.set_xlabel("sparse points (% of valid GT pixels)")
+        ax.set_ylabel(ylabel)
+        ax.set_ylim(bottom=0)
+        ax.grid(True, alpha=0.3)
+    axes[0].legend()
+    fig.suptitle(f"Middlebury 2005/2006 third size, {n_scenes} scenes, census-sgm, seed {SEED} "
+                 "(means over scenes, holes filled, all valid-GT pixels)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(str(path), format="png")
+    plt.close(fig)
+
+
+def _per_scene_table(rows: list[dict]) -> str:
+    by: dict[str, dict[str, dict]] = defaultdict(dict)
+    for r in rows:
+        if (r["dataset"] == SWEEP_DATASET and r["matcher"] == "census-sgm" and r["sensor"] == "uniform"
+                and math.isclose(r["density"], DENSITY)):
+            by[r["scene"]][r["method"]] = r
+    header = ["scene", "baseline bad-2", "guided bad-2", "vpp bad-2", "vpp / baseline", "baseline avg", "vpp avg"]
+    lines = []
+    for scene in sorted(by):
+        m = by[scene]
+        b, g, v = (m.get(k, {}) for k in METHODS)
+        ratio = v.get("bad2", float("nan")) / b["bad2"] if b.get("bad2") else float("nan")
+        lines.append([scene, _f(b.get("bad2")), _f(g.get("bad2")), _f(v.get("bad2")), _f(ratio),
+                      _f(b.get("avg")), _f(v.get("avg"))])
+    return _table(header, lines)
+
+
+def render(doc: dict[str, Any], out: Path) -> str:
+    """Markdown of ``docs/results.md`` from the results document."""
+    summ = doc["summary"]
+    sweep = doc["sweep"]
+    meta, cfg = doc["meta"], doc["config"]
+    names = {k: n for _, k, n in DATASETS}
+    P: list[str] = []
+    P += ["# Results: matcher alone vs guided stereo vs VPP on the real datasets", "",
+          "Regenerate everything on this page (tables, JSON, plot) with one command from the repository root:", "",
+          "```", "python scripts/make_results.py [--data ../shared/data] [--out docs]", "```", "",
+          f"Last run: {meta['date_utc']}, commit `{meta['git_commit'][:12]}`"
+          f"{' + uncommitted changes in ' + ', '.join(f'`{p}`' for p in meta['git_dirty_library']) if meta.get('git_dirty_library') else ''}, "
+          f"{meta['seconds']:.0f} s on {meta['cpu']} ({meta['threads_used']} thread, "
+          f"{meta['usable_cores']} usable cores), Python {meta['python']}, NumPy {meta['numpy']}, "
+          f"OpenCV {meta['opencv']}. Everything (config, machine, every per-scene row) is in "
+          "[`results/results.json`](results/results.json)."
+          + (f" **Partial run: first {cfg['limit']} scene(s) per dataset.**" if cfg.get("limit") else ""), "",
+          "## Protocol", "",
+          f"- Sparse points: {100 * cfg['density']:g} % of the valid ground-truth pixels drawn uniformly at random, "
+          f"seed {cfg['seed']} (same points for guided and VPP). KITTI also with a simulated 64-beam LiDAR "
+          "(`--sensor lidar`, sampled from the accumulated-laser ground truth: the folder ships no raw scan).",
+          "- VPP: default `VPPConfig` = the paper's setting (random pattern, per-pixel 3x3 patches, alpha 0.4, "
+          "sub-pixel splatting, occlusion handling FGD).",
+          "- Guided stereo (Poggi et al. 2019): cost modulation k = 10, c = 1 inside `census-sgm`; `sgbm` "
+          "(OpenCV StereoSGBM, 3-way, block 5) exposes no cost volume, so guided is n/a for it.",
+          "- `census-sgm`: our re-implementation of the rSGM recipe (5x5 census, 8-path SGM with "
+          "intensity-adaptive P2, left-right check, 3x3 median, speckle filter), 1 thread. Disparity range "
+          "per scene = smallest multiple of 16 above the largest GT disparity.",
+          "- Holes of every matcher filled before scoring (background interpolation). bad-τ = % of pixels with "
+          "|d - gt| > τ, avg = mean absolute error (px), over **all** pixels with valid ground truth "
+          "(occluded included); `nocc` columns use the non-occlusion mask where one exists (Middlebury: "
+          "`nonocc.png` for Tsukuba, left-right check of the two GT maps otherwise; KITTI: `disp_noc`; "
+          "ETH3D: no mask in the folder). Numbers are means over scenes; `ms` = VPP + matching time per "
+          "scene; `points` = mean number of sparse points.", ""]
+
+    # headline
+    mb = summ.get(SWEEP_DATASET, {}).get("uniform", {}).get("census-sgm", {})
+    if all(k in mb for k in METHODS):
+        b, g, v = (mb[k] for k in METHODS)
+        P += ["## Headline", "",
+              f"Middlebury 2005/2006 ({b['scenes']} scenes), census-sgm, 5 % points, mean bad-2: "
+              f"**baseline {b['bad2']:.2f} % → guided {g['bad2']:.2f} % → VPP {v['bad2']:.2f} %** "
+              f"(VPP / baseline = {v['bad2'] / b['bad2']:.2f}; paper on Middlebury 2014: 20.37 / 41.86 = 0.49). "
+              f"Mean avg error {b['avg']:.2f} → {g['avg']:.2f} → {v['avg']:.2f} px.", ""]
+
+    P += ["## Per dataset (5 % uniform points unless noted)", ""]
+    for _, key, name in DATASETS:
+        if key not in summ:
+            continue
+        for sensor in ("uniform", "lidar"):
+            block = summ[key].get(sensor)
+            if not block:
+                continue
+            any_s = next(iter(next(iter(block.values())).values()))
+            extra = (f"simulated 64-beam LiDAR, {100 * any_s['density']:.1f} % of valid GT pixels"
+                     if sensor == "lidar" else "5 % uniform points")
+            P += [f"### {name} - {extra} ({any_s['scenes']} scene{'s' if any_s['scenes'] != 1 else ''})", "",
+                  _dataset_table(block), ""]
+    P += ["bad-τ in %, errors in px. `-`: no non-occlusion mask for this dataset.", ""]
+
+    # paper comparison
+    P += ["## Beside the paper", "",
+          "The paper's numbers (Table 2, 5 % points, rSGM; Table 4 for KITTI) and ours for the closest "
+          "dataset we have. bad-2 (%) / avg (px), baseline → guided → VPP.", ""]
+    lines = []
+    for pkey, p in PAPER.items():
+        ds, sensor = PAPER_OURS[pkey]
+        ours = summ.get(ds, {}).get(sensor, {}).get("census-sgm", {})
+        pb = " → ".join(f"{x:.2f}" for x in p["bad2"])
+        pa = " → ".join(f"{x:.2f}" for x in p["avg"]) if p["avg"] else "-"
+        if all(k in ours for k in METHODS):
+            ob = " → ".join(_f(ours[k]["bad2"]) for k in METHODS)
+            oa = " → ".join(_f(ours[k]["avg"]) for k in METHODS)
+            r_ours = _f(ours["vpp"]["bad2"] / ours["baseline"]["bad2"])
+        else:
+            ob = oa = r_ours = "not run"
+        oname = names[ds] + (" (sim. LiDAR)" if sensor == "lidar" else "")
+        lines.append([p["label"], pb, pa, f"{p['bad2'][2] / p['bad2'][0]:.2f}", oname, ob, oa, r_ours])
+    P += [_table(["paper: dataset", "bad-2", "avg", "VPP/base", "ours: dataset", "bad-2", "avg", "VPP/base"],
+                 lines), ""]
+    P += _comment(summ)
+
+    # sweep
+    if sweep and sweep.get("baseline"):
+        n = next(iter(sweep["baseline"].values()))["scenes"]
+        P += ["## Density sweep (Middlebury 2005/2006, census-sgm)", "",
+              "![bad-2 and avg error vs density](results/sweep_middlebury2006.png)", "",
+              "Data: [`results/sweep_middlebury2006.json`](results/sweep_middlebury2006.json). "
+              "0 % = census-sgm alone.", ""]
+        dens = list(sweep["baseline"].keys())
+        header = ["method"] + [f"{100 * float(d):g} %" for d in dens]
+        lines = []
+        for metric, unit in (("bad2", "bad-2"), ("avg", "avg")):
+            for method in METHODS:
+                per = sweep.get(method, {})
+                lines.append([f"{method} {unit}"] + [_f(per[d][metric]) if d in per else "-" for d in dens])
+        P += [_table(header, lines), "", f"({n} scenes; bad-2 in %, avg in px.)", ""]
+        P += ["### Per scene at 5 % (Middlebury 2005/2006, census-sgm)", "", _per_scene_table(doc["results"]), ""]
+    P += ["Data: Middlebury (Scharstein & Szeliski 2002/2003, Scharstein & Pal 2007, Hirschmüller & Scharstein "
+          "2007), KITTI (Geiger et al. 2012), ETH3D (Schöps et al. 2017); non-commercial research use for "
+          "KITTI and ETH3D.", ""]
+    return "\n".join(P)
+
+
+def _comment(summ: dict[str, Any]) -> list[str]:
+    """Honest comparison with the paper: the differences and which way they push."""
+    def get(ds: str, sensor: str, method: str, metric: str, matcher: str = "census-sgm") -> float:
+        try:
+            return summ[ds][sensor][matcher][method][metric]
+        except KeyError:
+            return float("nan")
+
+    mb, mv = get(SWEEP_DATASET, "uniform", "baseline", "bad2"), get(SWEEP_DATASET, "uniform", "vpp", "bad2")
+    mbn, mvn = (get(SWEEP_DATASET, "uniform", "baseline", "bad2_nocc"),
+                get(SWEEP_DATASET, "uniform", "vpp", "bad2_nocc"))
+    eb, ev = get("eth3d", "uniform", "baseline", "bad2"), get("eth3d", "uniform", "vpp", "bad2")
+    kb, kg, kv = (get("kitti2012", "lidar", m, "bad2") for m in METHODS)
+    sb, sv = get(SWEEP_DATASET, "uniform", "baseline", "bad2", "sgbm"), get(SWEEP_DATASET, "uniform", "vpp", "bad2",
+                                                                             "sgbm")
+    L = ["### How our setting differs, and which way it pushes", "",
+         f"- **Middlebury: 2005/2006 at third size, not 2014 at full resolution.** Our scenes are ~430 x 370 px "
+         "with disparities below ~90 px; the paper's are ~3000 x 2000 with disparities up to several hundred px. "
+         "A 2-px threshold at third size is ~6 px at full size and the matcher searches a far smaller range, so "
+         f"our baseline is much better in absolute terms ({_f(mb)} % vs 41.86 % bad-2): this *favours our "
+         "absolute numbers* but leaves VPP less to fix, so the *relative* gain "
+         f"(VPP/baseline {_f(mv / mb)} vs the paper's 0.49) is not directly comparable. The 2005/2006 scenes are "
+         "also less textureless and less glossy than 2014's, again less headroom for VPP.",
+         "- **Occluded pixels are scored** as in the paper, but the 2005/2006 (and 2003/2001) ground truth has no "
+         "value at many occluded pixels (they are 0 = invalid), so 'all pixels' there is closer to "
+         f"'non-occluded' than in Middlebury 2014 (ours, non-occluded: baseline {_f(mbn)} % → VPP {_f(mvn)} %). "
+         "This favours us.",
+         "- **`census-sgm` is our own re-implementation of the rSGM recipe**, not the authors' rSGM binary "
+         "(different penalties, post-processing and sub-pixel step; the holes left by our left-right check and "
+         "speckle filter are filled by background interpolation before scoring). Absolute numbers differ for "
+         "that reason alone; our guided stereo is the k = 10, c = 1 modulation applied to our census cost.",
+         f"- **ETH3D: one scene (playground_1l), not the whole training set**, and no non-occlusion mask in the "
+         f"folder. One scene is anecdotal: baseline {_f(eb)} % → VPP {_f(ev)} % vs 9.11 % → 0.62 % in the paper.",
+         f"- **KITTI: one 2012 frame with a simulated LiDAR, not KITTI 2015 with the raw scans.** Our 64-beam "
+         "LiDAR is sampled *from the ground truth itself* (accumulated laser scans): every point is exact, "
+         "noise-free, perfectly registered, never on a moving object's wrong side and never occluded from the "
+         "camera, which strongly favours guided and VPP. The paper's raw single sweep has noise, a different "
+         "viewpoint (points visible to the LiDAR but occluded for the camera) and rolling-shutter-like "
+         f"misalignment. Ours: {_f(kb)} → {_f(kg)} → {_f(kv)} % bad-2 vs 15.66 → 10.00 → 6.12 %. The KITTI ground "
+         "truth is also sparse (~29 % of pixels, mostly the road and near objects, no sky), so the scored pixels "
+         "are the easier ones.",
+         "- **Sparse points are scored too** (they are valid-GT pixels), as in the paper; at 5 % they are a small "
+         "share of the scored pixels.",
+         f"- `sgbm` (OpenCV) is not in the paper's tables; with VPP it gives {_f(sb)} → {_f(sv)} % bad-2 on "
+         "Middlebury 2005/2006. It searches colour blocks, so VPP's painted pattern helps it by a different "
+         "margin than census-sgm.",
+         "- The paper's deep networks (RAFT-Stereo, PSMNet) are not evaluated here (no weights, CPU only).", ""]
+    return L
+
+
+def _json_safe(obj: Any) -> Any:
+    if isinstance(obj, float):
+        return round(obj, 4) if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {str(k): _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    if hasattr(obj, "item") and callable(obj.item):
+        return _json_safe(obj.item())
+    return obj
+
+
+def write_outputs(doc: dict[str, Any], out: Path) -> None:
+    """Summaries, JSON files, the plot and results.md under ``out``."""
+    res_dir = out / "results"
+    res_dir.mkdir(parents=True, exist_ok=True)
+    doc["summary"] = summaries(doc["results"])
+    doc["sweep"] = sweep_summary(doc["results"])
+    doc = _json_safe(doc)
+    (res_dir / "results.json").write_text(json.dumps(doc, indent=1) + "\n")
+    if doc["sweep"].get("baseline"):
+        srows = [r for r in doc["results"] if r["dataset"] == SWEEP_DATASET and r["matcher"] == "census-sgm"
+                 and r["sensor"] == "uniform"]
+        sweep_doc = {"meta": doc["meta"], "densities": [0.0] + list(SWEEP), "summary": doc["sweep"],
+                     "results": srows}
+        (res_dir / "sweep_middlebury2006.json").write_text(json.dumps(sweep_doc, indent=1) + "\n")
+        n = next(iter(doc["sweep"]["baseline"].values()))["scenes"]
+        plot(res_dir / "sweep_middlebury2006.png", doc["sweep"], n)
+    (out / "results.md").write_text(render(doc, out))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data",
+                    help="folder holding the dataset folders (default ../shared/data)")
+    ap.add_argument("--out", type=Path, default=REPO / "docs", help="docs folder (default docs)")
+    ap.add_argument("--limit", type=int, help="first N scenes per dataset only (quick check)")
+    ap.add_argument("--render-only", action="store_true",
+                    help="rebuild results.md and the plot from <out>/results/results.json")
+    a = ap.parse_args(argv)
+    if a.limit is not None and a.limit < 1:
+        ap.error(f"--limit: must be >= 1, got {a.limit}")
+    if a.render_only:
+        src = a.out / "results" / "results.json"
+        if not src.is_file():
+            ap.error(f"--render-only: {src} not found; run without --render-only first")
+        doc = json.loads(src.read_text())
+        doc = {k: doc[k] for k in ("meta", "config", "paper", "results")}
+    else:
+        if not a.data.is_dir():
+            ap.error(f"--data: folder not found: {a.data}")
+        doc = run_all(a.data.resolve(), a.limit)
+    write_outputs(doc, a.out)
+    print(f"wrote {a.out / 'results.md'} and {a.out / 'results'}/", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
