@@ -686,6 +686,160 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
                         oL[xl * C + c] = _blend16(oL[xl * C + c], vals[k * C + c], wa)
 
 
+cdef inline uint8_t _blend32(uint32_t a, uint32_t b, uint32_t w) noexcept nogil:
+    """_blend16 in 32-bit arithmetic (a * (65536 - w) + b * w + 32768 < 2**25)."""
+    return <uint8_t>((a * (65536 - w) + b * w + 32768) >> 16)
+
+
+cdef void _paint_row_random(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_t* cidx,
+                            int32_t* crow, uint64_t* zbuf) noexcept nogil:
+    """Fast path of :func:`_paint_row` for the per-pixel random pattern (no adaptive patch).
+
+    Same order and arithmetic; the 64-bit hash of each painted left pixel is
+    computed once (right pass) and kept for the left pass.
+    """
+    cdef int H = cx.H, W = cx.W, C = cx.C, hmax = cx.hmax
+    cdef int K = 2 * hmax + 1
+    cdef int64_t rowb = <int64_t>r * W * C
+    cdef int s_lo, s_hi, nsrc, j, jbest, s, x, dy, c, col, fl, k, ncon, n, xl, k0, k1
+    cdef int64_t idx
+    cdef uint64_t key, kbest, v16, src, i0, i1, z
+    cdef uint32_t w0, w1, wb, wa32
+    cdef double d, xp, beta
+    cdef int occ_pt
+    cdef uint8_t* oL = cx.oL + rowb
+    cdef uint8_t* oR = cx.oR + rowb
+    cdef const uint64_t* pkey = cx.pkey
+    cdef const uint8_t* occ = cx.occ
+    cdef int occmode = cx.occmode
+    cdef int splat = cx.splat
+    cdef uint64_t wa = cx.wa
+    cdef uint64_t seedmix = cx.seedmix
+    cdef double alpha = cx.alpha
+    cdef uint64_t* zb
+    cdef uint64_t cand[64]
+    wa32 = <uint32_t>wa
+    memcpy(oL, cx.L + rowb, W * C)
+    memcpy(oR, cx.R + rowb, W * C)
+    s_lo = r - hmax
+    if s_lo < 0:
+        s_lo = 0
+    s_hi = r + hmax
+    if s_hi > H - 1:
+        s_hi = H - 1
+    nsrc = s_hi - s_lo + 1
+    for j in range(nsrc):
+        heads[j] = cx.off[s_lo + j]
+        ends[j] = cx.off[s_lo + j + 1]
+    # branch-free k-way merge: candidate = (d bits << 8) | source index (ties -> smaller row)
+    for j in range(nsrc):
+        cand[j] = ((pkey[heads[j]] >> 32) << 8) | <uint64_t>j if heads[j] < ends[j] else ALL1
+    ncon = 0
+    while True:
+        kbest = cand[0]
+        for j in range(1, nsrc):
+            kbest = cand[j] if cand[j] < kbest else kbest
+        if kbest == ALL1:
+            break
+        jbest = <int>(kbest & 255)
+        idx = heads[jbest]
+        heads[jbest] += 1
+        cand[jbest] = ((pkey[idx + 1] >> 32) << 8) | <uint64_t>jbest if idx + 1 < ends[jbest] else ALL1
+        s = s_lo + jbest
+        occ_pt = 0
+        if occ != NULL and occmode != 2:
+            occ_pt = occ[<int64_t>s * W + <int>(pkey[idx] & LOW32)]
+        if occ_pt and occmode == 1:
+            continue
+        cidx[ncon] = idx
+        crow[ncon] = s if not occ_pt else -1 - s
+        ncon += 1
+    if ncon == 0:
+        return
+    # right row (visible points), hashes kept per contribution
+    for n in range(ncon):
+        if crow[n] < 0 and occmode == 3:
+            continue
+        idx = cidx[n]
+        x = <int>(pkey[idx] & LOW32)
+        d = vpp_u2f(<uint32_t>(pkey[idx] >> 32))
+        xp = <double>x - d
+        zb = zbuf + <int64_t>n * K
+        k0 = 0
+        if x - hmax < 0:
+            k0 = hmax - x
+        k1 = K
+        if x + hmax > W - 1:
+            k1 = W - 1 - x + hmax + 1
+        for k in range(k0, k1):
+            zb[k] = _hash(seedmix, <uint64_t>(x + k - hmax), <uint64_t>r)
+        if splat:
+            fl = <int>floor(xp)
+            beta = xp - <double>fl
+            w0 = <uint32_t>_w16(alpha * (1.0 - beta))
+            w1 = <uint32_t>_w16(alpha * beta)
+            for k in range(k0, k1):
+                z = zb[k]
+                col = fl + k - hmax
+                if col >= 0 and col < W:
+                    for c in range(C):
+                        oR[col * C + c] = _blend32(oR[col * C + c], <uint32_t>((z >> (8 * c)) & 255), w0)
+                col = col + 1
+                if beta > 0 and col >= 0 and col < W:
+                    for c in range(C):
+                        oR[col * C + c] = _blend32(oR[col * C + c], <uint32_t>((z >> (8 * c)) & 255), w1)
+        else:
+            fl = <int>floor(xp + 0.5)
+            for k in range(k0, k1):
+                z = zb[k]
+                col = fl + k - hmax
+                if col >= 0 and col < W:
+                    for c in range(C):
+                        oR[col * C + c] = _blend32(oR[col * C + c], <uint32_t>((z >> (8 * c)) & 255), wa32)
+    # left row: pattern, or FGD content of the final right row
+    for n in range(ncon):
+        idx = cidx[n]
+        x = <int>(pkey[idx] & LOW32)
+        k0 = 0
+        if x - hmax < 0:
+            k0 = hmax - x
+        k1 = K
+        if x + hmax > W - 1:
+            k1 = W - 1 - x + hmax + 1
+        if crow[n] < 0 and occmode == 3:
+            d = vpp_u2f(<uint32_t>(pkey[idx] >> 32))
+            xp = <double>x - d
+            if splat:
+                fl = <int>floor(xp)
+                beta = xp - <double>fl
+            else:
+                fl = <int>floor(xp + 0.5)
+                beta = 0.0
+            wb = <uint32_t>_w16(beta)
+            for k in range(k0, k1):
+                col = fl + k - hmax
+                if col < 0 or col >= W or (beta > 0 and col + 1 >= W):
+                    continue
+                xl = x + k - hmax
+                for c in range(C):
+                    i0 = oR[col * C + c]
+                    if beta > 0:
+                        i1 = oR[(col + 1) * C + c]
+                        v16 = i0 * (65536 - wb) + i1 * wb
+                    else:
+                        v16 = i0 * 65536
+                    src = oL[xl * C + c]
+                    oL[xl * C + c] = <uint8_t>((src * (65536 - wa) * 65536 + v16 * wa
+                                                + 2147483648ULL) >> 32)
+        else:
+            zb = zbuf + <int64_t>n * K
+            for k in range(k0, k1):
+                z = zb[k]
+                xl = x + k - hmax
+                for c in range(C):
+                    oL[xl * C + c] = _blend32(oL[xl * C + c], <uint32_t>((z >> (8 * c)) & 255), wa32)
+
+
 # ----------------------------------------------------------------- entry points
 def hist_pick_bits(const uint64_t[::1] occupancy):
     """Histogram value of a 256-bit occupancy (4 uint64, bit v = bin v filled); -1 if all filled.
@@ -849,6 +1003,9 @@ def project_kernel(const uint8_t[:, :, ::1] left, const uint8_t[:, :, ::1] right
     cdef int32_t* crow
     cdef uint8_t* vbuf
     cdef uint8_t* mbuf
+    cdef uint64_t* zbuf
+    cdef bint fast_random = (pattern == 0 and not uniform and not bilateral and cx.hp == NULL
+                             and K <= 64)
     with nogil, parallel(num_threads=nthreads):
         heads = <int64_t*>malloc(sizeof(int64_t) * K)
         ends = <int64_t*>malloc(sizeof(int64_t) * K)
@@ -857,8 +1014,12 @@ def project_kernel(const uint8_t[:, :, ::1] left, const uint8_t[:, :, ::1] right
         vbuf = <uint8_t*>malloc(mc * K * C)
         mbuf = <uint8_t*>malloc(mc * K)
         tabs = <uint64_t*>malloc(sizeof(uint64_t) * tabsize)
+        zbuf = <uint64_t*>malloc(sizeof(uint64_t) * mc * K)
         for y in prange(H, schedule="guided"):
-            _paint_row(&cx, y, heads, ends, cidx, crow, vbuf, mbuf, tabs)
+            if fast_random:
+                _paint_row_random(&cx, y, heads, ends, cidx, crow, zbuf)
+            else:
+                _paint_row(&cx, y, heads, ends, cidx, crow, vbuf, mbuf, tabs)
         free(heads)
         free(ends)
         free(cidx)
@@ -866,4 +1027,5 @@ def project_kernel(const uint8_t[:, :, ::1] left, const uint8_t[:, :, ::1] right
         free(vbuf)
         free(mbuf)
         free(tabs)
+        free(zbuf)
     return stats, cnt
