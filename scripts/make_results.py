@@ -362,7 +362,8 @@ def render(doc: dict[str, Any], out: Path) -> str:
                      if sensor == "lidar" else "5 % uniform points")
             P += [f"### {name} - {extra} ({any_s['scenes']} scene{'s' if any_s['scenes'] != 1 else ''})", "",
                   _dataset_table(block), ""]
-    P += ["bad-τ in %, errors in px. `-`: no non-occlusion mask for this dataset.", ""]
+    P += ["bad-τ in %, errors in px. `-` in the nocc columns: no non-occlusion mask for this dataset; "
+          "in `points`: the matcher alone uses no points.", ""]
 
     # paper comparison
     P += ["## Beside the paper", "",
