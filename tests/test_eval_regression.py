@@ -1,0 +1,31 @@
+"""Accuracy regression guard on real data: the issue's acceptance criterion.
+
+On all Middlebury 2005/2006 third-size scenes with ``census-sgm`` at 5 % uniform
+points (seed 0, default VPP config), VPP's mean bad-2 must be at most 0.6x the
+matcher alone and below guided stereo. Compared against the benchmark's ground
+truth; if a change to VPP, the matcher or the harness makes VPP quietly worse,
+this fails. Takes ~30-60 s on 2 cores.
+"""
+from pathlib import Path
+
+import pytest
+
+from vpp_service.datasets import open_dataset
+from vpp_service.evaluation.report import summarize
+from vpp_service.evaluation.runner import run_evaluation
+
+ROOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "middlebury2005_2006_thirdsize"
+
+
+@pytest.mark.slow
+def test_vpp_beats_baseline_and_guided_on_middlebury2006():
+    if not ROOT.is_dir():
+        pytest.skip(f"shared data not found at {ROOT}")
+    dataset = open_dataset("auto", ROOT)
+    assert len(dataset) == 26
+    rows = run_evaluation(dataset, "census-sgm", ("baseline", "guided", "vpp"), 0.05, seed=0)
+    assert len(rows) == 3 * 26
+    summary = summarize(rows)
+    base, guided, vpp = (summary[m]["bad2"] for m in ("baseline", "guided", "vpp"))
+    assert vpp <= 0.6 * base, (base, guided, vpp)
+    assert vpp < guided < base, (base, guided, vpp)
