@@ -57,6 +57,26 @@ def _probability(name: str, v: float) -> None:
         raise ValueError(f"{name}: must be in [0, 1), got {v!r}")
 
 
+@dataclass(frozen=True)
+class NominalGeometry:
+    """Options every sensor shares: the geometry assumed for uncalibrated frames.
+
+    Attributes
+    ----------
+    nominal_f : float
+        Focal length (px) assumed when the frame has no calibration. Default 1000.
+    nominal_baseline : float
+        Baseline (m) assumed when the frame has no calibration. Default 0.1.
+    """
+
+    nominal_f: float = 1000.0
+    nominal_baseline: float = 0.1
+
+    def __post_init__(self) -> None:
+        _positive("nominal_f", self.nominal_f)
+        _positive("nominal_baseline", self.nominal_baseline)
+
+
 class Sensor:
     """Base class: turns a frame's ground truth into sparse measurements.
 
@@ -98,10 +118,27 @@ class Sensor:
         gt = gt.astype(np.float32, copy=False)
         return np.where(np.isfinite(gt) & (gt > 0), gt, np.nan).astype(np.float32)
 
-    @staticmethod
-    def _check_seed(seed: int) -> None:
+    @classmethod
+    def _begin(cls, frame: StereoFrame, seed: int) -> tuple[np.ndarray, np.random.Generator]:
+        """Validated ground truth (NaN = invalid) and the seeded generator of one simulation."""
+        gt = cls._gt(frame)
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ValueError(f"seed: must be an integer >= 0, got {seed!r}")
+        return gt, np.random.default_rng(seed)
+
+    @staticmethod
+    def _true_depth(gt: np.ndarray, rows: np.ndarray, cols: np.ndarray, f: float, b: float,
+                    doffs: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Sample ``gt`` at (rows, cols); keep the valid hits, return them with their depth."""
+        d = gt[rows, cols].astype(np.float64)
+        hit = np.isfinite(d)
+        return rows[hit], cols[hit], f * b / (d[hit] + doffs)
+
+    @staticmethod
+    def _measured_disparity(z_meas: np.ndarray, keep: np.ndarray, f: float, b: float,
+                            doffs: float) -> np.ndarray:
+        """Disparity of measured depths (rows not kept get a placeholder, never read)."""
+        return f * b / np.where(keep, z_meas, 1.0) - doffs
 
     def _output(self, frame: StereoFrame, rows: np.ndarray, cols: np.ndarray, disp: np.ndarray,
                 depth: np.ndarray | None) -> StereoFrame:
@@ -147,7 +184,7 @@ class UniformSensor(Sensor):
     name = "uniform"
 
     @dataclass(frozen=True)
-    class Options:
+    class Options(NominalGeometry):
         """Options of the ``uniform`` sensor.
 
         Attributes
@@ -162,20 +199,15 @@ class UniformSensor(Sensor):
 
         density: float = 0.05
         noise_px: float = 0.0
-        nominal_f: float = 1000.0
-        nominal_baseline: float = 0.1
 
         def __post_init__(self) -> None:
             if not np.isfinite(self.density) or not 0 < self.density <= 1:
                 raise ValueError(f"density: must be in (0, 1], got {self.density!r}")
             _non_negative("noise_px", self.noise_px)
-            _positive("nominal_f", self.nominal_f)
-            _positive("nominal_baseline", self.nominal_baseline)
+            super().__post_init__()
 
     def simulate(self, frame: StereoFrame, seed: int = 0) -> StereoFrame:
-        gt = self._gt(frame)
-        self._check_seed(seed)
-        rng = np.random.default_rng(seed)
+        gt, rng = self._begin(frame, seed)
         valid = np.flatnonzero(np.isfinite(gt).ravel())
         n = int(round(self.options.density * valid.size))
         pick = np.sort(rng.choice(valid, size=n, replace=False)) if n else valid[:0]
@@ -193,7 +225,7 @@ class LidarSensor(Sensor):
     name = "lidar"
 
     @dataclass(frozen=True)
-    class Options:
+    class Options(NominalGeometry):
         """Options of the ``lidar`` sensor.
 
         Attributes
@@ -222,8 +254,6 @@ class LidarSensor(Sensor):
         max_range: float = 120.0
         dropout: float = 0.0
         noise_m: float = 0.0
-        nominal_f: float = 1000.0
-        nominal_baseline: float = 0.1
 
         def __post_init__(self) -> None:
             if self.beams < 1:
@@ -238,8 +268,7 @@ class LidarSensor(Sensor):
                 raise ValueError(f"max_range: must exceed min_range ({self.min_range}), got {self.max_range}")
             _probability("dropout", self.dropout)
             _non_negative("noise_m", self.noise_m)
-            _positive("nominal_f", self.nominal_f)
-            _positive("nominal_baseline", self.nominal_baseline)
+            super().__post_init__()
 
     def elevations(self) -> np.ndarray:
         """Beam elevations in degrees, top beam first."""
@@ -247,10 +276,8 @@ class LidarSensor(Sensor):
         return np.linspace(o.fov_up, o.fov_down, o.beams) if o.beams > 1 else np.array([o.fov_up])
 
     def simulate(self, frame: StereoFrame, seed: int = 0) -> StereoFrame:
-        gt = self._gt(frame)
-        self._check_seed(seed)
+        gt, rng = self._begin(frame, seed)
         o = self.options
-        rng = np.random.default_rng(seed)
         h, w = frame.shape
         f, b, doffs, cx, cy = self._geometry(frame)
         step = np.deg2rad(o.azimuth_step)
@@ -267,10 +294,7 @@ class LidarSensor(Sensor):
         # one return per pixel (the first beam/azimuth that lands there)
         _, first = np.unique(rows * w + cols, return_index=True)
         rows, cols = rows[np.sort(first)], cols[np.sort(first)]
-        d = gt[rows, cols].astype(np.float64)
-        hit = np.isfinite(d)
-        rows, cols, d = rows[hit], cols[hit], d[hit]
-        z = f * b / (d + doffs)
+        rows, cols, z = self._true_depth(gt, rows, cols, f, b, doffs)
         ray = np.sqrt(1.0 + ((cols - cx) / f) ** 2 + ((rows - cy) / f) ** 2)
         r = z * ray
         keep = (r >= o.min_range) & (r <= o.max_range) & np.isfinite(r) & (z > 0)
@@ -280,7 +304,7 @@ class LidarSensor(Sensor):
         r_meas = r + noise
         keep &= r_meas > 0
         z_meas = r_meas / ray
-        d_meas = f * b / np.where(keep, z_meas, 1.0) - doffs
+        d_meas = self._measured_disparity(z_meas, keep, f, b, doffs)
         rows, cols = rows[keep], cols[keep]
         return self._output(frame, rows, cols, d_meas[keep].astype(np.float32), z_meas[keep].astype(np.float32))
 
@@ -292,7 +316,7 @@ class ToFSensor(Sensor):
     name = "tof"
 
     @dataclass(frozen=True)
-    class Options:
+    class Options(NominalGeometry):
         """Options of the ``tof`` sensor.
 
         Attributes
@@ -316,8 +340,6 @@ class ToFSensor(Sensor):
         max_range: float = 8.0
         noise_k: float = 0.0
         dropout: float = 0.0
-        nominal_f: float = 1000.0
-        nominal_baseline: float = 0.1
 
         def __post_init__(self) -> None:
             if self.grid_w < 1 or self.grid_h < 1:
@@ -328,14 +350,11 @@ class ToFSensor(Sensor):
                 raise ValueError(f"max_range: must exceed min_range ({self.min_range}), got {self.max_range}")
             _non_negative("noise_k", self.noise_k)
             _probability("dropout", self.dropout)
-            _positive("nominal_f", self.nominal_f)
-            _positive("nominal_baseline", self.nominal_baseline)
+            super().__post_init__()
 
     def simulate(self, frame: StereoFrame, seed: int = 0) -> StereoFrame:
-        gt = self._gt(frame)
-        self._check_seed(seed)
+        gt, rng = self._begin(frame, seed)
         o = self.options
-        rng = np.random.default_rng(seed)
         h, w = frame.shape
         f, b, doffs, _, _ = self._geometry(frame)
         cs = np.minimum(((np.arange(o.grid_w) + 0.5) * w / o.grid_w).astype(np.int64), w - 1)
@@ -343,16 +362,13 @@ class ToFSensor(Sensor):
         rows, cols = (a.ravel() for a in np.meshgrid(rs, cs, indexing="ij"))
         flat = np.unique(rows * w + cols)
         rows, cols = np.divmod(flat, w)
-        d = gt[rows, cols].astype(np.float64)
-        hit = np.isfinite(d)
-        rows, cols, d = rows[hit], cols[hit], d[hit]
-        z = f * b / (d + doffs)
+        rows, cols, z = self._true_depth(gt, rows, cols, f, b, doffs)
         keep = (z >= o.min_range) & (z <= o.max_range)
         keep &= ~(rng.random(z.size) < o.dropout)
         noise = rng.normal(0.0, 1.0, size=z.size) * o.noise_k * z**2 if o.noise_k > 0 else np.zeros(z.size)
         z_meas = z + noise
         keep &= z_meas > 0
-        d_meas = f * b / np.where(keep, z_meas, 1.0) - doffs
+        d_meas = self._measured_disparity(z_meas, keep, f, b, doffs)
         return self._output(frame, rows[keep], cols[keep], d_meas[keep].astype(np.float32), z_meas[keep].astype(np.float32))
 
 
@@ -376,4 +392,4 @@ def build_sensor(name: str, options: Mapping[str, Any] | None = None) -> Sensor:
     return cls(from_mapping(cls.Options, options, f"sensor.{name}"))
 
 
-__all__ = ["SENSORS", "Sensor", "UniformSensor", "LidarSensor", "ToFSensor", "build_sensor"]
+__all__ = ["SENSORS", "Sensor", "NominalGeometry", "UniformSensor", "LidarSensor", "ToFSensor", "build_sensor"]
