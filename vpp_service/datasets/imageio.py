@@ -7,6 +7,17 @@ import cv2
 import numpy as np
 
 
+def _imread(path: str | Path, what: str) -> np.ndarray:
+    """Read ``path`` as stored (``cv2.IMREAD_UNCHANGED``); ``what`` names it in errors."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"path: {what} not found: {path}")
+    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if raw is None:
+        raise ValueError(f"path: cannot decode {what} {path}")
+    return raw
+
+
 def read_image(path: str | Path) -> np.ndarray:
     """Read an 8-bit image as stored: H x W (gray) or H x W x 3 RGB, uint8.
 
@@ -22,12 +33,7 @@ def read_image(path: str | Path) -> np.ndarray:
     ValueError
         If OpenCV cannot decode it or it is not 8-bit.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"path: image not found: {path}")
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise ValueError(f"path: cannot decode image {path}")
+    img = _imread(path, "image")
     if img.dtype != np.uint8:
         raise ValueError(f"path: expected an 8-bit image, {path} is {img.dtype}")
     if img.ndim == 3:
@@ -54,12 +60,7 @@ def read_scaled_disparity(path: str | Path, scale: float) -> np.ndarray:
     """
     if not np.isfinite(scale) or scale <= 0:
         raise ValueError(f"scale: must be a finite number > 0, got {scale!r}")
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"path: disparity file not found: {path}")
-    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if raw is None:
-        raise ValueError(f"path: cannot decode disparity image {path}")
+    raw = _imread(path, "disparity image")
     if raw.ndim == 3:
         raw = raw[..., 0]
     disp = raw.astype(np.float32) / np.float32(scale)
@@ -73,12 +74,7 @@ def read_mask(path: str | Path, threshold: int = 128) -> np.ndarray:
     Middlebury ``mask0nocc.png`` / ``nonocc.png`` use 255 for non-occluded pixels
     (128 = occluded, 0 = invalid), hence the default threshold.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"path: mask not found: {path}")
-    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if raw is None:
-        raise ValueError(f"path: cannot decode mask {path}")
+    raw = _imread(path, "mask")
     if raw.ndim == 3:
         raw = raw[..., 0]
     return raw >= threshold
