@@ -9,8 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from vpp_service.datasets.base import AUTO_ORDER, DATASETS, scene_dirs
-from vpp_service.datasets.calibfile import parse_middlebury_calib
+from vpp_service.datasets.base import AUTO_ORDER, DATASETS
 from vpp_service.datasets.middlebury import Middlebury2014
 
 
@@ -31,18 +30,7 @@ class ETH3D(Middlebury2014):
     name = "eth3d"
     layout = "<scene>/im0.png, im1.png, calib.txt without vmin, disp0GT.pfm or disp0.pfm [mask0nocc.png]"
 
-    @classmethod
-    def _is_mine(cls, p: Path) -> bool:
-        if not cls._is_scene(p):
-            return False
-        try:
-            return "vmin" not in parse_middlebury_calib(p / "calib.txt")
-        except (ValueError, OSError):
-            return False
-
-    @classmethod
-    def detect(cls, root: Path) -> bool:
-        return bool(scene_dirs(root, cls._is_mine))
+    calib_has_vmin = False
 
     def __init__(self, root: str | Path) -> None:
         super().__init__(root)

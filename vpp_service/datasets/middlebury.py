@@ -70,12 +70,15 @@ class Middlebury2014(Dataset):
     def _is_scene(p: Path) -> bool:
         return (p / "im0.png").is_file() and (p / "im1.png").is_file() and (p / "calib.txt").is_file()
 
+    #: Whether this set's ``calib.txt`` carries ``vmin`` (Middlebury 2014 does, ETH3D does not).
+    calib_has_vmin = True
+
     @classmethod
     def _is_mine(cls, p: Path) -> bool:
         if not cls._is_scene(p):
             return False
         try:
-            return "vmin" in parse_middlebury_calib(p / "calib.txt")
+            return ("vmin" in parse_middlebury_calib(p / "calib.txt")) == cls.calib_has_vmin
         except (ValueError, OSError):
             return False
 
