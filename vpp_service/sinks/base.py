@@ -18,51 +18,33 @@ the service reports in its ``@status`` reply.
 """
 from __future__ import annotations
 
-from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
-from typing import Any, ClassVar, Mapping
+from abc import abstractmethod
+from typing import Any, Mapping
 
 from vpp_service.frame import FusionResult
+from vpp_service.plugin import Plugin, PluginContext, parse_plugin_options
 from vpp_service.registry import Registry
-from vpp_service.settings import from_mapping
 
 #: Registered sink classes by name ("zenoh", "rerun", "files").
 SINKS: Registry["Sink"] = Registry("sink")
 
 
-@dataclass
-class SinkContext:
-    """Service-wide facts a sink may need.
+class SinkContext(PluginContext):
+    """Service-wide facts a sink may need (fields: see :class:`~vpp_service.plugin.PluginContext`)."""
 
-    Attributes
+
+class Sink(Plugin):
+    """Base class of result sinks (see the module docstring for the life cycle).
+
+    Parameters
     ----------
-    rig : str
-        Rig name (used in topic names and entity paths).
-    prefix : str
-        Zenoh key prefix (default ``"vpp"``).
-    session : Any
-        The service's open ``zenoh.Session`` when one exists, else None.
+    options : Any
+        Instance of the subclass's ``Options``.
+    context : SinkContext
+        Service-wide facts.
     """
 
-    rig: str = "rig0"
-    prefix: str = "vpp"
-    session: Any = None
-    extra: dict[str, Any] = field(default_factory=dict)
-
-
-class Sink(ABC):
-    """Base class of result sinks (see the module docstring for the life cycle)."""
-
-    #: Frozen dataclass describing the options; override in subclasses.
-    Options: ClassVar[type] = None  # type: ignore[assignment]
-
-    def __init__(self, options: Any, context: SinkContext) -> None:
-        self.options = options
-        self.context = context
-        self._counters = {"written": 0, "dropped": 0, "errors": 0}
-
-    def open(self) -> None:  # noqa: B027 - optional hook
-        """Acquire resources (files, sessions, threads)."""
+    counter_names = ("written", "dropped", "errors")
 
     @abstractmethod
     def write(self, result: FusionResult) -> None:
@@ -70,10 +52,6 @@ class Sink(ABC):
 
     def close(self, timeout: float = 5.0) -> None:  # noqa: B027 - optional hook
         """Flush and release resources within ``timeout`` seconds."""
-
-    def stats(self) -> dict[str, int]:
-        """Counters: written, dropped, errors (and sink-specific extras)."""
-        return dict(self._counters)
 
     def __enter__(self) -> "Sink":
         self.open()
@@ -85,8 +63,7 @@ class Sink(ABC):
 
 def parse_sink_options(name: str, options: Mapping[str, Any] | None, section: str | None = None) -> Any:
     """Validate ``options`` for sink ``name`` without building it."""
-    cls = SINKS.get(name)
-    return from_mapping(cls.Options, options or {}, section or f"sinks.{name}")
+    return parse_plugin_options(SINKS, name, options, section or f"sinks.{name}")
 
 
 def build_sink(name: str, options: Mapping[str, Any] | None = None, context: SinkContext | None = None) -> Sink:

@@ -19,13 +19,12 @@ pipeline. Life cycle, mirroring :mod:`vpp_service.sinks.base`:
 from __future__ import annotations
 
 import threading
-from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
-from typing import Any, Callable, ClassVar, Mapping
+from abc import abstractmethod
+from typing import Any, Callable, Mapping
 
 from vpp_service.frame import StereoFrame
+from vpp_service.plugin import Plugin, PluginContext, parse_plugin_options
 from vpp_service.registry import Registry
-from vpp_service.settings import from_mapping
 
 #: Registered source classes by name ("zenoh", "files", "sim").
 SOURCES: Registry["Source"] = Registry("source")
@@ -36,43 +35,29 @@ Emit = Callable[[StereoFrame], bool]
 Reject = Callable[[str], None]
 
 
-@dataclass
-class SourceContext:
-    """Service-wide facts a source may need.
+class SourceContext(PluginContext):
+    """Service-wide facts a source may need (fields: see :class:`~vpp_service.plugin.PluginContext`)."""
 
-    Attributes
+
+class Source(Plugin):
+    """Base class of frame sources (see the module docstring for the life cycle).
+
+    Parameters
     ----------
-    rig : str
-        Rig name (topic names; frames get this rig unless the wire says otherwise).
-    prefix : str
-        Zenoh key prefix (default ``"vpp"``).
-    session : Any
-        The service's open ``zenoh.Session`` when one exists, else None.
+    options : Any
+        Instance of the subclass's ``Options``.
+    context : SourceContext
+        Service-wide facts.
     """
 
-    rig: str = "rig0"
-    prefix: str = "vpp"
-    session: Any = None
-    extra: dict[str, Any] = field(default_factory=dict)
-
-
-class Source(ABC):
-    """Base class of frame sources (see the module docstring for the life cycle)."""
-
-    #: Frozen dataclass describing the options; override in subclasses.
-    Options: ClassVar[type] = None  # type: ignore[assignment]
+    counter_names = ("emitted", "rejected")
 
     def __init__(self, options: Any, context: SourceContext) -> None:
-        self.options = options
-        self.context = context
-        self._counters: dict[str, int] = {"emitted": 0, "rejected": 0}
+        super().__init__(options, context)
         #: Set when a finite source has produced its last frame.
         self.finished = threading.Event()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-
-    def open(self) -> None:  # noqa: B027 - optional hook
-        """Acquire resources."""
 
     def start(self, emit: Emit, reject: Reject | None = None) -> None:
         """Start producing frames from a daemon thread running :meth:`run`."""
@@ -116,15 +101,10 @@ class Source(ABC):
     def close(self) -> None:  # noqa: B027 - optional hook
         """Release resources (called by :meth:`stop`)."""
 
-    def stats(self) -> dict[str, int]:
-        """Counters: emitted, rejected (and source-specific extras)."""
-        return dict(self._counters)
-
 
 def parse_source_options(name: str, options: Mapping[str, Any] | None, section: str | None = None) -> Any:
     """Validate ``options`` for source ``name`` without building it."""
-    cls = SOURCES.get(name)
-    return from_mapping(cls.Options, options or {}, section or f"source.{name}")
+    return parse_plugin_options(SOURCES, name, options, section or f"source.{name}")
 
 
 def build_source(name: str, options: Mapping[str, Any] | None = None,
