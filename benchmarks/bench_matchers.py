@@ -13,14 +13,10 @@ JSON (default ``benchmarks/results/bench_matchers.json``).
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
-import time
-from pathlib import Path
 
 import cv2
 import numpy as np
+from _harness import median_ms, write_report
 
 from vpp_service.matchers import build_matcher
 from vpp_service.matchers import census_sgm as cs
@@ -43,16 +39,6 @@ def scene(H: int, W: int, seed: int = 0):
     right = np.ascontiguousarray(cv2.remap(tex, map_x, map_y, cv2.INTER_LINEAR))
     hints = np.where(rng.random((H, W)) < 0.05, gt, np.nan).astype(np.float32)
     return left, right, hints
-
-
-def timeit(fn, reps: int) -> float:
-    fn()
-    ts = []
-    for _ in range(reps):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return float(np.median(ts) * 1e3)
 
 
 def main(argv=None) -> int:
@@ -81,7 +67,7 @@ def main(argv=None) -> int:
             ]
         for name, opts, h, t in cases:
             m = build_matcher(name, {"max_disparity": D, **opts})
-            ms = timeit(lambda: m.compute(left, right, hints=h), reps)
+            ms = median_ms(lambda: m.compute(left, right, hints=h), reps)
             label = name + (f" paths={opts['paths']}" if "paths" in opts else "") + (" +guided" if h is not None else "")
             thr = "cv" if t is None else str(t)
             print(f"{size:11s} {W:4d}x{H:<4d} {D:4d} {label:22s} {thr:>4s} {ms:9.1f}")
@@ -105,15 +91,11 @@ def main(argv=None) -> int:
             "median": lambda: cs.median_filter3x3(dl, 1),
         }
         for stage, fn in stages.items():
-            ms = timeit(fn, reps)
+            ms = median_ms(fn, reps)
             print(f"{size:11s} {W:4d}x{H:<4d} {D:4d} {'  stage ' + stage:22s} {1:>4d} {ms:9.1f}")
             rows.append({"size": size, "width": W, "height": H, "max_disparity": D, "matcher": "census-sgm",
                          "stage": stage, "threads": 1, "ms": ms})
-    out = Path(a.json)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    meta = {"cpu_count": os.cpu_count(), "threads_all": allt, "platform": platform.platform(),
-            "opencv": cv2.__version__, "reps": reps}
-    out.write_text(json.dumps({"meta": meta, "results": rows}, indent=2))
+    out = write_report(a.json, rows, threads_all=allt, opencv=cv2.__version__, reps=reps)
     print(f"wrote {out}")
     return 0
 
