@@ -105,6 +105,49 @@ def check_image(img: Any, name: str) -> np.ndarray:
     return img
 
 
+def check_array(a: Any, name: str, dtypes: tuple[type, ...], ndim: int, layout: str) -> np.ndarray:
+    """Validate a kernel input array: one of ``dtypes``, ``ndim`` dimensions, non-empty, C-contiguous.
+
+    Parameters
+    ----------
+    a : Any
+        The value to check.
+    name : str
+        Argument name used in the messages.
+    dtypes : tuple of numpy scalar types
+        Accepted dtypes.
+    ndim : int
+        Required number of dimensions.
+    layout : str
+        Human-readable shape named in the message, e.g. ``"H x W x D"``.
+
+    Returns
+    -------
+    ndarray
+        ``a`` unchanged.
+
+    Raises
+    ------
+    TypeError
+        Not an array or wrong dtype.
+    ValueError
+        Wrong number of dimensions, empty, or not C-contiguous.
+    """
+    if not isinstance(a, np.ndarray):
+        raise TypeError(f"{name} must be a numpy array, got {type(a).__name__}")
+    names = [np.dtype(d).name for d in dtypes]
+    if a.dtype not in [np.dtype(d) for d in dtypes]:
+        allowed = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " or " + names[-1]
+        raise TypeError(f"{name} must be {allowed}, got dtype {a.dtype}")
+    if a.ndim != ndim:
+        raise ValueError(f"{name} must be {layout}, got shape {a.shape}")
+    if a.size == 0:
+        raise ValueError(f"{name} is empty (shape {a.shape})")
+    if not a.flags.c_contiguous:
+        raise ValueError(f"{name} must be C-contiguous (use np.ascontiguousarray)")
+    return a
+
+
 def check_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
     """Validate a stereo pair: both pass :func:`check_image` and have the same shape."""
     check_image(left, "left")

@@ -47,6 +47,7 @@ from vpp_service.matchers.base import (
     MATCHERS,
     Matcher,
     MatcherOptions,
+    check_array,
     check_hints,
     check_image,
     check_max_disparity,
@@ -74,29 +75,12 @@ def _check_gray(img: Any, name: str) -> np.ndarray:
     return img
 
 
-def _check_volume(vol: Any, name: str, dtype: type = np.uint16) -> np.ndarray:
-    if not isinstance(vol, np.ndarray):
-        raise TypeError(f"{name} must be a numpy array, got {type(vol).__name__}")
-    if vol.dtype != dtype:
-        raise TypeError(f"{name} must be {np.dtype(dtype).name}, got dtype {vol.dtype}")
-    if vol.ndim != 3:
-        raise ValueError(f"{name} must be H x W x D, got shape {vol.shape}")
-    if vol.size == 0:
-        raise ValueError(f"{name} is empty (shape {vol.shape})")
-    if not vol.flags.c_contiguous:
-        raise ValueError(f"{name} must be C-contiguous (use np.ascontiguousarray)")
-    return vol
+def _check_volume(vol: Any, name: str) -> np.ndarray:
+    return check_array(vol, name, (np.uint16,), 3, "H x W x D")
 
 
 def _check_disparity(disp: Any, name: str) -> np.ndarray:
-    if not isinstance(disp, np.ndarray):
-        raise TypeError(f"{name} must be a numpy array, got {type(disp).__name__}")
-    if disp.dtype != np.float32:
-        raise TypeError(f"{name} must be float32, got dtype {disp.dtype}")
-    if disp.ndim != 2 or disp.size == 0:
-        raise ValueError(f"{name} must be a non-empty H x W map, got shape {disp.shape}")
-    if not disp.flags.c_contiguous:
-        raise ValueError(f"{name} must be C-contiguous (use np.ascontiguousarray)")
+    check_array(disp, name, (np.float32,), 2, "an H x W map")
     if np.isinf(disp).any():
         raise ValueError(f"{name} contains +-inf; use NaN for invalid")
     return disp
@@ -142,15 +126,8 @@ def hamming_cost_volume(
     ndarray
         H x W x D uint16, ``popcount(cL[y, x] ^ cR[y, x - d])``; :data:`INVALID_COST` where ``x < d``.
     """
-    for name, a in (("census_left", census_left), ("census_right", census_right)):
-        if not isinstance(a, np.ndarray):
-            raise TypeError(f"{name} must be a numpy array, got {type(a).__name__}")
-        if a.dtype != np.uint32:
-            raise TypeError(f"{name} must be uint32, got dtype {a.dtype}")
-        if a.ndim != 2 or a.size == 0:
-            raise ValueError(f"{name} must be a non-empty H x W array, got shape {a.shape}")
-        if not a.flags.c_contiguous:
-            raise ValueError(f"{name} must be C-contiguous (use np.ascontiguousarray)")
+    check_array(census_left, "census_left", (np.uint32,), 2, "an H x W array")
+    check_array(census_right, "census_right", (np.uint32,), 2, "an H x W array")
     if census_left.shape != census_right.shape:
         raise ValueError(
             f"census_left and census_right must have the same shape, got {census_left.shape} and {census_right.shape}"

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from vpp_service.matchers._guided import modulate
-from vpp_service.matchers.base import check_hints, resolve_threads
+from vpp_service.matchers.base import check_array, check_hints, resolve_threads
 
 _DTYPES = (np.uint8, np.uint16, np.float32)
 
@@ -64,16 +64,7 @@ def modulate_cost(
         Bad shapes, non-contiguous ``cost``, empty volume, NaN/inf in a float
         ``cost``, or ``k``/``c`` not finite and > 0.
     """
-    if not isinstance(cost, np.ndarray):
-        raise TypeError(f"cost must be a numpy array, got {type(cost).__name__}")
-    if cost.dtype not in _DTYPES:
-        raise TypeError(f"cost must be uint8, uint16 or float32, got dtype {cost.dtype}")
-    if cost.ndim != 3:
-        raise ValueError(f"cost must be H x W x D, got shape {cost.shape}")
-    if cost.size == 0:
-        raise ValueError(f"cost is empty (shape {cost.shape})")
-    if not cost.flags.c_contiguous:
-        raise ValueError("cost must be C-contiguous (use np.ascontiguousarray)")
+    check_array(cost, "cost", _DTYPES, 3, "H x W x D")
     if cost.dtype == np.float32 and not np.isfinite(cost).all():
         raise ValueError("cost contains NaN or inf")
     for name, v in (("k", k), ("c", c)):
