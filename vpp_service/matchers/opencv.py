@@ -42,9 +42,11 @@ def _check_odd(name: str, v: int, lo: int, hi: int) -> None:
         raise ValueError(f"{name} must be an odd integer in [{lo}, {hi}], got {v!r}")
 
 
-def _check_nonneg(name: str, v: int) -> None:
-    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-        raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
+def _check_int(name: str, v: int, lo: int, hi: int | None = None) -> None:
+    """Raise ValueError naming ``name`` unless ``v`` is an integer in ``[lo, hi]`` (``hi`` None: no upper bound)."""
+    if isinstance(v, bool) or not isinstance(v, int) or v < lo or (hi is not None and v > hi):
+        bounds = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+        raise ValueError(f"{name} must be an integer {bounds}, got {v!r}")
 
 
 def _to_float(raw: np.ndarray, min_disparity: int) -> np.ndarray:
@@ -107,13 +109,11 @@ class SGBMOptions(MatcherOptions):
             raise ValueError(f"mode must be one of {sorted(_SGBM_MODES)}, got {self.mode!r}")
         _check_odd("block_size", self.block_size, 1, 11)
         for name in ("p1", "p2", "min_disparity", "uniqueness", "speckle_window", "speckle_range"):
-            _check_nonneg(name, getattr(self, name))
+            _check_int(name, getattr(self, name), 0)
         if (self.p1 or self.p2) and not self.p2 > self.p1:
             raise ValueError(f"p2 must be > p1, got p1={self.p1}, p2={self.p2}")
-        if isinstance(self.disp12_max_diff, bool) or not isinstance(self.disp12_max_diff, int) or self.disp12_max_diff < -1:
-            raise ValueError(f"disp12_max_diff must be an integer >= -1, got {self.disp12_max_diff!r}")
-        if isinstance(self.pre_filter_cap, bool) or not isinstance(self.pre_filter_cap, int) or not 1 <= self.pre_filter_cap <= 63:
-            raise ValueError(f"pre_filter_cap must be an integer in [1, 63], got {self.pre_filter_cap!r}")
+        _check_int("disp12_max_diff", self.disp12_max_diff, -1)
+        _check_int("pre_filter_cap", self.pre_filter_cap, 1, 63)
 
 
 @MATCHERS.register("sgbm")
@@ -185,12 +185,10 @@ class BMOptions(MatcherOptions):
         _check_odd("pre_filter_size", self.pre_filter_size, 5, 255)
         if self.pre_filter not in ("xsobel", "normalized"):
             raise ValueError(f"pre_filter must be 'xsobel' or 'normalized', got {self.pre_filter!r}")
-        if isinstance(self.pre_filter_cap, bool) or not isinstance(self.pre_filter_cap, int) or not 1 <= self.pre_filter_cap <= 63:
-            raise ValueError(f"pre_filter_cap must be an integer in [1, 63], got {self.pre_filter_cap!r}")
+        _check_int("pre_filter_cap", self.pre_filter_cap, 1, 63)
         for name in ("min_disparity", "uniqueness", "texture_threshold", "speckle_window", "speckle_range"):
-            _check_nonneg(name, getattr(self, name))
-        if isinstance(self.disp12_max_diff, bool) or not isinstance(self.disp12_max_diff, int) or self.disp12_max_diff < -1:
-            raise ValueError(f"disp12_max_diff must be an integer >= -1, got {self.disp12_max_diff!r}")
+            _check_int(name, getattr(self, name), 0)
+        _check_int("disp12_max_diff", self.disp12_max_diff, -1)
 
 
 @MATCHERS.register("bm")
