@@ -38,6 +38,8 @@ from libc.math cimport floor, pow
 
 import numpy as np
 
+vpp_init_onehot()
+
 cdef extern from *:
     """
     #include <stdint.h>
@@ -136,11 +138,65 @@ cdef extern from *:
         if (trail > best_d) best_i = 255;
         return best_i;
     }
+    /* ---- histogram tables: a 256-bit occupancy word is two 128-bit GCC/Clang vectors
+       (one SSE2 register each on x86-64); one-hot of each byte value from an 8 KiB table. */
+    typedef uint64_t vpp_v2 __attribute__((vector_size(16)));
+    static vpp_v2 vpp_onehot[256][2];
+    static void vpp_init_onehot(void) {
+        int v, i;
+        for (v = 0; v < 256; v++) {
+            for (i = 0; i < 4; i++) vpp_onehot[v][i >> 1][i & 1] = 0;
+            vpp_onehot[v][v >> 7][(v >> 6) & 1] = (uint64_t)1 << (v & 63);
+        }
+    }
+    /* unaligned load / store of a 128-bit half */
+    static inline vpp_v2 vpp_ld2(const uint64_t* p) { vpp_v2 v; memcpy(&v, p, 16); return v; }
+    static inline void vpp_st2(uint64_t* p, vpp_v2 v) { memcpy(p, &v, 16); }
+    /* Per aligned 32-column block, prefix/suffix OR of the bin occupancy of the
+       columns over rows r +- sh_half (clipped) of channel c. */
+    static void vpp_build_tables(const uint8_t* img, int H, int W, int C, int c, int r,
+                                 int sh_half, uint64_t* pre, uint64_t* suf) {
+        int y0 = r - sh_half, y1 = r + sh_half, b0, b1, x, y;
+        const int64_t rs = (int64_t)W * C;
+        const vpp_v2 zero = {0, 0};
+        if (y0 < 0) y0 = 0;
+        if (y1 > H - 1) y1 = H - 1;
+        for (b0 = 0; b0 < W; b0 += 32) {
+            vpp_v2 acc0 = zero, acc1 = zero;
+            b1 = b0 + 32 < W ? b0 + 32 : W;
+            for (x = b0; x < b1; x++) {
+                const uint8_t* p = img + ((int64_t)y0 * W + x) * C + c;
+                vpp_v2 a0 = vpp_onehot[p[0]][0], a1 = vpp_onehot[p[0]][1];
+                for (y = y0 + 1; y <= y1; y++) {
+                    p += rs;
+                    a0 |= vpp_onehot[p[0]][0];
+                    a1 |= vpp_onehot[p[0]][1];
+                }
+                vpp_st2(suf + 4 * (int64_t)x, a0);
+                vpp_st2(suf + 4 * (int64_t)x + 2, a1);
+                acc0 |= a0;
+                acc1 |= a1;
+                vpp_st2(pre + 4 * (int64_t)x, acc0);
+                vpp_st2(pre + 4 * (int64_t)x + 2, acc1);
+            }
+            acc0 = zero;
+            acc1 = zero;
+            for (x = b1 - 1; x >= b0; x--) {
+                acc0 |= vpp_ld2(suf + 4 * (int64_t)x);
+                acc1 |= vpp_ld2(suf + 4 * (int64_t)x + 2);
+                vpp_st2(suf + 4 * (int64_t)x, acc0);
+                vpp_st2(suf + 4 * (int64_t)x + 2, acc1);
+            }
+        }
+    }
     """
     int vpp_ctz64(uint64_t v) nogil
     uint32_t vpp_f2u(float f) nogil
     float vpp_u2f(uint32_t u) nogil
     int vpp_hist_pick(const uint64_t* o) nogil
+    void vpp_init_onehot() nogil
+    void vpp_build_tables(const uint8_t* img, int H, int W, int C, int c, int r,
+                          int sh_half, uint64_t* pre, uint64_t* suf) nogil
 
 cdef extern from "<algorithm>" namespace "std" nogil:
     void std_sort "std::sort"(uint64_t* first, uint64_t* last)
@@ -199,58 +255,6 @@ cdef inline uint8_t _blend16(uint8_t a, uint8_t b, uint64_t w) noexcept nogil:
 
 
 # ----------------------------------------------------------------- histogram
-cdef void _build_tables(const uint8_t* img, int H, int W, int C, int c, int r, int sh_half,
-                        uint64_t* pre, uint64_t* suf) noexcept nogil:
-    """Per aligned 32-column block, prefix/suffix OR of the bin occupancy of rows r+-sh_half."""
-    cdef int y0 = r - sh_half
-    cdef int y1 = r + sh_half
-    cdef int b0, b1, x, y, k
-    cdef uint64_t a0, a1, a2, a3, bit
-    cdef unsigned v, q
-    if y0 < 0:
-        y0 = 0
-    if y1 > H - 1:
-        y1 = H - 1
-    for b0 in range(0, W, 32):
-        b1 = b0 + 32
-        if b1 > W:
-            b1 = W
-        # column bits into suf first (scratch), then prefix and suffix
-        for x in range(b0, b1):
-            a0 = 0
-            a1 = 0
-            a2 = 0
-            a3 = 0
-            for y in range(y0, y1 + 1):
-                v = img[(<int64_t>y * W + x) * C + c]
-                bit = (<uint64_t>1) << (v & 63)     # branch-free: values are random
-                q = v >> 6
-                a0 |= bit & (<uint64_t>0 - <uint64_t>(q == 0))
-                a1 |= bit & (<uint64_t>0 - <uint64_t>(q == 1))
-                a2 |= bit & (<uint64_t>0 - <uint64_t>(q == 2))
-                a3 |= bit & (<uint64_t>0 - <uint64_t>(q == 3))
-            suf[4 * x] = a0
-            suf[4 * x + 1] = a1
-            suf[4 * x + 2] = a2
-            suf[4 * x + 3] = a3
-        a0 = 0
-        a1 = 0
-        a2 = 0
-        a3 = 0
-        for x in range(b0, b1):
-            a0 |= suf[4 * x]
-            a1 |= suf[4 * x + 1]
-            a2 |= suf[4 * x + 2]
-            a3 |= suf[4 * x + 3]
-            pre[4 * x] = a0
-            pre[4 * x + 1] = a1
-            pre[4 * x + 2] = a2
-            pre[4 * x + 3] = a3
-        for x in range(b1 - 2, b0 - 1, -1):
-            for k in range(4):
-                suf[4 * x + k] |= suf[4 * x + 4 + k]
-
-
 cdef inline void _or4(uint64_t* o, const uint64_t* t) noexcept nogil:
     o[0] |= t[0]
     o[1] |= t[1]
@@ -352,8 +356,8 @@ cdef uint8_t _hist_value(const Ctx* cx, int c, int r, const uint64_t* tabs, int 
 
 cdef inline void _build_all(const Ctx* cx, int c, int r, uint64_t* tabs) noexcept nogil:
     cdef int W4 = 4 * cx.W
-    _build_tables(cx.L, cx.H, cx.W, cx.C, c, r, cx.sh_half, tabs, tabs + W4)
-    _build_tables(cx.R, cx.H, cx.W, cx.C, c, r, cx.sh_half, tabs + 2 * W4, tabs + 3 * W4)
+    vpp_build_tables(cx.L, cx.H, cx.W, cx.C, c, r, cx.sh_half, tabs, tabs + W4)
+    vpp_build_tables(cx.R, cx.H, cx.W, cx.C, c, r, cx.sh_half, tabs + 2 * W4, tabs + 3 * W4)
 
 
 # ----------------------------------------------------------------- phases
