@@ -25,9 +25,11 @@ Histogram speed: only the occupancy of the 256 bins matters unless all are
 filled.  For a (centre row, channel) we build, per aligned 32-column block,
 prefix-OR and suffix-OR tables of 256-bit occupancy (4 uint64) over the
 ``search_height`` rows; any window of length L is then ``suffix[a] | full
-middle blocks | prefix[e]`` (3 lookups for L=64).  The gap search walks the
-zero runs of the 256-bit word with ``ctz``.  If every bin is filled the window
-is counted exactly (rare).
+middle blocks | prefix[e]`` (3 lookups for L=64).  The tables are built in C
+(``vpp_build_tables``): the 256-bit one-hot of a byte comes from an 8 KiB table
+(``vpp_onehot``) and the words are ORed as two 128-bit vectors (GCC/Clang vector
+extensions; SSE2 on plain x86-64).  The gap search is bit-parallel
+(``vpp_hist_pick``).  If every bin is filled the window is counted exactly (rare).
 """
 from cython.parallel cimport prange, parallel
 cimport openmp
