@@ -595,7 +595,8 @@ def _map_message(result: FusionResult, arr: np.ndarray, extra: Mapping[str, Any]
     msg = {
         "v": VERSION, "rig": fr.rig, "seq": int(fr.seq), "stamp_ns": int(fr.stamp_ns),
         "h": int(arr.shape[0]), "w": int(arr.shape[1]), "dtype": "f32",
-        "data": np.ascontiguousarray(arr, dtype="<f4").tobytes(),
+        # a byte view of the (already contiguous float32) map: packb copies it once, no tobytes() copy
+        "data": memoryview(np.ascontiguousarray(arr, dtype="<f4")).cast("B"),
         "calib": fr.calib.to_dict() if fr.calib is not None else None,
         "timing_ms": {str(k): float(v) for k, v in result.timing_ms.items()},
     }
