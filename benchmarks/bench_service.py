@@ -89,6 +89,8 @@ def main() -> int:
     ap.add_argument("--max-disparity", type=int, default=128)
     ap.add_argument("--rate", type=float, default=5.0, help="paced run rate (Hz)")
     ap.add_argument("--warmup", type=int, default=3)
+    ap.add_argument("--source-poll-s", type=float, default=0.002,
+                    help="zenoh source idle poll period (service default 0.002; adds ~half of it to e2e)")
     ap.add_argument("--json", default=str(DEFAULT_JSON))
     a = ap.parse_args()
 
@@ -112,7 +114,7 @@ def main() -> int:
         "service": {"rig": RIG, "out": str(tmp / "out"), "summary": False, "timing_window": a.frames,
                     "seed": 0},
         "zenoh": {"listen": [ep], "multicast_scouting": False},
-        "source": {"type": "zenoh", "ring_size": 64},
+        "source": {"type": "zenoh", "ring_size": 64, "poll_s": a.source_poll_s},
         "matcher": {"name": "sgbm", "max_disparity": a.max_disparity},
         "queues": {"input_size": 64, "input_policy": "block", "output_size": 64, "output_policy": "block"},
         "sinks": [{"type": "zenoh", "outputs": ["disparity"], "queue_size": 64}],
