@@ -85,3 +85,27 @@ def test_nearest_point_wins():
 def test_points_bad_input(args, exc):
     with pytest.raises(exc):
         points_to_depth_map(*args)
+
+
+def _depth_to_disparity_reference(z, f, b, doffs):
+    """Plain whole-map float64 formula, NaN where missing or not > 0."""
+    zz = z.astype(np.float64)
+    ok = np.isfinite(zz) & (zz > 0)
+    out = np.full(zz.shape, np.nan)
+    out[ok] = f * b / zz[ok] - doffs
+    out[~(out > 0)] = np.nan
+    return out.astype(np.float32)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("doffs", [0.0, 30.0])
+@pytest.mark.parametrize("strided", [False, True])
+def test_depth_to_disparity_matches_reference(seed, doffs, strided):
+    rng = np.random.default_rng(seed)
+    z = rng.uniform(-1, 50, (40, 64)).astype(np.float32)
+    z[rng.random(z.shape) < 0.8] = 0
+    z[0, :3] = [np.nan, np.inf, -np.inf]
+    if strided:
+        z = z[:, ::2]
+    got = depth_to_disparity(z, 700.0, 0.5, doffs)
+    np.testing.assert_array_equal(got, _depth_to_disparity_reference(z, 700.0, 0.5, doffs))

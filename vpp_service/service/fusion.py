@@ -10,34 +10,13 @@ holds the error against it (:func:`vpp_service.evaluation.metrics.compute_metric
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from typing import Any
 
 import numpy as np
 
 from vpp_service.frame import FusionResult, StereoFrame
-
-
-def _sparse_depth_to_disparity(depth: np.ndarray, f: float, baseline: float, doffs: float) -> np.ndarray:
-    """:func:`vpp_service.vpp.depth_to_disparity`, bit for bit, computed on the valid pixels only.
-
-    A sensor map is mostly empty (a few % of the pixels): converting just the
-    valid ones skips the full-map float64 round trip (~2 ms at KITTI size).
-    Non-float input and bad scalars go to the reference for its errors.
-    """
-    if not isinstance(depth, np.ndarray) or depth.dtype.kind != "f" or not (
-            math.isfinite(f) and f > 0 and math.isfinite(baseline) and baseline > 0 and math.isfinite(doffs)):
-        from vpp_service.vpp import depth_to_disparity
-
-        return depth_to_disparity(depth, f, baseline, doffs)
-    flat = depth.reshape(-1)
-    idx = np.flatnonzero(np.isfinite(flat) & (flat > 0))
-    d = float(f) * float(baseline) / flat[idx].astype(np.float64) - float(doffs)
-    keep = d > 0
-    out = np.full(depth.shape, np.nan, dtype=np.float32)
-    out.reshape(-1)[idx[keep]] = d[keep].astype(np.float32)
-    return out
+from vpp_service.vpp import depth_to_disparity
 
 
 class Fusion:
@@ -71,7 +50,7 @@ class Fusion:
             return frame.sparse_disparity
         if frame.sensor_depth is not None and frame.calib is not None:
             c = frame.calib
-            return _sparse_depth_to_disparity(frame.sensor_depth, c.f, c.baseline, c.doffs)
+            return depth_to_disparity(frame.sensor_depth, c.f, c.baseline, c.doffs)
         return None
 
     def __call__(self, frame: StereoFrame) -> FusionResult:

@@ -55,12 +55,15 @@ def depth_to_disparity(depth: np.ndarray, f: float, baseline: float,
     f = _check_scalar("f", f, True)
     baseline = _check_scalar("baseline", baseline, True)
     doffs = _check_scalar("doffs", doffs, False)
-    z = depth.astype(np.float64)
-    ok = np.isfinite(z) & (z > 0)
-    out = np.full(z.shape, np.nan, dtype=np.float64)
-    out[ok] = f * baseline / z[ok] - doffs
-    out[~(out > 0)] = np.nan
-    return out.astype(np.float32)
+    # Sensor maps are mostly empty: convert only the valid pixels (float64
+    # arithmetic, as before) instead of round-tripping the whole map.
+    flat = depth.reshape(-1)
+    idx = np.flatnonzero(np.isfinite(flat) & (flat > 0))
+    d = f * baseline / flat[idx].astype(np.float64) - doffs
+    keep = d > 0
+    out = np.full(depth.shape, np.nan, dtype=np.float32)
+    out.reshape(-1)[idx[keep]] = d[keep].astype(np.float32)
+    return out
 
 
 def disparity_to_depth(disparity: np.ndarray, f: float, baseline: float,
