@@ -10,10 +10,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import time
 from pathlib import Path
 
 import numpy as np
+
+from _harness import median_ms
 
 from vpp_service.vpp import VPPConfig, project
 
@@ -29,16 +30,6 @@ def scene(H: int, W: int, density: float, seed: int = 0):
     gt = (20 + 60 * np.sin(np.arange(W) / 150.0)[None, :] + np.arange(H)[:, None] / 20.0)
     disp = np.where(rng.random((H, W)) < density, gt, 0).astype(np.float32)
     return left, right, disp
-
-
-def timeit(fn, reps: int) -> float:
-    fn()
-    ts = []
-    for _ in range(reps):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return float(np.median(ts) * 1e3)
 
 
 def main(argv=None) -> int:
@@ -57,14 +48,14 @@ def main(argv=None) -> int:
         H, W = SIZES[name]
         for density in dens:
             left, right, disp = scene(H, W, density)
-            copy_ms = timeit(lambda: (left.copy(), right.copy()), a.reps)
+            copy_ms = median_ms(lambda: (left.copy(), right.copy()), a.reps)
             rows.append(dict(size=name, H=H, W=W, density=density, pattern="copy", threads=1,
                              ms=copy_ms, ratio=1.0))
             print(f"{name:10s} {density:5.2f} {'copy':10s} {1:3d} {copy_ms:8.2f} {1.0:7.2f}")
             for pattern in ("random", "histogram"):
                 cfg = VPPConfig(pattern=pattern)
                 for nt in threads:
-                    ms = timeit(lambda: project(left, right, disp, cfg, num_threads=nt), a.reps)
+                    ms = median_ms(lambda: project(left, right, disp, cfg, num_threads=nt), a.reps)
                     npts = project(left, right, disp, cfg).stats.given
                     rows.append(dict(size=name, H=H, W=W, density=density, pattern=pattern,
                                      threads=nt, ms=ms, ratio=ms / copy_ms, points=npts))
