@@ -257,6 +257,22 @@ cdef inline uint8_t _blend16(uint8_t a, uint8_t b, uint64_t w) noexcept nogil:
 
 
 # ----------------------------------------------------------------- histogram
+cdef inline void _fgd_pixel(uint8_t* lp, const uint8_t* rp, int C, bint interp,
+                            uint64_t wb, uint64_t wa) noexcept nogil:
+    """FGD: blend the right view at x' (linearly interpolated between ``rp`` and
+    the next pixel with weight ``wb`` when ``interp``) into the left pixel ``lp``
+    with weight ``wa`` (both 1/65536 fixed point, round half up)."""
+    cdef int c
+    cdef uint64_t v16, src
+    for c in range(C):
+        if interp:
+            v16 = <uint64_t>rp[c] * (65536 - wb) + <uint64_t>rp[C + c] * wb
+        else:
+            v16 = <uint64_t>rp[c] * 65536
+        src = lp[c]
+        lp[c] = <uint8_t>((src * (65536 - wa) * 65536 + v16 * wa + 2147483648ULL) >> 32)
+
+
 cdef inline void _or4(uint64_t* o, const uint64_t* t) noexcept nogil:
     o[0] |= t[0]
     o[1] |= t[1]
@@ -673,16 +689,7 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
                 if col < 0 or col >= W or (beta > 0 and col + 1 >= W):
                     continue
                 xl = x + k - hmax
-                for c in range(C):
-                    i0 = oR[col * C + c]
-                    if beta > 0:
-                        i1 = oR[(col + 1) * C + c]
-                        v16 = i0 * (65536 - wb) + i1 * wb
-                    else:
-                        v16 = i0 * 65536
-                    src = oL[xl * C + c]
-                    oL[xl * C + c] = <uint8_t>((src * (65536 - wa) * 65536 + v16 * wa
-                                                + 2147483648ULL) >> 32)
+                _fgd_pixel(oL + xl * C, oR + col * C, C, beta > 0, wb, wa)
         else:
             vals = vbuf + <int64_t>n * K * C
             for k in range(K):
@@ -827,16 +834,7 @@ cdef void _paint_row_random(const Ctx* cx, int r, int64_t* heads, int64_t* ends,
                 if col < 0 or col >= W or (beta > 0 and col + 1 >= W):
                     continue
                 xl = x + k - hmax
-                for c in range(C):
-                    i0 = oR[col * C + c]
-                    if beta > 0:
-                        i1 = oR[(col + 1) * C + c]
-                        v16 = i0 * (65536 - wb) + i1 * wb
-                    else:
-                        v16 = i0 * 65536
-                    src = oL[xl * C + c]
-                    oL[xl * C + c] = <uint8_t>((src * (65536 - wa) * 65536 + v16 * wa
-                                                + 2147483648ULL) >> 32)
+                _fgd_pixel(oL + xl * C, oR + col * C, C, beta > 0, wb, wa)
         else:
             zb = zbuf + <int64_t>n * K
             for k in range(k0, k1):
