@@ -7,8 +7,12 @@ Two layouts:
   ship ground truth but no sparse sensor, so a simulated one is drawn per frame
   (``sensor``, default ``uniform`` 5 %; ``"none"`` to send frames without depth).
 - ``format = "msgpack"``: a folder of wire-format v1 ``in/frame`` messages
-  (``*.msgpack``, replayed in name order; e.g. recorded off Zenoh). Every file is
-  validated like a network message; a bad file is rejected and skipped.
+  (``*.msgpack``, replayed in name order; e.g. written by the ``record`` sink,
+  :mod:`vpp_service.sinks.record`). Every file is validated like a network
+  message; a bad file is rejected and skipped. Frames that carry sparse depth
+  keep it (``sensor`` only fills in frames without any); ``scale`` is not
+  applied. With ``format = "dataset"`` and ``dataset = "auto"``, a folder that
+  matches no dataset layout but holds ``*.msgpack`` files is replayed this way.
 
 ``rate_hz`` paces the replay (0 = as fast as possible), ``loop`` restarts at the
 end, ``count`` caps the number of frames (0 = no cap). Frames are renumbered
@@ -103,7 +107,15 @@ class FilesSource(Source):
         else:
             from vpp_service.datasets import open_dataset
 
-            self._dataset = open_dataset(o.dataset, root)
+            try:
+                self._dataset = open_dataset(o.dataset, root)
+            except ValueError:
+                # "auto" on a folder of wire frames (e.g. a recording, which is what
+                # `vpp-service publish --dataset auto --root DIR` passes): replay it
+                self._files = sorted(root.glob("*.msgpack")) if o.dataset == "auto" else []
+                if not self._files:
+                    raise
+                return
             if len(self._dataset) == 0:
                 raise ValueError(f"source.root: dataset {o.dataset!r} at {root} has no frames")
 
