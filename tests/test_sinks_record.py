@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+import signal
 import threading
 
 import numpy as np
@@ -369,3 +370,36 @@ def test_service_records_and_a_second_service_replays(tmp_path):
         b = wire.decode_frame((second / n).read_bytes())
         assert a.sparse_disparity is not None and a.gt_disparity is not None
         assert_same_frame(b, a)
+
+
+def test_vpp_service_publish_replays_a_recording(tmp_path, zenoh_endpoint, zenoh_config):
+    """``vpp-service publish --dataset auto --root REC`` sends the recorded frames onto Zenoh unchanged."""
+    import zenoh
+
+    from vpp_service.cli import main
+
+    ref = sim_frames(3)
+    with make_sink(tmp_path) as sink:
+        for f in ref:
+            sink.write(as_result(f))
+    got: list[StereoFrame] = []
+    with zenoh.open(zenoh_config(listen=[zenoh_endpoint])) as session:
+        sub = session.declare_subscriber("vpp/front/in/frame",
+                                         lambda s: got.append(wire.decode_frame(s.payload.to_bytes())))
+        handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:  # publish installs its own SIGINT/SIGTERM handlers
+            rc = main(["publish", "--dataset", "auto", "--root", str(tmp_path), "--rate", "0", "--rig", "front",
+                       "--enc", "png", "--connect", zenoh_endpoint, "--wait-subscriber", "5"])
+        finally:
+            for s, h in handlers.items():
+                signal.signal(s, h)
+        assert rc == 0
+        deadline = threading.Event()
+        for _ in range(100):
+            if len(got) >= 3:
+                break
+            deadline.wait(0.05)
+        sub.undeclare()
+    assert [f.seq for f in got] == [0, 1, 2] and all(f.rig == "front" for f in got)
+    for g, r in zip(got, ref):
+        assert_same_frame(g, r)
