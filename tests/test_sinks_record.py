@@ -403,3 +403,26 @@ def test_vpp_service_publish_replays_a_recording(tmp_path, zenoh_endpoint, zenoh
     assert [f.seq for f in got] == [0, 1, 2] and all(f.rig == "front" for f in got)
     for g, r in zip(got, ref):
         assert_same_frame(g, r)
+
+
+def test_example_config_documents_the_record_sink():
+    """deploy/config.example.toml shows every record option, and its commented block validates."""
+    import dataclasses
+    import re
+    import tomllib
+    from pathlib import Path
+
+    from vpp_service.service.config import validate_config
+    from vpp_service.sinks.record import RecordSinkOptions
+
+    text = (Path(__file__).resolve().parents[1] / "deploy" / "config.example.toml").read_text()
+    start = text.index('# type = "record"')
+    block = text[text.rindex("# [[sinks]]", 0, start):]
+    block = block[:block.index("\n\n")] if "\n\n" in block else block
+    for f in dataclasses.fields(RecordSinkOptions):
+        assert re.search(rf"^# {f.name} = ", block, re.M), f"record option {f.name} undocumented"
+    uncommented = "\n".join(line[2:] for line in block.splitlines())
+    data = tomllib.loads(uncommented)
+    assert data["sinks"][0]["type"] == "record"
+    cfg = validate_config({"zenoh": {"enabled": False}, "sinks": data["sinks"]})
+    assert cfg.sinks[0].options == RecordSinkOptions(dir="vpp-run/recording")  # every value shown is the default
