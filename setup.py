@@ -30,6 +30,7 @@ for pyx in sorted((ROOT / "vpp_service").rglob("*.pyx")):
         Extension(
             module,
             [str(pyx.relative_to(ROOT))],
+            depends=[str(h.relative_to(ROOT)) for h in pyx.parent.glob("*.h")],
             include_dirs=[np.get_include()],
             define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
             extra_compile_args=compile_args,

@@ -1,19 +1,17 @@
 # distutils: language = c++
-"""Cython kernel of Virtual Pattern Projection (called by :mod:`vpp_service.vpp.project`).
+"""General Cython kernel of Virtual Pattern Projection (called by :mod:`vpp_service.vpp.project`).
+
+Paints every variant that the fused sweep kernel (``_sweep.pyx``) does not:
+the histogram pattern, patch-uniform values and the adaptive patches.  The
+occlusion mask comes from ``_sweep`` (classify-only run).
 
 Pipeline (every phase is a ``prange`` over image rows, so it is parallel and
 race-free; results do not depend on the thread count):
 
 A. count the points of each row (given / valid / invalid / left-border);
-B. (serial, tiny) prefix sums give each row a slice of the key arrays;
-C. fill each row's keys and sort them with ``std::sort``:
-   paint key ``(float_bits(d) << 32) | x`` (positive float bits are monotone,
-   so the row is in (d, x) order) and occlusion key
-   ``((x - round(d) + W) << 32) | float_bits(d)`` (order (x_w, d));
-D. occlusion: a row walks its (x_w, d) keys; runs of equal x_w are collisions
-   (the last, largest d wins, the others are occluded); a winner scans the
-   ``r_y`` neighbour rows' sorted keys with one monotone pointer per row, so no
-   dense H x W grid is ever built;
+B. (serial, tiny) prefix sums give each row a slice of the key array;
+C. fill each row's keys ``(float_bits(d) << 32) | x`` and sort them with
+   ``std::sort`` (positive float bits are monotone, so the row is in (d, x) order);
 E. (histogram + uniform patch only) one value per point and channel;
 F. paint: row r of both outputs is owned by one thread; it copies the input
    rows, k-way merges the sorted keys of source rows r-h..r+h into the global
@@ -37,6 +35,8 @@ from libc.stdint cimport uint8_t, uint32_t, uint64_t, int64_t, int32_t, int8_t
 from libc.stdlib cimport malloc, free
 from libc.string cimport memcpy, memset
 from libc.math cimport floor, pow
+
+from vpp_service.vpp._pixel cimport _hash, _seedmix, _w16, _blend16, _fgd_pixel
 
 import numpy as np
 
@@ -200,11 +200,11 @@ cdef extern from *:
     void vpp_build_tables(const uint8_t* img, int H, int W, int C, int c, int r,
                           int sh_half, uint64_t* pre, uint64_t* suf) nogil
 
-cdef extern from "<algorithm>" namespace "std" nogil:
-    void std_sort "std::sort"(uint64_t* first, uint64_t* last)
+cdef extern from "_sweep.h" nogil:
+    int vpp_scan_row(const float* d, int W, uint64_t* keys, int64_t* st)
+    void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* bucket, int* cnt)
 
-cdef uint64_t SEED_MUL = 0xD1B54A32D192ED03ULL
-cdef uint64_t KEY_MUL = 0x9E3779B97F4A7C15ULL
+
 cdef uint64_t ALL1 = 0xFFFFFFFFFFFFFFFFULL
 cdef uint64_t LOW32 = 0xFFFFFFFFULL
 
@@ -237,40 +237,6 @@ cdef struct Ctx:
     int sw_half
     int sw_len
     int sh_half
-
-
-cdef inline uint64_t _hash(uint64_t seedmix, uint64_t x, uint64_t y) noexcept nogil:
-    cdef uint64_t z = seedmix + ((y << 32) | x) * KEY_MUL
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL
-    return z ^ (z >> 31)
-
-
-cdef inline uint64_t _w16(double w) noexcept nogil:
-    """Weight in [0, 1] -> fixed point /65536, rounded half up."""
-    return <uint64_t>floor(w * 65536.0 + 0.5)
-
-
-cdef inline uint8_t _blend16(uint8_t a, uint8_t b, uint64_t w) noexcept nogil:
-    """round((1 - w) a + w b) with w in 1/65536 (half up)."""
-    return <uint8_t>(((<uint64_t>a) * (65536 - w) + (<uint64_t>b) * w + 32768) >> 16)
-
-
-# ----------------------------------------------------------------- histogram
-cdef inline void _fgd_pixel(uint8_t* lp, const uint8_t* rp, int C, bint interp,
-                            uint64_t wb, uint64_t wa) noexcept nogil:
-    """FGD: blend the right view at x' (linearly interpolated between ``rp`` and
-    the next pixel with weight ``wb`` when ``interp``) into the left pixel ``lp``
-    with weight ``wa`` (both 1/65536 fixed point, round half up)."""
-    cdef int c
-    cdef uint64_t v16, src
-    for c in range(C):
-        if interp:
-            v16 = <uint64_t>rp[c] * (65536 - wb) + <uint64_t>rp[C + c] * wb
-        else:
-            v16 = <uint64_t>rp[c] * 65536
-        src = lp[c]
-        lp[c] = <uint8_t>((src * (65536 - wa) * 65536 + v16 * wa + 2147483648ULL) >> 32)
 
 
 cdef inline void _or4(uint64_t* o, const uint64_t* t) noexcept nogil:
@@ -379,110 +345,6 @@ cdef inline void _build_all(const Ctx* cx, int c, int r, uint64_t* tabs) noexcep
 
 
 # ----------------------------------------------------------------- phases
-cdef void _count_row(const float* drow, int W, int64_t* st) noexcept nogil:
-    """st = [given, valid, invalid, left-border]."""
-    cdef int x
-    cdef float v
-    cdef int64_t g = 0, ok = 0, oob = 0
-    for x in range(W):
-        v = drow[x]
-        if v != 0 and v == v:
-            g += 1
-            if v > 0 and v < W:
-                ok += 1
-                if <double>x - <double>v < 0:
-                    oob += 1
-    st[0] = g
-    st[1] = ok
-    st[2] = g - ok
-    st[3] = oob
-
-
-cdef void _fill_row(const float* drow, int W, uint64_t* pk, uint64_t* ok) noexcept nogil:
-    cdef int x, k = 0
-    cdef float v
-    cdef uint64_t bits
-    cdef int64_t xw
-    for x in range(W):
-        v = drow[x]
-        if v > 0 and v < W:
-            bits = vpp_f2u(v)
-            if pk != NULL:
-                pk[k] = (bits << 32) | <uint64_t>x
-            if ok != NULL:
-                xw = x - <int64_t>floor(<double>v + 0.5) + W
-                ok[k] = ((<uint64_t>xw) << 32) | bits
-            k += 1
-    if pk != NULL and k > 1:
-        std_sort(pk, pk + k)
-    if ok != NULL and k > 1:
-        std_sort(ok, ok + k)
-
-
-cdef int64_t _occ_row(int yo, int H, int W, const uint64_t* okey, const int64_t* off,
-                      int rx2, int ry2, const double* pen, double t, uint8_t* occ,
-                      int64_t* ptr) noexcept nogil:
-    """Classify the points of row yo; returns how many are occluded."""
-    cdef int64_t b = off[yo], e = off[yo + 1]
-    cdef int64_t i, j, q, q2, qend, cnt = 0
-    cdef int yn, jj, nrows, y_lo, y_hi, adx, ady, found
-    cdef int64_t xwk, xwn, x
-    cdef double dval, dn
-    y_lo = yo - ry2
-    if y_lo < 0:
-        y_lo = 0
-    y_hi = yo + ry2
-    if y_hi > H - 1:
-        y_hi = H - 1
-    nrows = y_hi - y_lo + 1
-    for jj in range(nrows):
-        ptr[jj] = off[y_lo + jj]
-    i = b
-    while i < e:
-        xwk = <int64_t>(okey[i] >> 32)
-        j = i
-        while j + 1 < e and <int64_t>(okey[j + 1] >> 32) == xwk:
-            j += 1
-        q = i
-        while q < j:       # collision losers
-            dval = vpp_u2f(<uint32_t>(okey[q] & LOW32))
-            x = xwk - W + <int64_t>floor(dval + 0.5)
-            occ[<int64_t>yo * W + x] = 1
-            cnt += 1
-            q += 1
-        dval = vpp_u2f(<uint32_t>(okey[j] & LOW32))
-        found = 0
-        for jj in range(nrows):
-            yn = y_lo + jj
-            qend = off[yn + 1]
-            while ptr[jj] < qend and <int64_t>(okey[ptr[jj]] >> 32) < xwk - rx2:
-                ptr[jj] += 1
-            q2 = ptr[jj]
-            ady = yn - yo
-            if ady < 0:
-                ady = -ady
-            while q2 < qend and not found:
-                xwn = <int64_t>(okey[q2] >> 32)
-                if xwn > xwk + rx2:
-                    break
-                if not (yn == yo and xwn == xwk):
-                    adx = <int>(xwn - xwk)
-                    if adx < 0:
-                        adx = -adx
-                    dn = vpp_u2f(<uint32_t>(okey[q2] & LOW32))
-                    if (dn - dval) - pen[ady * (rx2 + 1) + adx] > t:
-                        found = 1
-                q2 += 1
-            if found:
-                break
-        if found:
-            x = xwk - W + <int64_t>floor(dval + 0.5)
-            occ[<int64_t>yo * W + x] = 1
-            cnt += 1
-        i = j + 1
-    return cnt
-
-
 cdef void _uniform_hist_row(const Ctx* cx, int s, uint64_t* tabs, uint8_t* uvals) noexcept nogil:
     """Histogram value of every point of row s (uniform patches), all channels."""
     cdef int64_t b = cx.off[s], e = cx.off[s + 1], i
@@ -699,151 +561,6 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
                         oL[xl * C + c] = _blend16(oL[xl * C + c], vals[k * C + c], wa)
 
 
-cdef inline uint8_t _blend32(uint32_t a, uint32_t b, uint32_t w) noexcept nogil:
-    """_blend16 in 32-bit arithmetic (a * (65536 - w) + b * w + 32768 < 2**25)."""
-    return <uint8_t>((a * (65536 - w) + b * w + 32768) >> 16)
-
-
-cdef void _paint_row_random(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_t* cidx,
-                            int32_t* crow, uint64_t* zbuf) noexcept nogil:
-    """Fast path of :func:`_paint_row` for the per-pixel random pattern (no adaptive patch).
-
-    Same order and arithmetic; the 64-bit hash of each painted left pixel is
-    computed once (right pass) and kept for the left pass.
-    """
-    cdef int H = cx.H, W = cx.W, C = cx.C, hmax = cx.hmax
-    cdef int K = 2 * hmax + 1
-    cdef int64_t rowb = <int64_t>r * W * C
-    cdef int s_lo, s_hi, nsrc, j, jbest, s, x, dy, c, col, fl, k, ncon, n, xl, k0, k1
-    cdef int64_t idx
-    cdef uint64_t key, kbest, v16, src, i0, i1, z
-    cdef uint32_t w0, w1, wb, wa32
-    cdef double d, xp, beta
-    cdef int occ_pt
-    cdef uint8_t* oL = cx.oL + rowb
-    cdef uint8_t* oR = cx.oR + rowb
-    cdef const uint64_t* pkey = cx.pkey
-    cdef const uint8_t* occ = cx.occ
-    cdef int occmode = cx.occmode
-    cdef int splat = cx.splat
-    cdef uint64_t wa = cx.wa
-    cdef uint64_t seedmix = cx.seedmix
-    cdef double alpha = cx.alpha
-    cdef uint64_t* zb
-    cdef uint64_t cand[64]
-    wa32 = <uint32_t>wa
-    memcpy(oL, cx.L + rowb, W * C)
-    memcpy(oR, cx.R + rowb, W * C)
-    s_lo = r - hmax
-    if s_lo < 0:
-        s_lo = 0
-    s_hi = r + hmax
-    if s_hi > H - 1:
-        s_hi = H - 1
-    nsrc = s_hi - s_lo + 1
-    for j in range(nsrc):
-        heads[j] = cx.off[s_lo + j]
-        ends[j] = cx.off[s_lo + j + 1]
-    # branch-free k-way merge: candidate = (d bits << 8) | source index (ties -> smaller row)
-    for j in range(nsrc):
-        cand[j] = ((pkey[heads[j]] >> 32) << 8) | <uint64_t>j if heads[j] < ends[j] else ALL1
-    ncon = 0
-    while True:
-        kbest = cand[0]
-        for j in range(1, nsrc):
-            kbest = cand[j] if cand[j] < kbest else kbest
-        if kbest == ALL1:
-            break
-        jbest = <int>(kbest & 255)
-        idx = heads[jbest]
-        heads[jbest] += 1
-        cand[jbest] = ((pkey[idx + 1] >> 32) << 8) | <uint64_t>jbest if idx + 1 < ends[jbest] else ALL1
-        s = s_lo + jbest
-        occ_pt = 0
-        if occ != NULL and occmode != 2:
-            occ_pt = occ[<int64_t>s * W + <int>(pkey[idx] & LOW32)]
-        if occ_pt and occmode == 1:
-            continue
-        cidx[ncon] = idx
-        crow[ncon] = s if not occ_pt else -1 - s
-        ncon += 1
-    if ncon == 0:
-        return
-    # right row (visible points), hashes kept per contribution
-    for n in range(ncon):
-        if crow[n] < 0 and occmode == 3:
-            continue
-        idx = cidx[n]
-        x = <int>(pkey[idx] & LOW32)
-        d = vpp_u2f(<uint32_t>(pkey[idx] >> 32))
-        xp = <double>x - d
-        zb = zbuf + <int64_t>n * K
-        k0 = 0
-        if x - hmax < 0:
-            k0 = hmax - x
-        k1 = K
-        if x + hmax > W - 1:
-            k1 = W - 1 - x + hmax + 1
-        for k in range(k0, k1):
-            zb[k] = _hash(seedmix, <uint64_t>(x + k - hmax), <uint64_t>r)
-        if splat:
-            fl = <int>floor(xp)
-            beta = xp - <double>fl
-            w0 = <uint32_t>_w16(alpha * (1.0 - beta))
-            w1 = <uint32_t>_w16(alpha * beta)
-            for k in range(k0, k1):
-                z = zb[k]
-                col = fl + k - hmax
-                if col >= 0 and col < W:
-                    for c in range(C):
-                        oR[col * C + c] = _blend32(oR[col * C + c], <uint32_t>((z >> (8 * c)) & 255), w0)
-                col = col + 1
-                if beta > 0 and col >= 0 and col < W:
-                    for c in range(C):
-                        oR[col * C + c] = _blend32(oR[col * C + c], <uint32_t>((z >> (8 * c)) & 255), w1)
-        else:
-            fl = <int>floor(xp + 0.5)
-            for k in range(k0, k1):
-                z = zb[k]
-                col = fl + k - hmax
-                if col >= 0 and col < W:
-                    for c in range(C):
-                        oR[col * C + c] = _blend32(oR[col * C + c], <uint32_t>((z >> (8 * c)) & 255), wa32)
-    # left row: pattern, or FGD content of the final right row
-    for n in range(ncon):
-        idx = cidx[n]
-        x = <int>(pkey[idx] & LOW32)
-        k0 = 0
-        if x - hmax < 0:
-            k0 = hmax - x
-        k1 = K
-        if x + hmax > W - 1:
-            k1 = W - 1 - x + hmax + 1
-        if crow[n] < 0 and occmode == 3:
-            d = vpp_u2f(<uint32_t>(pkey[idx] >> 32))
-            xp = <double>x - d
-            if splat:
-                fl = <int>floor(xp)
-                beta = xp - <double>fl
-            else:
-                fl = <int>floor(xp + 0.5)
-                beta = 0.0
-            wb = <uint32_t>_w16(beta)
-            for k in range(k0, k1):
-                col = fl + k - hmax
-                if col < 0 or col >= W or (beta > 0 and col + 1 >= W):
-                    continue
-                xl = x + k - hmax
-                _fgd_pixel(oL + xl * C, oR + col * C, C, beta > 0, wb, wa)
-        else:
-            zb = zbuf + <int64_t>n * K
-            for k in range(k0, k1):
-                z = zb[k]
-                xl = x + k - hmax
-                for c in range(C):
-                    oL[xl * C + c] = _blend32(oL[xl * C + c], <uint32_t>((z >> (8 * c)) & 255), wa32)
-
-
 # ----------------------------------------------------------------- entry points
 def hist_pick_bits(const uint64_t[::1] occupancy):
     """Histogram value of a 256-bit occupancy (4 uint64, bit v = bin v filled); -1 if all filled.
@@ -855,81 +572,52 @@ def hist_pick_bits(const uint64_t[::1] occupancy):
     return vpp_hist_pick(&occupancy[0])
 
 
-def _row_keys(const float[:, ::1] disp, bint want_paint, bint want_occ, int nthreads):
-    """Phases A-C: per-row stats, offsets and sorted keys."""
+def _row_keys(const float[:, ::1] disp, int nthreads):
+    """Phases A-C: per-row stats, offsets and (d, x)-sorted keys (scanner shared with ``_sweep``)."""
     cdef int H = disp.shape[0], W = disp.shape[1]
-    cdef int y
+    cdef int y, n
     stats = np.empty((H, 4), np.int64)
     cdef int64_t[:, ::1] st = stats
-    for y in prange(H, nogil=True, num_threads=nthreads, schedule="static"):
-        _count_row(&disp[y, 0], W, &st[y, 0])
+    cdef uint64_t* scratch = NULL
+    cdef int* ibuf = NULL
+    with nogil, parallel(num_threads=nthreads):
+        scratch = <uint64_t*>malloc(sizeof(uint64_t) * (W if W > 0 else 1))
+        for y in prange(H, schedule="static"):
+            vpp_scan_row(&disp[y, 0], W, scratch, &st[y, 0])
+        free(scratch)
     off_np = np.zeros(H + 1, np.int64)
     np.cumsum(stats[:, 1], out=off_np[1:])
-    cdef int64_t n = off_np[H]
-    pkey_np = np.empty(max(n, 1), np.uint64) if want_paint else None
-    okey_np = np.empty(max(n, 1), np.uint64) if want_occ else None
-    cdef uint64_t[::1] pk
-    cdef uint64_t[::1] ok
-    cdef uint64_t* pkp = NULL
-    cdef uint64_t* okp = NULL
+    pkey_np = np.empty(max(int(off_np[H]), 1), np.uint64)
+    cdef uint64_t[::1] pk = pkey_np
     cdef int64_t[::1] off = off_np
-    if want_paint:
-        pk = pkey_np
-        pkp = &pk[0]
-    if want_occ:
-        ok = okey_np
-        okp = &ok[0]
-    for y in prange(H, nogil=True, num_threads=nthreads, schedule="guided"):
-        _fill_row(&disp[y, 0], W,
-                  (pkp + off[y]) if pkp != NULL else NULL,
-                  (okp + off[y]) if okp != NULL else NULL)
-    return stats, off_np, pkey_np, okey_np
-
-
-def _occlusions(int H, int W, uint64_t[::1] okey, int64_t[::1] off, int rx, int ry,
-                double[:, ::1] pen, double t, uint8_t[:, ::1] occ, int nthreads):
-    """Phase D; returns the per-row count of occluded points."""
-    cdef int yo
-    cdef int rx2 = rx // 2, ry2 = ry // 2
-    cnt_np = np.zeros(H, np.int64)
-    cdef int64_t[::1] cnt = cnt_np
-    cdef int64_t* ptr
     with nogil, parallel(num_threads=nthreads):
-        ptr = <int64_t*>malloc(sizeof(int64_t) * (2 * ry2 + 1))
-        for yo in prange(H, schedule="guided"):
-            cnt[yo] = _occ_row(yo, H, W, &okey[0], &off[0], rx2, ry2, &pen[0, 0], t,
-                               &occ[0, 0], ptr)
-        free(ptr)
-    return cnt_np
-
-
-def detect_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, int rx, int ry,
-                  double[:, ::1] pen, double t, int nthreads):
-    """Occlusion mask of a disparity map (phases A-D); returns (row stats, per-row occluded)."""
-    cdef int H = disp.shape[0], W = disp.shape[1]
-    stats, off, _, okey = _row_keys(disp, False, True, nthreads)
-    cnt = _occlusions(H, W, okey, off, rx, ry, pen, t, occ, nthreads)
-    return stats, cnt
+        scratch = <uint64_t*>malloc(sizeof(uint64_t) * (W + 1))
+        ibuf = <int*>malloc(sizeof(int) * (2 * W + 2))
+        for y in prange(H, schedule="guided"):
+            n = vpp_scan_row(&disp[y, 0], W, &pk[0] + off[y], &st[y, 0])
+            vpp_sort_keys(&pk[0] + off[y], n, scratch, ibuf, ibuf + W + 1)
+        free(scratch)
+        free(ibuf)
+    return stats, off_np, pkey_np
 
 
 def project_kernel(const uint8_t[:, :, ::1] left, const uint8_t[:, :, ::1] right,
                    const float[:, ::1] disp, uint8_t[:, :, ::1] out_left,
                    uint8_t[:, :, ::1] out_right, uint8_t[:, ::1] occ,
                    int pattern, bint uniform, int hmax, double alpha, bint splat, int occmode,
-                   int rx, int ry, double[:, ::1] pen, double t,
                    bint adaptive_distance, double adaptive_gamma, double adaptive_dmax,
                    bint bilateral, double two_ss, double two_sc, double neglogthr,
                    int search_width, int search_height, uint64_t seed, int nthreads):
-    """Phases A-F.  occmode: 0 off, 1 no, 2 bkgd, 3 fgd.  Returns (row stats, per-row occluded)."""
+    """Phases A-C, E, F for the variants the sweep kernel does not paint.
+
+    occmode: 0 off, 1 no, 2 bkgd, 3 fgd; ``occ`` is the occlusion mask already
+    computed by ``_sweep`` (ignored when occmode is 0).  Returns the row stats.
+    """
     cdef int H = disp.shape[0], W = disp.shape[1], C = left.shape[2]
     cdef int y, K = 2 * hmax + 1
     cdef Ctx cx
-    stats, off_np, pkey_np, okey_np = _row_keys(disp, True, occmode != 0, nthreads)
+    stats, off_np, pkey_np = _row_keys(disp, nthreads)
     cdef int64_t n = off_np[H]
-    if occmode != 0:
-        cnt = _occlusions(H, W, okey_np, off_np, rx, ry, pen, t, occ, nthreads)
-    else:
-        cnt = np.zeros(H, np.int64)
     cdef uint64_t[::1] pk = pkey_np
     cdef int64_t[::1] off = off_np
     hp_np = None
@@ -981,12 +669,12 @@ def project_kernel(const uint8_t[:, :, ::1] left, const uint8_t[:, :, ::1] right
     cx.neglogthr = neglogthr
     cx.alpha = alpha
     cx.wa = _w16(alpha)
-    cx.seedmix = seed * SEED_MUL
+    cx.seedmix = _seedmix(seed)
     cx.sw_half = search_width // 2
     cx.sw_len = search_width
     cx.sh_half = search_height // 2
     cdef int64_t tabsize = 16 * <int64_t>W if pattern == 1 else 1
-    cdef uint64_t* tabs
+    cdef uint64_t* tabs = NULL
     uvals_np = None
     cdef uint8_t[::1] uv
     if pattern == 1 and uniform and n > 0:
@@ -1001,15 +689,12 @@ def project_kernel(const uint8_t[:, :, ::1] left, const uint8_t[:, :, ::1] right
     # contributions to a row come from at most K source rows
     maxcon = max(1, min(int(n), K * int(stats[:, 1].max()) if H > 0 else 0))
     cdef int64_t mc = maxcon
-    cdef int64_t* heads
-    cdef int64_t* ends
-    cdef int64_t* cidx
-    cdef int32_t* crow
-    cdef uint8_t* vbuf
-    cdef uint8_t* mbuf
-    cdef uint64_t* zbuf
-    cdef bint fast_random = (pattern == 0 and not uniform and not bilateral and cx.hp == NULL
-                             and K <= 64)
+    cdef int64_t* heads = NULL
+    cdef int64_t* ends = NULL
+    cdef int64_t* cidx = NULL
+    cdef int32_t* crow = NULL
+    cdef uint8_t* vbuf = NULL
+    cdef uint8_t* mbuf = NULL
     with nogil, parallel(num_threads=nthreads):
         heads = <int64_t*>malloc(sizeof(int64_t) * K)
         ends = <int64_t*>malloc(sizeof(int64_t) * K)
@@ -1018,12 +703,8 @@ def project_kernel(const uint8_t[:, :, ::1] left, const uint8_t[:, :, ::1] right
         vbuf = <uint8_t*>malloc(mc * K * C)
         mbuf = <uint8_t*>malloc(mc * K)
         tabs = <uint64_t*>malloc(sizeof(uint64_t) * tabsize)
-        zbuf = <uint64_t*>malloc(sizeof(uint64_t) * mc * K)
         for y in prange(H, schedule="guided"):
-            if fast_random:
-                _paint_row_random(&cx, y, heads, ends, cidx, crow, zbuf)
-            else:
-                _paint_row(&cx, y, heads, ends, cidx, crow, vbuf, mbuf, tabs)
+            _paint_row(&cx, y, heads, ends, cidx, crow, vbuf, mbuf, tabs)
         free(heads)
         free(ends)
         free(cidx)
@@ -1031,5 +712,4 @@ def project_kernel(const uint8_t[:, :, ::1] left, const uint8_t[:, :, ::1] right
         free(vbuf)
         free(mbuf)
         free(tabs)
-        free(zbuf)
-    return stats, cnt
+    return stats

@@ -12,8 +12,8 @@ evaluated in float64 from the float32 disparities (penalty table precomputed
 with exactly that expression).  The grid is conceptually unbounded on the
 left, so points whose match falls left of column 0 are tested among
 themselves.  The result is warped back: the mask is set at each occluded
-point's own left-view pixel.  The kernel never builds the dense grid: see
-:mod:`vpp_service.vpp._kernel`.
+point's own left-view pixel.  The kernel keeps only ``r_y`` dense warped rows
+per thread: see :mod:`vpp_service.vpp._sweep`.
 """
 from __future__ import annotations
 
@@ -21,8 +21,10 @@ import math
 
 import numpy as np
 
-from . import _kernel
+from . import _sweep
 from ._validate import as_disparity, as_threads
+
+_NO_IMAGE = np.zeros((1, 1, 1), np.uint8)   # image arguments of a classify-only sweep
 
 
 def penalty_table(window: tuple[int, int], lam: float, gamma: float) -> np.ndarray:
@@ -54,6 +56,18 @@ def check_occlusion_params(window: object, lam: object, gamma: object, t: object
     return rx, ry
 
 
+def classify_into(disp: np.ndarray, occ: np.ndarray, window: tuple[int, int],
+                  pen: np.ndarray, t: float, num_threads: int) -> tuple[np.ndarray, np.ndarray]:
+    """Kernel call behind :func:`detect_occlusions` (inputs already validated).
+
+    Sets ``occ`` (H x W bool, zeroed by the caller) at the occluded points and
+    returns ``(row stats H x 4, occluded count per row)``.
+    """
+    return _sweep.sweep_kernel(disp, occ.view(np.uint8), True, window[0], window[1], pen, t,
+                               _NO_IMAGE, _NO_IMAGE, _NO_IMAGE, _NO_IMAGE, False, 0, 0.0, False,
+                               3, 0, num_threads)
+
+
 def detect_occlusions(disparity: np.ndarray, *, window: tuple[int, int] = (9, 7),
                       lam: float = 2.0, gamma: float = 0.4375, t: float = 1.0,
                       num_threads: int | None = None) -> np.ndarray:
@@ -80,6 +94,6 @@ def detect_occlusions(disparity: np.ndarray, *, window: tuple[int, int] = (9, 7)
     disp = as_disparity("disparity", disparity)
     nt = as_threads(num_threads)
     occ = np.zeros(disp.shape, dtype=bool)
-    _kernel.detect_kernel(disp, occ.view(np.uint8), rx, ry,
-                          penalty_table((rx, ry), float(lam), float(gamma)), float(t), nt)
+    classify_into(disp, occ, (rx, ry), penalty_table((rx, ry), float(lam), float(gamma)),
+                  float(t), nt)
     return occ

@@ -71,13 +71,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _kernel
+from . import _kernel, _sweep
 from .config import VPPConfig
-from .occlusion import check_occlusion_params, penalty_table
+from .occlusion import check_occlusion_params, classify_into, penalty_table
 from .rng import check_seed
 from ._validate import as_disparity, as_image, as_threads
 
 _OCC_MODE = {"off": 0, "no": 1, "bkgd": 2, "fgd": 3}
+
+
+def _sweep_paints(config: VPPConfig) -> bool:
+    """True when the fused sweep kernel paints this variant: the per-pixel random
+    pattern without adaptive patches (the default (vi), and (ii))."""
+    return (config.pattern == "random" and (not config.uniform_patch or config.patch == 1)
+            and config.adaptive_patch is None and config.patch <= 255)
 
 
 @dataclass(frozen=True)
@@ -172,18 +179,27 @@ def project(left: np.ndarray, right: np.ndarray, disparity: np.ndarray,
     out_r = np.empty_like(R)
     occ = np.zeros((H, W), dtype=bool)
     occmode = _OCC_MODE[config.occlusion]
-    bil = config.adaptive_patch == "bilateral"
-    stats, occ_rows = _kernel.project_kernel(
-        L, R, disp, out_l, out_r, occ.view(np.uint8),
-        0 if config.pattern == "random" else 1, config.uniform_patch, (config.patch - 1) // 2,
-        float(config.alpha), config.splat, occmode,
-        rx, ry, penalty_table((rx, ry), float(config.occ_lambda), float(config.occ_gamma)),
-        float(config.occ_t),
-        config.adaptive_patch == "distance", float(config.adaptive_gamma),
-        float(config.adaptive_max_disparity or 0.0),
-        bil, 2.0 * config.bilateral_sigma_space ** 2, 2.0 * config.bilateral_sigma_color ** 2,
-        -math.log(config.bilateral_threshold),
-        config.search_width, config.search_height, seed, nt)
+    pen = penalty_table((rx, ry), float(config.occ_lambda), float(config.occ_gamma))
+    hmax = (config.patch - 1) // 2
+    if _sweep_paints(config):
+        stats, occ_rows = _sweep.sweep_kernel(
+            disp, occ.view(np.uint8), occmode != 0, rx, ry, pen, float(config.occ_t),
+            L, R, out_l, out_r, True, hmax, float(config.alpha), config.splat, occmode,
+            seed, nt)
+    else:
+        occ_rows = np.zeros(H, np.int64)
+        if occmode != 0:
+            _, occ_rows = classify_into(disp, occ, (rx, ry), pen, float(config.occ_t), nt)
+        bil = config.adaptive_patch == "bilateral"
+        stats = _kernel.project_kernel(
+            L, R, disp, out_l, out_r, occ.view(np.uint8),
+            0 if config.pattern == "random" else 1, config.uniform_patch, hmax,
+            float(config.alpha), config.splat, occmode,
+            config.adaptive_patch == "distance", float(config.adaptive_gamma),
+            float(config.adaptive_max_disparity or 0.0),
+            bil, 2.0 * config.bilateral_sigma_space ** 2, 2.0 * config.bilateral_sigma_color ** 2,
+            -math.log(config.bilateral_threshold),
+            config.search_width, config.search_height, seed, nt)
     tot = stats.sum(axis=0)
     n_occ = int(occ_rows.sum())
     valid = int(tot[1])

@@ -1,0 +1,209 @@
+/* C helpers of the sweep kernel (vpp_service/vpp/_sweep.pyx): the row scanner,
+ * the byte blend on 16-byte vectors and the float window maximum.
+ *
+ * Every function computes exactly what its scalar definition says; the SIMD
+ * versions (SSE2, always present on x86-64) are used when available, a plain C
+ * loop otherwise.  The blend is the library's fixed-point rule
+ *     blend(a, b, w) = (a * (65536 - w) + b * w + 32768) >> 16,   0 <= w <= 65536
+ * rewritten as a + floor(((b - a) * w + 32768) / 65536) so that it runs on
+ * 16-bit lanes: floor(P / 65536) is the signed high half of P = (b - a) * w and
+ * the rounding term is bit 15 of its low half.  w = 65536 gives the same bytes
+ * as w = 65535 (for |b - a| <= 255), so weights are clamped to 16 bits.
+ */
+#ifndef VPP_SWEEP_H
+#define VPP_SWEEP_H
+
+#include <stdint.h>
+#include <string.h>
+#include <math.h>
+#ifdef __cplusplus
+#include <algorithm>
+#endif
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#define VPP_HAVE_SSE2 1
+#else
+#define VPP_HAVE_SSE2 0
+#endif
+
+static inline uint32_t vpp_sw_f2u(float f) { uint32_t u; memcpy(&u, &f, 4); return u; }
+
+/* Scan one disparity row.  Writes the key (float_bits(d) << 32) | x of every
+ * valid point (0 < d < W, finite) in increasing x and returns their number;
+ * st = [given, valid, invalid, left-border] where "given" is any value other
+ * than +-0 and NaN.  keys must hold W entries.  On SSE2, 8 entries are
+ * classified at once and blocks without a given value cost one test (sparse
+ * maps are mostly zeros). */
+static inline void vpp_scan_one(const float* d, int x, int W, uint64_t* keys, int* n,
+                                int64_t* given, int64_t* oob) {
+    float v = d[x];
+    if (v != 0.0f && v == v) {
+        (*given)++;
+        if (v > 0.0f && v < (float)W) {
+            keys[(*n)++] = ((uint64_t)vpp_sw_f2u(v) << 32) | (uint64_t)x;
+            if ((double)x - (double)v < 0.0) (*oob)++;
+        }
+    }
+}
+
+static int vpp_scan_row(const float* d, int W, uint64_t* keys, int64_t* st) {
+    int64_t given = 0, oob = 0;
+    int n = 0, x = 0;
+#if VPP_HAVE_SSE2
+    const __m128 zero = _mm_setzero_ps(), wf = _mm_set1_ps((float)W);
+    for (; x + 8 <= W; x += 8) {
+        __m128 a = _mm_loadu_ps(d + x), b = _mm_loadu_ps(d + x + 4);
+        unsigned g = (unsigned)_mm_movemask_ps(_mm_and_ps(_mm_cmpneq_ps(a, zero), _mm_cmpord_ps(a, a)))
+                   | ((unsigned)_mm_movemask_ps(_mm_and_ps(_mm_cmpneq_ps(b, zero), _mm_cmpord_ps(b, b))) << 4);
+        unsigned m;
+        if (!g) continue;
+        m = (unsigned)_mm_movemask_ps(_mm_and_ps(_mm_cmpgt_ps(a, zero), _mm_cmplt_ps(a, wf)))
+          | ((unsigned)_mm_movemask_ps(_mm_and_ps(_mm_cmpgt_ps(b, zero), _mm_cmplt_ps(b, wf))) << 4);
+        given += __builtin_popcount(g);
+        while (m) {
+            int i = x + __builtin_ctz(m);
+            m &= m - 1;
+            keys[n++] = ((uint64_t)vpp_sw_f2u(d[i]) << 32) | (uint64_t)i;
+            oob += ((double)i - (double)d[i] < 0.0);
+        }
+    }
+#endif
+    for (; x < W; x++) vpp_scan_one(d, x, W, keys, &n, &given, &oob);
+    st[0] = given;
+    st[1] = n;
+    st[2] = given - n;
+    st[3] = oob;
+    return n;
+}
+
+static inline float vpp_sw_u2f(uint32_t u) { float f; memcpy(&f, &u, 4); return f; }
+
+static inline void vpp_insertion_sort(uint64_t* a, int n) {
+    int i, j;
+    for (i = 1; i < n; i++) {
+        uint64_t v = a[i];
+        for (j = i; j > 0 && a[j - 1] > v; j--) a[j] = a[j - 1];
+        a[j] = v;
+    }
+}
+
+/* Sort the keys of one row ascending: (d, x) order.  A counting pass puts the
+ * keys into n buckets of d (the bucket index is a monotone function of d, so
+ * buckets are in d order), then each bucket is sorted by the full key
+ * (insertion sort; std::sort for the rare crowded bucket).  Expected linear
+ * time, against ~50 cycles per key for a comparison sort on unpredictable d.
+ * Scratch: tmp and bucket hold n entries, cnt n + 1. */
+static void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* bucket, int* cnt) {
+    float dmin, dmax, d;
+    double scale;
+    int i, b, s, e;
+    if (n <= 24) {
+        vpp_insertion_sort(keys, n);
+        return;
+    }
+    dmin = dmax = vpp_sw_u2f((uint32_t)(keys[0] >> 32));
+    for (i = 1; i < n; i++) {
+        d = vpp_sw_u2f((uint32_t)(keys[i] >> 32));
+        dmin = d < dmin ? d : dmin;
+        dmax = d > dmax ? d : dmax;
+    }
+    if (dmin == dmax) return;            /* one d: the scan order (x) is the key order */
+    scale = (double)n / ((double)dmax - (double)dmin);
+    memset(cnt, 0, sizeof(int) * (size_t)(n + 1));
+    for (i = 0; i < n; i++) {
+        b = (int)(((double)vpp_sw_u2f((uint32_t)(keys[i] >> 32)) - (double)dmin) * scale);
+        b = b < n - 1 ? b : n - 1;
+        bucket[i] = b;
+        cnt[b + 1]++;
+    }
+    for (i = 0; i < n; i++) cnt[i + 1] += cnt[i];
+    for (i = 0; i < n; i++) tmp[cnt[bucket[i]]++] = keys[i];   /* cnt[b] ends at bucket b's end */
+    s = 0;
+    for (b = 0; b < n; b++) {
+        e = cnt[b];
+        if (e - s > 32) {
+#ifdef __cplusplus
+            std::sort(tmp + s, tmp + e);
+#else
+            vpp_insertion_sort(tmp + s, e - s);
+#endif
+        } else if (e - s > 1) {
+            vpp_insertion_sort(tmp + s, e - s);
+        }
+        s = e;
+    }
+    memcpy(keys, tmp, sizeof(uint64_t) * (size_t)n);
+}
+
+/* Maximum of p[0..n-1] (n >= 1, no NaN). */
+static inline float vpp_maxf(const float* p, int n) {
+    int i = 0;
+    float m;
+#if VPP_HAVE_SSE2
+    if (n >= 4) {
+        __m128 v = _mm_loadu_ps(p);
+        for (i = 4; i + 4 <= n; i += 4) v = _mm_max_ps(v, _mm_loadu_ps(p + i));
+        v = _mm_max_ps(v, _mm_movehl_ps(v, v));
+        v = _mm_max_ss(v, _mm_shuffle_ps(v, v, 1));
+        m = _mm_cvtss_f32(v);
+    } else {
+        m = p[0];
+        i = 1;
+    }
+#else
+    m = p[0];
+    i = 1;
+#endif
+    for (; i < n; i++) if (p[i] > m) m = p[i];
+    return m;
+}
+
+static inline uint8_t vpp_blend_u8(uint32_t a, uint32_t b, uint32_t w) {
+    return (uint8_t)((a * (65536u - w) + b * w + 32768u) >> 16);
+}
+
+#if VPP_HAVE_SSE2
+static inline __m128i vpp_blend_epi16(__m128i a, __m128i b, __m128i w) {
+    __m128i d = _mm_sub_epi16(b, a);
+    __m128i hi = _mm_mulhi_epu16(d, w);                     /* high half of (d mod 2^16) * w */
+    hi = _mm_sub_epi16(hi, _mm_and_si128(_mm_srai_epi16(d, 15), w));   /* signed correction */
+    __m128i rb = _mm_srli_epi16(_mm_mullo_epi16(d, w), 15);  /* low half >= 32768 */
+    return _mm_add_epi16(_mm_add_epi16(a, hi), rb);
+}
+
+/* Blend bytes [0, n) (n <= 16) of the 16 bytes at dst with val; bytes [n, 16)
+ * are rewritten unchanged, so all 16 must belong to the caller. */
+static inline void vpp_blend16(uint8_t* dst, const uint8_t* val, int n, uint32_t w) {
+    static const int8_t iota[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15};
+    const __m128i z = _mm_setzero_si128();
+    __m128i lanes = _mm_cmplt_epi8(_mm_loadu_si128((const __m128i*)iota), _mm_set1_epi8((char)n));
+    __m128i wv = _mm_set1_epi16((short)(uint16_t)w);
+    __m128i a = _mm_loadu_si128((const __m128i*)dst);
+    __m128i b = _mm_loadu_si128((const __m128i*)val);
+    __m128i lo = vpp_blend_epi16(_mm_unpacklo_epi8(a, z), _mm_unpacklo_epi8(b, z),
+                                 _mm_and_si128(wv, _mm_unpacklo_epi8(lanes, lanes)));
+    __m128i hi = vpp_blend_epi16(_mm_unpackhi_epi8(a, z), _mm_unpackhi_epi8(b, z),
+                                 _mm_and_si128(wv, _mm_unpackhi_epi8(lanes, lanes)));
+    _mm_storeu_si128((__m128i*)dst, _mm_packus_epi16(lo, hi));
+}
+#endif
+
+/* dst[i] = blend(dst[i], val[i], w) for i < n.  `room` is the number of bytes
+ * from dst to the end of the caller's row; val must have n rounded up to 16
+ * readable bytes. */
+static inline void vpp_blend_span(uint8_t* dst, const uint8_t* val, int n, uint32_t w,
+                                  int64_t room) {
+    int i;
+    if (n <= 0) return;
+#if VPP_HAVE_SSE2
+    if (room >= (int64_t)((n + 15) & ~15)) {
+        uint32_t w16 = w > 65535u ? 65535u : w;
+        for (; n > 0; n -= 16, dst += 16, val += 16) vpp_blend16(dst, val, n < 16 ? n : 16, w16);
+        return;
+    }
+#endif
+    for (i = 0; i < n; i++) dst[i] = vpp_blend_u8(dst[i], val[i], w);
+}
+
+#endif
