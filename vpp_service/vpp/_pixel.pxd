@@ -2,7 +2,7 @@
 
 All arithmetic is the fixed-point rule documented in :mod:`vpp_service.vpp.project`.
 """
-from libc.stdint cimport uint8_t, uint64_t
+from libc.stdint cimport uint8_t, int64_t, uint64_t
 from libc.math cimport floor
 
 
@@ -20,7 +20,7 @@ cdef inline uint64_t _seedmix(uint64_t seed) noexcept nogil:
 
 cdef inline uint64_t _w16(double w) noexcept nogil:
     """Weight in [0, 1] -> fixed point /65536, rounded half up (truncation is floor for w >= 0)."""
-    return <uint64_t>(w * 65536.0 + 0.5)
+    return <uint64_t><int64_t>(w * 65536.0 + 0.5)   # via int64: one cvttsd2si
 
 
 cdef inline int _ifloor(double v) noexcept nogil:

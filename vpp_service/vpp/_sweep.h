@@ -136,6 +136,38 @@ static void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* bucket, int
     memcpy(keys, tmp, sizeof(uint64_t) * (size_t)n);
 }
 
+/* Merge three (d, x)-sorted key lists of consecutive rows into the global
+ * paint order (d, row, x), branch-free.  Lists may be empty; l[i][n[i]] and
+ * f[i][n[i]] must be readable (one padding entry).  A flagged key (occluded)
+ * is dropped when drop_flagged, else written with orow = -1 - list index;
+ * unflagged keys get orow = list index.  Returns the number written. */
+static int vpp_merge3(const uint64_t* const* l, const uint8_t* const* f, const int* n,
+                      int drop_flagged, uint64_t* okey, int32_t* orow) {
+    const uint64_t* a = l[0], *b = l[1], *c = l[2];
+    const uint8_t* fa = f[0], *fb = f[1], *fc = f[2];
+    const int na = n[0], nb = n[1], nc = n[2];
+    int ia = 0, ib = 0, ic = 0, m = 0, total = na + nb + nc, t;
+    for (t = 0; t < total; t++) {
+        uint64_t ka = ia < na ? (a[ia] >> 32) << 2 : ~0ULL;
+        uint64_t kb = ib < nb ? ((b[ib] >> 32) << 2) | 1 : ~0ULL;
+        uint64_t kc = ic < nc ? ((c[ic] >> 32) << 2) | 2 : ~0ULL;
+        uint64_t k = ka < kb ? ka : kb;
+        int j, flag;
+        uint64_t key;
+        k = k < kc ? k : kc;
+        j = (int)(k & 3);
+        key = j == 0 ? a[ia] : (j == 1 ? b[ib] : c[ic]);
+        flag = j == 0 ? fa[ia] : (j == 1 ? fb[ib] : fc[ic]);
+        ia += j == 0;
+        ib += j == 1;
+        ic += j == 2;
+        okey[m] = key;
+        orow[m] = flag ? -1 - j : j;
+        m += !(flag && drop_flagged);
+    }
+    return m;
+}
+
 /* Maximum of p[0..n-1] (n >= 1, no NaN). */
 static inline float vpp_maxf(const float* p, int n) {
     int i = 0;
@@ -172,20 +204,56 @@ static inline __m128i vpp_blend_epi16(__m128i a, __m128i b, __m128i w) {
     return _mm_add_epi16(_mm_add_epi16(a, hi), rb);
 }
 
+/* Byte lanes lo <= i < hi of a 16-byte vector (all ones there, zero elsewhere). */
+static inline __m128i vpp_lanes(int lo, int hi) {
+    const __m128i iota = _mm_setr_epi8(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    return _mm_and_si128(_mm_cmpgt_epi8(iota, _mm_set1_epi8((char)(lo - 1))),
+                         _mm_cmplt_epi8(iota, _mm_set1_epi8((char)hi)));
+}
+
+/* (alo, ahi) = 16 bytes widened to 16 bits; blend the lanes of `lanes` with b. */
+static inline void vpp_blend_regs(__m128i* alo, __m128i* ahi, __m128i b, __m128i lanes,
+                                  uint32_t w) {
+    const __m128i z = _mm_setzero_si128();
+    __m128i wv = _mm_set1_epi16((short)(uint16_t)(w > 65535u ? 65535u : w));
+    *alo = vpp_blend_epi16(*alo, _mm_unpacklo_epi8(b, z), _mm_and_si128(wv, _mm_unpacklo_epi8(lanes, lanes)));
+    *ahi = vpp_blend_epi16(*ahi, _mm_unpackhi_epi8(b, z), _mm_and_si128(wv, _mm_unpackhi_epi8(lanes, lanes)));
+}
+
 /* Blend bytes [0, n) (n <= 16) of the 16 bytes at dst with val; bytes [n, 16)
  * are rewritten unchanged, so all 16 must belong to the caller. */
 static inline void vpp_blend16(uint8_t* dst, const uint8_t* val, int n, uint32_t w) {
-    static const int8_t iota[16] = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15};
     const __m128i z = _mm_setzero_si128();
-    __m128i lanes = _mm_cmplt_epi8(_mm_loadu_si128((const __m128i*)iota), _mm_set1_epi8((char)n));
-    __m128i wv = _mm_set1_epi16((short)(uint16_t)w);
     __m128i a = _mm_loadu_si128((const __m128i*)dst);
-    __m128i b = _mm_loadu_si128((const __m128i*)val);
-    __m128i lo = vpp_blend_epi16(_mm_unpacklo_epi8(a, z), _mm_unpacklo_epi8(b, z),
-                                 _mm_and_si128(wv, _mm_unpacklo_epi8(lanes, lanes)));
-    __m128i hi = vpp_blend_epi16(_mm_unpackhi_epi8(a, z), _mm_unpackhi_epi8(b, z),
-                                 _mm_and_si128(wv, _mm_unpackhi_epi8(lanes, lanes)));
-    _mm_storeu_si128((__m128i*)dst, _mm_packus_epi16(lo, hi));
+    __m128i alo = _mm_unpacklo_epi8(a, z), ahi = _mm_unpackhi_epi8(a, z);
+    vpp_blend_regs(&alo, &ahi, _mm_loadu_si128((const __m128i*)val), vpp_lanes(0, n), w);
+    _mm_storeu_si128((__m128i*)dst, _mm_packus_epi16(alo, ahi));
+}
+/* Splatted right-view paint of one patch row in one pass: pixels [k0, k1) of
+ * val (C bytes each) go to columns j = k of dst with weight w0 and, first, to
+ * columns j = k + 1 with weight w1 (see _sweep.pyx).  dst is column 0 of the
+ * span.  Returns 0 (nothing done) unless the span fits one 16-byte vector
+ * ((k1 + 1) * C <= 16, `room` >= 16 bytes to the row end); the caller then
+ * blends the two spans separately. */
+static inline int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, int k1,
+                              uint32_t w0, uint32_t w1, int64_t room) {
+#if VPP_HAVE_SSE2
+    const __m128i z = _mm_setzero_si128();
+    __m128i a, alo, ahi, v, v1;
+    if ((k1 + 1) * C > 16 || room < 16 || (C != 1 && C != 3)) return 0;
+    a = _mm_loadu_si128((const __m128i*)dst);
+    alo = _mm_unpacklo_epi8(a, z);
+    ahi = _mm_unpackhi_epi8(a, z);
+    v = _mm_loadu_si128((const __m128i*)val);
+    v1 = C == 3 ? _mm_slli_si128(v, 3) : _mm_slli_si128(v, 1);
+    if (w1) vpp_blend_regs(&alo, &ahi, v1, vpp_lanes((k0 + 1) * C, (k1 + 1) * C), w1);
+    vpp_blend_regs(&alo, &ahi, v, vpp_lanes(k0 * C, k1 * C), w0);
+    _mm_storeu_si128((__m128i*)dst, _mm_packus_epi16(alo, ahi));
+    return 1;
+#else
+    (void)dst; (void)val; (void)C; (void)k0; (void)k1; (void)w0; (void)w1; (void)room;
+    return 0;
+#endif
 }
 #endif
 

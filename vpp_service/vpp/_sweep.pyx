@@ -42,7 +42,7 @@ not depend on the chunking or the thread count.
 """
 from cython.parallel cimport prange, parallel
 from libc.stdint cimport uint8_t, uint32_t, uint64_t, int64_t, int32_t
-from libc.stdlib cimport malloc, free, realloc
+from libc.stdlib cimport malloc, calloc, free, realloc
 from libc.string cimport memcpy, memset
 from libc.math cimport floor, INFINITY
 
@@ -54,8 +54,12 @@ cdef extern from "_sweep.h" nogil:
     int vpp_scan_row(const float* d, int W, uint64_t* keys, int64_t* st)
     void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* bucket, int* cnt)
     float vpp_sw_u2f(uint32_t u)
+    int vpp_merge3(const uint64_t* const* l, const uint8_t* const* f, const int* n,
+                   int drop_flagged, uint64_t* okey, int32_t* orow)
     float vpp_maxf(const float* p, int n)
     void vpp_blend_span(uint8_t* dst, const uint8_t* val, int n, uint32_t w, int64_t room)
+    int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, int k1,
+                    uint32_t w0, uint32_t w1, int64_t room)
     uint32_t vpp_sw_f2u(float f)
 
 cdef uint64_t ALL1 = 0xFFFFFFFFFFFFFFFFULL
@@ -106,28 +110,31 @@ cdef struct Scratch:
     int* sort_cnt       # W + 1
     int64_t cap         # contribution capacity
     uint64_t* ckey
-    int32_t* crow       # source row, or -1 - row for an FGD-occluded contribution
+    int32_t* crow       # source row (index), or -1 - it for an FGD-occluded contribution
     uint8_t* vals       # cap x vs
+    uint8_t* zeros      # W + 1 zero flags (occlusion off or bkgd)
     int failed
 
 
 cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
     cdef int64_t i, nw = <int64_t>J.ring * J.ww
-    S.keys = <uint64_t*>malloc(sizeof(uint64_t) * J.ring * J.W)
-    S.flags = <uint8_t*>malloc(<int64_t>J.ring * J.W)
+    S.keys = <uint64_t*>malloc(sizeof(uint64_t) * (J.ring * J.W + 1))   # +1: merge read-ahead
+    S.flags = <uint8_t*>malloc(<int64_t>J.ring * J.W + 1)
     S.nk = <int*>malloc(sizeof(int) * J.ring)
     S.rowid = <int*>malloc(sizeof(int) * J.ring)
     S.warp = <float*>malloc(sizeof(float) * (nw if J.occ_on else 1))
     S.sort_tmp = <uint64_t*>malloc(sizeof(uint64_t) * J.W)
     S.sort_bucket = <int*>malloc(sizeof(int) * J.W)
     S.sort_cnt = <int*>malloc(sizeof(int) * (J.W + 1))
+    S.zeros = <uint8_t*>calloc(J.W + 1, 1)
     S.cap = 0
     S.ckey = NULL
     S.crow = NULL
     S.vals = NULL
     S.failed = 0
     if (S.keys == NULL or S.flags == NULL or S.nk == NULL or S.rowid == NULL or S.warp == NULL
-            or S.sort_tmp == NULL or S.sort_bucket == NULL or S.sort_cnt == NULL):
+            or S.sort_tmp == NULL or S.sort_bucket == NULL or S.sort_cnt == NULL
+            or S.zeros == NULL):
         S.failed = 1
         return 1
     for i in range(J.ring):
@@ -148,6 +155,7 @@ cdef void _scratch_free(Scratch* S) noexcept nogil:
     free(S.sort_tmp)
     free(S.sort_bucket)
     free(S.sort_cnt)
+    free(S.zeros)
     free(S.ckey)
     free(S.crow)
     free(S.vals)
@@ -278,7 +286,7 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
     cdef uint64_t kb, key, z
     cdef uint8_t* v
     cdef int occmode = J.occmode, vs = J.vs
-    cdef int occ_pt
+    cdef int occ_pt, use_flags
     cdef double d, xp, beta
     cdef uint32_t w0, w1, wb
     memcpy(oL, J.L + rowb, W * C)
@@ -299,24 +307,36 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
         return
     if _reserve(J, S, total):
         return
-    # 1. merge rows s_lo..s_hi into the global order (d, y, x): ties in d -> smaller row
-    ncon = 0
-    while True:
-        kb = cand[0]
-        for j in range(1, nsrc):
-            kb = cand[j] if cand[j] < kb else kb
-        if kb == ALL1:
-            break
-        jb = <int>(kb & 255)
-        k = head[jb]
-        head[jb] = k + 1
-        cand[jb] = ((src[jb][k + 1] >> 32) << 8) | <uint64_t>jb if k + 1 < cnt[jb] else ALL1
-        occ_pt = fsrc[jb][k] if (occmode == 1 or occmode == 3) else 0
-        if occ_pt and occmode == 1:
-            continue
-        S.ckey[ncon] = src[jb][k]
-        S.crow[ncon] = s_lo + jb if not occ_pt else -1 - (s_lo + jb)
-        ncon += 1
+    # 1. merge rows s_lo..s_hi into the global order (d, y, x): ties in d -> smaller row;
+    #    only the sign of crow is used below (FGD-occluded or not)
+    use_flags = occmode == 1 or occmode == 3
+    if nsrc <= 3:
+        for j in range(nsrc, 3):
+            src[j] = src[0]
+            fsrc[j] = fsrc[0]
+            cnt[j] = 0
+        if not use_flags:
+            for j in range(3):
+                fsrc[j] = S.zeros
+        ncon = vpp_merge3(src, fsrc, cnt, occmode == 1, S.ckey, S.crow)
+    else:
+        ncon = 0
+        while True:
+            kb = cand[0]
+            for j in range(1, nsrc):
+                kb = cand[j] if cand[j] < kb else kb
+            if kb == ALL1:
+                break
+            jb = <int>(kb & 255)
+            k = head[jb]
+            head[jb] = k + 1
+            cand[jb] = ((src[jb][k + 1] >> 32) << 8) | <uint64_t>jb if k + 1 < cnt[jb] else ALL1
+            occ_pt = fsrc[jb][k] if use_flags else 0
+            if occ_pt and occmode == 1:
+                continue
+            S.ckey[ncon] = src[jb][k]
+            S.crow[ncon] = jb if not occ_pt else -1 - jb
+            ncon += 1
     # 2. pattern bytes of every painted contribution (hash of the left pixel)
     for n in range(ncon):
         if S.crow[n] < 0:
@@ -345,9 +365,13 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
         if J.splat:
             fl = _ifloor(xp)
             beta = xp - <double>fl
-            if beta > 0:
-                _span(J, oR, v, k0, k1, fl - h + 1, <uint32_t>_w16(J.alpha * beta))
-            _span(J, oR, v, k0, k1, fl - h, <uint32_t>_w16(J.alpha * (1.0 - beta)))
+            w1 = <uint32_t>_w16(J.alpha * beta) if beta > 0 else 0
+            w0 = <uint32_t>_w16(J.alpha * (1.0 - beta))
+            if (fl - h < 0 or fl + h + 1 >= W or not vpp_splat16(
+                    oR + (fl - h) * C, v, C, k0, k1, w0, w1, <int64_t>(W - fl + h) * C)):
+                if w1:
+                    _span(J, oR, v, k0, k1, fl - h + 1, w1)
+                _span(J, oR, v, k0, k1, fl - h, w0)
         else:
             _span(J, oR, v, k0, k1, _ifloor(xp + 0.5) - h, J.wa)
     # 4. left row: pattern, or (FGD) the final right row's content at x'
