@@ -89,7 +89,7 @@ def main() -> int:
     ap.add_argument("--max-disparity", type=int, default=128)
     ap.add_argument("--rate", type=float, default=5.0, help="paced run rate (Hz)")
     ap.add_argument("--warmup", type=int, default=3)
-    ap.add_argument("--source-poll-s", type=float, default=0.002,
+    ap.add_argument("--source-poll-s", type=float, default=0.05,
                     help="zenoh source idle poll period (service default 0.002; adds ~half of it to e2e)")
     ap.add_argument("--json", default=str(DEFAULT_JSON))
     a = ap.parse_args()

@@ -103,3 +103,36 @@ def test_needs_session():
 def test_bad_options(opts):
     with pytest.raises(ValueError, match="source.zenoh"):
         build_source("zenoh", opts)
+
+
+def test_ring_keeps_newest_and_counts_drops(sessions):
+    """A burst while the receive thread is not draining: only the newest ring_size
+    frames survive, the rest are counted as ring_dropped (no silent loss)."""
+    svc, cam = sessions
+    src = build_source("zenoh", {"ring_size": 3}, SourceContext(rig="z", session=svc))
+    src.open()
+    try:
+        time.sleep(0.3)  # let the subscription propagate
+        base = make_frame()
+        for seq in range(10):
+            cam.put("vpp/z/in/frame", wire.encode_frame(base.with_(seq=seq)),
+                    congestion_control=zenoh.CongestionControl.BLOCK)
+        assert wait_for(lambda: src.stats()["ring_dropped"] == 7)
+        frames = []
+        src.start(lambda f: frames.append(f) or True, lambda r: None)
+        assert wait_for(lambda: len(frames) == 3)
+        assert [f.seq for f in frames] == [7, 8, 9]
+        st = src.stats()
+        assert st["received"] == 3 and st["ring_dropped"] == 7
+    finally:
+        src.stop(2.0)
+
+
+def test_stop_is_prompt_when_idle(sessions):
+    """The idle receive thread sleeps on an event: stop() wakes it at once."""
+    svc, _ = sessions
+    src, _, _ = started(svc, poll_s=1.0)
+    t0 = time.monotonic()
+    src.stop(2.0)
+    assert time.monotonic() - t0 < 0.5
+    assert src.finished.wait(1.0)

@@ -1,11 +1,12 @@
 """Zenoh source: receive wire-format v1 frames from cameras on the network.
 
-Subscribes with ring-channel handlers (the Zenoh callback thread only pushes
-into a bounded ring: no decoding, no blocking there; when the service falls
-behind the oldest samples are overwritten). This source's thread drains the
-rings, decodes and validates every message (:mod:`vpp_service.service.wire`)
-and emits frames; a bad message is rejected (counted, reason reported) and the
-source keeps serving.
+Subscribes with a callback that only appends the sample to a bounded ring
+(``ring_size`` per topic; when the service falls behind the oldest samples are
+dropped and counted in ``ring_dropped``) and signals an event: no decoding and
+no blocking in Zenoh's thread.  This source's thread wakes on that event (no
+polling delay), drains the rings, decodes and validates every message
+(:mod:`vpp_service.service.wire`) and emits frames; a bad message is rejected
+(counted, reason reported) and the source keeps serving.
 
 Topics: ``<prefix>/<rig>/in/frame`` (default), or with ``topics = "separate"``
 ``in/left``, ``in/right`` and ``in/depth`` joined by
@@ -14,7 +15,9 @@ Topics: ``<prefix>/<rig>/in/frame`` (default), or with ``topics = "separate"``
 """
 from __future__ import annotations
 
+import threading
 import time
+from collections import deque
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -42,11 +45,12 @@ class ZenohSourceOptions:
     sync_threshold_ms : float
         Approximate sync: largest stamp difference inside a set.
     ring_size : int
-        Zenoh ring-channel capacity per subscriber (oldest overwritten).
+        Samples buffered per subscribed topic (oldest dropped and counted).
     max_message_mb : float
         Messages larger than this are rejected before unpacking.
     poll_s : float
-        Idle poll period of the receive thread.
+        Longest idle sleep of the receive thread between checks for a stop
+        request; arriving samples wake it at once.
     """
 
     topics: Literal["frame", "separate"] = "frame"
@@ -56,7 +60,7 @@ class ZenohSourceOptions:
     sync_threshold_ms: float = 20.0
     ring_size: int = 4
     max_message_mb: float = 256.0
-    poll_s: float = 0.002
+    poll_s: float = 0.05
 
     def __post_init__(self) -> None:
         if self.sync_queue_size < 1:
@@ -81,8 +85,11 @@ class ZenohSource(Source):
         super().__init__(options, context)
         self._subs: dict[str, Any] = {}
         self._limits = wire.WireLimits(max_message_bytes=int(options.max_message_mb * 1024 * 1024))
+        self._rings: dict[str, deque] = {}
+        self._ring_lock = threading.Lock()
+        self._arrived = threading.Event()
         self.sync: Synchronizer | None = None
-        self._counters.update({"received": 0, "sync_dropped": 0})
+        self._counters.update({"received": 0, "ring_dropped": 0, "sync_dropped": 0})
 
     def open(self) -> None:
         """Declare the subscribers on the service's session."""
@@ -95,26 +102,48 @@ class ZenohSource(Source):
         parts = ["frame"] if o.topics == "frame" else (["left", "right", "depth"] if o.with_depth else ["left", "right"])
         for part in parts:
             key = wire.topic(self.context.prefix, self.context.rig, f"in/{part}")
-            self._subs[part] = session.declare_subscriber(key, zenoh.handlers.RingChannel(o.ring_size))
+            self._rings[part] = deque(maxlen=o.ring_size)
+            self._subs[part] = session.declare_subscriber(
+                key, zenoh.handlers.Callback(lambda sample, part=part: self._on_sample(part, sample)))
         if o.topics == "separate":
             self.sync = Synchronizer(parts, o.sync, o.sync_queue_size, int(o.sync_threshold_ms * 1e6))
+
+    def _on_sample(self, part: str, sample: Any) -> None:
+        """Zenoh callback: buffer the sample and wake the receive thread (never blocks long)."""
+        ring = self._rings[part]
+        with self._ring_lock:
+            if len(ring) == ring.maxlen:
+                self._counters["ring_dropped"] += 1
+            ring.append(sample)
+        self._arrived.set()
+
+    def _next(self, part: str) -> Any:
+        with self._ring_lock:
+            ring = self._rings[part]
+            return ring.popleft() if ring else None
 
     def run(self, emit: Emit, reject: Reject) -> None:
         """Drain the rings, decode, validate, synchronize and emit until stopped."""
         while not self.stopping():
+            self._arrived.clear()       # before draining: a later sample sets it again
             got = False
-            for part, sub in self._subs.items():
-                try:
-                    sample = sub.try_recv()
-                except Exception:  # subscriber undeclared during shutdown
-                    return
+            for part in list(self._rings):
+                sample = self._next(part)
                 if sample is None:
                     continue
                 got = True
                 self._counters["received"] += 1
                 self._handle(part, sample, emit, reject)
             if not got:
-                self.wait(self.options.poll_s)
+                self._arrived.wait(self.options.poll_s)
+
+    def request_stop(self) -> None:
+        super().request_stop()
+        self._arrived.set()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self._arrived.set()
+        super().stop(timeout)
 
     def _handle(self, part: str, sample: Any, emit: Emit, reject: Reject) -> None:
         recv_ns = time.time_ns()
