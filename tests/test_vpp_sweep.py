@@ -1,0 +1,95 @@
+"""The fused sweep kernel (vpp_service/vpp/_sweep.pyx) against the literal reference.
+
+project() routes the per-pixel random pattern without adaptive patches (the
+default (vi), and (ii)) to the sweep kernel; detect_occlusions() always uses it.
+These cases are larger than test_vpp_project's sweep so that rows split into
+several chunks per thread, spans reach the 16-byte SIMD paths and the fallbacks
+(wide patches, row ends, left-border matches), and maps use NaN as "no point".
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vpp_service.vpp import VPPConfig, detect_occlusions, project
+
+from test_vpp_project import make_case
+from vpp_reference import ref_occlusions, ref_project
+
+CASES = [
+    # (patch, C, splat, occlusion, alpha, window (x, y), t, shape (H, W), density)
+    (3, 3, True, "fgd", 0.4, (9, 7), 1.0, (41, 97), 0.05),      # the default, several chunks
+    (3, 1, True, "fgd", 0.4, (9, 7), 1.0, (37, 80), 0.10),
+    (1, 3, True, "no", 0.7, (9, 7), 1.0, (30, 64), 0.20),
+    (5, 3, True, "bkgd", 0.4, (9, 7), 0.0, (33, 90), 0.08),     # (K+1)*C > 16: two-span path
+    (5, 1, False, "fgd", 1.0, (3, 3), 1.0, (29, 70), 0.10),
+    (7, 3, True, "off", 0.2, (9, 7), 1.0, (26, 60), 0.05),
+    (9, 1, True, "fgd", 0.5, (15, 11), 3.0, (45, 75), 0.04),
+    (3, 3, False, "no", 0.4, (1, 1), 1.0, (21, 50), 0.30),
+    (3, 3, True, "fgd", 0.0, (9, 7), 1.0, (24, 48), 0.10),      # alpha 0: nothing changes
+    (3, 3, True, "fgd", 1.0, (5, 9), 0.5, (38, 66), 0.15),      # alpha 1: w = 65536
+]
+
+
+def case_arrays(i, shape, C, density, nan_background):
+    rng = np.random.default_rng(100 + i)
+    left, right, disp = make_case(rng, shape[0], shape[1], C, density)
+    if C == 1 and left.ndim == 3:
+        left, right = left[:, :, 0], right[:, :, 0]
+    if nan_background:
+        disp[disp == 0] = np.nan
+    return left, right, disp
+
+
+@pytest.mark.parametrize("i", range(len(CASES)))
+@pytest.mark.parametrize("nan_background", [False, True])
+def test_sweep_matches_reference(i, nan_background):
+    patch, C, splat, occ, alpha, window, t, shape, density = CASES[i]
+    cfg = VPPConfig(patch=patch, splat=splat, occlusion=occ, alpha=alpha,
+                    occ_window_x=window[0], occ_window_y=window[1], occ_t=t)
+    left, right, disp = case_arrays(i, shape, C, density, nan_background)
+    rl, rr, rocc = ref_project(left, right, np.nan_to_num(disp, nan=0.0), cfg, seed=i)
+    for nt in (1, 2, 3):
+        res = project(left, right, disp, cfg, seed=i, num_threads=nt)
+        np.testing.assert_array_equal(res.occluded, rocc if occ != "off" else False)
+        np.testing.assert_array_equal(res.right, rr, err_msg=f"right, {nt} threads")
+        np.testing.assert_array_equal(res.left, rl, err_msg=f"left, {nt} threads")
+        assert res.stats.occluded == (int(rocc.sum()) if occ != "off" else 0)
+
+
+@pytest.mark.parametrize("window,lam,gamma,t", [((9, 7), 2.0, 0.4375, 1.0), ((3, 5), 0.0, 1.0, 0.0),
+                                                 ((21, 1), 1.3, 0.1, 2.5), ((1, 13), 5.0, 0.9, 0.25)])
+def test_detect_matches_reference_many_chunks(window, lam, gamma, t):
+    rng = np.random.default_rng(5)
+    H, W = 64, 120
+    disp = np.where(rng.random((H, W)) < 0.15,
+                    rng.uniform(0.5, 60, (H, W)), 0).astype(np.float32)
+    disp[10:20, 30:50] = np.where(disp[10:20, 30:50] > 0, 70.0, 0)   # a near block: occludes
+    ref = ref_occlusions(disp, window, lam, gamma, t)
+    for nt in (1, 2, 3):
+        got = detect_occlusions(disp, window=window, lam=lam, gamma=gamma, t=t, num_threads=nt)
+        np.testing.assert_array_equal(got, ref)
+
+
+def test_points_at_both_row_ends_and_past_the_left_border():
+    """Patches clipped at column 0 and W-1 in L, matches left of R's column 0 and
+    splats that straddle R's last column (the SIMD fast paths must step aside)."""
+    H, W = 9, 40
+    rng = np.random.default_rng(2)
+    left = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    right = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    disp = np.zeros((H, W), np.float32)
+    disp[1, 0] = 0.5          # x' = -0.5: left border, L patch clipped at column 0
+    disp[2, 1] = 1.25
+    disp[3, W - 1] = 0.75     # L patch clipped at W-1, R splat into columns W-2, W-1
+    disp[4, W - 2] = 1.5
+    disp[5, 5] = 20.0         # x' = -15
+    disp[6, W - 1] = 36.3
+    disp[7, 20] = 3.0         # integer d: one column per patch pixel
+    cfg = VPPConfig(patch=5, alpha=0.6, occlusion="off")
+    for c in (3, 1):
+        lc, rc = left[:, :, :c], right[:, :, :c]
+        rl, rr, _ = ref_project(lc, rc, disp, cfg, seed=4)
+        res = project(lc, rc, disp, cfg, seed=4)
+        np.testing.assert_array_equal(res.right, rr)
+        np.testing.assert_array_equal(res.left, rl)
