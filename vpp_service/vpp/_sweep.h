@@ -47,7 +47,7 @@ static inline void vpp_scan_one(const float* d, int x, int W, uint64_t* keys, in
     }
 }
 
-static int vpp_scan_row(const float* d, int W, uint64_t* keys, int64_t* st) {
+static inline int vpp_scan_row(const float* d, int W, uint64_t* keys, int64_t* st) {
     int64_t given = 0, oob = 0;
     int n = 0, x = 0;
 #if VPP_HAVE_SSE2
@@ -94,7 +94,7 @@ static inline void vpp_insertion_sort(uint64_t* a, int n) {
  * (insertion sort; std::sort for the rare crowded bucket).  Expected linear
  * time, against ~50 cycles per key for a comparison sort on unpredictable d.
  * Scratch: tmp and bucket hold n entries, cnt n + 1. */
-static void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* bucket, int* cnt) {
+static inline void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* bucket, int* cnt) {
     float dmin, dmax, d;
     double scale;
     int i, b, s, e;
@@ -137,12 +137,13 @@ static void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* bucket, int
 }
 
 /* Merge three (d, x)-sorted key lists of consecutive rows into the global
- * paint order (d, row, x), branch-free.  Lists may be empty; l[i][n[i]] and
- * f[i][n[i]] must be readable (one padding entry).  A flagged key (occluded)
- * is dropped when drop_flagged, else written with orow = -1 - list index;
- * unflagged keys get orow = list index.  Returns the number written. */
-static int vpp_merge3(const uint64_t* const* l, const uint8_t* const* f, const int* n,
-                      int drop_flagged, uint64_t* okey, int32_t* orow) {
+ * paint order (d, row, x), branch-free.  List i is l[i][0..n[i]) and lives at
+ * index base[i] of the caller's arrays; l[i][n[i]] and f[i][n[i]] must be
+ * readable (one padding entry).  Writes the array index of each key to oidx,
+ * as -1 - index when its flag (occluded) is set, or drops it when
+ * drop_flagged.  Returns the number written. */
+static inline int vpp_merge3(const uint64_t* const* l, const uint8_t* const* f, const int* n,
+                             const int* base, int drop_flagged, int32_t* oidx) {
     const uint64_t* a = l[0], *b = l[1], *c = l[2];
     const uint8_t* fa = f[0], *fb = f[1], *fc = f[2];
     const int na = n[0], nb = n[1], nc = n[2];
@@ -152,17 +153,15 @@ static int vpp_merge3(const uint64_t* const* l, const uint8_t* const* f, const i
         uint64_t kb = ib < nb ? ((b[ib] >> 32) << 2) | 1 : ~0ULL;
         uint64_t kc = ic < nc ? ((c[ic] >> 32) << 2) | 2 : ~0ULL;
         uint64_t k = ka < kb ? ka : kb;
-        int j, flag;
-        uint64_t key;
+        int j, flag, idx;
         k = k < kc ? k : kc;
         j = (int)(k & 3);
-        key = j == 0 ? a[ia] : (j == 1 ? b[ib] : c[ic]);
+        idx = j == 0 ? base[0] + ia : (j == 1 ? base[1] + ib : base[2] + ic);
         flag = j == 0 ? fa[ia] : (j == 1 ? fb[ib] : fc[ic]);
         ia += j == 0;
         ib += j == 1;
         ic += j == 2;
-        okey[m] = key;
-        orow[m] = flag ? -1 - j : j;
+        oidx[m] = flag ? -1 - idx : idx;
         m += !(flag && drop_flagged);
     }
     return m;
@@ -229,6 +228,66 @@ static inline void vpp_blend16(uint8_t* dst, const uint8_t* val, int n, uint32_t
     vpp_blend_regs(&alo, &ahi, _mm_loadu_si128((const __m128i*)val), vpp_lanes(0, n), w);
     _mm_storeu_si128((__m128i*)dst, _mm_packus_epi16(alo, ahi));
 }
+#if VPP_HAVE_SSE2 && defined(__GNUC__) && defined(__x86_64__)
+/* AVX2 versions (16 byte lanes widened into one 256-bit register), chosen at run
+ * time when the CPU has AVX2 (vpp_init_cpu); same arithmetic, same bytes. */
+#include <immintrin.h>
+#define VPP_HAVE_AVX2_PATH 1
+static int vpp_cpu_avx2 = 0;
+
+__attribute__((target("avx2"))) static inline __m256i vpp_lanes16_avx2(int lo, int hi) {
+    const __m256i iota = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    return _mm256_and_si256(_mm256_cmpgt_epi16(iota, _mm256_set1_epi16((short)(lo - 1))),
+                            _mm256_cmpgt_epi16(_mm256_set1_epi16((short)hi), iota));
+}
+
+__attribute__((target("avx2"))) static inline __m256i vpp_blend_avx2(__m256i a, __m256i b,
+                                                                    __m256i lanes, uint32_t w) {
+    __m256i wv = _mm256_and_si256(_mm256_set1_epi16((short)(uint16_t)(w > 65535u ? 65535u : w)), lanes);
+    __m256i d = _mm256_sub_epi16(b, a);
+    __m256i hi = _mm256_sub_epi16(_mm256_mulhi_epu16(d, wv),
+                                  _mm256_and_si256(_mm256_srai_epi16(d, 15), wv));
+    __m256i rb = _mm256_srli_epi16(_mm256_mullo_epi16(d, wv), 15);
+    return _mm256_add_epi16(_mm256_add_epi16(a, hi), rb);
+}
+
+__attribute__((target("avx2"))) static inline void vpp_store_packed_avx2(uint8_t* dst, __m256i a) {
+    _mm_storeu_si128((__m128i*)dst, _mm_packus_epi16(_mm256_castsi256_si128(a),
+                                                     _mm256_extracti128_si256(a, 1)));
+}
+
+__attribute__((target("avx2"))) static void vpp_blend16_avx2(uint8_t* dst, const uint8_t* val,
+                                                            int n, uint32_t w) {
+    __m256i a = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i*)dst));
+    __m256i b = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i*)val));
+    vpp_store_packed_avx2(dst, vpp_blend_avx2(a, b, vpp_lanes16_avx2(0, n), w));
+}
+
+__attribute__((target("avx2"))) static void vpp_splat16_avx2(uint8_t* dst, const uint8_t* val, int C,
+                                                            int k0, int k1, uint32_t w0, uint32_t w1) {
+    __m256i a = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i*)dst));
+    __m128i v = _mm_loadu_si128((const __m128i*)val);
+    __m128i v1 = C == 3 ? _mm_slli_si128(v, 3) : _mm_slli_si128(v, 1);
+    if (w1) a = vpp_blend_avx2(a, _mm256_cvtepu8_epi16(v1), vpp_lanes16_avx2((k0 + 1) * C, (k1 + 1) * C), w1);
+    a = vpp_blend_avx2(a, _mm256_cvtepu8_epi16(v), vpp_lanes16_avx2(k0 * C, k1 * C), w0);
+    vpp_store_packed_avx2(dst, a);
+}
+#else
+#define VPP_HAVE_AVX2_PATH 0
+static int vpp_cpu_avx2 = 0;
+#endif
+
+/* Pick the SIMD path for this CPU (call once at import); returns 1 for AVX2. */
+static inline int vpp_init_cpu(int allow_avx2) {
+#if VPP_HAVE_AVX2_PATH
+    __builtin_cpu_init();
+    vpp_cpu_avx2 = allow_avx2 && __builtin_cpu_supports("avx2");
+#else
+    (void)allow_avx2;
+#endif
+    return vpp_cpu_avx2;
+}
+
 /* Splatted right-view paint of one patch row in one pass: pixels [k0, k1) of
  * val (C bytes each) go to columns j = k of dst with weight w0 and, first, to
  * columns j = k + 1 with weight w1 (see _sweep.pyx).  dst is column 0 of the
@@ -241,6 +300,12 @@ static inline int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, i
     const __m128i z = _mm_setzero_si128();
     __m128i a, alo, ahi, v, v1;
     if ((k1 + 1) * C > 16 || room < 16 || (C != 1 && C != 3)) return 0;
+#if VPP_HAVE_AVX2_PATH
+    if (vpp_cpu_avx2) {
+        vpp_splat16_avx2(dst, val, C, k0, k1, w0, w1);
+        return 1;
+    }
+#endif
     a = _mm_loadu_si128((const __m128i*)dst);
     alo = _mm_unpacklo_epi8(a, z);
     ahi = _mm_unpackhi_epi8(a, z);
@@ -267,6 +332,12 @@ static inline void vpp_blend_span(uint8_t* dst, const uint8_t* val, int n, uint3
 #if VPP_HAVE_SSE2
     if (room >= (int64_t)((n + 15) & ~15)) {
         uint32_t w16 = w > 65535u ? 65535u : w;
+#if VPP_HAVE_AVX2_PATH
+        if (vpp_cpu_avx2) {
+            for (; n > 0; n -= 16, dst += 16, val += 16) vpp_blend16_avx2(dst, val, n < 16 ? n : 16, w16);
+            return;
+        }
+#endif
         for (; n > 0; n -= 16, dst += 16, val += 16) vpp_blend16(dst, val, n < 16 ? n : 16, w16);
         return;
     }

@@ -48,14 +48,20 @@ from libc.math cimport floor, INFINITY
 
 from vpp_service.vpp._pixel cimport _hash, _seedmix, _w16, _ifloor, _fgd_pixel
 
+import os
+
 import numpy as np
+
+#: True when the blends run on AVX2 (detected at import; VPP_NO_AVX2=1 forces SSE2).
+AVX2 = bool(vpp_init_cpu(os.environ.get("VPP_NO_AVX2", "0") != "1"))
 
 cdef extern from "_sweep.h" nogil:
     int vpp_scan_row(const float* d, int W, uint64_t* keys, int64_t* st)
     void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* bucket, int* cnt)
     float vpp_sw_u2f(uint32_t u)
+    int vpp_init_cpu(int allow_avx2)
     int vpp_merge3(const uint64_t* const* l, const uint8_t* const* f, const int* n,
-                   int drop_flagged, uint64_t* okey, int32_t* orow)
+                   const int* base, int drop_flagged, int32_t* oidx)
     float vpp_maxf(const float* p, int n)
     void vpp_blend_span(uint8_t* dst, const uint8_t* val, int n, uint32_t w, int64_t room)
     int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, int k1,
@@ -109,8 +115,9 @@ cdef struct Scratch:
     int* sort_bucket    # W
     int* sort_cnt       # W + 1
     int64_t cap         # contribution capacity
-    uint64_t* ckey
-    int32_t* crow       # source row (index), or -1 - it for an FGD-occluded contribution
+    int32_t* geo_fl     # ring x W: right-view column floor(x') (or round(x') without splat)
+    uint64_t* geo_w     # ring x W: right-view weights w0 | w1 << 32 (1/65536)
+    int32_t* cidx       # contributions: ring index of the key, -1 - it if FGD-occluded
     uint8_t* vals       # cap x vs
     uint8_t* zeros      # W + 1 zero flags (occlusion off or bkgd)
     int failed
@@ -119,6 +126,8 @@ cdef struct Scratch:
 cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
     cdef int64_t i, nw = <int64_t>J.ring * J.ww
     S.keys = <uint64_t*>malloc(sizeof(uint64_t) * (J.ring * J.W + 1))   # +1: merge read-ahead
+    S.geo_fl = <int32_t*>malloc(sizeof(int32_t) * (J.ring * J.W + 1))
+    S.geo_w = <uint64_t*>malloc(sizeof(uint64_t) * (J.ring * J.W + 1))
     S.flags = <uint8_t*>malloc(<int64_t>J.ring * J.W + 1)
     S.nk = <int*>malloc(sizeof(int) * J.ring)
     S.rowid = <int*>malloc(sizeof(int) * J.ring)
@@ -128,11 +137,10 @@ cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
     S.sort_cnt = <int*>malloc(sizeof(int) * (J.W + 1))
     S.zeros = <uint8_t*>calloc(J.W + 1, 1)
     S.cap = 0
-    S.ckey = NULL
-    S.crow = NULL
+    S.cidx = NULL
     S.vals = NULL
     S.failed = 0
-    if (S.keys == NULL or S.flags == NULL or S.nk == NULL or S.rowid == NULL or S.warp == NULL
+    if (S.keys == NULL or S.geo_fl == NULL or S.geo_w == NULL or S.flags == NULL or S.nk == NULL or S.rowid == NULL or S.warp == NULL
             or S.sort_tmp == NULL or S.sort_bucket == NULL or S.sort_cnt == NULL
             or S.zeros == NULL):
         S.failed = 1
@@ -148,6 +156,8 @@ cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
 
 cdef void _scratch_free(Scratch* S) noexcept nogil:
     free(S.keys)
+    free(S.geo_fl)
+    free(S.geo_w)
     free(S.flags)
     free(S.nk)
     free(S.rowid)
@@ -156,28 +166,23 @@ cdef void _scratch_free(Scratch* S) noexcept nogil:
     free(S.sort_bucket)
     free(S.sort_cnt)
     free(S.zeros)
-    free(S.ckey)
-    free(S.crow)
+    free(S.cidx)
     free(S.vals)
 
 
 cdef int _reserve(const Job* J, Scratch* S, int64_t n) noexcept nogil:
-    cdef uint64_t* k
-    cdef int32_t* r
+    cdef int32_t* c
     cdef uint8_t* v
     if n <= S.cap:
         return 0
     n = n + n // 2 + 16
-    k = <uint64_t*>realloc(S.ckey, sizeof(uint64_t) * n)
-    if k != NULL:
-        S.ckey = k
-    r = <int32_t*>realloc(S.crow, sizeof(int32_t) * n)
-    if r != NULL:
-        S.crow = r
+    c = <int32_t*>realloc(S.cidx, sizeof(int32_t) * n)
+    if c != NULL:
+        S.cidx = c
     v = <uint8_t*>realloc(S.vals, n * J.vs)
     if v != NULL:
         S.vals = v
-    if k == NULL or r == NULL or v == NULL:
+    if c == NULL or v == NULL:
         S.failed = 1
         return 1
     S.cap = n
@@ -187,6 +192,27 @@ cdef int _reserve(const Job* J, Scratch* S, int64_t n) noexcept nogil:
 cdef inline int _xw(uint64_t key) noexcept nogil:
     """Warp column x - round(d) (round half up) of a key."""
     return <int>(key & LOW32) - <int>(<double>vpp_sw_u2f(<uint32_t>(key >> 32)) + 0.5)  # d > 0
+
+
+cdef void _geometry(const Job* J, const uint64_t* keys, int n, int32_t* fl,
+                    uint64_t* w) noexcept nogil:
+    """Right-view column and splat weights of each point, once for its 2h+1 patch rows."""
+    cdef int i, f
+    cdef double xp, beta
+    cdef uint64_t w0, w1
+    for i in range(n):
+        xp = <double>(keys[i] & LOW32) - <double>vpp_sw_u2f(<uint32_t>(keys[i] >> 32))
+        if J.splat:
+            f = _ifloor(xp)
+            beta = xp - <double>f
+            w1 = _w16(J.alpha * beta) if beta > 0 else 0
+            w0 = _w16(J.alpha * (1.0 - beta))
+        else:
+            f = _ifloor(xp + 0.5)
+            w0 = J.wa
+            w1 = 0
+        fl[i] = f
+        w[i] = w0 | (w1 << 32)
 
 
 cdef void _ingest(const Job* J, Scratch* S, int y, bint own) noexcept nogil:
@@ -208,6 +234,8 @@ cdef void _ingest(const Job* J, Scratch* S, int y, bint own) noexcept nogil:
     S.nk[slot] = n
     S.rowid[slot] = y
     memset(S.flags + <int64_t>slot * W, 0, n)
+    if J.paint:
+        _geometry(J, keys, n, S.geo_fl + <int64_t>slot * W, S.geo_w + <int64_t>slot * W)
     if J.occ_on:
         for i in range(n):
             xw = _xw(keys[i])
@@ -276,18 +304,19 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
     cdef int64_t rowb = <int64_t>p * W * C
     cdef uint8_t* oL = J.oL + rowb
     cdef uint8_t* oR = J.oR + rowb
-    cdef int s_lo, s_hi, nsrc, j, jb, x, k, k0, k1, c, col, fl, slot, n, ncon
+    cdef int s_lo, s_hi, nsrc, j, jb, x, k, k0, k1, c, col, fl, slot, n, ncon, idx
     cdef int64_t total
     cdef const uint64_t* src[256]
     cdef const uint8_t* fsrc[256]
+    cdef int base[256]
     cdef int head[256]
     cdef int cnt[256]
     cdef uint64_t cand[256]
-    cdef uint64_t kb, key, z
+    cdef uint64_t kb, key, z, wpair
     cdef uint8_t* v
     cdef int occmode = J.occmode, vs = J.vs
     cdef int occ_pt, use_flags
-    cdef double d, xp, beta
+    cdef double xp, beta
     cdef uint32_t w0, w1, wb
     memcpy(oL, J.L + rowb, W * C)
     memcpy(oR, J.R + rowb, W * C)
@@ -297,8 +326,9 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
     total = 0
     for j in range(nsrc):
         slot = (s_lo + j) & (J.ring - 1)
-        src[j] = S.keys + <int64_t>slot * W
-        fsrc[j] = S.flags + <int64_t>slot * W
+        base[j] = slot * W
+        src[j] = S.keys + base[j]
+        fsrc[j] = S.flags + base[j]
         cnt[j] = S.nk[slot]
         head[j] = 0
         total += cnt[j]
@@ -307,18 +337,19 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
         return
     if _reserve(J, S, total):
         return
-    # 1. merge rows s_lo..s_hi into the global order (d, y, x): ties in d -> smaller row;
-    #    only the sign of crow is used below (FGD-occluded or not)
+    # 1. merge rows s_lo..s_hi into the global order (d, y, x), ties in d -> smaller row;
+    #    cidx = ring index of the key, negative for an FGD-occluded point
     use_flags = occmode == 1 or occmode == 3
     if nsrc <= 3:
         for j in range(nsrc, 3):
             src[j] = src[0]
             fsrc[j] = fsrc[0]
+            base[j] = base[0]
             cnt[j] = 0
         if not use_flags:
             for j in range(3):
                 fsrc[j] = S.zeros
-        ncon = vpp_merge3(src, fsrc, cnt, occmode == 1, S.ckey, S.crow)
+        ncon = vpp_merge3(src, fsrc, cnt, base, occmode == 1, S.cidx)
     else:
         ncon = 0
         while True:
@@ -334,14 +365,14 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
             occ_pt = fsrc[jb][k] if use_flags else 0
             if occ_pt and occmode == 1:
                 continue
-            S.ckey[ncon] = src[jb][k]
-            S.crow[ncon] = jb if not occ_pt else -1 - jb
+            S.cidx[ncon] = base[jb] + k if not occ_pt else -1 - (base[jb] + k)
             ncon += 1
     # 2. pattern bytes of every painted contribution (hash of the left pixel)
     for n in range(ncon):
-        if S.crow[n] < 0:
+        idx = S.cidx[n]
+        if idx < 0:
             continue
-        x = <int>(S.ckey[n] & LOW32)
+        x = <int>(S.keys[idx] & LOW32)
         k0 = h - x if x < h else 0
         k1 = K if x + h < W else W - x + h
         v = S.vals + <int64_t>n * vs
@@ -352,35 +383,35 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
             else:
                 for c in range(C):
                     v[k * C + c] = <uint8_t>(z >> (8 * c))
-    # 3. right row: visible contributions, splatted
+    # 3. right row: visible contributions, splatted (geometry precomputed at ingest)
     for n in range(ncon):
-        if S.crow[n] < 0:
+        idx = S.cidx[n]
+        if idx < 0:
             continue
-        key = S.ckey[n]
-        x = <int>(key & LOW32)
+        x = <int>(S.keys[idx] & LOW32)
         k0 = h - x if x < h else 0
         k1 = K if x + h < W else W - x + h
         v = S.vals + <int64_t>n * vs
-        xp = <double>x - <double>vpp_sw_u2f(<uint32_t>(key >> 32))
+        fl = S.geo_fl[idx]
+        wpair = S.geo_w[idx]
+        w0 = <uint32_t>(wpair & LOW32)
+        w1 = <uint32_t>(wpair >> 32)
         if J.splat:
-            fl = _ifloor(xp)
-            beta = xp - <double>fl
-            w1 = <uint32_t>_w16(J.alpha * beta) if beta > 0 else 0
-            w0 = <uint32_t>_w16(J.alpha * (1.0 - beta))
             if (fl - h < 0 or fl + h + 1 >= W or not vpp_splat16(
                     oR + (fl - h) * C, v, C, k0, k1, w0, w1, <int64_t>(W - fl + h) * C)):
                 if w1:
                     _span(J, oR, v, k0, k1, fl - h + 1, w1)
                 _span(J, oR, v, k0, k1, fl - h, w0)
         else:
-            _span(J, oR, v, k0, k1, _ifloor(xp + 0.5) - h, J.wa)
+            _span(J, oR, v, k0, k1, fl - h, w0)
     # 4. left row: pattern, or (FGD) the final right row's content at x'
     for n in range(ncon):
-        key = S.ckey[n]
+        idx = S.cidx[n]
+        key = S.keys[idx if idx >= 0 else -1 - idx]
         x = <int>(key & LOW32)
         k0 = h - x if x < h else 0
         k1 = K if x + h < W else W - x + h
-        if S.crow[n] >= 0:
+        if idx >= 0:
             _span(J, oL, S.vals + <int64_t>n * vs, k0, k1, x - h, J.wa)
             continue
         xp = <double>x - <double>vpp_sw_u2f(<uint32_t>(key >> 32))
