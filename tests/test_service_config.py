@@ -120,6 +120,10 @@ def test_file_config_and_cli_overrides(tmp_path):
     args.rerun_save, args.sink = str(tmp_path / "x.rrd"), None
     cfg = validate_config(overrides_from_args(read_toml(p), args))
     assert [s.name for s in cfg.sinks] == ["zenoh", "rerun"] and cfg.sinks[1].options.path.endswith("x.rrd")
+    args.rerun_save, args.sink = None, ["files", "record"]   # file sinks get folders under --out
+    cfg = validate_config(overrides_from_args(read_toml(p), args))
+    assert [s.name for s in cfg.sinks] == ["files", "record"]
+    assert [s.options.dir for s in cfg.sinks] == [str(tmp_path / "o" / "frames"), str(tmp_path / "o" / "recording")]
 
 
 def test_cli_check_reports_bad_key(tmp_path, capsys):

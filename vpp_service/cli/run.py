@@ -68,6 +68,8 @@ def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[
                 sinks.append({"type": "rerun", "mode": "save", "path": "{out}/vpp.rrd"})
             elif t == "files":
                 sinks.append({"type": "files", "dir": "{out}/frames", "create_dir": True})
+            elif t == "record":
+                sinks.append({"type": "record", "dir": "{out}/recording", "create_dir": True})
             else:
                 sinks.append({"type": t})
         d["sinks"] = sinks

@@ -28,8 +28,6 @@ from __future__ import annotations
 
 import io
 import logging
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,6 +37,7 @@ import numpy as np
 
 from vpp_service.datasets.pfm import write_pfm
 from vpp_service.frame import FusionResult
+from vpp_service.sinks.atomic import prepare_dir, write_atomic
 from vpp_service.sinks.base import SINKS, Sink, SinkContext
 
 log = logging.getLogger(__name__)
@@ -216,24 +215,7 @@ class FilesSink(Sink):
         PermissionError
             ``dir`` cannot be written to.
         """
-        d = self._dir
-        if self.options.create_dir and not d.exists():
-            try:
-                d.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                raise PermissionError(f"sinks.files.dir: cannot create {str(d)!r}: {exc}") from None
-        if not d.exists():
-            raise FileNotFoundError(
-                f"sinks.files.dir: output folder {str(d)!r} does not exist (create it or set create_dir = true)"
-            )
-        if not d.is_dir():
-            raise NotADirectoryError(f"sinks.files.dir: {str(d)!r} is not a folder")
-        try:  # os.access lies for root and on read-only mounts; really try
-            fd, probe = tempfile.mkstemp(prefix=".vpp-probe-", dir=d)
-            os.close(fd)
-            os.unlink(probe)
-        except OSError as exc:
-            raise PermissionError(f"sinks.files.dir: output folder {str(d)!r} is not writable: {exc}") from None
+        prepare_dir(self._dir, self.options.create_dir, "sinks.files.dir", "output folder")
         self._open = True
 
     def close(self, timeout: float = 5.0) -> None:
@@ -286,7 +268,7 @@ class FilesSink(Sink):
                 writer = self._writer(kind, result)
                 if writer is None:
                     continue
-                self._atomic_write(path, writer)
+                write_atomic(path, writer, self.options.overwrite)
                 self._counters["files"] += 1
             except Exception as exc:  # noqa: BLE001 - counted, logged, never raised
                 failures += 1
@@ -326,28 +308,6 @@ class FilesSink(Sink):
             raise ValueError(f"{kind}: OpenCV could not encode shape {img.shape}")
         data = buf.tobytes()
         return lambda p: Path(p).write_bytes(data)
-
-    def _atomic_write(self, path: Path, writer) -> None:
-        """Write via a temp file in the same folder, then rename into place."""
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        os.close(fd)
-        try:
-            writer(tmp)
-            if self.options.overwrite:
-                os.replace(tmp, path)
-            else:
-                # link() fails if the target exists: atomic no-clobber.
-                try:
-                    os.link(tmp, path)
-                except FileExistsError:
-                    raise FileExistsError(f"{path} exists and overwrite = false") from None
-                except OSError:  # file system without hard links: check, then rename
-                    if path.exists():
-                        raise FileExistsError(f"{path} exists and overwrite = false") from None
-                    os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
 
 
 __all__ = ["FORMATS", "FilesSink", "FilesSinkOptions", "decode_png16", "encode_png16"]

@@ -43,14 +43,13 @@ logged and counted in ``stats()["errors"]``, never raised.
 from __future__ import annotations
 
 import logging
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
 from vpp_service.frame import FusionResult
 from vpp_service.service import wire
+from vpp_service.sinks.atomic import prepare_dir, write_atomic
 from vpp_service.sinks.base import SINKS, Sink, SinkContext
 
 log = logging.getLogger(__name__)
@@ -116,46 +115,6 @@ class RecordSinkOptions:
             raise ValueError(f"pattern: {self.pattern!r} must give a plain, non-hidden file name, got {stem!r}")
 
 
-def write_atomic(path: Path, data: bytes, overwrite: bool) -> None:
-    """Write ``data`` to ``path`` via a temporary file in the same folder, then rename.
-
-    Parameters
-    ----------
-    path : Path
-        Destination file.
-    data : bytes
-        Contents.
-    overwrite : bool
-        Replace an existing ``path``; when false an existing file raises and is
-        left untouched (no-clobber is atomic where hard links are supported).
-
-    Raises
-    ------
-    FileExistsError
-        ``path`` exists and ``overwrite`` is false.
-    OSError
-        The folder is not writable, the disk is full, ...
-    """
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        if overwrite:
-            os.replace(tmp, path)
-        else:
-            try:  # link() fails if the target exists: atomic no-clobber
-                os.link(tmp, path)
-            except FileExistsError:
-                raise FileExistsError(f"{path} exists and overwrite = false") from None
-            except OSError:  # file system without hard links: check, then rename
-                if path.exists():
-                    raise FileExistsError(f"{path} exists and overwrite = false") from None
-                os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-
-
 @SINKS.register("record")
 class RecordSink(Sink):
     """Record every input frame as a wire-format ``.msgpack`` file (see the module docstring).
@@ -204,24 +163,7 @@ class RecordSink(Sink):
         PermissionError
             ``dir`` cannot be created or written to.
         """
-        d = self._dir
-        if self.options.create_dir and not d.exists():
-            try:
-                d.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                raise PermissionError(f"sinks.record.dir: cannot create {str(d)!r}: {exc}") from None
-        if not d.exists():
-            raise FileNotFoundError(
-                f"sinks.record.dir: recording folder {str(d)!r} does not exist (create it or set create_dir = true)"
-            )
-        if not d.is_dir():
-            raise NotADirectoryError(f"sinks.record.dir: {str(d)!r} is not a folder")
-        try:  # os.access lies for root and on read-only mounts; really try
-            fd, probe = tempfile.mkstemp(prefix=".vpp-probe-", dir=d)
-            os.close(fd)
-            os.unlink(probe)
-        except OSError as exc:
-            raise PermissionError(f"sinks.record.dir: recording folder {str(d)!r} is not writable: {exc}") from None
+        prepare_dir(self._dir, self.options.create_dir, "sinks.record.dir", "recording folder")
         self._open = True
 
     def close(self, timeout: float = 5.0) -> None:
@@ -300,4 +242,4 @@ class RecordSink(Sink):
             self._stop("max_frames", f"{self._counters['written']} frames")
 
 
-__all__ = ["ENCODINGS", "EXTENSION", "RecordSink", "RecordSinkOptions", "write_atomic"]
+__all__ = ["ENCODINGS", "EXTENSION", "RecordSink", "RecordSinkOptions"]
