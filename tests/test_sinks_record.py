@@ -13,7 +13,7 @@ from vpp_service.service import wire
 from vpp_service.settings import SettingsError
 from vpp_service.sinks import SINKS, build_sink
 from vpp_service.sinks.base import SinkContext
-from vpp_service.sinks.atomic import write_atomic
+from vpp_service.sinks.folder import write_atomic
 from vpp_service.sinks.record import RecordSink
 from vpp_service.sources.base import SourceContext, build_source
 from vpp_service.sources.sim import motorcycle_frame

@@ -37,7 +37,7 @@ import numpy as np
 
 from vpp_service.datasets.pfm import write_pfm
 from vpp_service.frame import FusionResult
-from vpp_service.sinks.atomic import prepare_dir, write_atomic
+from vpp_service.sinks.folder import FolderSink, check_pattern, write_atomic
 from vpp_service.sinks.base import SINKS, Sink, SinkContext
 
 log = logging.getLogger(__name__)
@@ -45,7 +45,6 @@ log = logging.getLogger(__name__)
 #: Supported disparity formats.
 FORMATS = ("png16", "pfm", "npy")
 _EXT = {"png16": ".png", "pfm": ".pfm", "npy": ".npy"}
-_PATTERN_FIELDS = {"rig": "rig0", "seq": 0, "stamp_ns": 0, "name": "scene"}
 
 
 @dataclass(frozen=True)
@@ -91,14 +90,7 @@ class FilesSinkOptions:
                 raise ValueError(f"formats[{i}]: must be one of {list(FORMATS)}, got {f!r}")
         if len(set(self.formats)) != len(self.formats):
             raise ValueError(f"formats: duplicate entries in {list(self.formats)}")
-        try:
-            stem = self.pattern.format(**_PATTERN_FIELDS)
-        except (KeyError, IndexError, ValueError) as exc:
-            raise ValueError(
-                f"pattern: {self.pattern!r} is not a valid pattern over {sorted(_PATTERN_FIELDS)} ({exc!r})"
-            ) from None
-        if not stem or "/" in stem or "\\" in stem or stem in (".", ".."):
-            raise ValueError(f"pattern: {self.pattern!r} must give a plain file name, got {stem!r}")
+        check_pattern(self.pattern)
 
 
 def _check_disparity(disparity: Any) -> np.ndarray:
@@ -175,7 +167,7 @@ def _float_nan(a: np.ndarray) -> np.ndarray:
 
 
 @SINKS.register("files")
-class FilesSink(Sink):
+class FilesSink(FolderSink):
     """Write disparity (and optionally painted pair and depth) files per result.
 
     Parameters
@@ -194,33 +186,12 @@ class FilesSink(Sink):
 
     Options = FilesSinkOptions
 
+    DIR_KEY = "sinks.files.dir"
+    DIR_WHAT = "output folder"
+
     def __init__(self, options: FilesSinkOptions, context: SinkContext | None = None) -> None:
-        if not isinstance(options, FilesSinkOptions):
-            raise TypeError(f"options: must be FilesSinkOptions, got {type(options).__name__}")
-        super().__init__(options, context or SinkContext())
-        self._dir = Path(options.dir).expanduser()
-        self._open = False
+        super().__init__(options, context)
         self._counters["files"] = 0
-
-    # -- life cycle -----------------------------------------------------------------
-    def open(self) -> None:
-        """Check that ``dir`` exists (or create it) and is writable.
-
-        Raises
-        ------
-        FileNotFoundError
-            ``dir`` is missing and ``create_dir`` is false.
-        NotADirectoryError
-            ``dir`` exists but is not a folder.
-        PermissionError
-            ``dir`` cannot be written to.
-        """
-        prepare_dir(self._dir, self.options.create_dir, "sinks.files.dir", "output folder")
-        self._open = True
-
-    def close(self, timeout: float = 5.0) -> None:
-        """Nothing is buffered (writes are synchronous); marks the sink closed."""
-        self._open = False
 
     # -- writing --------------------------------------------------------------------
     def output_paths(self, result: FusionResult) -> dict[str, Path]:
@@ -235,12 +206,7 @@ class FilesSink(Sink):
         TypeError
             If ``result`` is not a FusionResult.
         """
-        if not isinstance(result, FusionResult):
-            raise TypeError(f"result: must be a FusionResult, got {type(result).__name__}")
-        fr = result.frame
-        stem = self.options.pattern.format(
-            rig=fr.rig or self.context.rig, seq=fr.seq, stamp_ns=fr.stamp_ns, name=fr.name or "frame"
-        )
+        stem = self.frame_stem(result)
         paths = {f: self._dir / f"{stem}_disparity{_EXT[f]}" for f in self.options.formats}
         if self.options.depth:
             paths["depth"] = self._dir / f"{stem}_depth.npy"

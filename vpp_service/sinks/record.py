@@ -49,7 +49,7 @@ from typing import Literal
 
 from vpp_service.frame import FusionResult
 from vpp_service.service import wire
-from vpp_service.sinks.atomic import prepare_dir, write_atomic
+from vpp_service.sinks.folder import FolderSink, check_pattern, write_atomic
 from vpp_service.sinks.base import SINKS, Sink, SinkContext
 
 log = logging.getLogger(__name__)
@@ -58,7 +58,6 @@ log = logging.getLogger(__name__)
 ENCODINGS = ("raw", "png")
 #: File name extension of recorded frames (what the ``files`` source globs for).
 EXTENSION = ".msgpack"
-_PATTERN_FIELDS = {"rig": "rig0", "seq": 0, "stamp_ns": 0, "name": "scene"}
 
 
 @dataclass(frozen=True)
@@ -105,18 +104,11 @@ class RecordSinkOptions:
             raise ValueError(f"max_frames: must be >= 0 (0 = no limit), got {self.max_frames}")
         if self.max_bytes < 0:
             raise ValueError(f"max_bytes: must be >= 0 (0 = no limit), got {self.max_bytes}")
-        try:
-            stem = self.pattern.format(**_PATTERN_FIELDS)
-        except (KeyError, IndexError, ValueError) as exc:
-            raise ValueError(
-                f"pattern: {self.pattern!r} is not a valid pattern over {sorted(_PATTERN_FIELDS)} ({exc!r})"
-            ) from None
-        if not stem or "/" in stem or "\\" in stem or stem in (".", "..") or stem.startswith("."):
-            raise ValueError(f"pattern: {self.pattern!r} must give a plain, non-hidden file name, got {stem!r}")
+        check_pattern(self.pattern)
 
 
 @SINKS.register("record")
-class RecordSink(Sink):
+class RecordSink(FolderSink):
     """Record every input frame as a wire-format ``.msgpack`` file (see the module docstring).
 
     Parameters
@@ -140,35 +132,14 @@ class RecordSink(Sink):
 
     Options = RecordSinkOptions
 
+    DIR_KEY = "sinks.record.dir"
+    DIR_WHAT = "recording folder"
+
     def __init__(self, options: RecordSinkOptions, context: SinkContext | None = None) -> None:
-        if not isinstance(options, RecordSinkOptions):
-            raise TypeError(f"options: must be RecordSinkOptions, got {type(options).__name__}")
-        super().__init__(options, context or SinkContext())
-        self._dir = Path(options.dir).expanduser()
-        self._open = False
+        super().__init__(options, context)
         self._stopped: str | None = None
         self._counters["skipped"] = 0
         self._counters["bytes"] = 0
-
-    # -- life cycle -----------------------------------------------------------------
-    def open(self) -> None:
-        """Check that ``dir`` exists (or create it) and is writable.
-
-        Raises
-        ------
-        FileNotFoundError
-            ``dir`` is missing and ``create_dir`` is false.
-        NotADirectoryError
-            ``dir`` exists but is not a folder.
-        PermissionError
-            ``dir`` cannot be created or written to.
-        """
-        prepare_dir(self._dir, self.options.create_dir, "sinks.record.dir", "recording folder")
-        self._open = True
-
-    def close(self, timeout: float = 5.0) -> None:
-        """Nothing is buffered (writes are synchronous); marks the sink closed."""
-        self._open = False
 
     @property
     def stopped(self) -> str | None:
@@ -184,12 +155,7 @@ class RecordSink(Sink):
         TypeError
             If ``result`` is not a FusionResult.
         """
-        if not isinstance(result, FusionResult):
-            raise TypeError(f"result: must be a FusionResult, got {type(result).__name__}")
-        fr = result.frame
-        stem = self.options.pattern.format(
-            rig=fr.rig or self.context.rig, seq=fr.seq, stamp_ns=fr.stamp_ns, name=fr.name or "frame"
-        )
+        stem = self.frame_stem(result)
         return self._dir / f"{stem}{EXTENSION}"
 
     def _stop(self, reason: str, detail: str) -> None:

@@ -286,6 +286,12 @@ cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
         J.occ_cnt[q] = cnt
 
 
+cdef inline void _patch_range(int x, int h, int W, int* k0, int* k1) noexcept nogil:
+    """Patch pixels [k0, k1) of a point at column x whose left position is inside the image."""
+    k0[0] = h - x if x < h else 0
+    k1[0] = 2 * h + 1 if x + h < W else W - x + h
+
+
 cdef inline void _span(const Job* J, uint8_t* row, const uint8_t* vals, int k0, int k1,
                        int base, uint32_t w) noexcept nogil:
     """Blend patch pixels [k0, k1) of ``vals`` into columns base + k of ``row`` (clipped)."""
@@ -373,8 +379,7 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
         if idx < 0:
             continue
         x = <int>(S.keys[idx] & LOW32)
-        k0 = h - x if x < h else 0
-        k1 = K if x + h < W else W - x + h
+        _patch_range(x, h, W, &k0, &k1)
         v = S.vals + <int64_t>n * vs
         for k in range(k0, k1):
             z = _hash(J.seedmix, <uint64_t>(x + k - h), <uint64_t>p)
@@ -389,8 +394,7 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
         if idx < 0:
             continue
         x = <int>(S.keys[idx] & LOW32)
-        k0 = h - x if x < h else 0
-        k1 = K if x + h < W else W - x + h
+        _patch_range(x, h, W, &k0, &k1)
         v = S.vals + <int64_t>n * vs
         fl = S.geo_fl[idx]
         wpair = S.geo_w[idx]
@@ -409,8 +413,7 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
         idx = S.cidx[n]
         key = S.keys[idx if idx >= 0 else -1 - idx]
         x = <int>(key & LOW32)
-        k0 = h - x if x < h else 0
-        k1 = K if x + h < W else W - x + h
+        _patch_range(x, h, W, &k0, &k1)
         if idx >= 0:
             _span(J, oL, S.vals + <int64_t>n * vs, k0, k1, x - h, J.wa)
             continue

@@ -1,0 +1,173 @@
+"""What the sinks that write files into a folder share (``files``, ``record``).
+
+:class:`FolderSink` checks (or creates) the folder at open time; file names
+come from a ``str.format`` pattern (:func:`check_pattern`, :func:`frame_stem`);
+:func:`write_atomic` writes a file to a temporary name in its destination
+folder and renames it into place, so readers never see a partial file.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Callable
+
+from vpp_service.frame import FusionResult
+from vpp_service.sinks.base import Sink, SinkContext
+
+#: Fields a file-name pattern may use, with the sample values used to check it.
+PATTERN_FIELDS = {"rig": "rig0", "seq": 0, "stamp_ns": 0, "name": "scene"}
+
+
+def check_pattern(pattern: str) -> None:
+    """Validate a file-name pattern over :data:`PATTERN_FIELDS`.
+
+    Raises
+    ------
+    ValueError
+        Naming ``pattern``: not a valid pattern, or not a plain, non-hidden file name.
+    """
+    try:
+        stem = pattern.format(**PATTERN_FIELDS)
+    except (KeyError, IndexError, ValueError) as exc:
+        raise ValueError(
+            f"pattern: {pattern!r} is not a valid pattern over {sorted(PATTERN_FIELDS)} ({exc!r})"
+        ) from None
+    if not stem or "/" in stem or "\\" in stem or stem in (".", "..") or stem.startswith("."):
+        raise ValueError(f"pattern: {pattern!r} must give a plain, non-hidden file name, got {stem!r}")
+
+
+def write_atomic(path: Path, data: bytes | Callable[[str], object], overwrite: bool) -> None:
+    """Write ``path`` via a temporary file in the same folder, then rename.
+
+    Parameters
+    ----------
+    path : Path
+        Destination file.
+    data : bytes or callable
+        The contents, or a function writing them to the temporary path it is given.
+    overwrite : bool
+        Replace an existing ``path``; when false an existing file raises and is
+        left untouched (no-clobber is atomic where hard links are supported).
+
+    Raises
+    ------
+    FileExistsError
+        ``path`` exists and ``overwrite`` is false.
+    OSError
+        The folder is not writable, the disk is full, ...
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        if callable(data):
+            os.close(fd)
+            data(tmp)
+        else:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
+        if overwrite:
+            os.replace(tmp, path)
+        else:
+            try:  # link() fails if the target exists: atomic no-clobber
+                os.link(tmp, path)
+            except FileExistsError:
+                raise FileExistsError(f"{path} exists and overwrite = false") from None
+            except OSError:  # file system without hard links: check, then rename
+                if path.exists():
+                    raise FileExistsError(f"{path} exists and overwrite = false") from None
+                os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def prepare_dir(d: Path, create: bool, key: str, what: str = "output folder") -> None:
+    """Check (and with ``create`` make) a sink's output folder before the run.
+
+    Parameters
+    ----------
+    d : Path
+        The folder.
+    create : bool
+        Create it (with parents) when missing.
+    key : str
+        Config key named in errors, e.g. ``"sinks.files.dir"``.
+    what : str
+        How errors call the folder.
+
+    Raises
+    ------
+    FileNotFoundError, NotADirectoryError, PermissionError
+        Missing (and not created), not a folder, or not writable.
+    """
+    if create and not d.exists():
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise PermissionError(f"{key}: cannot create {str(d)!r}: {exc}") from None
+    if not d.exists():
+        raise FileNotFoundError(f"{key}: {what} {str(d)!r} does not exist (create it or set create_dir = true)")
+    if not d.is_dir():
+        raise NotADirectoryError(f"{key}: {str(d)!r} is not a folder")
+    try:  # os.access lies for root and on read-only mounts; really try
+        fd, probe = tempfile.mkstemp(prefix=".vpp-probe-", dir=d)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise PermissionError(f"{key}: {what} {str(d)!r} is not writable: {exc}") from None
+
+
+class FolderSink(Sink):
+    """Base of the sinks that write files into one folder (``options.dir``).
+
+    Subclasses set ``Options`` (a dataclass with ``dir``, ``create_dir`` and
+    ``pattern``) and ``DIR_KEY`` / ``DIR_WHAT`` for error messages.
+    """
+
+    DIR_KEY = "sinks.dir"
+    DIR_WHAT = "output folder"
+
+    def __init__(self, options: Any, context: SinkContext | None = None) -> None:
+        if not isinstance(options, self.Options):
+            raise TypeError(f"options: must be {self.Options.__name__}, got {type(options).__name__}")
+        super().__init__(options, context or SinkContext())
+        self._dir = Path(options.dir).expanduser()
+        self._open = False
+
+    def open(self) -> None:
+        """Check that ``dir`` exists (or create it) and is writable.
+
+        Raises
+        ------
+        FileNotFoundError
+            ``dir`` is missing and ``create_dir`` is false.
+        NotADirectoryError
+            ``dir`` exists but is not a folder.
+        PermissionError
+            ``dir`` cannot be created or written to.
+        """
+        prepare_dir(self._dir, self.options.create_dir, self.DIR_KEY, self.DIR_WHAT)
+        self._open = True
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Nothing is buffered (writes are synchronous); marks the sink closed."""
+        self._open = False
+
+    def frame_stem(self, result: FusionResult) -> str:
+        """File-name stem of ``result`` from ``options.pattern``.
+
+        Raises
+        ------
+        TypeError
+            If ``result`` is not a FusionResult.
+        """
+        if not isinstance(result, FusionResult):
+            raise TypeError(f"result: must be a FusionResult, got {type(result).__name__}")
+        fr = result.frame
+        return self.options.pattern.format(
+            rig=fr.rig or self.context.rig, seq=fr.seq, stamp_ns=fr.stamp_ns, name=fr.name or "frame"
+        )
+
+
+__all__ = ["FolderSink", "PATTERN_FIELDS", "check_pattern", "prepare_dir", "write_atomic"]
