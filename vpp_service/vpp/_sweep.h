@@ -137,34 +137,61 @@ static inline void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* buck
 }
 
 /* Merge three (d, x)-sorted key lists of consecutive rows into the global
- * paint order (d, row, x), branch-free.  List i is l[i][0..n[i]) and lives at
- * index base[i] of the caller's arrays; l[i][n[i]] and f[i][n[i]] must be
- * readable (one padding entry).  Writes the array index of each key to oidx,
- * as -1 - index when its flag (occluded) is set, or drops it when
- * drop_flagged.  Returns the number written. */
+ * paint order (d, row, x), branch-free and from both ends at once (two
+ * independent dependency chains: the front takes the smallest remaining key,
+ * the back the largest, and they meet exactly).  List i is l[i][0..n[i]) and
+ * lives at index base[i] of the caller's arrays; l[i][n[i]] and f[i][n[i]]
+ * must be readable (one padding entry).  Writes the array index of
+ * every key to oidx[0..n0+n1+n2), as -1 - index when its flag (occluded) is
+ * set, and returns that count. */
 static inline int vpp_merge3(const uint64_t* const* l, const uint8_t* const* f, const int* n,
-                             const int* base, int drop_flagged, int32_t* oidx) {
+                             const int* base, int32_t* oidx) {
     const uint64_t* a = l[0], *b = l[1], *c = l[2];
     const uint8_t* fa = f[0], *fb = f[1], *fc = f[2];
     const int na = n[0], nb = n[1], nc = n[2];
-    int ia = 0, ib = 0, ic = 0, m = 0, total = na + nb + nc, t;
-    for (t = 0; t < total; t++) {
-        uint64_t ka = ia < na ? (a[ia] >> 32) << 2 : ~0ULL;
-        uint64_t kb = ib < nb ? ((b[ib] >> 32) << 2) | 1 : ~0ULL;
-        uint64_t kc = ic < nc ? ((c[ic] >> 32) << 2) | 2 : ~0ULL;
-        uint64_t k = ka < kb ? ka : kb;
-        int j, flag, idx;
-        k = k < kc ? k : kc;
-        j = (int)(k & 3);
-        idx = j == 0 ? base[0] + ia : (j == 1 ? base[1] + ib : base[2] + ic);
-        flag = j == 0 ? fa[ia] : (j == 1 ? fb[ib] : fc[ic]);
-        ia += j == 0;
-        ib += j == 1;
-        ic += j == 2;
-        oidx[m] = flag ? -1 - idx : idx;
-        m += !(flag && drop_flagged);
+    const int total = na + nb + nc, nback = total / 2;
+    int ia = 0, ib = 0, ic = 0, ea = na, eb = nb, ec = nc, tf = 0, tb = total - 1, t;
+    /* Every load is unconditional (the lists are padded by one entry and an
+     * exhausted back index reads entry 0) and every select is mask arithmetic,
+     * so the loop has no data-dependent branch (GCC turns ?: chains into jumps). */
+#define VPP_PICK3(j, x0, x1, x2) \
+    ((-(int)((j) == 0) & (x0)) | (-(int)((j) == 1) & (x1)) | (-(int)((j) == 2) & (x2)))
+#define VPP_FRONT_STEP do { \
+        uint64_t ka = (((a[ia] >> 32) << 2)) | (0ULL - (uint64_t)(ia >= na)); \
+        uint64_t kb = (((b[ib] >> 32) << 2) | 1) | (0ULL - (uint64_t)(ib >= nb)); \
+        uint64_t kc = (((c[ic] >> 32) << 2) | 2) | (0ULL - (uint64_t)(ic >= nc)); \
+        uint64_t k = ka < kb ? ka : kb; \
+        int j, idx, flag; \
+        k = k < kc ? k : kc; \
+        j = (int)(k & 3); \
+        idx = VPP_PICK3(j, base[0] + ia, base[1] + ib, base[2] + ic); \
+        flag = VPP_PICK3(j, (int)fa[ia], (int)fb[ib], (int)fc[ic]); \
+        ia += j == 0; ib += j == 1; ic += j == 2; \
+        oidx[tf++] = idx ^ -flag;   /* flag: -1 - idx */ \
+    } while (0)
+    for (t = 0; t < nback; t++) {
+        VPP_FRONT_STEP;
+        {   /* back: keys are >= 4 (d > 0), so 0 is below every candidate */
+            int pa = ea - (ea > 0), pb = eb - (eb > 0), pc = ec - (ec > 0);
+            uint64_t ka = ((a[pa] >> 32) << 2) & (0ULL - (uint64_t)(ea > 0));
+            uint64_t kb = (((b[pb] >> 32) << 2) | 1) & (0ULL - (uint64_t)(eb > 0));
+            uint64_t kc = (((c[pc] >> 32) << 2) | 2) & (0ULL - (uint64_t)(ec > 0));
+            uint64_t k = ka > kb ? ka : kb;
+            int j, idx, flag;
+            k = k > kc ? k : kc;
+            j = (int)(k & 3);
+            idx = VPP_PICK3(j, base[0] + pa, base[1] + pb, base[2] + pc);
+            flag = VPP_PICK3(j, (int)fa[pa], (int)fb[pb], (int)fc[pc]);
+            ea -= j == 0;
+            eb -= j == 1;
+            ec -= j == 2;
+            oidx[tb--] = idx ^ -flag;
+        }
     }
-    return m;
+    if (tf <= tb) VPP_FRONT_STEP;          /* odd total: the middle key */
+#undef VPP_FRONT_STEP
+#undef VPP_PICK3
+    return total;
 }
 
 /* Maximum of p[0..n-1] (n >= 1, no NaN). */

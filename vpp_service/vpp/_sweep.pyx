@@ -61,7 +61,7 @@ cdef extern from "_sweep.h" nogil:
     float vpp_sw_u2f(uint32_t u)
     int vpp_init_cpu(int allow_avx2)
     int vpp_merge3(const uint64_t* const* l, const uint8_t* const* f, const int* n,
-                   const int* base, int drop_flagged, int32_t* oidx)
+                   const int* base, int32_t* oidx)
     float vpp_maxf(const float* p, int n)
     void vpp_blend_span(uint8_t* dst, const uint8_t* val, int n, uint32_t w, int64_t room)
     int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, int k1,
@@ -344,7 +344,8 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
     if _reserve(J, S, total):
         return
     # 1. merge rows s_lo..s_hi into the global order (d, y, x), ties in d -> smaller row;
-    #    cidx = ring index of the key, negative for an FGD-occluded point
+    #    cidx = ring index of the key, negative for an occluded point (NO: skipped,
+    #    FGD: the right view's content is copied into the left view)
     use_flags = occmode == 1 or occmode == 3
     if nsrc <= 3:
         for j in range(nsrc, 3):
@@ -355,7 +356,7 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
         if not use_flags:
             for j in range(3):
                 fsrc[j] = S.zeros
-        ncon = vpp_merge3(src, fsrc, cnt, base, occmode == 1, S.cidx)
+        ncon = vpp_merge3(src, fsrc, cnt, base, S.cidx)
     else:
         ncon = 0
         while True:
@@ -369,8 +370,6 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
             head[jb] = k + 1
             cand[jb] = ((src[jb][k + 1] >> 32) << 8) | <uint64_t>jb if k + 1 < cnt[jb] else ALL1
             occ_pt = fsrc[jb][k] if use_flags else 0
-            if occ_pt and occmode == 1:
-                continue
             S.cidx[ncon] = base[jb] + k if not occ_pt else -1 - (base[jb] + k)
             ncon += 1
     # 2. pattern bytes of every painted contribution (hash of the left pixel)
@@ -416,6 +415,8 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
         _patch_range(x, h, W, &k0, &k1)
         if idx >= 0:
             _span(J, oL, S.vals + <int64_t>n * vs, k0, k1, x - h, J.wa)
+            continue
+        if occmode == 1:
             continue
         xp = <double>x - <double>vpp_sw_u2f(<uint32_t>(key >> 32))
         if J.splat:
