@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import Any, Iterator, TextIO
 
+from vpp_service.service.allocator import reuse_freed_memory
 from vpp_service.service.config import ServiceConfig, ZenohSection
 from vpp_service.service.fusion import Fusion
 from vpp_service.service.pipeline import Pipeline
@@ -89,6 +90,8 @@ def run_service(cfg: ServiceConfig, stop: threading.Event | None = None,
     out = Path(s.out)
     out.mkdir(parents=True, exist_ok=True)
     summary_path = out / "summary.json"
+    if s.reuse_memory:
+        reuse_freed_memory()
     with open_session(cfg.zenoh) as session:
         pipe = build_pipeline(cfg, session)
         pipe.start()
