@@ -6,6 +6,7 @@ wrap-around on (a debug build used to fuzz the wrappers against out-of-bounds
 access); the default build turns them off for speed.
 """
 import os
+import platform
 import sys
 from pathlib import Path
 
@@ -23,17 +24,26 @@ elif sys.platform == "darwin":
 else:
     compile_args, link_args = ["-O3", "-fopenmp"], ["-fopenmp"]
 
+# Modules named *_avx2 are a second build of a kernel for x86-64-v3 CPUs (AVX2,
+# FMA, BMI2, ...), chosen at run time by the Python side when the CPU has them.
+x86 = platform.machine().lower() in ("x86_64", "amd64") and sys.platform != "win32"
+avx2_args = ["-mavx2", "-mfma", "-mbmi", "-mbmi2", "-mlzcnt", "-mpopcnt", "-mf16c", "-mmovbe"]
+
 extensions = []
 for pyx in sorted((ROOT / "vpp_service").rglob("*.pyx")):
     module = ".".join(pyx.relative_to(ROOT).with_suffix("").parts)
+    avx2 = module.endswith("_avx2")
+    if avx2 and not x86:
+        continue
     extensions.append(
         Extension(
             module,
             [str(pyx.relative_to(ROOT))],
-            depends=[str(h.relative_to(ROOT)) for h in pyx.parent.glob("*.h")],
+            depends=[str(h.relative_to(ROOT)) for h in pyx.parent.glob("*.h")]
+            + ([str(pyx.with_name(pyx.name.replace("_avx2", "")).relative_to(ROOT))] if avx2 else []),
             include_dirs=[np.get_include()],
             define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
-            extra_compile_args=compile_args,
+            extra_compile_args=compile_args + (avx2_args if avx2 else []),
             extra_link_args=link_args,
         )
     )

@@ -11,10 +11,30 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vpp_service.vpp import VPPConfig, detect_occlusions, project
+from vpp_service.vpp import VPPConfig, backend, detect_occlusions, project
 
 from test_vpp_project import make_case
 from vpp_reference import ref_occlusions, ref_project
+
+BUILDS = {"portable": backend.portable, "avx2": backend.avx2_build()}
+
+
+@pytest.fixture(params=list(BUILDS))
+def build(request, monkeypatch):
+    """Run the test on each build of the sweep kernel this machine can execute."""
+    mod = BUILDS[request.param]
+    if mod is None:
+        pytest.skip("no AVX2 build for this CPU / platform")
+    monkeypatch.setattr(backend, "sweep", mod)
+    return mod
+
+
+def test_builds_report_themselves():
+    assert backend.portable.AVX2 is False
+    if BUILDS["avx2"] is not None:
+        assert BUILDS["avx2"].AVX2 is True
+    assert backend.sweep in [m for m in BUILDS.values() if m is not None]
+
 
 CASES = [
     # (patch, C, splat, occlusion, alpha, window (x, y), t, shape (H, W), density)
@@ -43,7 +63,7 @@ def case_arrays(i, shape, C, density, nan_background):
 
 @pytest.mark.parametrize("i", range(len(CASES)))
 @pytest.mark.parametrize("nan_background", [False, True])
-def test_sweep_matches_reference(i, nan_background):
+def test_sweep_matches_reference(build, i, nan_background):
     patch, C, splat, occ, alpha, window, t, shape, density = CASES[i]
     cfg = VPPConfig(patch=patch, splat=splat, occlusion=occ, alpha=alpha,
                     occ_window_x=window[0], occ_window_y=window[1], occ_t=t)
@@ -59,7 +79,7 @@ def test_sweep_matches_reference(i, nan_background):
 
 @pytest.mark.parametrize("window,lam,gamma,t", [((9, 7), 2.0, 0.4375, 1.0), ((3, 5), 0.0, 1.0, 0.0),
                                                  ((21, 1), 1.3, 0.1, 2.5), ((1, 13), 5.0, 0.9, 0.25)])
-def test_detect_matches_reference_many_chunks(window, lam, gamma, t):
+def test_detect_matches_reference_many_chunks(build, window, lam, gamma, t):
     rng = np.random.default_rng(5)
     H, W = 64, 120
     disp = np.where(rng.random((H, W)) < 0.15,
@@ -71,7 +91,7 @@ def test_detect_matches_reference_many_chunks(window, lam, gamma, t):
         np.testing.assert_array_equal(got, ref)
 
 
-def test_points_at_both_row_ends_and_past_the_left_border():
+def test_points_at_both_row_ends_and_past_the_left_border(build):
     """Patches clipped at column 0 and W-1 in L, matches left of R's column 0 and
     splats that straddle R's last column (the SIMD fast paths must step aside)."""
     H, W = 9, 40

@@ -255,21 +255,18 @@ static inline void vpp_blend16(uint8_t* dst, const uint8_t* val, int n, uint32_t
     vpp_blend_regs(&alo, &ahi, _mm_loadu_si128((const __m128i*)val), vpp_lanes(0, n), w);
     _mm_storeu_si128((__m128i*)dst, _mm_packus_epi16(alo, ahi));
 }
-#if VPP_HAVE_SSE2 && defined(__GNUC__) && defined(__x86_64__)
-/* AVX2 versions (16 byte lanes widened into one 256-bit register), chosen at run
- * time when the CPU has AVX2 (vpp_init_cpu); same arithmetic, same bytes. */
+#if defined(__AVX2__)
+/* AVX2 versions (16 byte lanes widened into one 256-bit register), used by the
+ * build compiled for x86-64-v3 (_sweep_avx2); same arithmetic, same bytes. */
 #include <immintrin.h>
-#define VPP_HAVE_AVX2_PATH 1
-static int vpp_cpu_avx2 = 0;
 
-__attribute__((target("avx2"))) static inline __m256i vpp_lanes16_avx2(int lo, int hi) {
+static inline __m256i vpp_lanes16_avx2(int lo, int hi) {
     const __m256i iota = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     return _mm256_and_si256(_mm256_cmpgt_epi16(iota, _mm256_set1_epi16((short)(lo - 1))),
                             _mm256_cmpgt_epi16(_mm256_set1_epi16((short)hi), iota));
 }
 
-__attribute__((target("avx2"))) static inline __m256i vpp_blend_avx2(__m256i a, __m256i b,
-                                                                    __m256i lanes, uint32_t w) {
+static inline __m256i vpp_blend_avx2(__m256i a, __m256i b, __m256i lanes, uint32_t w) {
     __m256i wv = _mm256_and_si256(_mm256_set1_epi16((short)(uint16_t)(w > 65535u ? 65535u : w)), lanes);
     __m256i d = _mm256_sub_epi16(b, a);
     __m256i hi = _mm256_sub_epi16(_mm256_mulhi_epu16(d, wv),
@@ -278,20 +275,19 @@ __attribute__((target("avx2"))) static inline __m256i vpp_blend_avx2(__m256i a, 
     return _mm256_add_epi16(_mm256_add_epi16(a, hi), rb);
 }
 
-__attribute__((target("avx2"))) static inline void vpp_store_packed_avx2(uint8_t* dst, __m256i a) {
+static inline void vpp_store_packed_avx2(uint8_t* dst, __m256i a) {
     _mm_storeu_si128((__m128i*)dst, _mm_packus_epi16(_mm256_castsi256_si128(a),
                                                      _mm256_extracti128_si256(a, 1)));
 }
 
-__attribute__((target("avx2"))) static void vpp_blend16_avx2(uint8_t* dst, const uint8_t* val,
-                                                            int n, uint32_t w) {
+static inline void vpp_blend16_avx2(uint8_t* dst, const uint8_t* val, int n, uint32_t w) {
     __m256i a = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i*)dst));
     __m256i b = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i*)val));
     vpp_store_packed_avx2(dst, vpp_blend_avx2(a, b, vpp_lanes16_avx2(0, n), w));
 }
 
-__attribute__((target("avx2"))) static void vpp_splat16_avx2(uint8_t* dst, const uint8_t* val, int C,
-                                                            int k0, int k1, uint32_t w0, uint32_t w1) {
+static inline void vpp_splat16_avx2(uint8_t* dst, const uint8_t* val, int C,
+                                    int k0, int k1, uint32_t w0, uint32_t w1) {
     __m256i a = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i*)dst));
     __m128i v = _mm_loadu_si128((const __m128i*)val);
     __m128i v1 = C == 3 ? _mm_slli_si128(v, 3) : _mm_slli_si128(v, 1);
@@ -299,20 +295,25 @@ __attribute__((target("avx2"))) static void vpp_splat16_avx2(uint8_t* dst, const
     a = vpp_blend_avx2(a, _mm256_cvtepu8_epi16(v), vpp_lanes16_avx2(k0 * C, k1 * C), w0);
     vpp_store_packed_avx2(dst, a);
 }
+#define VPP_BUILD_AVX2 1
 #else
-#define VPP_HAVE_AVX2_PATH 0
-static int vpp_cpu_avx2 = 0;
+#define VPP_BUILD_AVX2 0
 #endif
 
-/* Pick the SIMD path for this CPU (call once at import); returns 1 for AVX2. */
-static inline int vpp_init_cpu(int allow_avx2) {
-#if VPP_HAVE_AVX2_PATH
+/* Whether this build uses AVX2, and whether the CPU could run the AVX2 build
+ * (AVX2, FMA, BMI1/2, LZCNT, POPCNT: what -march=x86-64-v3 may emit). */
+static inline int vpp_build_avx2(void) { return VPP_BUILD_AVX2; }
+
+static inline int vpp_cpu_supports_avx2(void) {
+#if defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__))
     __builtin_cpu_init();
-    vpp_cpu_avx2 = allow_avx2 && __builtin_cpu_supports("avx2");
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")
+        && __builtin_cpu_supports("bmi") && __builtin_cpu_supports("bmi2")
+        && __builtin_cpu_supports("popcnt") && __builtin_cpu_supports("f16c")
+        && __builtin_cpu_supports("movbe");
 #else
-    (void)allow_avx2;
+    return 0;
 #endif
-    return vpp_cpu_avx2;
 }
 
 /* Splatted right-view paint of one patch row in one pass: pixels [k0, k1) of
@@ -327,11 +328,9 @@ static inline int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, i
     const __m128i z = _mm_setzero_si128();
     __m128i a, alo, ahi, v, v1;
     if ((k1 + 1) * C > 16 || room < 16 || (C != 1 && C != 3)) return 0;
-#if VPP_HAVE_AVX2_PATH
-    if (vpp_cpu_avx2) {
-        vpp_splat16_avx2(dst, val, C, k0, k1, w0, w1);
-        return 1;
-    }
+#if VPP_BUILD_AVX2
+    vpp_splat16_avx2(dst, val, C, k0, k1, w0, w1);
+    return 1;
 #endif
     a = _mm_loadu_si128((const __m128i*)dst);
     alo = _mm_unpacklo_epi8(a, z);
@@ -359,11 +358,9 @@ static inline void vpp_blend_span(uint8_t* dst, const uint8_t* val, int n, uint3
 #if VPP_HAVE_SSE2
     if (room >= (int64_t)((n + 15) & ~15)) {
         uint32_t w16 = w > 65535u ? 65535u : w;
-#if VPP_HAVE_AVX2_PATH
-        if (vpp_cpu_avx2) {
-            for (; n > 0; n -= 16, dst += 16, val += 16) vpp_blend16_avx2(dst, val, n < 16 ? n : 16, w16);
-            return;
-        }
+#if VPP_BUILD_AVX2
+        for (; n > 0; n -= 16, dst += 16, val += 16) vpp_blend16_avx2(dst, val, n < 16 ? n : 16, w16);
+        return;
 #endif
         for (; n > 0; n -= 16, dst += 16, val += 16) vpp_blend16(dst, val, n < 16 ? n : 16, w16);
         return;

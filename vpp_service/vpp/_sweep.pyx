@@ -48,18 +48,22 @@ from libc.math cimport floor, INFINITY
 
 from vpp_service.vpp._pixel cimport _hash, _seedmix, _w16, _ifloor, _fgd_pixel
 
-import os
-
 import numpy as np
 
-#: True when the blends run on AVX2 (detected at import; VPP_NO_AVX2=1 forces SSE2).
-AVX2 = bool(vpp_init_cpu(os.environ.get("VPP_NO_AVX2", "0") != "1"))
+#: True in the build compiled for x86-64-v3 (``_sweep_avx2``), False in the portable one.
+AVX2 = bool(vpp_build_avx2())
+
+
+def cpu_supports_avx2():
+    """True when this CPU can run the x86-64-v3 build (checked before importing it)."""
+    return bool(vpp_cpu_supports_avx2())
 
 cdef extern from "_sweep.h" nogil:
     int vpp_scan_row(const float* d, int W, uint64_t* keys, int64_t* st)
     void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* bucket, int* cnt)
     float vpp_sw_u2f(uint32_t u)
-    int vpp_init_cpu(int allow_avx2)
+    int vpp_build_avx2()
+    int vpp_cpu_supports_avx2()
     int vpp_merge3(const uint64_t* const* l, const uint8_t* const* f, const int* n,
                    const int* base, int32_t* oidx)
     float vpp_maxf(const float* p, int n)

@@ -13,7 +13,7 @@ with exactly that expression).  The grid is conceptually unbounded on the
 left, so points whose match falls left of column 0 are tested among
 themselves.  The result is warped back: the mask is set at each occluded
 point's own left-view pixel.  The kernel keeps only ``r_y`` dense warped rows
-per thread: see :mod:`vpp_service.vpp._sweep`.
+per thread: see :mod:`vpp_service.vpp._sweep` (and :mod:`vpp_service.vpp.backend`).
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ import math
 
 import numpy as np
 
-from . import _sweep
+from . import backend
 from ._validate import as_disparity, as_threads
 
 _NO_IMAGE = np.zeros((1, 1, 1), np.uint8)   # image arguments of a classify-only sweep
@@ -63,7 +63,7 @@ def classify_into(disp: np.ndarray, occ: np.ndarray, window: tuple[int, int],
     Sets ``occ`` (H x W bool, zeroed by the caller) at the occluded points and
     returns ``(row stats H x 4, occluded count per row)``.
     """
-    return _sweep.sweep_kernel(disp, occ.view(np.uint8), True, window[0], window[1], pen, t,
+    return backend.sweep.sweep_kernel(disp, occ.view(np.uint8), True, window[0], window[1], pen, t,
                                _NO_IMAGE, _NO_IMAGE, _NO_IMAGE, _NO_IMAGE, False, 0, 0.0, False,
                                3, 0, num_threads)
 

@@ -71,7 +71,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _kernel, _sweep
+from . import _kernel, backend
 from .config import VPPConfig
 from .occlusion import check_occlusion_params, classify_into, penalty_table
 from .rng import check_seed
@@ -182,7 +182,7 @@ def project(left: np.ndarray, right: np.ndarray, disparity: np.ndarray,
     pen = penalty_table((rx, ry), float(config.occ_lambda), float(config.occ_gamma))
     hmax = (config.patch - 1) // 2
     if _sweep_paints(config):
-        stats, occ_rows = _sweep.sweep_kernel(
+        stats, occ_rows = backend.sweep.sweep_kernel(
             disp, occ.view(np.uint8), occmode != 0, rx, ry, pen, float(config.occ_t),
             L, R, out_l, out_r, True, hmax, float(config.alpha), config.splat, occmode,
             seed, nt)

@@ -1,0 +1,45 @@
+"""Which build of the sweep kernel runs.
+
+The sweep kernel (:mod:`vpp_service.vpp._sweep`) is compiled twice: a portable
+build (SSE2 on x86-64, plain C elsewhere) and, on x86-64, ``_sweep_avx2``
+compiled for x86-64-v3 (AVX2, FMA, BMI2, ...).  Both give the same bytes.  The
+AVX2 build is imported only after the portable one has checked that the CPU
+supports it (importing it on an older CPU would crash); ``VPP_NO_AVX2=1`` in
+the environment keeps the portable build.
+
+Attributes
+----------
+sweep : module
+    The build in use (``project`` and ``detect_occlusions`` call ``sweep.sweep_kernel``).
+AVX2 : bool
+    True when ``sweep`` is the AVX2 build.
+"""
+from __future__ import annotations
+
+import os
+from types import ModuleType
+
+from . import _sweep as portable
+
+
+def avx2_build() -> ModuleType | None:
+    """The AVX2 build when it exists and this CPU can run it, else None."""
+    if not portable.cpu_supports_avx2():
+        return None
+    try:
+        from . import _sweep_avx2
+    except ImportError:  # not built (non-x86 platform or a compiler without -mavx2)
+        return None
+    return _sweep_avx2
+
+
+def _choose() -> ModuleType:
+    if os.environ.get("VPP_NO_AVX2", "0") == "1":
+        return portable
+    return avx2_build() or portable
+
+
+sweep: ModuleType = _choose()
+AVX2: bool = bool(sweep.AVX2)
+
+__all__ = ["AVX2", "avx2_build", "portable", "sweep"]
