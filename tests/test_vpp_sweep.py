@@ -75,6 +75,19 @@ def test_sweep_matches_reference(build, i, nan_background):
         np.testing.assert_array_equal(res.right, rr, err_msg=f"right, {nt} threads")
         np.testing.assert_array_equal(res.left, rl, err_msg=f"left, {nt} threads")
         assert res.stats.occluded == (int(rocc.sum()) if occ != "off" else 0)
+        assert res.stats.to_dict() == expected_stats(disp, res.stats.occluded, occ)
+
+
+def expected_stats(disp, occluded, occ):
+    """Point counts computed with NumPy from the map (the module docstring's rules)."""
+    with np.errstate(invalid="ignore"):
+        given = (disp != 0) & ~np.isnan(disp)
+        valid = given & (disp > 0) & (disp < disp.shape[1])
+        oob = valid & (np.arange(disp.shape[1])[None, :] - disp.astype(np.float64) < 0)
+    n_valid = int(valid.sum())
+    return {"given": int(given.sum()), "invalid": int(given.sum()) - n_valid,
+            "out_of_bounds": int(oob.sum()), "occluded": occluded,
+            "projected": n_valid - occluded if occ in ("no", "fgd") else n_valid}
 
 
 @pytest.mark.parametrize("window,lam,gamma,t", [((9, 7), 2.0, 0.4375, 1.0), ((3, 5), 0.0, 1.0, 0.0),

@@ -20,6 +20,9 @@
 #include <algorithm>
 #endif
 
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #define VPP_HAVE_SSE2 1
@@ -50,7 +53,28 @@ static inline void vpp_scan_one(const float* d, int x, int W, uint64_t* keys, in
 static inline int vpp_scan_row(const float* d, int W, uint64_t* keys, int64_t* st) {
     int64_t given = 0, oob = 0;
     int n = 0, x = 0;
-#if VPP_HAVE_SSE2
+#if defined(__AVX2__)
+    const __m256 zero = _mm256_setzero_ps(), wf = _mm256_set1_ps((float)W);
+    const __m256 iota = _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7);
+    for (; x + 8 <= W; x += 8) {
+        __m256 a = _mm256_loadu_ps(d + x);
+        unsigned g = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(a, zero, _CMP_NEQ_OQ));  /* not 0, not NaN */
+        unsigned m, o;
+        if (!g) continue;
+        m = (unsigned)_mm256_movemask_ps(_mm256_and_ps(_mm256_cmp_ps(a, zero, _CMP_GT_OQ),
+                                                       _mm256_cmp_ps(a, wf, _CMP_LT_OQ)));
+        /* left border: x - d < 0, i.e. x < d (exact in float for x < 2^24) */
+        o = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(_mm256_add_ps(iota, _mm256_set1_ps((float)x)), a,
+                                                       _CMP_LT_OQ)) & m;
+        given += __builtin_popcount(g);
+        oob += __builtin_popcount(o);
+        while (m) {
+            int i = x + __builtin_ctz(m);
+            m &= m - 1;
+            keys[n++] = ((uint64_t)vpp_sw_f2u(d[i]) << 32) | (uint64_t)i;
+        }
+    }
+#elif VPP_HAVE_SSE2
     const __m128 zero = _mm_setzero_ps(), wf = _mm_set1_ps((float)W);
     for (; x + 8 <= W; x += 8) {
         __m128 a = _mm_loadu_ps(d + x), b = _mm_loadu_ps(d + x + 4);
