@@ -1,9 +1,11 @@
 /* C helpers of the sweep kernel (vpp_service/vpp/_sweep.pyx): the row scanner,
- * the byte blend on 16-byte vectors and the float window maximum.
+ * the per-row key sort, the 3-row merge, the byte blends on 16-byte vectors and
+ * the float window maximum.
  *
- * Every function computes exactly what its scalar definition says; the SIMD
- * versions (SSE2, always present on x86-64) are used when available, a plain C
- * loop otherwise.  The blend is the library's fixed-point rule
+ * Every function computes exactly what its scalar definition says.  The SIMD
+ * versions are chosen at compile time: AVX2 in the x86-64-v3 build
+ * (_sweep_avx2.pyx, __AVX2__ defined), SSE2 (always present on x86-64) in the
+ * portable build, a plain C loop elsewhere.  The blend is the library's fixed-point rule
  *     blend(a, b, w) = (a * (65536 - w) + b * w + 32768) >> 16,   0 <= w <= 65536
  * rewritten as a + floor(((b - a) * w + 32768) / 65536) so that it runs on
  * 16-bit lanes: floor(P / 65536) is the signed high half of P = (b - a) * w and

@@ -24,16 +24,18 @@ classify(q = y - r_y//2)
     ``(max - d) - pen(|dy|, 0) <= t`` proves no cell of that row qualifies,
     and only the remaining rows are tested cell by cell (exact).
 paint(p = q - h)
-    copy row p of both inputs to the outputs, k-way merge the sorted keys of
-    rows p-h..p+h into the global order (d, y, x), compute the pattern bytes
+    copy row p of both inputs to the outputs, merge the sorted keys of rows
+    p-h..p+h into the global order (d, y, x) (3x3 and smaller patches: a
+    branch-free 3-way merge from both ends, ``_sweep.h``), compute the pattern bytes
     once per contribution, then blend them into the right row and the left row
     (FGD reads the final right row).  Each contribution is at most three
     uniform-weight blends of a K*C-byte span: with splatting, column
     ``floor(x') + dx + 1`` receives ``alpha * beta`` of value ``dx`` *before*
     column ``floor(x') + dx + 1`` receives ``alpha * (1 - beta)`` of value
     ``dx + 1``, so the whole ``beta`` span can be blended first and the whole
-    ``1 - beta`` span second.  Spans are blended 16 bytes at a time on SSE2
-    (``_sweep.h``), bit-exact with the scalar rule.
+    ``1 - beta`` span second.  Spans are blended 16 bytes at a time (SSE2, or
+    AVX2 in the x86-64-v3 build ``_sweep_avx2``: see
+    :mod:`vpp_service.vpp.backend`), bit-exact with the scalar rule.
 
 A chunk first ingests (and classifies) the few rows above it that its first
 rows depend on, so chunks are independent; each output row, statistic and
@@ -44,19 +46,12 @@ from cython.parallel cimport prange, parallel
 from libc.stdint cimport uint8_t, uint32_t, uint64_t, int64_t, int32_t
 from libc.stdlib cimport malloc, calloc, free, realloc
 from libc.string cimport memcpy, memset
-from libc.math cimport floor, INFINITY
+from libc.math cimport INFINITY
 
 from vpp_service.vpp._pixel cimport _hash, _seedmix, _w16, _ifloor, _fgd_pixel
 
 import numpy as np
 
-#: True in the build compiled for x86-64-v3 (``_sweep_avx2``), False in the portable one.
-AVX2 = bool(vpp_build_avx2())
-
-
-def cpu_supports_avx2():
-    """True when this CPU can run the x86-64-v3 build (checked before importing it)."""
-    return bool(vpp_cpu_supports_avx2())
 
 cdef extern from "_sweep.h" nogil:
     int vpp_scan_row(const float* d, int W, uint64_t* keys, int64_t* st)
@@ -71,6 +66,15 @@ cdef extern from "_sweep.h" nogil:
     int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, int k1,
                     uint32_t w0, uint32_t w1, int64_t room)
     uint32_t vpp_sw_f2u(float f)
+
+#: True in the build compiled for x86-64-v3 (``_sweep_avx2``), False in the portable one.
+AVX2 = bool(vpp_build_avx2())
+
+
+def cpu_supports_avx2():
+    """True when this CPU can run the x86-64-v3 build (checked before importing it)."""
+    return bool(vpp_cpu_supports_avx2())
+
 
 cdef uint64_t ALL1 = 0xFFFFFFFFFFFFFFFFULL
 cdef uint64_t LOW32 = 0xFFFFFFFFULL
