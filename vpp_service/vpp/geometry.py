@@ -87,9 +87,11 @@ def disparity_to_depth(disparity: np.ndarray, f: float, baseline: float,
     baseline = _check_scalar("baseline", baseline, True)
     doffs = _check_scalar("doffs", doffs, False)
     d = disparity.astype(np.float64)
-    ok = np.isfinite(d) & (d > 0) & (d + doffs > 0)
-    out = np.full(d.shape, np.nan, dtype=np.float64)
-    out[ok] = f * baseline / (d[ok] + doffs)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        den = d + doffs
+        ok = np.isfinite(d) & (d > 0) & (den > 0)
+        # dense divide + select: no boolean gather/scatter (several times faster)
+        out = np.where(ok, (f * baseline) / den, np.nan)
     return out.astype(np.float32)
 
 
