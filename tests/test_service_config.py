@@ -83,6 +83,8 @@ def test_vpp_disabled():
     ({"sinks": [{"type": "zenoh", "outputs": ["disparity", "normals"]}]}, "sinks[0]"),
     ({"sinks": [{"outputs": []}]}, "sinks[0].type"),
     ({"sinks": {"type": "zenoh"}}, "sinks"),
+    ({"sinks": [{"type": "record"}]}, "sinks[0].dir"),     # a required option is missing
+    ({"sinks": [{"type": "files"}]}, "sinks[0].dir"),
 ])
 def test_errors_name_the_key(change, key):
     data = copy.deepcopy(DEFAULT_CONFIG)

@@ -114,6 +114,10 @@ def from_mapping(cls: type[T], mapping: Mapping[str, Any] | None, section: str =
     unknown = sorted(set(mapping) - set(fields))
     if unknown:
         raise SettingsError(f"{prefix}{unknown[0]}: unknown option; known: {', '.join(sorted(fields))}")
+    missing = [n for n, f in fields.items() if n not in mapping
+               and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+    if missing:
+        raise SettingsError(f"{prefix}{missing[0]}: required option is missing")
     hints = get_type_hints(cls)
     kwargs = {}
     for name, value in mapping.items():
