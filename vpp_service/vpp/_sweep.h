@@ -1,6 +1,5 @@
 /* C helpers of the sweep kernel (vpp_service/vpp/_sweep.pyx): the row scanner,
- * the per-row key sort, the 3-row merge, the byte blends on 16-byte vectors and
- * the float window maximum.
+ * the key sort, the byte blends on 16-byte vectors and the float window maximum.
  *
  * Every function computes exactly what its scalar definition says.  The SIMD
  * versions are chosen at compile time: AVX2 in the x86-64-v3 build
@@ -114,12 +113,13 @@ static inline void vpp_insertion_sort(uint64_t* a, int n) {
     }
 }
 
-/* Sort the keys of one row ascending: (d, x) order.  A counting pass puts the
- * keys into n buckets of d (the bucket index is a monotone function of d, so
- * buckets are in d order), then each bucket is sorted by the full key
- * (insertion sort; std::sort for the rare crowded bucket).  Expected linear
- * time, against ~50 cycles per key for a comparison sort on unpredictable d.
- * Scratch: tmp and bucket hold n entries, cnt n + 1. */
+/* Sort keys (float_bits(d) << 32) | tiebreak ascending, given in increasing
+ * tiebreak order (a row's keys in x order; a band's in gather order).  A
+ * counting pass puts the keys into n buckets of d (the bucket index is a
+ * monotone function of d, so buckets are in d order), then each bucket is
+ * sorted by the full key (insertion sort; std::sort for the rare crowded
+ * bucket).  Expected linear time, against ~50 cycles per key for a comparison
+ * sort on unpredictable d.  Scratch: tmp and bucket hold n entries, cnt n + 1. */
 static inline void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* bucket, int* cnt) {
     float dmin, dmax, d;
     double scale;
@@ -134,7 +134,7 @@ static inline void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* buck
         dmin = d < dmin ? d : dmin;
         dmax = d > dmax ? d : dmax;
     }
-    if (dmin == dmax) return;            /* one d: the scan order (x) is the key order */
+    if (dmin == dmax) return;            /* one d: the input (tiebreak) order is the key order */
     scale = (double)n / ((double)dmax - (double)dmin);
     memset(cnt, 0, sizeof(int) * (size_t)(n + 1));
     for (i = 0; i < n; i++) {
@@ -160,64 +160,6 @@ static inline void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* buck
         s = e;
     }
     memcpy(keys, tmp, sizeof(uint64_t) * (size_t)n);
-}
-
-/* Merge three (d, x)-sorted key lists of consecutive rows into the global
- * paint order (d, row, x), branch-free and from both ends at once (two
- * independent dependency chains: the front takes the smallest remaining key,
- * the back the largest, and they meet exactly).  List i is l[i][0..n[i]) and
- * lives at index base[i] of the caller's arrays; l[i][n[i]] and f[i][n[i]]
- * must be readable (one padding entry).  Writes the array index of
- * every key to oidx[0..n0+n1+n2), as -1 - index when its flag (occluded) is
- * set, and returns that count. */
-static inline int vpp_merge3(const uint64_t* const* l, const uint8_t* const* f, const int* n,
-                             const int* base, int32_t* oidx) {
-    const uint64_t* a = l[0], *b = l[1], *c = l[2];
-    const uint8_t* fa = f[0], *fb = f[1], *fc = f[2];
-    const int na = n[0], nb = n[1], nc = n[2];
-    const int total = na + nb + nc, nback = total / 2;
-    int ia = 0, ib = 0, ic = 0, ea = na, eb = nb, ec = nc, tf = 0, tb = total - 1, t;
-    /* Every load is unconditional (the lists are padded by one entry and an
-     * exhausted back index reads entry 0) and every select is mask arithmetic,
-     * so the loop has no data-dependent branch (GCC turns ?: chains into jumps). */
-#define VPP_PICK3(j, x0, x1, x2) \
-    ((-(int)((j) == 0) & (x0)) | (-(int)((j) == 1) & (x1)) | (-(int)((j) == 2) & (x2)))
-#define VPP_FRONT_STEP do { \
-        uint64_t ka = (((a[ia] >> 32) << 2)) | (0ULL - (uint64_t)(ia >= na)); \
-        uint64_t kb = (((b[ib] >> 32) << 2) | 1) | (0ULL - (uint64_t)(ib >= nb)); \
-        uint64_t kc = (((c[ic] >> 32) << 2) | 2) | (0ULL - (uint64_t)(ic >= nc)); \
-        uint64_t k = ka < kb ? ka : kb; \
-        int j, idx, flag; \
-        k = k < kc ? k : kc; \
-        j = (int)(k & 3); \
-        idx = VPP_PICK3(j, base[0] + ia, base[1] + ib, base[2] + ic); \
-        flag = VPP_PICK3(j, (int)fa[ia], (int)fb[ib], (int)fc[ic]); \
-        ia += j == 0; ib += j == 1; ic += j == 2; \
-        oidx[tf++] = idx ^ -flag;   /* flag: -1 - idx */ \
-    } while (0)
-    for (t = 0; t < nback; t++) {
-        VPP_FRONT_STEP;
-        {   /* back: keys are >= 4 (d > 0), so 0 is below every candidate */
-            int pa = ea - (ea > 0), pb = eb - (eb > 0), pc = ec - (ec > 0);
-            uint64_t ka = ((a[pa] >> 32) << 2) & (0ULL - (uint64_t)(ea > 0));
-            uint64_t kb = (((b[pb] >> 32) << 2) | 1) & (0ULL - (uint64_t)(eb > 0));
-            uint64_t kc = (((c[pc] >> 32) << 2) | 2) & (0ULL - (uint64_t)(ec > 0));
-            uint64_t k = ka > kb ? ka : kb;
-            int j, idx, flag;
-            k = k > kc ? k : kc;
-            j = (int)(k & 3);
-            idx = VPP_PICK3(j, base[0] + pa, base[1] + pb, base[2] + pc);
-            flag = VPP_PICK3(j, (int)fa[pa], (int)fb[pb], (int)fc[pc]);
-            ea -= j == 0;
-            eb -= j == 1;
-            ec -= j == 2;
-            oidx[tb--] = idx ^ -flag;
-        }
-    }
-    if (tf <= tb) VPP_FRONT_STEP;          /* odd total: the middle key */
-#undef VPP_FRONT_STEP
-#undef VPP_PICK3
-    return total;
 }
 
 /* Maximum of p[0..n-1] (n >= 1, no NaN). */

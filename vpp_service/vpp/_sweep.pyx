@@ -12,10 +12,11 @@ walks its rows top to bottom with a small ring of per-row state, so nothing
 of size H x W is ever built besides the outputs:
 
 ingest(y)
-    scan the disparity row (blocks of 8 zeros are skipped), sort the row's
-    keys ``(float_bits(d) << 32) | x`` (positive float bits are monotone, so
-    the order is (d, x)), and warp the points into a dense row of the right
-    view, ``warp[x - round(d)] = max d`` (``-inf`` elsewhere).
+    scan the disparity row (SIMD compare + movemask; blocks of 8 empty values
+    cost one test) into keys ``(float_bits(d) << 32) | x`` in increasing x,
+    compute each point's right-view column and splat weights once, and warp
+    the points into a dense row of the right view, ``warp[x - round(d)] = max d``
+    (``-inf`` elsewhere).
 classify(q = y - r_y//2)
     a point is occluded if it lost a collision in its warp cell, or if a
     neighbour of its r_x x r_y window satisfies ``(W_n - d) - pen > t``
@@ -23,18 +24,19 @@ classify(q = y - r_y//2)
     its float maximum: since ``pen >= 0`` and rounding is monotone,
     ``(max - d) - pen(|dy|, 0) <= t`` proves no cell of that row qualifies,
     and only the remaining rows are tested cell by cell (exact).
-paint(p = q - h)
-    copy row p of both inputs to the outputs, merge the sorted keys of rows
-    p-h..p+h into the global order (d, y, x) (3x3 and smaller patches: a
-    branch-free 3-way merge from both ends, ``_sweep.h``), compute the pattern bytes
-    once per contribution, then blend them into the right row and the left row
-    (FGD reads the final right row).  Each contribution is at most three
-    uniform-weight blends of a K*C-byte span: with splatting, column
-    ``floor(x') + dx + 1`` receives ``alpha * beta`` of value ``dx`` *before*
-    column ``floor(x') + dx + 1`` receives ``alpha * (1 - beta)`` of value
-    ``dx + 1``, so the whole ``beta`` span can be blended first and the whole
-    ``1 - beta`` span second.  Spans are blended 16 bytes at a time (SSE2, or
-    AVX2 in the x86-64-v3 build ``_sweep_avx2``: see
+paint a band of 16 rows [b0, b1) once rows up to b1 - 1 + h are classified
+    copy the band's rows of both inputs to the outputs; gather the points of
+    rows b0-h .. b1-1+h in (row, x) order and sort them by (d, gather
+    position) -- the global order (d, y, x) -- with a linear-time bucket sort;
+    then each point paints the band rows its patch covers: pattern bytes (the
+    hash of each left pixel) and the splatted right view for every point
+    first, then the left view (FGD reads the final right rows).  Each patch row
+    is at most three uniform-weight blends of a K*C-byte span: with
+    splatting, column ``floor(x') + dx + 1`` receives ``alpha * beta`` of value
+    ``dx`` *before* it receives ``alpha * (1 - beta)`` of value ``dx + 1``, so
+    the whole ``beta`` span can be blended first and the whole ``1 - beta``
+    span second (one 16-byte vector for 3x3 RGB).  Spans are blended 16 bytes
+    at a time (SSE2, or AVX2 in the x86-64-v3 build ``_sweep_avx2``: see
     :mod:`vpp_service.vpp.backend`), bit-exact with the scalar rule.
 
 A chunk first ingests (and classifies) the few rows above it that its first
@@ -44,7 +46,7 @@ not depend on the chunking or the thread count.
 """
 from cython.parallel cimport prange, parallel
 from libc.stdint cimport uint8_t, uint32_t, uint64_t, int64_t, int32_t
-from libc.stdlib cimport malloc, calloc, free, realloc
+from libc.stdlib cimport malloc, free
 from libc.string cimport memcpy, memset
 from libc.math cimport INFINITY
 
@@ -59,8 +61,6 @@ cdef extern from "_sweep.h" nogil:
     float vpp_sw_u2f(uint32_t u)
     int vpp_build_avx2()
     int vpp_cpu_supports_avx2()
-    int vpp_merge3(const uint64_t* const* l, const uint8_t* const* f, const int* n,
-                   const int* base, int32_t* oidx)
     float vpp_maxf(const float* p, int n)
     void vpp_blend_span(uint8_t* dst, const uint8_t* val, int n, uint32_t w, int64_t room)
     int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, int k1,
@@ -76,7 +76,6 @@ def cpu_supports_avx2():
     return bool(vpp_cpu_supports_avx2())
 
 
-cdef uint64_t ALL1 = 0xFFFFFFFFFFFFFFFFULL
 cdef uint64_t LOW32 = 0xFFFFFFFFULL
 
 
@@ -108,6 +107,7 @@ cdef struct Job:
     uint32_t wa
     uint64_t seedmix
     int ring            # power of two
+    int band            # output rows painted together
     int ww              # warp row length
     int woff            # warp index of column 0
     int vs              # value-slot stride (bytes)
@@ -119,38 +119,39 @@ cdef struct Scratch:
     int* nk             # ring
     int* rowid          # ring
     float* warp         # ring x ww
-    uint64_t* sort_tmp  # W, scratch of vpp_sort_keys
-    int* sort_bucket    # W
-    int* sort_cnt       # W + 1
     int64_t cap         # contribution capacity
     int32_t* geo_fl     # ring x W: right-view column floor(x') (or round(x') without splat)
     uint64_t* geo_w     # ring x W: right-view weights w0 | w1 << 32 (1/65536)
-    int32_t* cidx       # contributions: ring index of the key, -1 - it if FGD-occluded
-    uint8_t* vals       # cap x vs
-    uint8_t* zeros      # W + 1 zero flags (occlusion off or bkgd)
+    uint64_t* bkey      # band points: (float_bits(d) << 32) | gather position
+    int32_t* bidx       # by gather position: ring index of the point, -1 - it if FGD-occluded
+    int32_t* brow       # by gather position: image row of the point
+    uint64_t* btmp      # sort scratch (cap), then bucket ids and counts below
+    int* bbucket        # cap
+    int* bcnt           # cap + 1
+    uint8_t* vals       # cap x K x vs: pattern bytes of (point, patch row)
     int failed
 
 
 cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
     cdef int64_t i, nw = <int64_t>J.ring * J.ww
-    S.keys = <uint64_t*>malloc(sizeof(uint64_t) * (J.ring * J.W + 1))   # +1: merge read-ahead
+    S.keys = <uint64_t*>malloc(sizeof(uint64_t) * (J.ring * J.W + 1))
     S.geo_fl = <int32_t*>malloc(sizeof(int32_t) * (J.ring * J.W + 1))
     S.geo_w = <uint64_t*>malloc(sizeof(uint64_t) * (J.ring * J.W + 1))
     S.flags = <uint8_t*>malloc(<int64_t>J.ring * J.W + 1)
     S.nk = <int*>malloc(sizeof(int) * J.ring)
     S.rowid = <int*>malloc(sizeof(int) * J.ring)
     S.warp = <float*>malloc(sizeof(float) * (nw if J.occ_on else 1))
-    S.sort_tmp = <uint64_t*>malloc(sizeof(uint64_t) * J.W)
-    S.sort_bucket = <int*>malloc(sizeof(int) * J.W)
-    S.sort_cnt = <int*>malloc(sizeof(int) * (J.W + 1))
-    S.zeros = <uint8_t*>calloc(J.W + 1, 1)
     S.cap = 0
-    S.cidx = NULL
+    S.bkey = NULL
+    S.bidx = NULL
+    S.brow = NULL
+    S.btmp = NULL
+    S.bbucket = NULL
+    S.bcnt = NULL
     S.vals = NULL
     S.failed = 0
-    if (S.keys == NULL or S.geo_fl == NULL or S.geo_w == NULL or S.flags == NULL or S.nk == NULL or S.rowid == NULL or S.warp == NULL
-            or S.sort_tmp == NULL or S.sort_bucket == NULL or S.sort_cnt == NULL
-            or S.zeros == NULL):
+    if (S.keys == NULL or S.geo_fl == NULL or S.geo_w == NULL or S.flags == NULL
+            or S.nk == NULL or S.rowid == NULL or S.warp == NULL):
         S.failed = 1
         return 1
     for i in range(J.ring):
@@ -170,27 +171,38 @@ cdef void _scratch_free(Scratch* S) noexcept nogil:
     free(S.nk)
     free(S.rowid)
     free(S.warp)
-    free(S.sort_tmp)
-    free(S.sort_bucket)
-    free(S.sort_cnt)
-    free(S.zeros)
-    free(S.cidx)
+    free(S.bkey)
+    free(S.bidx)
+    free(S.brow)
+    free(S.btmp)
+    free(S.bbucket)
+    free(S.bcnt)
     free(S.vals)
 
 
 cdef int _reserve(const Job* J, Scratch* S, int64_t n) noexcept nogil:
-    cdef int32_t* c
-    cdef uint8_t* v
+    """Grow the band buffers to hold n points."""
+    cdef int64_t K = 2 * J.hmax + 1
     if n <= S.cap:
         return 0
     n = n + n // 2 + 16
-    c = <int32_t*>realloc(S.cidx, sizeof(int32_t) * n)
-    if c != NULL:
-        S.cidx = c
-    v = <uint8_t*>realloc(S.vals, n * J.vs)
-    if v != NULL:
-        S.vals = v
-    if c == NULL or v == NULL:
+    free(S.bkey)
+    free(S.bidx)
+    free(S.brow)
+    free(S.btmp)
+    free(S.bbucket)
+    free(S.bcnt)
+    free(S.vals)
+    S.bkey = <uint64_t*>malloc(sizeof(uint64_t) * n)
+    S.bidx = <int32_t*>malloc(sizeof(int32_t) * n)
+    S.brow = <int32_t*>malloc(sizeof(int32_t) * n)
+    S.btmp = <uint64_t*>malloc(sizeof(uint64_t) * n)
+    S.bbucket = <int*>malloc(sizeof(int) * n)
+    S.bcnt = <int*>malloc(sizeof(int) * (n + 1))
+    S.vals = <uint8_t*>malloc(n * K * J.vs)
+    if (S.bkey == NULL or S.bidx == NULL or S.brow == NULL or S.btmp == NULL
+            or S.bbucket == NULL or S.bcnt == NULL or S.vals == NULL):
+        S.cap = 0
         S.failed = 1
         return 1
     S.cap = n
@@ -234,8 +246,7 @@ cdef void _ingest(const Job* J, Scratch* S, int y, bint own) noexcept nogil:
     if J.occ_on and S.rowid[slot] >= 0:      # clear the evicted row's warp cells
         for i in range(S.nk[slot]):
             wp[_xw(keys[i])] = -INFINITY
-    n = vpp_scan_row(J.disp + <int64_t>y * W, W, keys, st)
-    vpp_sort_keys(keys, n, S.sort_tmp, S.sort_bucket, S.sort_cnt)
+    n = vpp_scan_row(J.disp + <int64_t>y * W, W, keys, st)   # in increasing x
     if own:
         for i in range(4):
             J.stats[<int64_t>y * 4 + i] = st[i]
@@ -313,118 +324,95 @@ cdef inline void _span(const Job* J, uint8_t* row, const uint8_t* vals, int k0, 
                        <int64_t>(W - base - k0) * C)
 
 
-cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
+cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
+    """Paint output rows [b0, b1): every point of rows b0-h .. b1-1+h, in the global
+    order (d, y, x), blended into the band rows it covers (right view, then left)."""
     cdef int H = J.H, W = J.W, C = J.C, h = J.hmax, K = 2 * J.hmax + 1
-    cdef int64_t rowb = <int64_t>p * W * C
-    cdef uint8_t* oL = J.oL + rowb
-    cdef uint8_t* oR = J.oR + rowb
-    cdef int s_lo, s_hi, nsrc, j, jb, x, k, k0, k1, c, col, fl, slot, n, ncon, idx
-    cdef int64_t total
-    cdef const uint64_t* src[256]
-    cdef const uint8_t* fsrc[256]
-    cdef int base[256]
-    cdef int head[256]
-    cdef int cnt[256]
-    cdef uint64_t cand[256]
-    cdef uint64_t kb, key, z, wpair
-    cdef uint8_t* v
+    cdef int64_t rs = <int64_t>W * C
+    cdef int s0 = b0 - h if b0 - h > 0 else 0
+    cdef int s1 = b1 - 1 + h if b1 - 1 + h < H - 1 else H - 1
     cdef int occmode = J.occmode, vs = J.vs
-    cdef int occ_pt, use_flags
-    cdef double xp, beta
+    cdef int use_flags = occmode == 1 or occmode == 3
+    cdef int s, slot, i, j, m, pos, ridx, x, r, r0, r1, k0, k1, k, c, fl, flag, base
+    cdef int64_t total = 0
+    cdef uint64_t key, z, wpair
+    cdef uint8_t* v
+    cdef uint8_t* oL
+    cdef uint8_t* oR
     cdef uint32_t w0, w1, wb
-    memcpy(oL, J.L + rowb, W * C)
-    memcpy(oR, J.R + rowb, W * C)
-    s_lo = p - h if p - h > 0 else 0
-    s_hi = p + h if p + h < H - 1 else H - 1
-    nsrc = s_hi - s_lo + 1
-    total = 0
-    for j in range(nsrc):
-        slot = (s_lo + j) & (J.ring - 1)
-        base[j] = slot * W
-        src[j] = S.keys + base[j]
-        fsrc[j] = S.flags + base[j]
-        cnt[j] = S.nk[slot]
-        head[j] = 0
-        total += cnt[j]
-        cand[j] = ((src[j][0] >> 32) << 8) | <uint64_t>j if cnt[j] > 0 else ALL1
+    cdef double xp, beta
+    for r in range(b0, b1):
+        memcpy(J.oL + r * rs, J.L + r * rs, rs)
+        memcpy(J.oR + r * rs, J.R + r * rs, rs)
+    for s in range(s0, s1 + 1):
+        total += S.nk[s & (J.ring - 1)]
     if total == 0:
         return
     if _reserve(J, S, total):
         return
-    # 1. merge rows s_lo..s_hi into the global order (d, y, x), ties in d -> smaller row;
-    #    cidx = ring index of the key, negative for an occluded point (NO: skipped,
-    #    FGD: the right view's content is copied into the left view)
-    use_flags = occmode == 1 or occmode == 3
-    if nsrc <= 3:
-        for j in range(nsrc, 3):
-            src[j] = src[0]
-            fsrc[j] = fsrc[0]
-            base[j] = base[0]
-            cnt[j] = 0
-        if not use_flags:
-            for j in range(3):
-                fsrc[j] = S.zeros
-        ncon = vpp_merge3(src, fsrc, cnt, base, S.cidx)
-    else:
-        ncon = 0
-        while True:
-            kb = cand[0]
-            for j in range(1, nsrc):
-                kb = cand[j] if cand[j] < kb else kb
-            if kb == ALL1:
-                break
-            jb = <int>(kb & 255)
-            k = head[jb]
-            head[jb] = k + 1
-            cand[jb] = ((src[jb][k + 1] >> 32) << 8) | <uint64_t>jb if k + 1 < cnt[jb] else ALL1
-            occ_pt = fsrc[jb][k] if use_flags else 0
-            S.cidx[ncon] = base[jb] + k if not occ_pt else -1 - (base[jb] + k)
-            ncon += 1
-    # 2. pattern bytes of every painted contribution (hash of the left pixel)
-    for n in range(ncon):
-        idx = S.cidx[n]
-        if idx < 0:
+    # 1. gather the points in (row, x) order and sort them by (d, gather position):
+    #    the global order (d, y, x); NO-occluded points are dropped here
+    m = 0
+    for s in range(s0, s1 + 1):
+        slot = s & (J.ring - 1)
+        base = slot * W
+        for i in range(S.nk[slot]):
+            flag = S.flags[base + i] if use_flags else 0
+            if flag and occmode == 1:
+                continue
+            S.bkey[m] = (S.keys[base + i] & ~LOW32) | <uint64_t>m
+            S.bidx[m] = base + i if not flag else -1 - (base + i)
+            S.brow[m] = s
+            m += 1
+    vpp_sort_keys(S.bkey, m, S.btmp, S.bbucket, S.bcnt)
+    # 2. right view: each visible point's pattern bytes per covered band row (the
+    #    hash of each left pixel), splatted; geometry was computed at ingest
+    for j in range(m):
+        pos = <int>(S.bkey[j] & LOW32)
+        ridx = S.bidx[pos]
+        if ridx < 0:
             continue
-        x = <int>(S.keys[idx] & LOW32)
+        s = S.brow[pos]
+        x = <int>(S.keys[ridx] & LOW32)
         _patch_range(x, h, W, &k0, &k1)
-        v = S.vals + <int64_t>n * vs
-        for k in range(k0, k1):
-            z = _hash(J.seedmix, <uint64_t>(x + k - h), <uint64_t>p)
-            if C == 3:
-                memcpy(v + 3 * k, &z, 4)       # byte 3 is overwritten by pixel k + 1
-            else:
-                for c in range(C):
-                    v[k * C + c] = <uint8_t>(z >> (8 * c))
-    # 3. right row: visible contributions, splatted (geometry precomputed at ingest)
-    for n in range(ncon):
-        idx = S.cidx[n]
-        if idx < 0:
-            continue
-        x = <int>(S.keys[idx] & LOW32)
-        _patch_range(x, h, W, &k0, &k1)
-        v = S.vals + <int64_t>n * vs
-        fl = S.geo_fl[idx]
-        wpair = S.geo_w[idx]
+        fl = S.geo_fl[ridx]
+        wpair = S.geo_w[ridx]
         w0 = <uint32_t>(wpair & LOW32)
         w1 = <uint32_t>(wpair >> 32)
-        if J.splat:
-            if (fl - h < 0 or fl + h + 1 >= W or not vpp_splat16(
-                    oR + (fl - h) * C, v, C, k0, k1, w0, w1, <int64_t>(W - fl + h) * C)):
-                if w1:
-                    _span(J, oR, v, k0, k1, fl - h + 1, w1)
+        r0 = s - h if s - h > b0 else b0
+        r1 = s + h if s + h < b1 - 1 else b1 - 1
+        for r in range(r0, r1 + 1):
+            v = S.vals + (<int64_t>pos * K + (r - s + h)) * vs
+            for k in range(k0, k1):
+                z = _hash(J.seedmix, <uint64_t>(x + k - h), <uint64_t>r)
+                if C == 3:
+                    memcpy(v + 3 * k, &z, 4)       # byte 3 is overwritten by pixel k + 1
+                else:
+                    for c in range(C):
+                        v[k * C + c] = <uint8_t>(z >> (8 * c))
+            oR = J.oR + r * rs
+            if J.splat:
+                if (fl - h < 0 or fl + h + 1 >= W or not vpp_splat16(
+                        oR + (fl - h) * C, v, C, k0, k1, w0, w1, <int64_t>(W - fl + h) * C)):
+                    if w1:
+                        _span(J, oR, v, k0, k1, fl - h + 1, w1)
+                    _span(J, oR, v, k0, k1, fl - h, w0)
+            else:
                 _span(J, oR, v, k0, k1, fl - h, w0)
-        else:
-            _span(J, oR, v, k0, k1, fl - h, w0)
-    # 4. left row: pattern, or (FGD) the final right row's content at x'
-    for n in range(ncon):
-        idx = S.cidx[n]
-        key = S.keys[idx if idx >= 0 else -1 - idx]
+    # 3. left view: the pattern, or (FGD) the final right row's content at x'
+    for j in range(m):
+        pos = <int>(S.bkey[j] & LOW32)
+        ridx = S.bidx[pos]
+        s = S.brow[pos]
+        key = S.keys[ridx if ridx >= 0 else -1 - ridx]
         x = <int>(key & LOW32)
         _patch_range(x, h, W, &k0, &k1)
-        if idx >= 0:
-            _span(J, oL, S.vals + <int64_t>n * vs, k0, k1, x - h, J.wa)
-            continue
-        if occmode == 1:
+        r0 = s - h if s - h > b0 else b0
+        r1 = s + h if s + h < b1 - 1 else b1 - 1
+        if ridx >= 0:
+            for r in range(r0, r1 + 1):
+                _span(J, J.oL + r * rs, S.vals + (<int64_t>pos * K + (r - s + h)) * vs,
+                      k0, k1, x - h, J.wa)
             continue
         xp = <double>x - <double>vpp_sw_u2f(<uint32_t>(key >> 32))
         if J.splat:
@@ -434,11 +422,14 @@ cdef void _paint(const Job* J, Scratch* S, int p) noexcept nogil:
             fl = _ifloor(xp + 0.5)
             beta = 0.0
         wb = <uint32_t>_w16(beta)
-        for k in range(k0, k1):
-            col = fl + k - h
-            if col < 0 or col >= W or (beta > 0 and col + 1 >= W):
-                continue
-            _fgd_pixel(oL + (x + k - h) * C, oR + col * C, C, beta > 0, wb, J.wa)
+        for r in range(r0, r1 + 1):
+            oL = J.oL + r * rs
+            oR = J.oR + r * rs
+            for k in range(k0, k1):
+                c = fl + k - h
+                if c < 0 or c >= W or (beta > 0 and c + 1 >= W):
+                    continue
+                _fgd_pixel(oL + (x + k - h) * C, oR + c * C, C, beta > 0, wb, J.wa)
 
 
 cdef void _run_chunk(const Job* J, Scratch* S, int c0, int c1) noexcept nogil:
@@ -448,7 +439,7 @@ cdef void _run_chunk(const Job* J, Scratch* S, int c0, int c1) noexcept nogil:
     cdef int H = J.H
     cdef int y0 = c0 - h - ry2
     cdef int cl0 = c0 - h, cl1 = c1 - 1 + h
-    cdef int t, q, p
+    cdef int t, q, p, b0 = c0
     if y0 < 0:
         y0 = 0
     if cl0 < 0:
@@ -463,9 +454,10 @@ cdef void _run_chunk(const Job* J, Scratch* S, int c0, int c1) noexcept nogil:
         q = t - ry2
         if J.occ_on and q >= cl0 and q <= cl1:
             _classify(J, S, q, q >= c0 and q < c1)
-        p = q - h
-        if J.paint and p >= c0 and p < c1:
-            _paint(J, S, p)
+        p = q - h                   # rows up to p are ready to paint
+        if J.paint and p >= c0 and p < c1 and (p + 1 - b0 == J.band or p == c1 - 1):
+            _paint_band(J, S, b0, p + 1)
+            b0 = p + 1
 
 
 def sweep_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, bint occ_on, int rx, int ry,
@@ -523,9 +515,11 @@ def sweep_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, bint occ_on, int
     J.alpha = alpha
     J.wa = <uint32_t>_w16(alpha)
     J.seedmix = _seedmix(seed)
-    need = 2 * J.hmax + 1
+    J.band = 16 if paint else 1
+    # rows alive at once: a band and its patch margins, plus the occlusion window lag
+    need = J.band + 2 * J.hmax
     if occ_on:
-        need = max(need, ry2 + 2 * J.hmax + 1, 2 * ry2 + 1)
+        need = max(need + ry2, 2 * ry2 + 1)
     J.ring = 1
     while J.ring < need:
         J.ring *= 2
