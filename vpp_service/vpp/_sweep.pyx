@@ -250,6 +250,7 @@ cdef void _ingest(const Job* J, Scratch* S, int y, bint own) noexcept nogil:
     if own:
         for i in range(4):
             J.stats[<int64_t>y * 4 + i] = st[i]
+        memset(J.occ + <int64_t>y * W, 0, W)   # the mask row (first touched by this thread)
     S.nk[slot] = n
     S.rowid[slot] = y
     memset(S.flags + <int64_t>slot * W, 0, n)

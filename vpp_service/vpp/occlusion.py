@@ -60,7 +60,7 @@ def classify_into(disp: np.ndarray, occ: np.ndarray, window: tuple[int, int],
                   pen: np.ndarray, t: float, num_threads: int) -> tuple[np.ndarray, np.ndarray]:
     """Kernel call behind :func:`detect_occlusions` (inputs already validated).
 
-    Sets ``occ`` (H x W bool, zeroed by the caller) at the occluded points and
+    Fills ``occ`` (H x W bool, any initial content): True at the occluded points, and
     returns ``(row stats H x 4, occluded count per row)``.
     """
     return backend.sweep.sweep_kernel(disp, occ.view(np.uint8), True, window[0], window[1], pen, t,
@@ -93,7 +93,7 @@ def detect_occlusions(disparity: np.ndarray, *, window: tuple[int, int] = (9, 7)
     rx, ry = check_occlusion_params(window, lam, gamma, t)
     disp = as_disparity("disparity", disparity)
     nt = as_threads(num_threads)
-    occ = np.zeros(disp.shape, dtype=bool)
+    occ = np.empty(disp.shape, dtype=bool)   # every row is written by the kernel
     classify_into(disp, occ, (rx, ry), penalty_table((rx, ry), float(lam), float(gamma)),
                   float(t), nt)
     return occ

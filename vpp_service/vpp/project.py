@@ -177,7 +177,7 @@ def project(left: np.ndarray, right: np.ndarray, disparity: np.ndarray,
                                     config.occ_lambda, config.occ_gamma, config.occ_t)
     out_l = np.empty_like(L)
     out_r = np.empty_like(R)
-    occ = np.zeros((H, W), dtype=bool)
+    occ = np.empty((H, W), dtype=bool)   # every row is written by the kernel
     occmode = _OCC_MODE[config.occlusion]
     pen = penalty_table((rx, ry), float(config.occ_lambda), float(config.occ_gamma))
     hmax = (config.patch - 1) // 2
@@ -190,6 +190,8 @@ def project(left: np.ndarray, right: np.ndarray, disparity: np.ndarray,
         occ_rows = np.zeros(H, np.int64)
         if occmode != 0:
             _, occ_rows = classify_into(disp, occ, (rx, ry), pen, float(config.occ_t), nt)
+        else:
+            occ.fill(False)
         bil = config.adaptive_patch == "bilateral"
         stats = _kernel.project_kernel(
             L, R, disp, out_l, out_r, occ.view(np.uint8),
