@@ -171,6 +171,10 @@ cdef void _scratch_free(Scratch* S) noexcept nogil:
     free(S.nk)
     free(S.rowid)
     free(S.warp)
+    _free_band(S)
+
+
+cdef void _free_band(Scratch* S) noexcept nogil:
     free(S.bkey)
     free(S.bidx)
     free(S.brow)
@@ -186,13 +190,7 @@ cdef int _reserve(const Job* J, Scratch* S, int64_t n) noexcept nogil:
     if n <= S.cap:
         return 0
     n = n + n // 2 + 16
-    free(S.bkey)
-    free(S.bidx)
-    free(S.brow)
-    free(S.btmp)
-    free(S.bbucket)
-    free(S.bcnt)
-    free(S.vals)
+    _free_band(S)
     S.bkey = <uint64_t*>malloc(sizeof(uint64_t) * n)
     S.bidx = <int32_t*>malloc(sizeof(int32_t) * n)
     S.brow = <int32_t*>malloc(sizeof(int32_t) * n)
