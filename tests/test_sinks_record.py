@@ -373,8 +373,10 @@ def test_service_records_and_a_second_service_replays(tmp_path):
         assert_same_frame(b, a)
 
 
-def test_vpp_service_publish_replays_a_recording(tmp_path, zenoh_endpoint, zenoh_config):
-    """``vpp-service publish --dataset auto --root REC`` sends the recorded frames onto Zenoh unchanged."""
+@pytest.mark.parametrize("how", [["--dataset", "auto", "--root"], ["--recording"]])
+def test_vpp_service_publish_replays_a_recording(tmp_path, zenoh_endpoint, zenoh_config, how):
+    """``vpp-service publish --recording REC`` (or ``--dataset auto --root REC``) sends the
+    recorded frames onto Zenoh unchanged."""
     import zenoh
 
     from vpp_service.cli import main
@@ -389,7 +391,7 @@ def test_vpp_service_publish_replays_a_recording(tmp_path, zenoh_endpoint, zenoh
                                          lambda s: got.append(wire.decode_frame(s.payload.to_bytes())))
         handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
         try:  # publish installs its own SIGINT/SIGTERM handlers
-            rc = main(["publish", "--dataset", "auto", "--root", str(tmp_path), "--rate", "0", "--rig", "front",
+            rc = main(["publish", *how, str(tmp_path), "--rate", "0", "--rig", "front",
                        "--enc", "png", "--connect", zenoh_endpoint, "--wait-subscriber", "5"])
         finally:
             for s, h in handlers.items():

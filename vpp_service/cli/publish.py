@@ -22,6 +22,8 @@ def add_parser(subparsers: Any) -> None:
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--dataset", help="dataset name or 'auto' (default: the simulator)")
     p.add_argument("--root", help="dataset folder (with --dataset)")
+    p.add_argument("--recording", metavar="DIR",
+                   help="replay a folder of .msgpack frames (the record sink's output) instead")
     p.add_argument("--scene", default="motorcycle", choices=["motorcycle", "synthetic"], help="simulator scene")
     p.add_argument("--scale", type=float, default=1.0, help="resize factor in (0, 1]")
     p.add_argument("--sensor", default="uniform", help="sensor simulator (uniform, lidar, tof, none)")
@@ -50,6 +52,11 @@ def _source(args: argparse.Namespace) -> Any:
 
     ctx = SourceContext(rig=args.rig, prefix=args.prefix)
     sensor_opts = {"density": args.density} if args.sensor == "uniform" else {}
+    if args.recording:
+        if args.dataset:
+            raise ValueError("--recording and --dataset: give one of them")
+        return build_source("files", {"root": args.recording, "format": "msgpack", "rate_hz": 0.0,
+                                      "loop": args.loop, "count": args.count}, ctx)
     if args.dataset:
         if not args.root:
             raise ValueError("--root: required with --dataset")
