@@ -113,6 +113,17 @@ cdef struct Job:
     int vs              # value-slot stride (bytes)
 
 
+cdef struct BandPt:
+    # one point of a band, in gather order (compact: read in d order by the passes)
+    int32_t x
+    int32_t s           # image row
+    int32_t fl          # right-view column (see _geometry)
+    uint32_t w0
+    uint32_t w1
+    int32_t occl        # FGD-occluded
+    float d
+
+
 cdef struct Scratch:
     uint64_t* keys      # ring x W
     uint8_t* flags      # ring x W (occluded, per key)
@@ -123,8 +134,7 @@ cdef struct Scratch:
     int32_t* geo_fl     # ring x W: right-view column floor(x') (or round(x') without splat)
     uint64_t* geo_w     # ring x W: right-view weights w0 | w1 << 32 (1/65536)
     uint64_t* bkey      # band points: (float_bits(d) << 32) | gather position
-    int32_t* bidx       # by gather position: ring index of the point, -1 - it if FGD-occluded
-    int32_t* brow       # by gather position: image row of the point
+    BandPt* bpt         # by gather position
     uint64_t* btmp      # sort scratch (cap), then bucket ids and counts below
     int* bbucket        # cap
     int* bcnt           # cap + 1
@@ -143,8 +153,7 @@ cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
     S.warp = <float*>malloc(sizeof(float) * (nw if J.occ_on else 1))
     S.cap = 0
     S.bkey = NULL
-    S.bidx = NULL
-    S.brow = NULL
+    S.bpt = NULL
     S.btmp = NULL
     S.bbucket = NULL
     S.bcnt = NULL
@@ -176,8 +185,7 @@ cdef void _scratch_free(Scratch* S) noexcept nogil:
 
 cdef void _free_band(Scratch* S) noexcept nogil:
     free(S.bkey)
-    free(S.bidx)
-    free(S.brow)
+    free(S.bpt)
     free(S.btmp)
     free(S.bbucket)
     free(S.bcnt)
@@ -192,13 +200,12 @@ cdef int _reserve(const Job* J, Scratch* S, int64_t n) noexcept nogil:
     n = n + n // 2 + 16
     _free_band(S)
     S.bkey = <uint64_t*>malloc(sizeof(uint64_t) * n)
-    S.bidx = <int32_t*>malloc(sizeof(int32_t) * n)
-    S.brow = <int32_t*>malloc(sizeof(int32_t) * n)
+    S.bpt = <BandPt*>malloc(sizeof(BandPt) * n)
     S.btmp = <uint64_t*>malloc(sizeof(uint64_t) * n)
     S.bbucket = <int*>malloc(sizeof(int) * n)
     S.bcnt = <int*>malloc(sizeof(int) * (n + 1))
     S.vals = <uint8_t*>malloc(n * K * J.vs)
-    if (S.bkey == NULL or S.bidx == NULL or S.brow == NULL or S.btmp == NULL
+    if (S.bkey == NULL or S.bpt == NULL or S.btmp == NULL
             or S.bbucket == NULL or S.bcnt == NULL or S.vals == NULL):
         S.cap = 0
         S.failed = 1
@@ -332,7 +339,8 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
     cdef int s1 = b1 - 1 + h if b1 - 1 + h < H - 1 else H - 1
     cdef int occmode = J.occmode, vs = J.vs
     cdef int use_flags = occmode == 1 or occmode == 3
-    cdef int s, slot, i, j, m, pos, ridx, x, r, r0, r1, k0, k1, k, c, fl, flag, base
+    cdef int s, slot, i, j, m, pos, x, r, r0, r1, k0, k1, k, c, fl, flag, base
+    cdef BandPt* pt
     cdef int64_t total = 0
     cdef uint64_t key, z, wpair
     cdef uint8_t* v
@@ -359,25 +367,32 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
             flag = S.flags[base + i] if use_flags else 0
             if flag and occmode == 1:
                 continue
-            S.bkey[m] = (S.keys[base + i] & ~LOW32) | <uint64_t>m
-            S.bidx[m] = base + i if not flag else -1 - (base + i)
-            S.brow[m] = s
+            key = S.keys[base + i]
+            S.bkey[m] = (key & ~LOW32) | <uint64_t>m
+            pt = &S.bpt[m]
+            pt.x = <int32_t>(key & LOW32)
+            pt.s = s
+            pt.fl = S.geo_fl[base + i]
+            wpair = S.geo_w[base + i]
+            pt.w0 = <uint32_t>(wpair & LOW32)
+            pt.w1 = <uint32_t>(wpair >> 32)
+            pt.occl = flag
+            pt.d = vpp_sw_u2f(<uint32_t>(key >> 32))
             m += 1
     vpp_sort_keys(S.bkey, m, S.btmp, S.bbucket, S.bcnt)
     # 2. right view: each visible point's pattern bytes per covered band row (the
     #    hash of each left pixel), splatted; geometry was computed at ingest
     for j in range(m):
         pos = <int>(S.bkey[j] & LOW32)
-        ridx = S.bidx[pos]
-        if ridx < 0:
+        pt = &S.bpt[pos]
+        if pt.occl:
             continue
-        s = S.brow[pos]
-        x = <int>(S.keys[ridx] & LOW32)
+        s = pt.s
+        x = pt.x
         _patch_range(x, h, W, &k0, &k1)
-        fl = S.geo_fl[ridx]
-        wpair = S.geo_w[ridx]
-        w0 = <uint32_t>(wpair & LOW32)
-        w1 = <uint32_t>(wpair >> 32)
+        fl = pt.fl
+        w0 = pt.w0
+        w1 = pt.w1
         r0 = s - h if s - h > b0 else b0
         r1 = s + h if s + h < b1 - 1 else b1 - 1
         for r in range(r0, r1 + 1):
@@ -401,19 +416,18 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
     # 3. left view: the pattern, or (FGD) the final right row's content at x'
     for j in range(m):
         pos = <int>(S.bkey[j] & LOW32)
-        ridx = S.bidx[pos]
-        s = S.brow[pos]
-        key = S.keys[ridx if ridx >= 0 else -1 - ridx]
-        x = <int>(key & LOW32)
+        pt = &S.bpt[pos]
+        s = pt.s
+        x = pt.x
         _patch_range(x, h, W, &k0, &k1)
         r0 = s - h if s - h > b0 else b0
         r1 = s + h if s + h < b1 - 1 else b1 - 1
-        if ridx >= 0:
+        if not pt.occl:
             for r in range(r0, r1 + 1):
                 _span(J, J.oL + r * rs, S.vals + (<int64_t>pos * K + (r - s + h)) * vs,
                       k0, k1, x - h, J.wa)
             continue
-        xp = <double>x - <double>vpp_sw_u2f(<uint32_t>(key >> 32))
+        xp = <double>x - <double>pt.d
         if J.splat:
             fl = _ifloor(xp)
             beta = xp - <double>fl
