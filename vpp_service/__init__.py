@@ -16,12 +16,14 @@ Packages, by architectural role:
 import os as _os
 
 # OpenMP threads of the kernels sleep as soon as a parallel region ends
-# (OMP_WAIT_POLICY=PASSIVE) unless the user chose otherwise.  A streaming service
-# calls the kernels once per frame with idle gaps between; with libgomp's default
-# (spin, then sleep) the first region after a gap took 2-8 ms on virtualised
-# 2-core hosts, against 0.03 ms when passive (benchmarks/bench_vpp.py --paced).
-# It must be set before libgomp loads, i.e. before any kernel module is imported;
-# it has no effect if another library loaded OpenMP first.
-_os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+# (OMP_WAIT_POLICY=PASSIVE) unless the user chose a policy or a spin count.  A
+# streaming service calls the kernels once per frame with idle gaps between; with
+# libgomp's default (spin, then sleep) the first region after a gap took 2-8 ms
+# on virtualised 2-core hosts, against 0.03 ms when passive (docs/deployment.md,
+# "Process tuning", also for the spinning low-latency alternative).  It must be
+# set before libgomp loads, i.e. before any kernel module is imported; it has no
+# effect if another library loaded OpenMP first.
+if "OMP_WAIT_POLICY" not in _os.environ and "GOMP_SPINCOUNT" not in _os.environ:
+    _os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
 
 __version__ = "0.1.0"
