@@ -126,3 +126,13 @@ def test_points_at_both_row_ends_and_past_the_left_border(build):
         res = project(lc, rc, disp, cfg, seed=4)
         np.testing.assert_array_equal(res.right, rr)
         np.testing.assert_array_equal(res.left, rl)
+
+
+def test_backend_falls_back_to_the_portable_build(monkeypatch):
+    """No AVX2 build importable, or VPP_NO_AVX2=1: the portable build is chosen."""
+    monkeypatch.setitem(__import__("sys").modules, "vpp_service.vpp._sweep_avx2", None)
+    assert backend.avx2_build() is None
+    assert backend._choose() is backend.portable
+    monkeypatch.undo()
+    monkeypatch.setenv("VPP_NO_AVX2", "1")
+    assert backend._choose() is backend.portable
