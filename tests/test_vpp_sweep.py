@@ -130,7 +130,12 @@ def test_points_at_both_row_ends_and_past_the_left_border(build):
 
 def test_backend_falls_back_to_the_portable_build(monkeypatch):
     """No AVX2 build importable, or VPP_NO_AVX2=1: the portable build is chosen."""
-    monkeypatch.setitem(__import__("sys").modules, "vpp_service.vpp._sweep_avx2", None)
+    import sys
+
+    import vpp_service.vpp as vpp_pkg
+
+    monkeypatch.setitem(sys.modules, "vpp_service.vpp._sweep_avx2", None)   # "not built"
+    monkeypatch.delattr(vpp_pkg, "_sweep_avx2", raising=False)
     assert backend.avx2_build() is None
     assert backend._choose() is backend.portable
     monkeypatch.undo()
