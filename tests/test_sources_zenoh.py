@@ -99,7 +99,11 @@ def test_needs_session():
         src.open()
 
 
-@pytest.mark.parametrize("opts", [{"ring_size": 0}, {"topics": "both"}, {"sync_threshold_ms": -1.0}])
+@pytest.mark.parametrize("opts", [{"ring_size": 0}, {"topics": "both"}, {"sync_threshold_ms": -1.0},
+                                  {"topics": "separate", "ring_sizes": {"center": 2}},
+                                  {"topics": "separate", "ring_sizes": {"left": 0}},
+                                  {"topics": "separate", "ring_sizes": {"depth": True}},
+                                  {"ring_sizes": {"depth": 8}}])
 def test_bad_options(opts):
     with pytest.raises(ValueError, match="source.zenoh"):
         build_source("zenoh", opts)
@@ -136,3 +140,29 @@ def test_stop_is_prompt_when_idle(sessions):
     src.stop(2.0)
     assert time.monotonic() - t0 < 0.5
     assert src.finished.wait(1.0)
+
+
+def test_per_topic_ring_sizes(sessions):
+    """Separate topics with a deeper depth ring: each topic keeps its own newest
+    samples and counts its own drops; exact sync then joins the seqs all kept."""
+    svc, cam = sessions
+    src = build_source("zenoh", {"topics": "separate", "ring_size": 2, "ring_sizes": {"depth": 5},
+                                 "sync_queue_size": 8},
+                       SourceContext(rig="z", session=svc))
+    src.open()
+    try:
+        time.sleep(0.3)  # let the subscriptions propagate
+        base = make_frame()
+        for seq in range(6):
+            fr = base.with_(seq=seq, stamp_ns=1_000_000_000 + seq * 100_000_000)
+            for part in ("depth", "left", "right"):
+                cam.put(f"vpp/z/in/{part}", wire.encode_part(fr, part),
+                        congestion_control=zenoh.CongestionControl.BLOCK)
+        assert wait_for(lambda: src.stats()["ring_dropped"] == 4 + 4 + 1)
+        frames = []
+        src.start(lambda f: frames.append(f) or True, lambda r: None)
+        assert wait_for(lambda: len(frames) == 2)
+        time.sleep(0.2)
+        assert [f.seq for f in frames] == [4, 5]
+    finally:
+        src.stop(2.0)

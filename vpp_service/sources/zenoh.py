@@ -18,7 +18,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from vpp_service.service import wire
@@ -46,6 +46,9 @@ class ZenohSourceOptions:
         Approximate sync: largest stamp difference inside a set.
     ring_size : int
         Samples buffered per subscribed topic (oldest dropped and counted).
+    ring_sizes : dict
+        Per-topic overrides of ``ring_size`` in separate-topics mode, e.g.
+        ``{depth = 16}`` for a sensor that runs ahead of the cameras.
     max_message_mb : float
         Messages larger than this are rejected before unpacking.
     poll_s : float
@@ -59,6 +62,7 @@ class ZenohSourceOptions:
     sync_queue_size: int = 10
     sync_threshold_ms: float = 20.0
     ring_size: int = 4
+    ring_sizes: dict = field(default_factory=dict)
     max_message_mb: float = 256.0
     poll_s: float = 0.05
 
@@ -69,6 +73,13 @@ class ZenohSourceOptions:
             raise ValueError(f"sync_threshold_ms must be >= 0, got {self.sync_threshold_ms}")
         if self.ring_size < 1:
             raise ValueError(f"ring_size must be >= 1, got {self.ring_size}")
+        for part, n in self.ring_sizes.items():
+            if part not in ("left", "right", "depth"):
+                raise ValueError(f"ring_sizes: unknown topic {part!r}; known: depth, left, right")
+            if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+                raise ValueError(f"ring_sizes.{part} must be an int >= 1, got {n!r}")
+        if self.ring_sizes and self.topics != "separate":
+            raise ValueError('ring_sizes: only for topics = "separate" (use ring_size)')
         if not 0 < self.max_message_mb <= 4096:
             raise ValueError(f"max_message_mb must be in (0, 4096], got {self.max_message_mb}")
         if not 0 < self.poll_s <= 1:
@@ -102,7 +113,7 @@ class ZenohSource(Source):
         parts = ["frame"] if o.topics == "frame" else (["left", "right", "depth"] if o.with_depth else ["left", "right"])
         for part in parts:
             key = wire.topic(self.context.prefix, self.context.rig, f"in/{part}")
-            self._rings[part] = deque(maxlen=o.ring_size)
+            self._rings[part] = deque(maxlen=o.ring_sizes.get(part, o.ring_size))
             self._subs[part] = session.declare_subscriber(
                 key, zenoh.handlers.Callback(lambda sample, part=part: self._on_sample(part, sample)))
         if o.topics == "separate":
