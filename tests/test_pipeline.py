@@ -196,3 +196,25 @@ def test_pipeline_bad_args():
         Pipeline(sim_source(1), lambda f: f, max_frames=-1)
     with pytest.raises(TypeError):
         Fusion(object())
+
+
+@pytest.mark.parametrize("values", ["too_far", "negative", "nan"])
+def test_fusion_without_usable_points_is_no_depth(values):
+    """A sparse map whose points are all unusable (d >= width, d < 0, NaN) runs the
+    matcher on the raw pair and counts no_depth, like a frame without depth."""
+    from vpp_service.matchers import build_matcher
+    from vpp_service.vpp import VPPConfig
+
+    src, got = sim_source(1, sensor="uniform"), []
+    src.open()
+    src.run(lambda f: got.append(f) or True, lambda r: None)
+    frame = got[0]
+    W = frame.shape[1]
+    sparse = np.zeros(frame.shape, np.float32)
+    sparse[::7, ::5] = {"too_far": W + 3.0, "negative": -2.0, "nan": np.nan}[values]
+    matcher = build_matcher("sgbm", {"max_disparity": 32})
+    fusion = Fusion(matcher, VPPConfig())
+    res = fusion(frame.with_(sparse_disparity=sparse, sensor_depth=None))
+    assert fusion.counters == {"vpp": 0, "no_depth": 1}
+    assert res.left_vpp is None and res.right_vpp is None
+    np.testing.assert_array_equal(res.disparity, np.asarray(matcher.compute(frame.left, frame.right)))

@@ -2,9 +2,10 @@
 
 :class:`Fusion` is what the pipeline's process stage calls on every frame.
 A frame with metric depth (``sensor_depth``) and a calibration has it converted
-to disparity (``d = f * b / Z - doffs``); a frame with no sparse depth at all
-(or VPP disabled) runs the matcher on the raw pair and is counted as
-``no_depth``. When the frame carries ground truth, ``FusionResult.metrics``
+to disparity (``d = f * b / Z - doffs``); a frame without a usable point
+(none with ``0 < d < width``, as counted by VPP itself) runs the matcher on the
+raw pair and is counted as ``no_depth`` (with VPP disabled, frames without any
+positive finite point are). When the frame carries ground truth, ``FusionResult.metrics``
 holds the error against it (:func:`vpp_service.evaluation.metrics.compute_metrics`).
 """
 from __future__ import annotations
@@ -68,25 +69,27 @@ class Fusion:
         sparse = self.sparse_disparity(frame)
         left_vpp = right_vpp = occluded = None
         stats: dict[str, Any] = {}
-        has_points = sparse is not None and bool(np.any(np.isfinite(sparse) & (sparse > 0)))
-        if self.vpp_config is not None and has_points:
+        m_left, m_right = left, right
+        if self.vpp_config is not None and sparse is not None:
             from vpp_service.vpp import project
 
             t0 = time.perf_counter()
             res = project(left, right, sparse, self.vpp_config, seed=self.seed + int(frame.seq))
             timing["vpp"] = (time.perf_counter() - t0) * 1e3
-            left_vpp, right_vpp, occluded = res.left, res.right, res.occluded
             raw_stats = getattr(res, "stats", None)
             if dataclasses.is_dataclass(raw_stats):
                 stats = dataclasses.asdict(raw_stats)
             elif isinstance(raw_stats, dict):
                 stats = dict(raw_stats)
-            self.counters["vpp"] += 1
-            m_left, m_right = left_vpp, right_vpp
-        else:
-            if not has_points:
+            # the kernel counted the usable points: no second pass over the map here
+            if stats.get("given", 0) - stats.get("invalid", 0) > 0:
+                left_vpp, right_vpp, occluded = res.left, res.right, res.occluded
+                self.counters["vpp"] += 1
+                m_left, m_right = left_vpp, right_vpp
+            else:
                 self.counters["no_depth"] += 1
-            m_left, m_right = left, right
+        elif sparse is None or not np.any(np.isfinite(sparse) & (sparse > 0)):
+            self.counters["no_depth"] += 1
         t0 = time.perf_counter()
         disp = np.asarray(self.matcher.compute(m_left, m_right), dtype=np.float32)
         timing["match"] = (time.perf_counter() - t0) * 1e3
