@@ -84,7 +84,7 @@ def _sweep_paints(config: VPPConfig) -> bool:
     """True when the fused sweep kernel paints this variant: the per-pixel random
     pattern without adaptive patches (the default (vi), and (ii))."""
     return (config.pattern == "random" and (not config.uniform_patch or config.patch == 1)
-            and config.adaptive_patch is None and config.patch <= 255)
+            and config.adaptive_patch is None)
 
 
 @dataclass(frozen=True)
