@@ -36,7 +36,7 @@ from libc.stdlib cimport malloc, free
 from libc.string cimport memcpy, memset
 from libc.math cimport floor, pow
 
-from vpp_service.vpp._pixel cimport _hash, _seedmix, _w16, _blend16, _fgd_pixel
+from vpp_service.vpp._pixel cimport _pidx, _w16, _blend16, _fgd_pixel
 
 import numpy as np
 
@@ -233,7 +233,7 @@ cdef struct Ctx:
     double neglogthr
     double alpha
     uint64_t wa
-    uint64_t seedmix
+    const uint8_t* pat  # padded pattern table (rng.py)
     int sw_half
     int sw_len
     int sh_half
@@ -368,7 +368,7 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
     cdef int64_t rowb = <int64_t>r * W * C
     cdef int s_lo, s_hi, nsrc, j, jbest, s, h, x, dx, dy, c, col, fl, cn, k, ncon, n, xl
     cdef int64_t idx
-    cdef uint64_t key, kbest, w0, w1, wb, v16, z, src, i0, i1
+    cdef uint64_t key, kbest, w0, w1, wb, v16, src, i0, i1
     cdef double d, xp, beta, e
     cdef int sumsq, diff, occ_pt
     cdef uint8_t* oL = cx.oL + rowb
@@ -384,7 +384,7 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
     cdef int bilateral = cx.bilateral
     cdef int splat = cx.splat
     cdef uint64_t wa = cx.wa
-    cdef uint64_t seedmix = cx.seedmix
+    cdef const uint8_t* pv
     cdef double alpha = cx.alpha
     memcpy(oL, Lr, W * C)
     memcpy(oR, cx.R + rowb, W * C)
@@ -465,17 +465,17 @@ cdef void _paint_row(const Ctx* cx, int r, int64_t* heads, int64_t* ends, int64_
         vals = vbuf + <int64_t>n * K * C
         if pattern == 0:
             if uniform:
-                z = _hash(seedmix, <uint64_t>x, <uint64_t>s)
+                pv = cx.pat + _pidx(x, s) * C
                 for k in range(K):
                     if msk[k]:
                         for c in range(C):
-                            vals[k * C + c] = <uint8_t>((z >> (8 * c)) & 255)
+                            vals[k * C + c] = pv[c]
             else:
+                pv = cx.pat + _pidx(x - hmax, r) * C
                 for k in range(K):
                     if msk[k]:
-                        z = _hash(seedmix, <uint64_t>(x + k - hmax), <uint64_t>r)
                         for c in range(C):
-                            vals[k * C + c] = <uint8_t>((z >> (8 * c)) & 255)
+                            vals[k * C + c] = pv[k * C + c]
         elif uniform:
             for k in range(K):
                 if msk[k]:
@@ -607,7 +607,7 @@ def project_kernel(const uint8_t[:, :, ::1] left, const uint8_t[:, :, ::1] right
                    int pattern, bint uniform, int hmax, double alpha, bint splat, int occmode,
                    bint adaptive_distance, double adaptive_gamma, double adaptive_dmax,
                    bint bilateral, double two_ss, double two_sc, double neglogthr,
-                   int search_width, int search_height, uint64_t seed, int nthreads):
+                   int search_width, int search_height, const uint8_t[::1] pat, int nthreads):
     """Phases A-C, E, F for the variants the sweep kernel does not paint.
 
     occmode: 0 off, 1 no, 2 bkgd, 3 fgd; ``occ`` is the occlusion mask already
@@ -669,7 +669,7 @@ def project_kernel(const uint8_t[:, :, ::1] left, const uint8_t[:, :, ::1] right
     cx.neglogthr = neglogthr
     cx.alpha = alpha
     cx.wa = _w16(alpha)
-    cx.seedmix = _seedmix(seed)
+    cx.pat = &pat[0]
     cx.sw_half = search_width // 2
     cx.sw_len = search_width
     cx.sh_half = search_height // 2

@@ -18,6 +18,14 @@ cdef inline uint64_t _seedmix(uint64_t seed) noexcept nogil:
     return seed * <uint64_t>0xD1B54A32D192ED03ULL
 
 
+cdef inline int64_t _pidx(int64_t x, int64_t y) noexcept nogil:
+    """Pattern-table index of pixel (x, y): ``(x + y * ROW_STEP) mod TABLE_SIZE`` (see ``rng.py``).
+
+    The table given to the kernels is padded past ``TABLE_SIZE`` entries with a
+    copy of its start, so ``_pidx(x0, y) + k`` reads pixel ``x0 + k`` directly."""
+    return (x + y * 23679) & 65535
+
+
 cdef inline uint64_t _w16(double w) noexcept nogil:
     """Weight in [0, 1] -> fixed point /65536, rounded half up (truncation is floor for w >= 0)."""
     return <uint64_t><int64_t>(w * 65536.0 + 0.5)   # via int64: one cvttsd2si

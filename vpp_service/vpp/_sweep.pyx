@@ -50,7 +50,7 @@ from libc.stdlib cimport malloc, free
 from libc.string cimport memcpy, memset
 from libc.math cimport INFINITY
 
-from vpp_service.vpp._pixel cimport _hash, _seedmix, _w16, _ifloor, _fgd_pixel
+from vpp_service.vpp._pixel cimport _hash, _seedmix, _pidx, _w16, _ifloor, _fgd_pixel
 
 import numpy as np
 
@@ -77,6 +77,32 @@ def cpu_supports_avx2():
 
 
 cdef uint64_t LOW32 = 0xFFFFFFFFULL
+
+#: pattern-table entries per seed (``rng.TABLE_SIZE``; ``_pidx`` masks with it)
+TABLE_SIZE = 65536
+
+
+def table_padding(int C, int hmax):
+    """Bytes the kernels may read past the ``TABLE_SIZE * C`` bytes of a table:
+    a patch row (``2 hmax + 1`` pixels) starting at the last entry, plus SIMD over-read."""
+    return (2 * hmax + 1) * C + 64
+
+
+def fill_pattern_table(uint64_t seed, uint8_t[::1] out, int C):
+    """Write the seed's pattern table for ``C`` channels (``rng.pattern_table``) into
+    ``out[:TABLE_SIZE * C]`` and repeat its start over the rest of ``out`` (the padding)."""
+    cdef int64_t core = <int64_t>TABLE_SIZE * C, n = out.shape[0], i, j, b
+    cdef uint64_t sm = _seedmix(seed), z
+    if C < 1 or n < core:
+        raise ValueError(f"out has {n} bytes, need at least {core} for {C} channel(s)")
+    with nogil:
+        for j in range((core + 7) // 8):
+            z = _hash(sm, <uint64_t>(j + 1), 0)
+            for b in range(8):
+                if 8 * j + b < core:
+                    out[8 * j + b] = <uint8_t>(z >> (8 * b))
+        for i in range(core, n):
+            out[i] = out[i - core]
 
 
 cdef struct Job:
@@ -105,12 +131,11 @@ cdef struct Job:
     int occmode         # 0 off, 1 no, 2 bkgd, 3 fgd
     double alpha
     uint32_t wa
-    uint64_t seedmix
+    const uint8_t* pat  # padded pattern table (rng.py): a patch row is one span of it
     int ring            # power of two
     int band            # output rows painted together
     int ww              # warp row length
     int woff            # warp index of column 0
-    int vs              # value-slot stride (bytes)
 
 
 cdef struct BandPt:
@@ -138,7 +163,6 @@ cdef struct Scratch:
     uint64_t* btmp      # sort scratch (cap), then bucket ids and counts below
     int* bbucket        # cap
     int* bcnt           # cap + 1
-    uint8_t* vals       # cap x K x vs: pattern bytes of (point, patch row)
     int failed
 
 
@@ -157,7 +181,6 @@ cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
     S.btmp = NULL
     S.bbucket = NULL
     S.bcnt = NULL
-    S.vals = NULL
     S.failed = 0
     if (S.keys == NULL or S.geo_fl == NULL or S.geo_w == NULL or S.flags == NULL
             or S.nk == NULL or S.rowid == NULL or S.warp == NULL):
@@ -189,12 +212,10 @@ cdef void _free_band(Scratch* S) noexcept nogil:
     free(S.btmp)
     free(S.bbucket)
     free(S.bcnt)
-    free(S.vals)
 
 
 cdef int _reserve(const Job* J, Scratch* S, int64_t n) noexcept nogil:
     """Grow the band buffers to hold n points."""
-    cdef int64_t K = 2 * J.hmax + 1
     if n <= S.cap:
         return 0
     n = n + n // 2 + 16
@@ -204,9 +225,8 @@ cdef int _reserve(const Job* J, Scratch* S, int64_t n) noexcept nogil:
     S.btmp = <uint64_t*>malloc(sizeof(uint64_t) * n)
     S.bbucket = <int*>malloc(sizeof(int) * n)
     S.bcnt = <int*>malloc(sizeof(int) * (n + 1))
-    S.vals = <uint8_t*>malloc(n * K * J.vs)
     if (S.bkey == NULL or S.bpt == NULL or S.btmp == NULL
-            or S.bbucket == NULL or S.bcnt == NULL or S.vals == NULL):
+            or S.bbucket == NULL or S.bcnt == NULL):
         S.cap = 0
         S.failed = 1
         return 1
@@ -337,13 +357,13 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
     cdef int64_t rs = <int64_t>W * C
     cdef int s0 = b0 - h if b0 - h > 0 else 0
     cdef int s1 = b1 - 1 + h if b1 - 1 + h < H - 1 else H - 1
-    cdef int occmode = J.occmode, vs = J.vs
+    cdef int occmode = J.occmode
     cdef int use_flags = occmode == 1 or occmode == 3
     cdef int s, slot, i, j, m, pos, x, r, r0, r1, k0, k1, k, c, fl, flag, base
     cdef BandPt* pt
     cdef int64_t total = 0
-    cdef uint64_t key, z, wpair
-    cdef uint8_t* v
+    cdef uint64_t key, wpair
+    cdef const uint8_t* v
     cdef uint8_t* oL
     cdef uint8_t* oR
     cdef uint32_t w0, w1, wb
@@ -380,8 +400,8 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
             pt.d = vpp_sw_u2f(<uint32_t>(key >> 32))
             m += 1
     vpp_sort_keys(S.bkey, m, S.btmp, S.bbucket, S.bcnt)
-    # 2. right view: each visible point's pattern bytes per covered band row (the
-    #    hash of each left pixel), splatted; geometry was computed at ingest
+    # 2. right view: each visible point's pattern span per covered band row (read
+    #    in place from the table), splatted; geometry was computed at ingest
     for j in range(m):
         pos = <int>(S.bkey[j] & LOW32)
         pt = &S.bpt[pos]
@@ -396,14 +416,7 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
         r0 = s - h if s - h > b0 else b0
         r1 = s + h if s + h < b1 - 1 else b1 - 1
         for r in range(r0, r1 + 1):
-            v = S.vals + (<int64_t>pos * K + (r - s + h)) * vs
-            for k in range(k0, k1):
-                z = _hash(J.seedmix, <uint64_t>(x + k - h), <uint64_t>r)
-                if C == 3:
-                    memcpy(v + 3 * k, &z, 4)       # byte 3 is overwritten by pixel k + 1
-                else:
-                    for c in range(C):
-                        v[k * C + c] = <uint8_t>(z >> (8 * c))
+            v = J.pat + _pidx(x - h, r) * C
             oR = J.oR + r * rs
             if J.splat:
                 if (fl - h < 0 or fl + h + 1 >= W or not vpp_splat16(
@@ -424,8 +437,7 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
         r1 = s + h if s + h < b1 - 1 else b1 - 1
         if not pt.occl:
             for r in range(r0, r1 + 1):
-                _span(J, J.oL + r * rs, S.vals + (<int64_t>pos * K + (r - s + h)) * vs,
-                      k0, k1, x - h, J.wa)
+                _span(J, J.oL + r * rs, J.pat + _pidx(x - h, r) * C, k0, k1, x - h, J.wa)
             continue
         xp = <double>x - <double>pt.d
         if J.splat:
@@ -478,10 +490,12 @@ def sweep_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, bint occ_on, int
                  const uint8_t[:, :, ::1] left, const uint8_t[:, :, ::1] right,
                  uint8_t[:, :, ::1] out_left, uint8_t[:, :, ::1] out_right,
                  bint paint, int hmax, double alpha, bint splat, int occmode,
-                 uint64_t seed, int nthreads):
+                 const uint8_t[::1] pattern, int nthreads):
     """Run the sweep.  ``pen`` is the ``[|dy|, |dx|]`` penalty table; ``paint``
     false only classifies (the image arguments are then ignored and may be
-    1 x 1 x 1).  Returns ``(row stats H x 4, occluded per row)``."""
+    1 x 1 x 1, and ``pattern`` may be empty).  ``pattern`` is the seed's table
+    padded by ``table_padding(C, hmax)`` bytes (:func:`fill_pattern_table`).
+    Returns ``(row stats H x 4, occluded per row)``."""
     cdef int H = disp.shape[0], W = disp.shape[1]
     cdef int rx2 = rx // 2, ry2 = ry // 2
     cdef int nwin = 2 * rx2 + 1, i, j, need, ci, nchunks, chunk
@@ -527,7 +541,10 @@ def sweep_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, bint occ_on, int
     J.occmode = occmode
     J.alpha = alpha
     J.wa = <uint32_t>_w16(alpha)
-    J.seedmix = _seedmix(seed)
+    if paint and pattern.shape[0] < TABLE_SIZE * J.C + table_padding(J.C, J.hmax):
+        raise ValueError(f"pattern table has {pattern.shape[0]} bytes, need "
+                         f"{TABLE_SIZE * J.C + table_padding(J.C, J.hmax)}")
+    J.pat = &pattern[0] if paint else NULL
     J.band = 16 if paint else 1
     # rows alive at once: a band and its patch margins, plus the occlusion window lag
     need = J.band + 2 * J.hmax
@@ -538,7 +555,6 @@ def sweep_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, bint occ_on, int
         J.ring *= 2
     J.ww = 2 * W + 2 * rx2 + 8       # warp columns -W .. W-1, +- rx2, SIMD over-read
     J.woff = W + rx2
-    J.vs = (((2 * J.hmax + 1) * J.C + 15) & ~15) + 16
     if nthreads <= 1:
         nchunks = 1
     else:

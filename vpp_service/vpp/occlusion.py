@@ -25,6 +25,7 @@ from . import backend
 from ._validate import as_disparity, as_threads
 
 _NO_IMAGE = np.zeros((1, 1, 1), np.uint8)   # image arguments of a classify-only sweep
+_NO_TABLE = np.zeros(1, np.uint8)           # pattern-table argument of a sweep that paints no random pattern
 
 
 def penalty_table(window: tuple[int, int], lam: float, gamma: float) -> np.ndarray:
@@ -65,7 +66,7 @@ def classify_into(disp: np.ndarray, occ: np.ndarray, window: tuple[int, int],
     """
     return backend.sweep.sweep_kernel(disp, occ.view(np.uint8), True, window[0], window[1], pen, t,
                                _NO_IMAGE, _NO_IMAGE, _NO_IMAGE, _NO_IMAGE, False, 0, 0.0, False,
-                               3, 0, num_threads)
+                               3, _NO_TABLE, num_threads)
 
 
 def detect_occlusions(disparity: np.ndarray, *, window: tuple[int, int] = (9, 7),

@@ -32,8 +32,10 @@ Patch
     (i.e. ``exp(-e) > threshold``).
 
 Values
-    random: byte ``c`` of :func:`vpp_service.vpp.rng.pattern_hash` (seed, x, y)
-    of the left pixel painted (per-pixel) or of the point (uniform).
+    random: channel ``c`` of :func:`vpp_service.vpp.rng.pattern_bytes` (seed,
+    x, y) of the left pixel painted (per-pixel) or of the point (uniform): a
+    seeded table of random bytes indexed by ``(x + 23679 y) mod 65536`` (see
+    :mod:`vpp_service.vpp.rng`).
     histogram: per channel, occupancy of rows ``r - sh//2 .. r + sh//2`` and
     columns ``[c - L//2, c - L//2 + L - 1]`` (clipped) of the ORIGINAL left
     image around the left pixel and of the ORIGINAL right image around
@@ -73,8 +75,8 @@ import numpy as np
 
 from . import _kernel, backend
 from .config import VPPConfig
-from .occlusion import check_occlusion_params, classify_into, penalty_table
-from .rng import check_seed
+from .occlusion import _NO_TABLE, check_occlusion_params, classify_into, penalty_table
+from .rng import check_seed, kernel_table
 from ._validate import as_disparity, as_image, as_threads
 
 _OCC_MODE = {"off": 0, "no": 1, "bkgd": 2, "fgd": 3}
@@ -181,11 +183,12 @@ def project(left: np.ndarray, right: np.ndarray, disparity: np.ndarray,
     occmode = _OCC_MODE[config.occlusion]
     pen = penalty_table((rx, ry), float(config.occ_lambda), float(config.occ_gamma))
     hmax = (config.patch - 1) // 2
+    table = kernel_table(seed, C, hmax) if config.pattern == "random" else _NO_TABLE
     if _sweep_paints(config):
         stats, occ_rows = backend.sweep.sweep_kernel(
             disp, occ.view(np.uint8), occmode != 0, rx, ry, pen, float(config.occ_t),
             L, R, out_l, out_r, True, hmax, float(config.alpha), config.splat, occmode,
-            seed, nt)
+            table, nt)
     else:
         occ_rows = np.zeros(H, np.int64)
         if occmode != 0:
@@ -201,7 +204,7 @@ def project(left: np.ndarray, right: np.ndarray, disparity: np.ndarray,
             float(config.adaptive_max_disparity or 0.0),
             bil, 2.0 * config.bilateral_sigma_space ** 2, 2.0 * config.bilateral_sigma_color ** 2,
             -math.log(config.bilateral_threshold),
-            config.search_width, config.search_height, seed, nt)
+            config.search_width, config.search_height, table, nt)
     tot = stats.sum(axis=0)
     n_occ = int(occ_rows.sum())
     valid = int(tot[1])
