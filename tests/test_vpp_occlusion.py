@@ -65,3 +65,28 @@ def test_bad_parameters(kwargs, exc):
 def test_bad_disparity(disp, exc):
     with pytest.raises(exc, match="disparity"):
         detect_occlusions(disp)
+
+
+@pytest.mark.parametrize("d0", [0.75, 37.3, 1500.6])
+@pytest.mark.parametrize("lam,gamma,t", [(2.0, 0.4375, 1.0), (0.3, 0.37, 0.1), (1.7, 0.9, 0.0)])
+def test_threshold_ties_match_reference(d0, lam, gamma, t):
+    """Neighbours at exactly ``d + t + pen`` and a few float32 ulps around it: the
+    kernel's float screen must never miss a cell that the exact (double) rule flags."""
+    H, W = 9, 4000
+    x0, y0 = 2600, 4
+    d0 = np.float32(d0)
+    for dx, dy in [(1, 0), (-3, 2), (4, -3), (0, 1), (-4, 3)]:
+        pen = lam * (gamma * abs(dx) + (1 - gamma) * abs(dy))
+        base = np.float32(float(d0) + t + pen)
+        for k in range(-3, 4):
+            dn = base
+            for _ in range(abs(k)):
+                dn = np.nextafter(dn, np.float32(np.inf if k > 0 else -np.inf))
+            disp = np.zeros((H, W), np.float32)
+            disp[y0, x0] = d0
+            xn = x0 - int(np.floor(float(d0) + 0.5)) + dx + int(np.floor(float(dn) + 0.5))
+            disp[y0 + dy, xn] = dn
+            occ = detect_occlusions(disp, lam=lam, gamma=gamma, t=t, num_threads=1)
+            ref = ref_occlusions(disp, window=(9, 7), lam=lam, gamma=gamma, t=t)
+            np.testing.assert_array_equal(occ, ref, err_msg=f"dx={dx} dy={dy} k={k}")
+            assert ref[y0, x0] == ((float(dn) - float(d0)) - pen > t)

@@ -162,27 +162,30 @@ static inline void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* buck
     memcpy(keys, tmp, sizeof(uint64_t) * (size_t)n);
 }
 
-/* Maximum of p[0..n-1] (n >= 1, no NaN). */
-static inline float vpp_maxf(const float* p, int n) {
-    int i = 0;
-    float m;
-#if VPP_HAVE_SSE2
-    if (n >= 4) {
-        __m128 v = _mm_loadu_ps(p);
-        for (i = 4; i + 4 <= n; i += 4) v = _mm_max_ps(v, _mm_loadu_ps(p + i));
-        v = _mm_max_ps(v, _mm_movehl_ps(v, v));
-        v = _mm_max_ss(v, _mm_shuffle_ps(v, v, 1));
-        m = _mm_cvtss_f32(v);
-    } else {
-        m = p[0];
-        i = 1;
-    }
+/* Candidate test of one occlusion-window row: is w[c] > pen[c] + thr for some
+ * c < npad?  npad is a multiple of 8; pen is padded with +inf past the window
+ * (and is +inf at the point's own cell), w may be read up to npad.  Empty warp
+ * cells are -inf and never pass.  See _classify for why the float test never
+ * misses a cell that the exact (double) rule flags. */
+static inline int vpp_occ_row_cand(const float* w, const float* pen, int npad, float thr) {
+    int c;
+#if defined(__AVX2__)
+    const __m256 t = _mm256_set1_ps(thr);
+    __m256 acc = _mm256_cmp_ps(_mm256_loadu_ps(w), _mm256_add_ps(_mm256_loadu_ps(pen), t), _CMP_GT_OQ);
+    for (c = 8; c < npad; c += 8)
+        acc = _mm256_or_ps(acc, _mm256_cmp_ps(_mm256_loadu_ps(w + c),
+                                              _mm256_add_ps(_mm256_loadu_ps(pen + c), t), _CMP_GT_OQ));
+    return _mm256_movemask_ps(acc);
+#elif VPP_HAVE_SSE2
+    const __m128 t = _mm_set1_ps(thr);
+    __m128 acc = _mm_setzero_ps();
+    for (c = 0; c < npad; c += 4)
+        acc = _mm_or_ps(acc, _mm_cmpgt_ps(_mm_loadu_ps(w + c), _mm_add_ps(_mm_loadu_ps(pen + c), t)));
+    return _mm_movemask_ps(acc);
 #else
-    m = p[0];
-    i = 1;
+    for (c = 0; c < npad; c++) if (w[c] > pen[c] + thr) return 1;
+    return 0;
 #endif
-    for (; i < n; i++) if (p[i] > m) m = p[i];
-    return m;
 }
 
 static inline uint8_t vpp_blend_u8(uint32_t a, uint32_t b, uint32_t w) {

@@ -20,10 +20,11 @@ ingest(y)
 classify(q = y - r_y//2)
     a point is occluded if it lost a collision in its warp cell, or if a
     neighbour of its r_x x r_y window satisfies ``(W_n - d) - pen > t``
-    (float64, as in the reference).  Each window row is first bounded with
-    its float maximum: since ``pen >= 0`` and rounding is monotone,
-    ``(max - d) - pen(|dy|, 0) <= t`` proves no cell of that row qualifies,
-    and only the remaining rows are tested cell by cell (exact).
+    (float64, as in the reference).  Each window row is first screened in
+    float, 8 cells per vector compare, against ``pen + d + t`` lowered by a
+    margin larger than the float rounding, so the screen never misses a cell
+    the exact rule flags; only rows with a passing cell are tested cell by
+    cell (exact).
 paint a band of 16 rows [b0, b1) once rows up to b1 - 1 + h are classified
     copy the band's rows of both inputs to the outputs; gather the points of
     rows b0-h .. b1-1+h in (row, x) order and sort them by (d, gather
@@ -61,7 +62,7 @@ cdef extern from "_sweep.h" nogil:
     float vpp_sw_u2f(uint32_t u)
     int vpp_build_avx2()
     int vpp_cpu_supports_avx2()
-    float vpp_maxf(const float* p, int n)
+    int vpp_occ_row_cand(const float* w, const float* pen, int npad, float thr)
     void vpp_blend_span(uint8_t* dst, const uint8_t* val, int n, uint32_t w, int64_t room)
     int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, int k1,
                     uint32_t w0, uint32_t w1, int64_t room)
@@ -115,7 +116,9 @@ cdef struct Job:
     int ry2
     int nwin            # 2 * rx2 + 1
     const double* pen   # (2 ry2 + 1) x nwin, centre = +inf (a point is not its own neighbour)
-    const double* penrow  # pen(|dy|, 0), the smallest penalty of window row |dy|
+    const float* penf   # (2 ry2 + 1) x npad: pen as float, +inf past the window (candidate test)
+    int npad            # nwin rounded up to a multiple of 8
+    double penmax       # largest finite penalty
     double t
     uint8_t* occ        # H x W mask
     int64_t* stats      # H x 4: given, valid, invalid, left-border
@@ -290,16 +293,22 @@ cdef void _ingest(const Job* J, Scratch* S, int y, bint own) noexcept nogil:
 
 
 cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
+    """Occlusion flags of row q's points.  Each window row is first screened in
+    float, 8 cells a vector: ``W > pen_f + thr`` with ``thr = f32(d + t - m)``
+    and ``m = (|d| + t + pen_max + 1) / 2**20``.  The float roundings of
+    ``pen_f``, ``thr`` and the sum are each below ``2**-24`` of those magnitudes,
+    so a cell with ``(W - d) - pen > t`` in double always passes the screen;
+    only rows with a passing cell are checked exactly (in double, as the reference)."""
     cdef int slot = q & (J.ring - 1)
-    cdef int W = J.W, H = J.H, nwin = J.nwin, rx2 = J.rx2, ry2 = J.ry2
+    cdef int W = J.W, H = J.H, nwin = J.nwin, rx2 = J.rx2, ry2 = J.ry2, npad = J.npad
     cdef const uint64_t* keys = S.keys + <int64_t>slot * W
     cdef uint8_t* flags = S.flags + <int64_t>slot * W
     cdef const float* wq = S.warp + <int64_t>slot * J.ww + J.woff
     cdef const float* wr
     cdef const double* pr
-    cdef int i, n = S.nk[slot], xw, dy, yn, ady, j, found
+    cdef int i, n = S.nk[slot], xw, dy, yn, j, found
     cdef int64_t cnt = 0
-    cdef float d
+    cdef float d, thr
     cdef double dd, t = J.t
     for i in range(n):
         d = vpp_sw_u2f(<uint32_t>(keys[i] >> 32))
@@ -307,13 +316,13 @@ cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
         xw = _xw(keys[i])
         found = wq[xw] > d                   # lost a collision
         if not found:
+            thr = <float>(dd + t - (dd + t + J.penmax + 1.0) * 9.5367431640625e-07)   # d > 0, t >= 0
             for dy in range(-ry2, ry2 + 1):
                 yn = q + dy
                 if yn < 0 or yn >= H:
                     continue
                 wr = S.warp + <int64_t>(yn & (J.ring - 1)) * J.ww + J.woff + xw - rx2
-                ady = dy if dy >= 0 else -dy
-                if (<double>vpp_maxf(wr, nwin) - dd) - J.penrow[ady] <= t:
+                if not vpp_occ_row_cand(wr, J.penf + <int64_t>(dy + ry2) * npad, npad, thr):
                     continue
                 pr = J.pen + <int64_t>(dy + ry2) * nwin
                 for j in range(nwin):
@@ -498,7 +507,7 @@ def sweep_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, bint occ_on, int
     Returns ``(row stats H x 4, occluded per row)``."""
     cdef int H = disp.shape[0], W = disp.shape[1]
     cdef int rx2 = rx // 2, ry2 = ry // 2
-    cdef int nwin = 2 * rx2 + 1, i, j, need, ci, nchunks, chunk
+    cdef int nwin = 2 * rx2 + 1, i, j, need, ci, nchunks, chunk, npad
     cdef Job J
     cdef Scratch* S = NULL
     failed_np = np.zeros(1, np.int32)
@@ -510,9 +519,11 @@ def sweep_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, bint occ_on, int
         for i in range(nwin):
             pen_full[j, i] = pen[abs(j - ry2), abs(i - rx2)]
     pen_full[ry2, rx2] = np.inf
-    penrow = np.ascontiguousarray(np.asarray(pen)[:, 0])
+    npad = (nwin + 7) // 8 * 8
+    penf_np = np.full((2 * ry2 + 1, npad), np.inf, np.float32)
+    penf_np[:, :nwin] = pen_full
     cdef double[:, ::1] pf = pen_full
-    cdef double[::1] prow = penrow
+    cdef float[:, ::1] penf = penf_np
     cdef int64_t[:, ::1] st = stats
     cdef int64_t[::1] cn = cnt
     if H == 0 or W == 0:
@@ -525,7 +536,9 @@ def sweep_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, bint occ_on, int
     J.ry2 = ry2
     J.nwin = nwin
     J.pen = &pf[0, 0]
-    J.penrow = &prow[0]
+    J.penf = &penf[0, 0]
+    J.npad = npad
+    J.penmax = float(pen_full[np.isfinite(pen_full)].max(initial=0.0))
     J.t = t
     J.occ = &occ[0, 0]
     J.stats = &st[0, 0]
@@ -553,7 +566,7 @@ def sweep_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, bint occ_on, int
     J.ring = 1
     while J.ring < need:
         J.ring *= 2
-    J.ww = 2 * W + 2 * rx2 + 8       # warp columns -W .. W-1, +- rx2, SIMD over-read
+    J.ww = 2 * W + 2 * rx2 + 8       # warp columns -W .. W-1, +- rx2, SIMD over-read (npad - nwin <= 7)
     J.woff = W + rx2
     if nthreads <= 1:
         nchunks = 1
