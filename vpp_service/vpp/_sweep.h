@@ -102,6 +102,63 @@ static inline int vpp_scan_row(const float* d, int W, uint64_t* keys, int64_t* s
     return n;
 }
 
+/* The same scan, for a keys buffer of W entries of which those past the
+ * returned count may be overwritten (the sweep's per-row ring).  With AVX2 it
+ * is branch-free: each block of 8 is compressed with a permutation from a
+ * 256-entry table (vpp_scan_lut, built by vpp_scan_init) and its 8 keys are
+ * stored whole, the count advancing by the block's number of points; a write
+ * never passes x + 8 <= W because a row has at most one key per pixel.
+ * (Branching on empty blocks and popping mask bits mispredicts about twice
+ * per non-empty block at 5 % density: ~4 ms of a 2964 x 1988 map.) */
+#if defined(__AVX2__)
+static int32_t vpp_scan_lut[256][8] __attribute__((aligned(32)));
+#endif
+
+static inline void vpp_scan_init(void) {
+#if defined(__AVX2__)
+    int m, b, k;
+    for (m = 0; m < 256; m++) {
+        for (b = 0, k = 0; b < 8; b++) if (m >> b & 1) vpp_scan_lut[m][k++] = b;
+        for (; k < 8; k++) vpp_scan_lut[m][k] = 0;
+    }
+#endif
+}
+
+static inline int vpp_scan_row_w(const float* d, int W, uint64_t* keys, int64_t* st) {
+#if defined(__AVX2__)
+    int64_t given = 0, oob = 0;
+    int n = 0, x = 0;
+    const __m256 zero = _mm256_setzero_ps(), wf = _mm256_set1_ps((float)W);
+    const __m256 iota = _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7);
+    const __m256i iotai = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    for (; x + 8 <= W; x += 8) {
+        __m256 a = _mm256_loadu_ps(d + x);
+        unsigned g = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(a, zero, _CMP_NEQ_OQ));  /* not 0, not NaN */
+        unsigned m = (unsigned)_mm256_movemask_ps(_mm256_and_ps(_mm256_cmp_ps(a, zero, _CMP_GT_OQ),
+                                                                _mm256_cmp_ps(a, wf, _CMP_LT_OQ)));
+        unsigned o = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(_mm256_add_ps(iota, _mm256_set1_ps((float)x)),
+                                                                a, _CMP_LT_OQ)) & m;
+        __m256i perm = _mm256_load_si256((const __m256i*)vpp_scan_lut[m]);
+        __m256i xs = _mm256_permutevar8x32_epi32(_mm256_add_epi32(_mm256_set1_epi32(x), iotai), perm);
+        __m256i ds = _mm256_permutevar8x32_epi32(_mm256_castps_si256(a), perm);
+        __m256i lo = _mm256_unpacklo_epi32(xs, ds), hi = _mm256_unpackhi_epi32(xs, ds);
+        _mm256_storeu_si256((__m256i*)(keys + n), _mm256_permute2x128_si256(lo, hi, 0x20));
+        _mm256_storeu_si256((__m256i*)(keys + n + 4), _mm256_permute2x128_si256(lo, hi, 0x31));
+        n += __builtin_popcount(m);
+        given += __builtin_popcount(g);
+        oob += __builtin_popcount(o);
+    }
+    for (; x < W; x++) vpp_scan_one(d, x, W, keys, &n, &given, &oob);
+    st[0] = given;
+    st[1] = n;
+    st[2] = given - n;
+    st[3] = oob;
+    return n;
+#else
+    return vpp_scan_row(d, W, keys, st);
+#endif
+}
+
 static inline float vpp_sw_u2f(uint32_t u) { float f; memcpy(&f, &u, 4); return f; }
 
 static inline void vpp_insertion_sort(uint64_t* a, int n) {

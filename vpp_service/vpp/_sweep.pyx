@@ -57,7 +57,8 @@ import numpy as np
 
 
 cdef extern from "_sweep.h" nogil:
-    int vpp_scan_row(const float* d, int W, uint64_t* keys, int64_t* st)
+    int vpp_scan_row_w(const float* d, int W, uint64_t* keys, int64_t* st)
+    void vpp_scan_init()
     void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* bucket, int* cnt)
     float vpp_sw_u2f(uint32_t u)
     int vpp_build_avx2()
@@ -67,6 +68,8 @@ cdef extern from "_sweep.h" nogil:
     int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, int k1,
                     uint32_t w0, uint32_t w1, int64_t room)
     uint32_t vpp_sw_f2u(float f)
+
+vpp_scan_init()     # the scan's compress table, once per process (before any sweep)
 
 #: True in the build compiled for x86-64-v3 (``_sweep_avx2``), False in the portable one.
 AVX2 = bool(vpp_build_avx2())
@@ -274,7 +277,7 @@ cdef void _ingest(const Job* J, Scratch* S, int y, bint own) noexcept nogil:
     if J.occ_on and S.rowid[slot] >= 0:      # clear the evicted row's warp cells
         for i in range(S.nk[slot]):
             wp[_xw(keys[i])] = -INFINITY
-    n = vpp_scan_row(J.disp + <int64_t>y * W, W, keys, st)   # in increasing x
+    n = vpp_scan_row_w(J.disp + <int64_t>y * W, W, keys, st)   # in increasing x
     if own:
         for i in range(4):
             J.stats[<int64_t>y * 4 + i] = st[i]
