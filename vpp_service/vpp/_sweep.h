@@ -161,6 +161,76 @@ static inline int vpp_scan_row_w(const float* d, int W, uint64_t* keys, int64_t*
 
 static inline float vpp_sw_u2f(uint32_t u) { float f; memcpy(&f, &u, 4); return f; }
 
+static inline uint32_t vpp_w16(double w) { return (uint32_t)(int64_t)(w * 65536.0 + 0.5); }
+
+/* Per-point geometry of a row's keys (see _sweep.pyx), into arrays of n (+3
+ * for the vector tail) entries:
+ *   xw[i] = x - round_half_up(d), the warp column (if xw != NULL);
+ *   fl[i], w[i] = w0 | w1 << 32 (if fl != NULL): with splatting fl = floor(x'),
+ *   beta = x' - fl, w1 = w16(alpha beta) (0 if beta == 0), w0 = w16(alpha (1 - beta));
+ *   without, fl = floor(x' + 0.5), w0 = wa, w1 = 0; x' = x - d in double.
+ * The AVX2 path does the same double operations 4 points at a time. */
+static inline void vpp_geometry(const uint64_t* keys, int n, int32_t* xw, int32_t* fl, uint64_t* w,
+                                int splat, double alpha, uint32_t wa) {
+    int i = 0;
+#if defined(__AVX2__)
+    const __m256d half = _mm256_set1_pd(0.5), one = _mm256_set1_pd(1.0), zero = _mm256_setzero_pd();
+    const __m256d av = _mm256_set1_pd(alpha), scale = _mm256_set1_pd(65536.0);
+    const __m256i pick = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
+    for (; i + 4 <= n; i += 4) {
+        /* 4 keys -> x (low halves) and float bits of d (high halves) */
+        __m256i k = _mm256_permutevar8x32_epi32(_mm256_loadu_si256((const __m256i*)(keys + i)), pick);
+        __m128i x4 = _mm256_castsi256_si128(k);
+        __m256d dd = _mm256_cvtps_pd(_mm_castsi128_ps(_mm256_extracti128_si256(k, 1)));
+        __m256d xd = _mm256_cvtepi32_pd(x4);
+        if (xw) _mm_storeu_si128((__m128i*)(xw + i),
+                                 _mm_sub_epi32(x4, _mm256_cvttpd_epi32(_mm256_add_pd(dd, half))));
+        if (fl) {
+            __m256d xp = _mm256_sub_pd(xd, dd), f, beta;
+            __m128i w0, w1;
+            if (splat) {
+                f = _mm256_floor_pd(xp);
+                beta = _mm256_sub_pd(xp, f);
+                w1 = _mm256_cvttpd_epi32(_mm256_add_pd(_mm256_mul_pd(_mm256_mul_pd(av, beta), scale), half));
+                w1 = _mm_and_si128(w1, _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(
+                    _mm256_castpd_si256(_mm256_cmp_pd(beta, zero, _CMP_GT_OQ)), pick)));
+                w0 = _mm256_cvttpd_epi32(_mm256_add_pd(_mm256_mul_pd(_mm256_mul_pd(
+                    av, _mm256_sub_pd(one, beta)), scale), half));
+            } else {
+                f = _mm256_floor_pd(_mm256_add_pd(xp, half));
+                w0 = _mm_set1_epi32((int)wa);
+                w1 = _mm_setzero_si128();
+            }
+            _mm_storeu_si128((__m128i*)(fl + i), _mm256_cvttpd_epi32(f));
+            _mm_storeu_si128((__m128i*)(w + i), _mm_unpacklo_epi32(w0, w1));
+            _mm_storeu_si128((__m128i*)(w + i + 2), _mm_unpackhi_epi32(w0, w1));
+        }
+    }
+#endif
+    for (; i < n; i++) {
+        double x = (double)(uint32_t)(keys[i] & 0xFFFFFFFFu);
+        double d = (double)vpp_sw_u2f((uint32_t)(keys[i] >> 32));
+        if (xw) xw[i] = (int32_t)x - (int32_t)(d + 0.5);
+        if (fl) {
+            double xp = x - d, f, beta;
+            uint32_t w0, w1;
+            if (splat) {
+                f = floor(xp);
+                beta = xp - f;
+                w1 = beta > 0 ? vpp_w16(alpha * beta) : 0;
+                w0 = vpp_w16(alpha * (1.0 - beta));
+            } else {
+                f = floor(xp + 0.5);
+                w0 = wa;
+                w1 = 0;
+            }
+            fl[i] = (int32_t)f;
+            w[i] = (uint64_t)w0 | ((uint64_t)w1 << 32);
+        }
+    }
+}
+
+
 static inline void vpp_insertion_sort(uint64_t* a, int n) {
     int i, j;
     for (i = 1; i < n; i++) {

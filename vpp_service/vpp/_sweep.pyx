@@ -68,6 +68,8 @@ cdef extern from "_sweep.h" nogil:
     int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, int k1,
                     uint32_t w0, uint32_t w1, int64_t room)
     uint32_t vpp_sw_f2u(float f)
+    void vpp_geometry(const uint64_t* keys, int n, int32_t* xw, int32_t* fl, uint64_t* w,
+                      int splat, double alpha, uint32_t wa)
 
 vpp_scan_init()     # the scan's compress table, once per process (before any sweep)
 
@@ -148,7 +150,7 @@ cdef struct BandPt:
     # one point of a band, in gather order (compact: read in d order by the passes)
     int32_t x
     int32_t s           # image row
-    int32_t fl          # right-view column (see _geometry)
+    int32_t fl          # right-view column (see vpp_geometry)
     uint32_t w0
     uint32_t w1
     int32_t occl        # FGD-occluded
@@ -161,6 +163,7 @@ cdef struct Scratch:
     int* nk             # ring
     int* rowid          # ring
     float* warp         # ring x ww
+    int32_t* xw         # ring x W: warp column x - round(d) per key
     int64_t cap         # contribution capacity
     int32_t* geo_fl     # ring x W: right-view column floor(x') (or round(x') without splat)
     uint64_t* geo_w     # ring x W: right-view weights w0 | w1 << 32 (1/65536)
@@ -177,6 +180,7 @@ cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
     S.keys = <uint64_t*>malloc(sizeof(uint64_t) * (J.ring * J.W + 1))
     S.geo_fl = <int32_t*>malloc(sizeof(int32_t) * (J.ring * J.W + 1))
     S.geo_w = <uint64_t*>malloc(sizeof(uint64_t) * (J.ring * J.W + 1))
+    S.xw = <int32_t*>malloc(sizeof(int32_t) * (J.ring * J.W + 1))
     S.flags = <uint8_t*>malloc(<int64_t>J.ring * J.W + 1)
     S.nk = <int*>malloc(sizeof(int) * J.ring)
     S.rowid = <int*>malloc(sizeof(int) * J.ring)
@@ -188,7 +192,7 @@ cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
     S.bbucket = NULL
     S.bcnt = NULL
     S.failed = 0
-    if (S.keys == NULL or S.geo_fl == NULL or S.geo_w == NULL or S.flags == NULL
+    if (S.keys == NULL or S.geo_fl == NULL or S.geo_w == NULL or S.xw == NULL or S.flags == NULL
             or S.nk == NULL or S.rowid == NULL or S.warp == NULL):
         S.failed = 1
         return 1
@@ -205,6 +209,7 @@ cdef void _scratch_free(Scratch* S) noexcept nogil:
     free(S.keys)
     free(S.geo_fl)
     free(S.geo_w)
+    free(S.xw)
     free(S.flags)
     free(S.nk)
     free(S.rowid)
@@ -240,43 +245,18 @@ cdef int _reserve(const Job* J, Scratch* S, int64_t n) noexcept nogil:
     return 0
 
 
-cdef inline int _xw(uint64_t key) noexcept nogil:
-    """Warp column x - round(d) (round half up) of a key."""
-    return <int>(key & LOW32) - <int>(<double>vpp_sw_u2f(<uint32_t>(key >> 32)) + 0.5)  # d > 0
-
-
-cdef void _geometry(const Job* J, const uint64_t* keys, int n, int32_t* fl,
-                    uint64_t* w) noexcept nogil:
-    """Right-view column and splat weights of each point, once for its 2h+1 patch rows."""
-    cdef int i, f
-    cdef double xp, beta
-    cdef uint64_t w0, w1
-    for i in range(n):
-        xp = <double>(keys[i] & LOW32) - <double>vpp_sw_u2f(<uint32_t>(keys[i] >> 32))
-        if J.splat:
-            f = _ifloor(xp)
-            beta = xp - <double>f
-            w1 = _w16(J.alpha * beta) if beta > 0 else 0
-            w0 = _w16(J.alpha * (1.0 - beta))
-        else:
-            f = _ifloor(xp + 0.5)
-            w0 = J.wa
-            w1 = 0
-        fl[i] = f
-        w[i] = w0 | (w1 << 32)
-
-
 cdef void _ingest(const Job* J, Scratch* S, int y, bint own) noexcept nogil:
     cdef int slot = y & (J.ring - 1)
     cdef int W = J.W
     cdef uint64_t* keys = S.keys + <int64_t>slot * W
+    cdef int32_t* xw = S.xw + <int64_t>slot * W
     cdef float* wp = S.warp + <int64_t>slot * J.ww + J.woff
-    cdef int i, n, xw
+    cdef int i, n
     cdef int64_t st[4]
     cdef float d
     if J.occ_on and S.rowid[slot] >= 0:      # clear the evicted row's warp cells
         for i in range(S.nk[slot]):
-            wp[_xw(keys[i])] = -INFINITY
+            wp[xw[i]] = -INFINITY
     n = vpp_scan_row_w(J.disp + <int64_t>y * W, W, keys, st)   # in increasing x
     if own:
         for i in range(4):
@@ -285,14 +265,15 @@ cdef void _ingest(const Job* J, Scratch* S, int y, bint own) noexcept nogil:
     S.nk[slot] = n
     S.rowid[slot] = y
     memset(S.flags + <int64_t>slot * W, 0, n)
-    if J.paint:
-        _geometry(J, keys, n, S.geo_fl + <int64_t>slot * W, S.geo_w + <int64_t>slot * W)
+    # warp columns (occlusion) and right-view column + splat weights (paint), once per point
+    vpp_geometry(keys, n, xw if J.occ_on else NULL,
+                 S.geo_fl + <int64_t>slot * W if J.paint else NULL, S.geo_w + <int64_t>slot * W,
+                 J.splat, J.alpha, J.wa)
     if J.occ_on:
         for i in range(n):
-            xw = _xw(keys[i])
             d = vpp_sw_u2f(<uint32_t>(keys[i] >> 32))
-            if d > wp[xw]:
-                wp[xw] = d
+            if d > wp[xw[i]]:
+                wp[xw[i]] = d
 
 
 cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
@@ -305,6 +286,7 @@ cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
     cdef int slot = q & (J.ring - 1)
     cdef int W = J.W, H = J.H, nwin = J.nwin, rx2 = J.rx2, ry2 = J.ry2, npad = J.npad
     cdef const uint64_t* keys = S.keys + <int64_t>slot * W
+    cdef const int32_t* xws = S.xw + <int64_t>slot * W
     cdef uint8_t* flags = S.flags + <int64_t>slot * W
     cdef const float* wq = S.warp + <int64_t>slot * J.ww + J.woff
     cdef const float* wr
@@ -316,7 +298,7 @@ cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
     for i in range(n):
         d = vpp_sw_u2f(<uint32_t>(keys[i] >> 32))
         dd = d
-        xw = _xw(keys[i])
+        xw = xws[i]
         found = wq[xw] > d                   # lost a collision
         if not found:
             thr = <float>(dd + t - (dd + t + J.penmax + 1.0) * 9.5367431640625e-07)   # d > 0, t >= 0
