@@ -18,12 +18,17 @@ cdef inline uint64_t _seedmix(uint64_t seed) noexcept nogil:
     return seed * <uint64_t>0xD1B54A32D192ED03ULL
 
 
+cdef enum:
+    PAT_ROW_STEP = 23679    # rng.ROW_STEP
+    PAT_MASK = 65535        # rng.TABLE_SIZE - 1
+
+
 cdef inline int64_t _pidx(int64_t x, int64_t y) noexcept nogil:
     """Pattern-table index of pixel (x, y): ``(x + y * ROW_STEP) mod TABLE_SIZE`` (see ``rng.py``).
 
     The table given to the kernels is padded past ``TABLE_SIZE`` entries with a
     copy of its start, so ``_pidx(x0, y) + k`` reads pixel ``x0 + k`` directly."""
-    return (x + y * 23679) & 65535
+    return (x + y * PAT_ROW_STEP) & PAT_MASK
 
 
 cdef inline uint64_t _w16(double w) noexcept nogil:

@@ -393,9 +393,76 @@ static inline void vpp_splat16_avx2(uint8_t* dst, const uint8_t* val, int C,
     a = vpp_blend_avx2(a, _mm256_cvtepu8_epi16(v), vpp_lanes16_avx2(k0 * C, k1 * C), w0);
     vpp_store_packed_avx2(dst, a);
 }
+
+/* The blend with w < 32768 (every weight when alpha <= 0.5): w fits a signed
+ * 16-bit lane, so mulhi_epi16 gives floor(d w / 65536) directly and the sign
+ * correction of vpp_blend_avx2 is not needed; same bytes. */
+static inline __m256i vpp_blend_avx2_s(__m256i a, __m256i b, __m256i wv) {
+    __m256i d = _mm256_sub_epi16(b, a);
+    return _mm256_add_epi16(_mm256_add_epi16(a, _mm256_mulhi_epi16(d, wv)),
+                            _mm256_srli_epi16(_mm256_mullo_epi16(d, wv), 15));
+}
+
+/* vpp_splat16_avx2 for the nrows rows of one point's patch: row i's span
+ * starts at dst + i rs, its pattern at pat + C * ((p0 + i * step) & mask).
+ * Lane masks and weights are set up once. */
+static inline void vpp_splat_rows_avx2(uint8_t* dst, int64_t rs, const uint8_t* pat, int64_t p0,
+                                       int64_t step, int64_t mask, int nrows, int C, int k0, int k1,
+                                       uint32_t w0, uint32_t w1) {
+    const __m256i l1 = vpp_lanes16_avx2((k0 + 1) * C, (k1 + 1) * C), l0 = vpp_lanes16_avx2(k0 * C, k1 * C);
+    const __m256i wv1 = _mm256_and_si256(_mm256_set1_epi16((short)(uint16_t)(w1 > 65535u ? 65535u : w1)), l1);
+    const __m256i wv0 = _mm256_and_si256(_mm256_set1_epi16((short)(uint16_t)(w0 > 65535u ? 65535u : w0)), l0);
+    const int fast = w0 < 32768u && w1 < 32768u;
+    int i;
+    for (i = 0; i < nrows; i++, dst += rs, p0 += step) {
+        const uint8_t* val = pat + (size_t)C * (size_t)(p0 & mask);
+        __m256i a = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i*)dst));
+        __m128i v = _mm_loadu_si128((const __m128i*)val);
+        __m256i b1 = _mm256_cvtepu8_epi16(C == 3 ? _mm_slli_si128(v, 3) : _mm_slli_si128(v, 1));
+        __m256i b0 = _mm256_cvtepu8_epi16(v);
+        if (fast) {
+            if (w1) a = vpp_blend_avx2_s(a, b1, wv1);
+            a = vpp_blend_avx2_s(a, b0, wv0);
+        } else {
+            if (w1) a = vpp_blend_avx2(a, b1, l1, w1);
+            a = vpp_blend_avx2(a, b0, l0, w0);
+        }
+        vpp_store_packed_avx2(dst, a);
+    }
+}
+
+/* One uniform-weight blend of bytes [lo, hi) (hi <= 16) of 16-byte spans,
+ * for nrows rows (dst + i rs; pattern as in vpp_splat_rows_avx2, whose
+ * bytes [lo, hi) are blended in place). */
+static inline void vpp_blend_rows_avx2(uint8_t* dst, int64_t rs, const uint8_t* pat, int64_t p0,
+                                       int64_t step, int64_t mask, int nrows, int C, int lo, int hi,
+                                       uint32_t w) {
+    const __m256i l = vpp_lanes16_avx2(lo, hi);
+    const __m256i wv = _mm256_and_si256(_mm256_set1_epi16((short)(uint16_t)(w > 65535u ? 65535u : w)), l);
+    int i;
+    for (i = 0; i < nrows; i++, dst += rs, p0 += step) {
+        const uint8_t* val = pat + (size_t)C * (size_t)(p0 & mask);
+        __m256i a = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i*)dst));
+        __m256i b = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i*)val));
+        vpp_store_packed_avx2(dst, w < 32768u ? vpp_blend_avx2_s(a, b, wv) : vpp_blend_avx2(a, b, l, w));
+    }
+}
 #define VPP_BUILD_AVX2 1
 #else
 #define VPP_BUILD_AVX2 0
+/* not called without AVX2 (the kernel checks vpp_build_avx2()) */
+static inline void vpp_splat_rows_avx2(uint8_t* dst, int64_t rs, const uint8_t* pat, int64_t p0,
+                                       int64_t step, int64_t mask, int nrows, int C, int k0, int k1,
+                                       uint32_t w0, uint32_t w1) {
+    (void)dst; (void)rs; (void)pat; (void)p0; (void)step; (void)mask; (void)nrows; (void)C;
+    (void)k0; (void)k1; (void)w0; (void)w1;
+}
+static inline void vpp_blend_rows_avx2(uint8_t* dst, int64_t rs, const uint8_t* pat, int64_t p0,
+                                       int64_t step, int64_t mask, int nrows, int C, int lo, int hi,
+                                       uint32_t w) {
+    (void)dst; (void)rs; (void)pat; (void)p0; (void)step; (void)mask; (void)nrows; (void)C;
+    (void)lo; (void)hi; (void)w;
+}
 #endif
 
 /* Whether this build uses AVX2, and whether the CPU could run the AVX2 build

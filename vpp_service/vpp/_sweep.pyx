@@ -51,7 +51,7 @@ from libc.stdlib cimport malloc, free
 from libc.string cimport memcpy, memset
 from libc.math cimport INFINITY
 
-from vpp_service.vpp._pixel cimport _hash, _seedmix, _pidx, _w16, _ifloor, _fgd_pixel
+from vpp_service.vpp._pixel cimport _hash, _seedmix, _pidx, _w16, _ifloor, _fgd_pixel, PAT_ROW_STEP, PAT_MASK
 
 import numpy as np
 
@@ -68,6 +68,10 @@ cdef extern from "_sweep.h" nogil:
     int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, int k1,
                     uint32_t w0, uint32_t w1, int64_t room)
     uint32_t vpp_sw_f2u(float f)
+    void vpp_splat_rows_avx2(uint8_t* dst, int64_t rs, const uint8_t* pat, int64_t p0, int64_t step,
+                             int64_t mask, int nrows, int C, int k0, int k1, uint32_t w0, uint32_t w1)
+    void vpp_blend_rows_avx2(uint8_t* dst, int64_t rs, const uint8_t* pat, int64_t p0, int64_t step,
+                             int64_t mask, int nrows, int C, int lo, int hi, uint32_t w)
     void vpp_geometry(const uint64_t* keys, int n, int32_t* xw, int32_t* fl, uint64_t* w,
                       int splat, double alpha, uint32_t wa)
 
@@ -353,6 +357,8 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
     cdef int s1 = b1 - 1 + h if b1 - 1 + h < H - 1 else H - 1
     cdef int occmode = J.occmode
     cdef int use_flags = occmode == 1 or occmode == 3
+    # one vector per patch row (AVX2 build, C in {1, 3}, the patch plus a splat column within 16 bytes)
+    cdef int rows_fast = vpp_build_avx2() and (C == 1 or C == 3) and (K + 1) * C <= 16
     cdef int s, slot, i, j, m, pos, x, r, r0, r1, k0, k1, k, c, fl, flag, base
     cdef BandPt* pt
     cdef int64_t total = 0
@@ -409,6 +415,15 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
         w1 = pt.w1
         r0 = s - h if s - h > b0 else b0
         r1 = s + h if s + h < b1 - 1 else b1 - 1
+        if rows_fast and fl - h >= 0 and fl + h + 1 < W and <int64_t>(W - fl + h) * C >= 16:
+            # the whole patch column at once: weights and lane masks set up once
+            if J.splat:
+                vpp_splat_rows_avx2(J.oR + r0 * rs + (fl - h) * C, rs, J.pat, x - h + <int64_t>r0 * PAT_ROW_STEP,
+                                    PAT_ROW_STEP, PAT_MASK, r1 - r0 + 1, C, k0, k1, w0, w1)
+            else:
+                vpp_blend_rows_avx2(J.oR + r0 * rs + (fl - h) * C, rs, J.pat, x - h + <int64_t>r0 * PAT_ROW_STEP,
+                                    PAT_ROW_STEP, PAT_MASK, r1 - r0 + 1, C, k0 * C, k1 * C, w0)
+            continue
         for r in range(r0, r1 + 1):
             v = J.pat + _pidx(x - h, r) * C
             oR = J.oR + r * rs
@@ -430,6 +445,10 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
         r0 = s - h if s - h > b0 else b0
         r1 = s + h if s + h < b1 - 1 else b1 - 1
         if not pt.occl:
+            if rows_fast and x - h >= 0 and <int64_t>(W - x + h) * C >= 16:
+                vpp_blend_rows_avx2(J.oL + r0 * rs + (x - h) * C, rs, J.pat, x - h + <int64_t>r0 * PAT_ROW_STEP,
+                                    PAT_ROW_STEP, PAT_MASK, r1 - r0 + 1, C, k0 * C, k1 * C, J.wa)
+                continue
             for r in range(r0, r1 + 1):
                 _span(J, J.oL + r * rs, J.pat + _pidx(x - h, r) * C, k0, k1, x - h, J.wa)
             continue
