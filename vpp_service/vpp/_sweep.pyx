@@ -63,7 +63,8 @@ cdef extern from "_sweep.h" nogil:
     float vpp_sw_u2f(uint32_t u)
     int vpp_build_avx2()
     int vpp_cpu_supports_avx2()
-    int vpp_occ_row_cand(const float* w, const float* pen, int npad, float thr)
+    int vpp_occ_window_cand(const float* const* rows, const float* const* pens, int nr, int npad,
+                            int64_t off, float thr)
     void vpp_blend_span(uint8_t* dst, const uint8_t* val, int n, uint32_t w, int64_t room)
     int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, int k1,
                     uint32_t w0, uint32_t w1, int64_t room)
@@ -168,6 +169,9 @@ cdef struct Scratch:
     int* rowid          # ring
     float* warp         # ring x ww
     int32_t* xw         # ring x W: warp column x - round(d) per key
+    const float** wrows # 2 ry2 + 1: the current window's warp rows (column 0)
+    const float** prows # 2 ry2 + 1: their float penalty rows
+    const double** erows  # 2 ry2 + 1: their exact penalty rows
     int64_t cap         # contribution capacity
     int32_t* geo_fl     # ring x W: right-view column floor(x') (or round(x') without splat)
     uint64_t* geo_w     # ring x W: right-view weights w0 | w1 << 32 (1/65536)
@@ -185,6 +189,9 @@ cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
     S.geo_fl = <int32_t*>malloc(sizeof(int32_t) * (J.ring * J.W + 1))
     S.geo_w = <uint64_t*>malloc(sizeof(uint64_t) * (J.ring * J.W + 1))
     S.xw = <int32_t*>malloc(sizeof(int32_t) * (J.ring * J.W + 1))
+    S.wrows = <const float**>malloc(sizeof(float*) * (2 * J.ry2 + 1))
+    S.prows = <const float**>malloc(sizeof(float*) * (2 * J.ry2 + 1))
+    S.erows = <const double**>malloc(sizeof(double*) * (2 * J.ry2 + 1))
     S.flags = <uint8_t*>malloc(<int64_t>J.ring * J.W + 1)
     S.nk = <int*>malloc(sizeof(int) * J.ring)
     S.rowid = <int*>malloc(sizeof(int) * J.ring)
@@ -197,6 +204,7 @@ cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
     S.bcnt = NULL
     S.failed = 0
     if (S.keys == NULL or S.geo_fl == NULL or S.geo_w == NULL or S.xw == NULL or S.flags == NULL
+            or S.wrows == NULL or S.prows == NULL or S.erows == NULL
             or S.nk == NULL or S.rowid == NULL or S.warp == NULL):
         S.failed = 1
         return 1
@@ -214,6 +222,9 @@ cdef void _scratch_free(Scratch* S) noexcept nogil:
     free(S.geo_fl)
     free(S.geo_w)
     free(S.xw)
+    free(S.wrows)
+    free(S.prows)
+    free(S.erows)
     free(S.flags)
     free(S.nk)
     free(S.rowid)
@@ -281,12 +292,12 @@ cdef void _ingest(const Job* J, Scratch* S, int y, bint own) noexcept nogil:
 
 
 cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
-    """Occlusion flags of row q's points.  Each window row is first screened in
+    """Occlusion flags of row q's points.  The window is first screened in
     float, 8 cells a vector: ``W > pen_f + thr`` with ``thr = f32(d + t - m)``
     and ``m = (|d| + t + pen_max + 1) / 2**20``.  The float roundings of
     ``pen_f``, ``thr`` and the sum are each below ``2**-24`` of those magnitudes,
     so a cell with ``(W - d) - pen > t`` in double always passes the screen;
-    only rows with a passing cell are checked exactly (in double, as the reference)."""
+    only points with a passing cell are checked exactly (in double, as the reference)."""
     cdef int slot = q & (J.ring - 1)
     cdef int W = J.W, H = J.H, nwin = J.nwin, rx2 = J.rx2, ry2 = J.ry2, npad = J.npad
     cdef const uint64_t* keys = S.keys + <int64_t>slot * W
@@ -295,10 +306,17 @@ cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
     cdef const float* wq = S.warp + <int64_t>slot * J.ww + J.woff
     cdef const float* wr
     cdef const double* pr
-    cdef int i, n = S.nk[slot], xw, dy, yn, j, found
+    cdef int i, n = S.nk[slot], xw, dy, yn, j, k, nr = 0, found
     cdef int64_t cnt = 0
     cdef float d, thr
     cdef double dd, t = J.t
+    for dy in range(-ry2, ry2 + 1):            # the window rows inside the image
+        yn = q + dy
+        if yn >= 0 and yn < H:
+            S.wrows[nr] = S.warp + <int64_t>(yn & (J.ring - 1)) * J.ww + J.woff - rx2
+            S.prows[nr] = J.penf + <int64_t>(dy + ry2) * npad
+            S.erows[nr] = J.pen + <int64_t>(dy + ry2) * nwin
+            nr += 1
     for i in range(n):
         d = vpp_sw_u2f(<uint32_t>(keys[i] >> 32))
         dd = d
@@ -306,20 +324,16 @@ cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
         found = wq[xw] > d                   # lost a collision
         if not found:
             thr = <float>(dd + t - (dd + t + J.penmax + 1.0) * 9.5367431640625e-07)   # d > 0, t >= 0
-            for dy in range(-ry2, ry2 + 1):
-                yn = q + dy
-                if yn < 0 or yn >= H:
-                    continue
-                wr = S.warp + <int64_t>(yn & (J.ring - 1)) * J.ww + J.woff + xw - rx2
-                if not vpp_occ_row_cand(wr, J.penf + <int64_t>(dy + ry2) * npad, npad, thr):
-                    continue
-                pr = J.pen + <int64_t>(dy + ry2) * nwin
-                for j in range(nwin):
-                    if (<double>wr[j] - dd) - pr[j] > t:
-                        found = 1
+            if vpp_occ_window_cand(S.wrows, S.prows, nr, npad, xw, thr):
+                for k in range(nr):
+                    wr = S.wrows[k] + xw
+                    pr = S.erows[k]
+                    for j in range(nwin):
+                        if (<double>wr[j] - dd) - pr[j] > t:
+                            found = 1
+                            break
+                    if found:
                         break
-                if found:
-                    break
         if found:
             flags[i] = 1
             cnt += 1
