@@ -177,6 +177,7 @@ cdef struct Scratch:
     uint64_t* geo_w     # ring x W: right-view weights w0 | w1 << 32 (1/65536)
     uint64_t* bkey      # band points: (float_bits(d) << 32) | gather position
     BandPt* bpt         # by gather position
+    BandPt* spt         # in paint order (d, y, x)
     uint64_t* btmp      # sort scratch (cap), then bucket ids and counts below
     int* bbucket        # cap
     int* bcnt           # cap + 1
@@ -199,6 +200,7 @@ cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
     S.cap = 0
     S.bkey = NULL
     S.bpt = NULL
+    S.spt = NULL
     S.btmp = NULL
     S.bbucket = NULL
     S.bcnt = NULL
@@ -235,6 +237,7 @@ cdef void _scratch_free(Scratch* S) noexcept nogil:
 cdef void _free_band(Scratch* S) noexcept nogil:
     free(S.bkey)
     free(S.bpt)
+    free(S.spt)
     free(S.btmp)
     free(S.bbucket)
     free(S.bcnt)
@@ -248,10 +251,11 @@ cdef int _reserve(const Job* J, Scratch* S, int64_t n) noexcept nogil:
     _free_band(S)
     S.bkey = <uint64_t*>malloc(sizeof(uint64_t) * n)
     S.bpt = <BandPt*>malloc(sizeof(BandPt) * n)
+    S.spt = <BandPt*>malloc(sizeof(BandPt) * n)
     S.btmp = <uint64_t*>malloc(sizeof(uint64_t) * n)
     S.bbucket = <int*>malloc(sizeof(int) * n)
     S.bcnt = <int*>malloc(sizeof(int) * (n + 1))
-    if (S.bkey == NULL or S.bpt == NULL or S.btmp == NULL
+    if (S.bkey == NULL or S.bpt == NULL or S.spt == NULL or S.btmp == NULL
             or S.bbucket == NULL or S.bcnt == NULL):
         S.cap = 0
         S.failed = 1
@@ -373,7 +377,7 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
     cdef int use_flags = occmode == 1 or occmode == 3
     # one vector per patch row (AVX2 build, C in {1, 3}, the patch plus a splat column within 16 bytes)
     cdef int rows_fast = vpp_build_avx2() and (C == 1 or C == 3) and (K + 1) * C <= 16
-    cdef int s, slot, i, j, m, pos, x, r, r0, r1, k0, k1, k, c, fl, flag, base
+    cdef int s, slot, i, j, m, x, r, r0, r1, k0, k1, k, c, fl, flag, base
     cdef BandPt* pt
     cdef int64_t total = 0
     cdef uint64_t key, wpair
@@ -414,11 +418,12 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
             pt.d = vpp_sw_u2f(<uint32_t>(key >> 32))
             m += 1
     vpp_sort_keys(S.bkey, m, S.btmp, S.bbucket, S.bcnt)
+    for j in range(m):      # into paint order once: both passes then read sequentially
+        S.spt[j] = S.bpt[<int>(S.bkey[j] & LOW32)]
     # 2. right view: each visible point's pattern span per covered band row (read
     #    in place from the table), splatted; geometry was computed at ingest
     for j in range(m):
-        pos = <int>(S.bkey[j] & LOW32)
-        pt = &S.bpt[pos]
+        pt = &S.spt[j]
         if pt.occl:
             continue
         s = pt.s
@@ -451,8 +456,7 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
                 _span(J, oR, v, k0, k1, fl - h, w0)
     # 3. left view: the pattern, or (FGD) the final right row's content at x'
     for j in range(m):
-        pos = <int>(S.bkey[j] & LOW32)
-        pt = &S.bpt[pos]
+        pt = &S.spt[j]
         s = pt.s
         x = pt.x
         _patch_range(x, h, W, &k0, &k1)
