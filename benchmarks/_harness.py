@@ -36,6 +36,27 @@ def median_ms(fn: Callable[[], Any], reps: int) -> float:
     return float(np.median(ts) * 1e3)
 
 
+def paired_ratio(fn: Callable[[], Any], ref: Callable[[], Any], reps: int) -> float:
+    """Median over ``reps`` alternating runs of ``time(fn) / time(ref)``, after one warm-up each.
+
+    Both calls see the same machine state (a shared VM drifts by tens of
+    percent between a block of one and a block of the other).
+    """
+    if isinstance(reps, bool) or not isinstance(reps, int) or reps < 1:
+        raise ValueError(f"reps: must be an integer >= 1, got {reps!r}")
+    fn()
+    ref()
+    ratios = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        ref()
+        t1 = time.perf_counter()
+        fn()
+        t2 = time.perf_counter()
+        ratios.append((t2 - t1) / (t1 - t0))
+    return float(np.median(ratios))
+
+
 def write_report(path: str | Path, rows: list[dict[str, Any]], **meta: Any) -> Path:
     """Write ``{"meta": {...}, "results": rows}`` as indented JSON; create the folder.
 
