@@ -11,6 +11,7 @@ import pytest
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
 from vpp_service.service import wire
 from vpp_service.settings import SettingsError
+from vpp_service.vpp import depth_to_disparity
 from vpp_service.sinks import SINKS, build_sink
 from vpp_service.sinks.base import SinkContext
 from vpp_service.sinks.folder import write_atomic
@@ -82,7 +83,12 @@ def assert_same_frame(got: StereoFrame, ref: StereoFrame) -> None:
     np.testing.assert_array_equal(got.right, ref.right)
     assert got.calib == ref.calib
     # the sparse depth the fusion consumes: sparse disparity when present, else metric depth
-    assert_same_optional(got.sparse_disparity, ref.sparse_disparity)
+    # (which replays with its disparity, computed at the points)
+    if ref.sparse_disparity is None and ref.sensor_depth is not None:
+        c = got.calib
+        assert_same_optional(got.sparse_disparity, depth_to_disparity(ref.sensor_depth, c.f, c.baseline, c.doffs))
+    else:
+        assert_same_optional(got.sparse_disparity, ref.sparse_disparity)
     assert_same_optional(got.sensor_depth, None if ref.sparse_disparity is not None else ref.sensor_depth)
     assert_same_optional(got.gt_disparity, ref.gt_disparity)
 
@@ -120,7 +126,7 @@ def test_metric_depth_grayscale_round_trip(tmp_path):
     frames, rejects = replay(tmp_path)
     assert not rejects and len(frames) == 2
     for got, r in zip(frames, ref):
-        assert got.left.ndim == 2 and got.sparse_disparity is None
+        assert got.left.ndim == 2 and got.sparse_disparity is not None
         assert_same_frame(got, r)
 
 

@@ -10,6 +10,7 @@ import pytest
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
 from vpp_service.service import wire
 from vpp_service.service.wire import WireError
+from vpp_service.vpp import depth_to_disparity
 
 
 def make_frame(h=6, w=8, c=3, seed=0, depth="metric"):
@@ -48,8 +49,28 @@ def test_frame_roundtrip_metric(c, enc):
     assert (out.rig, out.seq, out.stamp_ns) == ("r1", 7, 123456789)
     assert out.calib == fr.calib
     np.testing.assert_array_equal(out.sensor_depth, fr.sensor_depth)  # NaN positions equal too
-    assert out.sparse_disparity is None
+    # metric points also give their disparity, computed at the points: the reference is the dense conversion
+    c_ = fr.calib
+    np.testing.assert_array_equal(out.sparse_disparity,
+                                  depth_to_disparity(out.sensor_depth, c_.f, c_.baseline, c_.doffs))
     np.testing.assert_array_equal(out.gt_disparity, fr.gt_disparity)
+
+
+@pytest.mark.parametrize("doffs", [0.0, 3.0, 40.0])
+def test_points_disparity_equals_dense_conversion(doffs):
+    """Colliding points (nearest wins), points whose disparity is <= 0 (large doffs)."""
+    rng = np.random.default_rng(3)
+    h, w = 12, 20
+    n = 150                                    # more points than pixels: many collisions
+    uv = np.stack([rng.uniform(-0.49, w - 0.51, n), rng.uniform(-0.49, h - 0.51, n)], 1).astype("<f4")
+    z = rng.uniform(0.5, 30.0, n).astype("<f4")
+    m = {"kind": "points", "n": n, "uv": uv.tobytes(), "z": z.tobytes()}
+    calib = Calibration(f=100.0, baseline=0.5, doffs=doffs)
+    sensor, disp = wire.decode_depth(m, h, w, calib=calib)
+    ref = depth_to_disparity(sensor, calib.f, calib.baseline, calib.doffs)
+    np.testing.assert_array_equal(disp, ref)
+    assert np.isnan(disp).any() and np.isfinite(disp).any()
+    assert wire.decode_depth(m, h, w)[1] is None          # no calibration: metric only
 
 
 @pytest.mark.parametrize("kind", ["auto", "disparity_points", "map"])

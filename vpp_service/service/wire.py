@@ -350,11 +350,17 @@ def _splat(h: int, w: int, uv: np.ndarray, vals: np.ndarray, keep: str) -> np.nd
 
 
 def decode_depth(m: Any, h: int, w: int, path: str = "depth",
-                 limits: WireLimits = DEFAULT_LIMITS) -> tuple[np.ndarray | None, np.ndarray | None]:
+                 limits: WireLimits = DEFAULT_LIMITS,
+                 calib: Calibration | None = None) -> tuple[np.ndarray | None, np.ndarray | None]:
     """Validate a ``SparseDepth`` map; return ``(sensor_depth_m, sparse_disparity_px)``.
 
-    Exactly one of the two is not None. Points are rounded to the nearest pixel;
-    when two land on one pixel the nearest (smaller depth / larger disparity) wins.
+    Exactly one of the two is not None, except for metric ``points`` with a
+    ``calib``: their disparity ``f b / z - doffs`` is then also computed, at the
+    points only (the same float32 values as
+    :func:`vpp_service.vpp.depth_to_disparity` of the metric map, which costs
+    four passes over the whole map; points with ``d <= 0`` are left out).
+    Points are rounded to the nearest pixel; when two land on one pixel the
+    nearest (smaller depth / larger disparity) wins.
 
     Raises
     ------
@@ -389,7 +395,13 @@ def decode_depth(m: Any, h: int, w: int, path: str = "depth",
         if not np.isfinite(vals).all() or (vals <= 0).any():
             raise WireError(f"{p}{key}: values must be finite and > 0")
     arr = _splat(h, w, uv, vals.astype(np.float32), "min" if kind == "points" else "max")
-    return (arr, None) if kind == "points" else (None, arr)
+    if kind != "points":
+        return None, arr
+    if calib is None:
+        return arr, None
+    d = calib.f * calib.baseline / vals.astype(np.float64) - calib.doffs
+    keep = d > 0
+    return arr, _splat(h, w, uv[keep], d[keep].astype(np.float32), "max")
 
 
 def _encode_gt(gt: np.ndarray) -> dict[str, Any]:
@@ -475,8 +487,9 @@ def encode_frame(frame: StereoFrame, enc: str = "raw", depth_kind: str = "auto",
 def decode_frame(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> StereoFrame:
     """Parse and fully validate an ``in/frame`` message into a :class:`StereoFrame`.
 
-    Metric depth arrives as ``sensor_depth`` (the pipeline converts it to
-    disparity with the calibration); disparity points/maps as ``sparse_disparity``.
+    Metric depth arrives as ``sensor_depth``, and metric points also as their
+    ``sparse_disparity`` (see :func:`decode_depth`; a metric map is converted
+    by the pipeline); disparity points/maps as ``sparse_disparity``.
 
     Raises
     ------
@@ -493,7 +506,7 @@ def decode_frame(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> StereoF
     h, w = left.shape[:2]
     sensor = disp = gt = None
     if msg.get("depth") is not None:
-        sensor, disp = decode_depth(msg["depth"], h, w, "depth", limits)
+        sensor, disp = decode_depth(msg["depth"], h, w, "depth", limits, calib)
     if msg.get("gt") is not None:
         gt = _decode_gt(msg["gt"], h, w)
     return StereoFrame(left=left, right=right, calib=calib, sparse_disparity=disp, sensor_depth=sensor,

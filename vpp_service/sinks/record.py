@@ -17,7 +17,9 @@ back unchanged by::
 The default pattern ``{rig}_{seq:09d}`` sorts by sequence number. Sparse depth
 is recorded as the fusion consumes it: ``sparse_disparity`` as disparity points
 when the frame has it (simulated sensors also attach the metric depth it was
-derived from; that copy is not recorded), else ``sensor_depth`` as metric points.
+derived from, and metric points received over the wire arrive with their
+disparity too; that metric copy is not recorded), else ``sensor_depth`` as
+metric points.
 Fields the wire format does not carry (``name``, ``nocc_mask``, ``meta``) are
 not recorded.
 
