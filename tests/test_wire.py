@@ -202,6 +202,13 @@ BIG = 1 << 40
                     "z": np.array([1.0], "<f4").tobytes()}), "depth.uv"),
     (raw_msg(depth={"kind": "points", "n": 1, "uv": np.array([1.0, 1.0], "<f4").tobytes(),
                     "z": np.array([np.nan], "<f4").tobytes()}), "depth.z"),
+    *[(raw_msg(depth={"kind": "points", "n": 3, "uv": np.array(uv, "<f4").tobytes(),
+                      "z": np.array([1.0, 2.0, 3.0], "<f4").tobytes()}), "depth.uv")
+      for uv in ([1, 1, 2, np.nan, 3, 3], [1, 1, np.inf, 2, 3, 3], [1, 1, 2, 2, -0.6, 3],
+                 [1, 1, 2, 5.5, 3, 3], [7.5, 1, 2, 2, 3, 3], [1, -np.inf, 2, 2, 3, 3])],
+    *[(raw_msg(depth={"kind": "disparity_points", "n": 3, "uv": np.array([1, 1, 2, 2, 3, 3], "<f4").tobytes(),
+                      "d": np.array(d, "<f4").tobytes()}), "depth.d")
+      for d in ([1.0, np.inf, 2.0], [1.0, 0.0, 2.0], [1.0, 2.0, -1.0], [np.nan, 1.0, 1.0])],
     (raw_msg(depth={"kind": "map", "h": 6, "w": 8, "unit": "m", "data": b"\0" * 4}), "depth.data"),
     (raw_msg(depth={"kind": "map", "h": 5, "w": 8, "unit": "m", "data": b"\0" * 160}), "depth.h"),
     (raw_msg(depth={"kind": "map", "h": 6, "w": 8, "unit": "ft", "data": b"\0" * 192}), "depth.unit"),
@@ -212,6 +219,13 @@ def test_malformed_frames_are_rejected(payload, field):
     with pytest.raises(WireError) as exc:
         wire.decode_frame(payload)
     assert str(exc.value).startswith(field), str(exc.value)
+
+
+def test_points_on_the_rounding_border_are_accepted():
+    uv = np.array([[-0.5, -0.5], [7.49, 5.49]], "<f4")
+    m = {"kind": "disparity_points", "n": 2, "uv": uv.tobytes(), "d": np.array([2.0, 3.0], "<f4").tobytes()}
+    _, disp = wire.decode_depth(m, 6, 8)
+    assert disp[0, 0] == 2.0 and disp[5, 7] == 3.0 and np.isnan(disp).sum() == 46
 
 
 def test_png_header_size_mismatch_is_rejected_before_decoding():
