@@ -33,6 +33,7 @@ import msgpack
 import numpy as np
 
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
+from vpp_service.service import msgview
 
 #: Wire format version written and accepted.
 VERSION = 1
@@ -127,11 +128,12 @@ def _str(msg: Mapping[str, Any], key: str, path: str, choices: tuple[str, ...] |
     return v
 
 
-def _bytes(msg: Mapping[str, Any], key: str, path: str) -> bytes:
+def _bytes(msg: Mapping[str, Any], key: str, path: str) -> bytes | memoryview:
+    """A bin field: a read-only view of the payload (no copy; see :mod:`.msgview`)."""
     v = _req(msg, key, path)
     if not isinstance(v, (bytes, bytearray, memoryview)):
         raise WireError(f"{path}{key}: must be binary (msgpack bin), got {type(v).__name__}")
-    return bytes(v) if not isinstance(v, bytes) else v
+    return v
 
 
 def _map(v: Any, path: str) -> Mapping[str, Any]:
@@ -149,6 +151,9 @@ def _f32(data: bytes, count: int, field: str) -> np.ndarray:
 def unpack(payload: bytes | bytearray | memoryview, limits: WireLimits = DEFAULT_LIMITS) -> dict[str, Any]:
     """Unpack one msgpack message with hard container limits.
 
+    ``bin`` fields come back as read-only ``memoryview`` slices of ``payload``
+    (:mod:`vpp_service.service.msgview`: no second copy of the images).
+
     Raises
     ------
     WireError
@@ -162,13 +167,11 @@ def unpack(payload: bytes | bytearray | memoryview, limits: WireLimits = DEFAULT
     if n > limits.max_message_bytes:
         raise WireError(f"message: {n} bytes exceeds the limit of {limits.max_message_bytes}")
     try:
-        msg = msgpack.unpackb(
-            payload, raw=False, strict_map_key=True, use_list=True,
+        msg = msgview.loads(payload, msgview.Limits(
             max_bin_len=n, max_str_len=min(n, 1 << 20), max_array_len=min(n, 1 << 16),
-            max_map_len=min(n, 1 << 12), max_ext_len=0,
-        )
-    except Exception as exc:  # msgpack raises several unrelated types
-        raise WireError(f"message: not valid msgpack ({type(exc).__name__}: {exc})") from None
+            max_map_len=min(n, 1 << 12)))
+    except msgview.MsgViewError as exc:
+        raise WireError(f"message: not valid msgpack ({exc})") from None
     if not isinstance(msg, dict):
         raise WireError(f"message: top level must be a map, got {type(msg).__name__}")
     return msg
