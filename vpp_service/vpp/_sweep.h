@@ -289,8 +289,13 @@ static inline void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* buck
     memcpy(keys, tmp, sizeof(uint64_t) * (size_t)n);
 }
 
-/* The candidate test over a whole window: rows[k] + off (k < nr) against
- * pens[k], any passing cell in any row.  One branch per point. */
+/* Candidate test of a whole occlusion window: is rows[k][off + c] >
+ * pens[k][c] + thr for some row k < nr and column c < npad?  npad is a
+ * multiple of 8; each pens row is padded with +inf past the window (and is
+ * +inf at the point's own cell), and the warp rows may be read up to npad.
+ * Empty warp cells are -inf and never pass.  One branch per point; see
+ * _classify for why the float test never misses a cell that the exact
+ * (double) rule flags. */
 static inline int vpp_occ_window_cand(const float* const* rows, const float* const* pens, int nr,
                                       int npad, int64_t off, float thr) {
     int k, c;
@@ -318,32 +323,6 @@ static inline int vpp_occ_window_cand(const float* const* rows, const float* con
 #else
     for (k = 0; k < nr; k++)
         for (c = 0; c < npad; c++) if (rows[k][off + c] > pens[k][c] + thr) return 1;
-    return 0;
-#endif
-}
-
-/* Candidate test of one occlusion-window row: is w[c] > pen[c] + thr for some
- * c < npad?  npad is a multiple of 8; pen is padded with +inf past the window
- * (and is +inf at the point's own cell), w may be read up to npad.  Empty warp
- * cells are -inf and never pass.  See _classify for why the float test never
- * misses a cell that the exact (double) rule flags. */
-static inline int vpp_occ_row_cand(const float* w, const float* pen, int npad, float thr) {
-    int c;
-#if defined(__AVX2__)
-    const __m256 t = _mm256_set1_ps(thr);
-    __m256 acc = _mm256_cmp_ps(_mm256_loadu_ps(w), _mm256_add_ps(_mm256_loadu_ps(pen), t), _CMP_GT_OQ);
-    for (c = 8; c < npad; c += 8)
-        acc = _mm256_or_ps(acc, _mm256_cmp_ps(_mm256_loadu_ps(w + c),
-                                              _mm256_add_ps(_mm256_loadu_ps(pen + c), t), _CMP_GT_OQ));
-    return _mm256_movemask_ps(acc);
-#elif VPP_HAVE_SSE2
-    const __m128 t = _mm_set1_ps(thr);
-    __m128 acc = _mm_setzero_ps();
-    for (c = 0; c < npad; c += 4)
-        acc = _mm_or_ps(acc, _mm_cmpgt_ps(_mm_loadu_ps(w + c), _mm_add_ps(_mm_loadu_ps(pen + c), t)));
-    return _mm_movemask_ps(acc);
-#else
-    for (c = 0; c < npad; c++) if (w[c] > pen[c] + thr) return 1;
     return 0;
 #endif
 }
