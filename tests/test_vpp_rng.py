@@ -86,6 +86,11 @@ def test_compiled_table_equals_reference(build, channels, hmax):
     np.testing.assert_array_equal(out[ref.size:], ref[:pad])     # padding repeats the start
 
 
+@pytest.mark.parametrize("build", BUILDS, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
+def test_compiled_index_constants_match_reference(build):
+    assert (build.TABLE_SIZE, build.ROW_STEP) == (rng.TABLE_SIZE, rng.ROW_STEP)
+
+
 def test_kernel_table_cached_and_padded():
     a = rng.kernel_table(3, 3, 1)
     assert a is rng.kernel_table(3, 3, 1)

@@ -51,6 +51,17 @@ static inline void vpp_scan_one(const float* d, int x, int W, uint64_t* keys, in
     }
 }
 
+/* The scalar tail [x, W) of a row scan and its statistics (see vpp_scan_row). */
+static inline int vpp_scan_finish(const float* d, int x, int W, uint64_t* keys, int n,
+                                  int64_t given, int64_t oob, int64_t* st) {
+    for (; x < W; x++) vpp_scan_one(d, x, W, keys, &n, &given, &oob);
+    st[0] = given;
+    st[1] = n;
+    st[2] = given - n;
+    st[3] = oob;
+    return n;
+}
+
 static inline int vpp_scan_row(const float* d, int W, uint64_t* keys, int64_t* st) {
     int64_t given = 0, oob = 0;
     int n = 0, x = 0;
@@ -94,12 +105,7 @@ static inline int vpp_scan_row(const float* d, int W, uint64_t* keys, int64_t* s
         }
     }
 #endif
-    for (; x < W; x++) vpp_scan_one(d, x, W, keys, &n, &given, &oob);
-    st[0] = given;
-    st[1] = n;
-    st[2] = given - n;
-    st[3] = oob;
-    return n;
+    return vpp_scan_finish(d, x, W, keys, n, given, oob, st);
 }
 
 /* The same scan, for a keys buffer of W entries of which those past the
@@ -148,12 +154,7 @@ static inline int vpp_scan_row_w(const float* d, int W, uint64_t* keys, int64_t*
         given += __builtin_popcount(g);
         oob += __builtin_popcount(o);
     }
-    for (; x < W; x++) vpp_scan_one(d, x, W, keys, &n, &given, &oob);
-    st[0] = given;
-    st[1] = n;
-    st[2] = given - n;
-    st[3] = oob;
-    return n;
+    return vpp_scan_finish(d, x, W, keys, n, given, oob, st);
 #else
     return vpp_scan_row(d, W, keys, st);
 #endif

@@ -89,8 +89,9 @@ def cpu_supports_avx2():
 
 cdef uint64_t LOW32 = 0xFFFFFFFFULL
 
-#: pattern-table entries per seed (``rng.TABLE_SIZE``; ``_pidx`` masks with it)
-TABLE_SIZE = 65536
+#: pattern-table entries per seed and row step of the index (``_pidx``; tested equal to ``rng``'s)
+TABLE_SIZE = PAT_MASK + 1
+ROW_STEP = PAT_ROW_STEP
 
 
 def table_padding(int C, int hmax):

@@ -54,6 +54,12 @@ def check_seed(seed: object) -> int:
     return seed
 
 
+def _check_channels(channels: object) -> int:
+    if isinstance(channels, bool) or not isinstance(channels, (int, np.integer)) or channels < 1:
+        raise ValueError(f"channels must be an int >= 1, got {channels!r}")
+    return int(channels)
+
+
 def pattern_hash(seed: int, x: np.ndarray | int, y: np.ndarray | int) -> np.ndarray:
     """64-bit splitmix64 hash of ``(x, y)`` for ``seed`` (vectorised).
 
@@ -90,9 +96,7 @@ def pattern_table(seed: int, channels: int) -> np.ndarray:
     channels : int
         Image channels (>= 1).
     """
-    if isinstance(channels, bool) or not isinstance(channels, (int, np.integer)) or channels < 1:
-        raise ValueError(f"channels must be an int >= 1, got {channels!r}")
-    return _table(check_seed(seed), int(channels))
+    return _table(check_seed(seed), _check_channels(channels))
 
 
 @functools.lru_cache(maxsize=8)
@@ -134,11 +138,10 @@ def kernel_table(seed: int, channels: int, hmax: int) -> np.ndarray:
     hmax : int
         Largest patch half-size (>= 0).
     """
-    if isinstance(channels, bool) or not isinstance(channels, (int, np.integer)) or channels < 1:
-        raise ValueError(f"channels must be an int >= 1, got {channels!r}")
+    channels = _check_channels(channels)
     if isinstance(hmax, bool) or not isinstance(hmax, (int, np.integer)) or hmax < 0:
         raise ValueError(f"hmax must be an int >= 0, got {hmax!r}")
-    return _kernel_table(check_seed(seed), int(channels), int(hmax))
+    return _kernel_table(check_seed(seed), channels, int(hmax))
 
 
 @functools.lru_cache(maxsize=4)
