@@ -246,6 +246,12 @@ cdef inline void _or4(uint64_t* o, const uint64_t* t) noexcept nogil:
     o[3] |= t[3]
 
 
+cdef inline void _window_rows(const Ctx* cx, int r, int* y0, int* y1) noexcept nogil:
+    """Rows ``[y0, y1]`` of the histogram search window centred on row r, clipped to the image."""
+    y0[0] = r - cx.sh_half if r - cx.sh_half > 0 else 0
+    y1[0] = r + cx.sh_half if r + cx.sh_half < cx.H - 1 else cx.H - 1
+
+
 cdef void _window_or(const Ctx* cx, const uint8_t* img, int c, int r,
                      const uint64_t* pre, const uint64_t* suf, int cen, uint64_t* o) noexcept nogil:
     """OR the occupancy of columns [cen - L//2, cen - L//2 + L - 1] (clipped) into o."""
@@ -276,12 +282,7 @@ cdef void _window_or(const Ctx* cx, const uint8_t* img, int c, int r,
     elif e == bend:
         _or4(o, suf + 4 * a)
     else:
-        y0 = r - cx.sh_half
-        y1 = r + cx.sh_half
-        if y0 < 0:
-            y0 = 0
-        if y1 > cx.H - 1:
-            y1 = cx.H - 1
+        _window_rows(cx, r, &y0, &y1)
         for y in range(y0, y1 + 1):
             for x in range(a, e + 1):
                 v = img[(<int64_t>y * W + x) * cx.C + c]
@@ -298,12 +299,7 @@ cdef void _window_count(const Ctx* cx, const uint8_t* img, int c, int r, int cen
         a = 0
     if e > W - 1:
         e = W - 1
-    y0 = r - cx.sh_half
-    y1 = r + cx.sh_half
-    if y0 < 0:
-        y0 = 0
-    if y1 > cx.H - 1:
-        y1 = cx.H - 1
+    _window_rows(cx, r, &y0, &y1)
     for y in range(y0, y1 + 1):
         for x in range(a, e + 1):
             counts[img[(<int64_t>y * W + x) * cx.C + c]] += 1
