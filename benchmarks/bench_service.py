@@ -95,6 +95,9 @@ def main() -> int:
     ap.add_argument("--omp-spincount", type=int, default=0, metavar="N",
                     help="run the service with GOMP_SPINCOUNT=N (OpenMP workers spin between frames "
                          "instead of sleeping: lower latency, one core busy); 0 = the default policy")
+    ap.add_argument("--shm-pool-mb", type=int, default=64,
+                    help="shared-memory pool of the camera's and the service's publishers "
+                         "(vpp_service.service.shm); 0 = plain puts")
     ap.add_argument("--json", default=str(DEFAULT_JSON))
     a = ap.parse_args()
 
@@ -103,6 +106,7 @@ def main() -> int:
     from vpp_service.matchers import build_matcher
     from vpp_service.service import wire
     from vpp_service.service.config import validate_config
+    from vpp_service.service.shm import ShmPutter
     from vpp_service.sources.sensors import build_sensor
     from vpp_service.sources.synthetic import make_scene
     from vpp_service.vpp import project
@@ -121,7 +125,8 @@ def main() -> int:
         "source": {"type": "zenoh", "ring_size": 64, "poll_s": a.source_poll_s},
         "matcher": {"name": "sgbm", "max_disparity": a.max_disparity},
         "queues": {"input_size": 64, "input_policy": "block", "output_size": 64, "output_policy": "block"},
-        "sinks": [{"type": "zenoh", "outputs": ["disparity"], "queue_size": 64}],
+        "sinks": [{"type": "zenoh", "outputs": ["disparity"], "queue_size": 64,
+                   "shm_pool_mb": a.shm_pool_mb}],
     }
     cfg = validate_config(raw_cfg)
 
@@ -200,13 +205,14 @@ def main() -> int:
                 got.release()
 
             sub = cli.declare_subscriber(wire.topic("vpp", RIG, "out/disparity"), on_out)
+            putter = ShmPutter(a.shm_pool_mb)
             pub = cli.declare_publisher(wire.topic("vpp", RIG, "in/frame"),
                                         congestion_control=zenoh.CongestionControl.BLOCK)
 
             def send(i: int) -> None:
                 buf, off = payloads[i % n_unique]
                 buf[off:off + 8] = struct.pack(">Q", time.time_ns())
-                pub.put(bytes(buf))
+                putter.put(pub, buf)
 
             # warm-up (also waits for the routes to be up)
             w = 0
@@ -298,6 +304,8 @@ def main() -> int:
         "status_timing_ms_paced": {k: v["p50"] for k, v in st_paced.get("timing_ms", {}).items()},
         "status_timing_ms_throughput": {k: v["p50"] for k, v in st_thr.get("timing_ms", {}).items()},
         "counters": st_thr.get("counters", {}),
+        "shm_pool_mb": a.shm_pool_mb,
+        "camera_shm": putter.stats(),
     }
     print(f"SGBM, {a.width}x{a.height}, {a.max_disparity} disparities, {a.frames} frames; "
           f"service in its own process over tcp/127.0.0.1")

@@ -61,6 +61,30 @@ def test_publishes_selected_outputs(sessions, outputs):
     assert sink.stats()["written"] == 3
 
 
+@pytest.mark.parametrize("pool_mb", [0, 16])
+def test_large_outputs_identical_with_and_without_shared_memory(sessions, pool_mb):
+    """A 3 MB disparity map comes through the same whether it left from the pool or not."""
+    svc, client = sessions
+    sub = client.declare_subscriber("vpp/m/out/disparity", zenoh.handlers.FifoChannel(8))
+    sink = build_sink("zenoh", {"outputs": ["disparity"], "shm_pool_mb": pool_mb},
+                      SinkContext(rig="m", session=svc))
+    sink.open()
+    time.sleep(0.3)
+    fr = make_frame().with_(seq=7)
+    disp = np.random.default_rng(3).random((750, 1000), dtype=np.float32)
+    big = fr.with_(left=np.zeros((750, 1000, 3), np.uint8), right=np.zeros((750, 1000, 3), np.uint8))
+    sink.write(FusionResult(frame=big, disparity=disp, depth=None, left_vpp=None, right_vpp=None,
+                            timing_ms={}))
+    sink.close(3.0)
+    got = collect(sub, 1)
+    assert len(got) == 1
+    np.testing.assert_array_equal(wire.decode_output(got[0].payload.to_bytes()).data, disp)
+    shm = sink.stats()["shm"]
+    assert shm["shm_puts"] + shm["plain_puts"] == 1 and shm["fallbacks"] == 0
+    if pool_mb == 0:
+        assert shm["plain_puts"] == 1
+
+
 def test_congestion_settings(sessions):
     svc, _ = sessions
     sink = build_sink("zenoh", {"outputs": ["disparity", "left_vpp"]}, SinkContext(session=svc))
@@ -93,7 +117,8 @@ def test_close_is_bounded_without_peers(sessions):
 
 
 @pytest.mark.parametrize("opts", [{"outputs": []}, {"outputs": ["normals"]}, {"outputs": ["depth", "depth"]},
-                                  {"queue_size": 0}, {"image_enc": "gif"}])
+                                  {"queue_size": 0}, {"image_enc": "gif"}, {"shm_pool_mb": -1},
+                                  {"shm_pool_mb": 5000}, {"shm_pool_mb": "64"}])
 def test_bad_options(opts):
     with pytest.raises(ValueError, match="sinks.zenoh"):
         build_sink("zenoh", opts)

@@ -44,6 +44,8 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--wait-subscriber", type=float, default=5.0, metavar="S",
                    help="wait up to S seconds for a matching subscriber before sending (0 = don't)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--shm-pool-mb", type=int, default=64, metavar="MB",
+                   help="publish large messages from a shared-memory pool of this size (0 = plain puts)")
     p.set_defaults(func=main)
 
 
@@ -78,12 +80,14 @@ def main(args: argparse.Namespace) -> int:
     from vpp_service.service import wire
     from vpp_service.service.app import open_session
     from vpp_service.service.config import ZenohSection
+    from vpp_service.service.shm import ShmPutter
     from vpp_service.sources.base import Pacer
 
     if not 0 < args.scale <= 1:
         raise ValueError(f"--scale: must be in (0, 1], got {args.scale}")
     if args.rate < 0 or args.count < 0:
         raise ValueError("--rate and --count must be >= 0")
+    putter = ShmPutter(args.shm_pool_mb)   # validates the pool size before anything starts
     zsec = ZenohSection(mode="peer", listen=list(args.listen), connect=list(args.connect),
                         multicast_scouting=args.multicast_scouting)
     src = _source(args)
@@ -135,13 +139,13 @@ def main(args: argparse.Namespace) -> int:
                 for p in parts:
                     payload = wire.encode_part(frame, p, args.enc, args.depth_kind)
                     if payload is not None:
-                        pubs[p].put(payload)
+                        putter.put(pubs[p], payload)
             else:
-                pubs["frame"].put(wire.encode_frame(frame, args.enc, args.depth_kind))
+                putter.put(pubs["frame"], wire.encode_frame(frame, args.enc, args.depth_kind))
             sent += 1
         src.stop(2.0)
         elapsed = time.monotonic() - t0
         for p in pubs.values():
             p.undeclare()
-    print(json.dumps({"sent": sent, "seconds": round(elapsed, 3)}), file=sys.stdout)
+    print(json.dumps({"sent": sent, "seconds": round(elapsed, 3), "shm": putter.stats()}), file=sys.stdout)
     return 0

@@ -24,6 +24,7 @@ from typing import Any, Literal
 
 from vpp_service.frame import FusionResult
 from vpp_service.service import wire
+from vpp_service.service.shm import ShmPutter
 from vpp_service.sinks.base import SINKS, Sink, SinkContext
 
 log = logging.getLogger(__name__)
@@ -41,11 +42,15 @@ class ZenohSinkOptions:
         Encoding of the ``left_vpp`` / ``right_vpp`` images.
     queue_size : int
         Results buffered between the pipeline and the publishing thread.
+    shm_pool_mb : int
+        Shared-memory pool the large outputs are published from
+        (:mod:`vpp_service.service.shm`); 0 = plain puts only.
     """
 
     outputs: list[str] = field(default_factory=lambda: ["disparity", "depth"])
     image_enc: Literal["raw", "png", "jpeg"] = "png"
     queue_size: int = 4
+    shm_pool_mb: int = 64
 
     def __post_init__(self) -> None:
         if not self.outputs:
@@ -55,6 +60,9 @@ class ZenohSinkOptions:
                 raise ValueError(f"outputs: unknown output {name!r}; known: {', '.join(wire.OUTPUTS)}")
         if len(set(self.outputs)) != len(self.outputs):
             raise ValueError("outputs: duplicates")
+        if isinstance(self.shm_pool_mb, bool) or not isinstance(self.shm_pool_mb, int) \
+                or not 0 <= self.shm_pool_mb <= 4096:
+            raise ValueError(f"shm_pool_mb: must be an int in [0, 4096], got {self.shm_pool_mb!r}")
         if self.queue_size < 1:
             raise ValueError(f"queue_size must be >= 1, got {self.queue_size}")
 
@@ -74,6 +82,7 @@ class ZenohSink(Sink):
         # per-result serialization / put durations (ms), reported by stats()
         self._encode_ms: deque[float] = deque(maxlen=200)
         self._put_ms: deque[float] = deque(maxlen=200)
+        self._putter = ShmPutter(options.shm_pool_mb)
 
     def open(self) -> None:
         """Declare one publisher per output and start the publishing thread."""
@@ -117,7 +126,7 @@ class ZenohSink(Sink):
                     payload = wire.encode_output(result, name, self.options.image_enc)
                     t1 = time.perf_counter()
                     if payload is not None:
-                        pub.put(payload)
+                        self._putter.put(pub, payload)
                     enc_s += t1 - t0
                     put_s += time.perf_counter() - t1
                 self._encode_ms.append(enc_s * 1e3)
@@ -154,6 +163,7 @@ class ZenohSink(Sink):
     def stats(self) -> dict[str, Any]:
         """Counters plus ``timing_ms``: median ``encode`` / ``put`` time per result (recent window)."""
         out: dict[str, Any] = dict(self._counters)
+        out["shm"] = self._putter.stats()
         timing = {}
         for key, d in (("encode", self._encode_ms), ("put", self._put_ms)):
             vals = sorted(d)
