@@ -33,7 +33,7 @@ import msgpack
 import numpy as np
 
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
-from vpp_service.service import msgview
+from vpp_service.service import _points, msgview
 
 #: Wire format version written and accepted.
 VERSION = 1
@@ -333,23 +333,64 @@ def encode_depth(frame: StereoFrame, kind: str = "auto") -> dict[str, Any] | Non
     return out
 
 
-def _winners(w: int, uv: np.ndarray, vals: np.ndarray, keep: str) -> tuple[np.ndarray, np.ndarray]:
-    """Flat pixel index of each point at rounded (x, y) and the points that win their
-    pixel (``keep`` = "min": smallest value, "max": largest), as ``(index, selection)``;
-    the selection is a slice when no two points share a pixel."""
-    idx = np.rint(uv[:, 1]).astype(np.int64) * w + np.rint(uv[:, 0]).astype(np.int64)
-    if idx.size < 2 or bool((idx[1:] > idx[:-1]).all()):
-        # row-major, one point per pixel (what encode_depth writes): no collision to resolve
-        return idx, slice(None)
-    # written in this order, the winner is written last: nearest point wins
-    return idx, np.argsort(-vals if keep == "min" else vals, kind="stable")
+def points_to_maps(uv: np.ndarray, vals: np.ndarray, h: int, w: int, keep: str,
+                   calib: Calibration | None = None, path: str = "depth.") -> tuple[np.ndarray, np.ndarray | None]:
+    """Validate sparse points and scatter them into H x W float32 maps (NaN = none).
 
+    Parameters
+    ----------
+    uv : numpy.ndarray
+        n x 2 float32 ``(x, y)`` positions in the left image; each lands on the
+        pixel ``(rint(y), rint(x))`` (round half to even) and must lie in
+        ``[-0.5, w - 0.5) x [-0.5, h - 0.5)``.
+    vals : numpy.ndarray
+        n float32 values, finite and > 0.
+    h, w : int
+        Map size.
+    keep : {"min", "max"}
+        Which value wins a pixel several points land on (the nearest point:
+        the smallest depth, the largest disparity).
+    calib : Calibration, optional
+        With metric values (``keep="min"``), also return their disparity
+        ``f b / z - doffs`` computed in float64 at the winning points (the
+        same float32 values as :func:`vpp_service.vpp.depth_to_disparity` of
+        the metric map, without its four passes over the whole map); pixels
+        where it is ``<= 0`` stay NaN.
+    path : str
+        Field prefix for error messages.
 
-def _scatter(h: int, w: int, idx: np.ndarray, vals: np.ndarray) -> np.ndarray:
-    """H x W float32 map, NaN except ``map.flat[idx] = vals`` (later entries win)."""
+    Returns
+    -------
+    (values_map, disparity_map or None)
+
+    Raises
+    ------
+    WireError
+        Non-finite coordinates, points outside the image, values not finite
+        and > 0 (checked in that order over all points).
+
+    Notes
+    -----
+    One pass in Cython (``_points.scatter_points``): about 4x faster than the
+    eight NumPy passes it replaces on a KITTI frame's 23 k points.
+    """
     out = np.full((h, w), np.nan, dtype=np.float32)
-    out.reshape(-1)[idx] = vals
-    return out
+    with_d = calib is not None and keep == "min"
+    out_d = np.full((h, w), np.nan, dtype=np.float32) if with_d else _NO_MAP
+    fb, doffs = (calib.f * calib.baseline, calib.doffs) if with_d else (0.0, 0.0)
+    bad = _points.scatter_points(np.ascontiguousarray(uv, dtype=np.float32).reshape(-1),
+                                 np.ascontiguousarray(vals, dtype=np.float32),
+                                 keep == "min", out, out_d, float(fb), float(doffs))
+    if bad & _points.BAD_UV:
+        raise WireError(f"{path}uv: coordinates must be finite")
+    if bad & _points.OUTSIDE:
+        raise WireError(f"{path}uv: points must lie inside the {w}x{h} left image")
+    if bad:
+        raise WireError(f"{path}{'z' if keep == 'min' else 'd'}: values must be finite and > 0")
+    return out, (out_d if with_d else None)
+
+
+_NO_MAP = np.empty((0, 0), np.float32)
 
 
 def decode_depth(m: Any, h: int, w: int, path: str = "depth",
@@ -390,31 +431,9 @@ def decode_depth(m: Any, h: int, w: int, path: str = "depth",
     uv = _f32(_bytes(m, "uv", p), 2 * n, p + "uv").reshape(n, 2)
     key = "z" if kind == "points" else "d"
     vals = _f32(_bytes(m, key, p), n, p + key)
-    if n:
-        # min / max propagate NaN and inf; 1-D reductions (numpy's axis-0 reduction
-        # of an n x 2 array is ~30x slower than four strided ones)
-        flat = uv.reshape(-1)
-        if not np.isfinite(flat).all():
-            raise WireError(f"{p}uv: coordinates must be finite")
-        xs, ys = flat[0::2], flat[1::2]
-        if xs.min() < -0.5 or xs.max() >= w - 0.5 or ys.min() < -0.5 or ys.max() >= h - 0.5:
-            raise WireError(f"{p}uv: points must lie inside the {w}x{h} left image")
-        vmin, vmax = vals.min(), vals.max()
-        if not (np.isfinite(vmin) and np.isfinite(vmax) and vmin > 0):
-            raise WireError(f"{p}{key}: values must be finite and > 0")
-    idx, sel = _winners(w, uv, vals, "min" if kind == "points" else "max")
-    idx, vals = idx[sel], vals[sel]
-    arr = _scatter(h, w, idx, vals.astype(np.float32))
     if kind != "points":
-        return None, arr
-    if calib is None:
-        return arr, None
-    # the nearest point (smallest z) has the largest disparity: the same winners
-    d = calib.f * calib.baseline / vals.astype(np.float64) - calib.doffs
-    keep = d > 0
-    if keep.all():
-        return arr, _scatter(h, w, idx, d.astype(np.float32))
-    return arr, _scatter(h, w, idx[keep], d[keep].astype(np.float32))
+        return None, points_to_maps(uv, vals, h, w, "max", path=p)[0]
+    return points_to_maps(uv, vals, h, w, "min", calib, path=p)
 
 
 def _encode_gt(gt: np.ndarray) -> dict[str, Any]:
