@@ -218,3 +218,53 @@ def test_fusion_without_usable_points_is_no_depth(values):
     assert fusion.counters == {"vpp": 0, "no_depth": 1}
     assert res.left_vpp is None and res.right_vpp is None
     np.testing.assert_array_equal(res.disparity, np.asarray(matcher.compute(frame.left, frame.right)))
+
+
+class PreparingProcess(SlowProcess):
+    """Processing step with the optional ``prepare_next`` hook; the hook fails on odd frames."""
+
+    def __init__(self, pipe_ref: list) -> None:
+        super().__init__(pipe_ref, delay=0.0)
+        self.prepared: list[int] = []
+
+    def prepare_next(self, frame) -> None:
+        self.prepared.append(frame.seq)
+        if frame.seq % 2:
+            raise RuntimeError("optional work failed")
+
+
+def test_prepare_next_runs_after_each_result_and_cannot_break_the_service():
+    ref: list = []
+    proc = PreparingProcess(ref)
+    sink = CollectSink()
+    pipe = Pipeline(sim_source(6), proc, [sink], input_policy="block")
+    ref.append(pipe)
+    run(pipe)
+    assert proc.prepared == [r.frame.seq for r in sink.results] == list(range(6))
+    assert pipe.counters["processed"] == 6 and pipe.counters["errors"] == 0
+
+
+@pytest.mark.parametrize("pattern, cached", [("random", True), ("histogram", False)])
+def test_fusion_prepare_next_caches_the_next_frames_pattern_table(pattern, cached):
+    from vpp_service.matchers import build_matcher
+    from vpp_service.vpp import VPPConfig
+    from vpp_service.vpp.rng import _kernel_table
+
+    src, got = sim_source(1, sensor="uniform"), []
+    src.open()
+    src.run(lambda f: got.append(f) or True, lambda r: None)
+    frame = got[0].with_(seq=41)
+    fusion = Fusion(build_matcher("sgbm", {"max_disparity": 32}), VPPConfig(pattern=pattern), seed=1000)
+    _kernel_table.cache_clear()
+    fusion.prepare_next(frame)
+    assert _kernel_table.cache_info().currsize == int(cached)
+    before = _kernel_table.cache_info()
+    res = fusion(frame.with_(seq=42))                  # seed 1042: the prepared table
+    after = _kernel_table.cache_info()
+    if cached:
+        assert (after.hits - before.hits, after.misses - before.misses) == (1, 0)
+    # preparing changes nothing in the output
+    _kernel_table.cache_clear()
+    again = fusion(frame.with_(seq=42))
+    np.testing.assert_array_equal(res.left_vpp, again.left_vpp)
+    np.testing.assert_array_equal(res.right_vpp, again.right_vpp)

@@ -256,6 +256,12 @@ class Pipeline:
                 self.output.put(result)
                 if self.output.dropped != before:
                     self._inc("dropped", self.output.dropped - before)
+            prepare = getattr(self.process, "prepare_next", None)
+            if prepare is not None:
+                try:
+                    prepare(result.frame)   # optional idle-time work for the next frame
+                except Exception as exc:
+                    log.debug("prepare_next(seq=%s): %r", result.frame.seq, exc)
             if self.max_frames and self.counters["processed"] >= self.max_frames:
                 self._enough.set()
                 self.source.request_stop()  # no more input wanted
