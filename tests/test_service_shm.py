@@ -87,3 +87,16 @@ def test_exhausted_pool_falls_back_without_losing_messages(pair):
 def test_rejects_bad_pool_size(bad):
     with pytest.raises(ValueError, match="pool_mb"):
         ShmPutter(bad)
+
+
+@pytest.mark.parametrize("pool_mb", [0, 16])
+def test_parts_arrive_joined(pair, pool_mb):
+    """A message given as parts (header, data) arrives as their concatenation, from the pool or not."""
+    pub, sub = pair
+    putter = ShmPutter(pool_mb)
+    parts = payloads([37, 200_000, 5], seed=4)
+    putter.put(pub, parts)
+    got = receive(sub, 1)
+    assert len(got) == 1 and got[0].payload.to_bytes() == b"".join(parts)
+    st = putter.stats()
+    assert st["shm_puts"] + st["plain_puts"] == 1 and (pool_mb > 0 or st["plain_puts"] == 1)

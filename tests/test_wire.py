@@ -147,6 +147,33 @@ def test_output_roundtrip():
         wire.encode_output(res, "bogus")
 
 
+@pytest.mark.parametrize("shape", [(1, 1), (100, 100), (200, 200)])   # bin8, bin16, bin32 data
+def test_output_parts_are_the_packb_message(shape):
+    """The parts joined are byte for byte what msgpack.packb writes for the same map."""
+    fr = make_frame()
+    disp = np.random.default_rng(0).random(shape, dtype=np.float32)
+    res = FusionResult(frame=fr, disparity=disp, depth=disp * 2, timing_ms={"match": 1.5, "vpp": 0.25},
+                       metrics={"bad2": 4.0}, vpp_stats={"projected": 2, "occluded": 1})
+    for name, arr in (("disparity", disp), ("depth", disp * 2)):
+        parts = wire.encode_output_parts(res, name)
+        assert len(parts) == 2 and parts[1] == arr.astype("<f4").tobytes()
+        fields = {"v": 1, "rig": fr.rig, "seq": fr.seq, "stamp_ns": fr.stamp_ns, "h": shape[0], "w": shape[1],
+                  "dtype": "f32", "calib": fr.calib.to_dict(), "timing_ms": {"match": 1.5, "vpp": 0.25}}
+        if name == "disparity":
+            fields.update(metrics={"bad2": 4.0}, vpp={"projected": 2, "occluded": 1})
+        want = msgpack.packb({**fields, "data": arr.astype("<f4").tobytes()}, use_bin_type=True)
+        assert b"".join(parts) == wire.encode_output(res, name) == want
+
+
+@pytest.mark.parametrize("nfields, nblob", [(0, 0), (14, 255), (15, 256), (20, 65535), (70000, 65536)])
+def test_map_parts_headers(nfields, nblob):
+    """fixmap / map16 / map32 and bin8 / bin16 / bin32 headers, as packb writes them."""
+    fields = {f"k{i}": i for i in range(nfields)}
+    blob = bytes(range(256)) * (nblob // 256) + bytes(nblob % 256)
+    assert b"".join(wire._map_parts(fields, "data", blob)) == \
+        msgpack.packb({**fields, "data": blob}, use_bin_type=True)
+
+
 @pytest.mark.parametrize("part", ["left", "right", "depth"])
 def test_parts_roundtrip(part):
     fr = make_frame()

@@ -17,7 +17,7 @@ fallback is counted.
 from __future__ import annotations
 
 import logging
-from typing import Any
+from typing import Any, Sequence
 
 log = logging.getLogger(__name__)
 
@@ -67,9 +67,15 @@ class ShmPutter:
             log.info("shared memory unavailable (%s); publishing with plain puts", exc)
             self._provider = None
 
-    def put(self, publisher: Any, payload: bytes) -> None:
-        """Publish ``payload`` on ``publisher``: from the pool if it fits, else plainly."""
-        n = len(payload)
+    def put(self, publisher: Any, payload: bytes | bytearray | Sequence[bytes | bytearray]) -> None:
+        """Publish ``payload`` on ``publisher``: from the pool if it fits, else plainly.
+
+        ``payload`` may be a list of parts whose concatenation is the message
+        (:func:`vpp_service.service.wire.encode_output_parts`): they are
+        written one after the other into the pool buffer, never joined there.
+        """
+        parts = [payload] if isinstance(payload, (bytes, bytearray)) else list(payload)
+        n = sum(len(p) for p in parts)
         if n >= MIN_SHM_BYTES and n <= self.pool_bytes:
             if not self._tried:
                 self._open()
@@ -81,12 +87,15 @@ class ShmPutter:
                     if self.fallbacks == 1:
                         log.info("shared-memory pool could not serve %d bytes (%s); plain put", n, exc)
                 else:
-                    buf[0:n] = payload
+                    off = 0
+                    for p in parts:
+                        buf[off:off + len(p)] = p
+                        off += len(p)
                     publisher.put(buf)
                     self.shm_puts += 1
                     return
         self.plain_puts += 1
-        publisher.put(payload)
+        publisher.put(parts[0] if len(parts) == 1 else b"".join(parts))
 
     def stats(self) -> dict[str, int]:
         """Counters: ``shm_puts``, ``plain_puts``, ``fallbacks``."""

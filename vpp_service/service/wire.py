@@ -635,28 +635,43 @@ def assemble(left: Part, right: Part, depth: Part | None) -> StereoFrame:
 
 
 # ------------------------------------------------------------------ outputs
-def _map_message(result: FusionResult, arr: np.ndarray, extra: Mapping[str, Any]) -> bytes:
+def _bin_header(n: int) -> bytes:
+    """msgpack ``bin`` header of an ``n``-byte payload (the smallest form, as ``packb`` writes it)."""
+    if n < 1 << 8:
+        return bytes((0xC4, n))
+    if n < 1 << 16:
+        return b"\xc5" + n.to_bytes(2, "big")
+    return b"\xc6" + n.to_bytes(4, "big")
+
+
+def _map_parts(fields: Mapping[str, Any], blob_key: str, blob: bytes) -> list[bytes]:
+    """``packb({**fields, blob_key: blob})`` as two parts: everything up to the blob, and the blob."""
+    pk = msgpack.Packer(use_bin_type=True, autoreset=False)
+    pk.pack_map_header(len(fields) + 1)
+    for k, v in fields.items():
+        pk.pack(k)
+        pk.pack(v)
+    pk.pack(blob_key)
+    return [pk.bytes() + _bin_header(len(blob)), blob]
+
+
+def _map_message(result: FusionResult, arr: np.ndarray, extra: Mapping[str, Any]) -> list[bytes]:
     fr = result.frame
     msg = {
         "v": VERSION, "rig": fr.rig, "seq": int(fr.seq), "stamp_ns": int(fr.stamp_ns),
         "h": int(arr.shape[0]), "w": int(arr.shape[1]), "dtype": "f32",
-        # a byte view of the (already contiguous float32) map: packb copies it once, no tobytes() copy
-        "data": memoryview(np.ascontiguousarray(arr, dtype="<f4")).cast("B"),
         "calib": fr.calib.to_dict() if fr.calib is not None else None,
         "timing_ms": {str(k): float(v) for k, v in result.timing_ms.items()},
     }
     msg.update(extra)
-    return msgpack.packb(msg, use_bin_type=True)
+    # the map's bytes stay a separate part (one copy out of the array): a
+    # publisher writes the parts straight into its buffer without joining them
+    return _map_parts(msg, "data", np.ascontiguousarray(arr, dtype="<f4").tobytes())
 
 
-def encode_output(result: FusionResult, name: str, enc: str = "raw") -> bytes | None:
-    """Serialize one output (``disparity``, ``depth``, ``left_vpp``, ``right_vpp``).
-
-    Returns None when the result does not have that output (e.g. no depth
-    without calibration, no painted pair when VPP was skipped). The
-    ``disparity`` message also carries ``metrics`` (vs ground truth) and
-    ``vpp`` (VPP counters) as extensions when known.
-    """
+def encode_output_parts(result: FusionResult, name: str, enc: str = "raw") -> list[bytes] | None:
+    """:func:`encode_output` as a list of byte strings whose concatenation is the
+    message (the float maps' data is its own part: no copy to join it)."""
     if name not in OUTPUTS:
         raise ValueError(f"name must be one of {OUTPUTS}, got {name!r}")
     fr = result.frame
@@ -675,7 +690,19 @@ def encode_output(result: FusionResult, name: str, enc: str = "raw") -> bytes | 
         return None
     msg = {"v": VERSION, "rig": fr.rig, "seq": int(fr.seq), "stamp_ns": int(fr.stamp_ns),
            "image": encode_image(img, enc)}
-    return msgpack.packb(msg, use_bin_type=True)
+    return [msgpack.packb(msg, use_bin_type=True)]
+
+
+def encode_output(result: FusionResult, name: str, enc: str = "raw") -> bytes | None:
+    """Serialize one output (``disparity``, ``depth``, ``left_vpp``, ``right_vpp``).
+
+    Returns None when the result does not have that output (e.g. no depth
+    without calibration, no painted pair when VPP was skipped). The
+    ``disparity`` message also carries ``metrics`` (vs ground truth) and
+    ``vpp`` (VPP counters) as extensions when known.
+    """
+    parts = encode_output_parts(result, name, enc)
+    return None if parts is None else b"".join(parts)
 
 
 @dataclass
@@ -729,6 +756,6 @@ def decode_output_image(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> 
 __all__ = [
     "VERSION", "DEFAULT_PREFIX", "OUTPUTS", "WireError", "WireLimits", "DEFAULT_LIMITS", "topic", "unpack",
     "encode_image", "decode_image", "encode_depth", "decode_depth", "encode_frame", "decode_frame",
-    "encode_part", "decode_part", "Part", "assemble", "encode_output", "decode_output", "OutputMap",
-    "decode_output_image",
+    "encode_part", "decode_part", "Part", "assemble", "encode_output", "encode_output_parts",
+    "decode_output", "OutputMap", "decode_output_image", "points_to_maps",
 ]

@@ -123,7 +123,7 @@ class ZenohSink(Sink):
                 enc_s = put_s = 0.0
                 for name, pub in self._pubs.items():
                     t0 = time.perf_counter()
-                    payload = wire.encode_output(result, name, self.options.image_enc)
+                    payload = wire.encode_output_parts(result, name, self.options.image_enc)
                     t1 = time.perf_counter()
                     if payload is not None:
                         self._putter.put(pub, payload)
