@@ -141,3 +141,23 @@ def test_backend_falls_back_to_the_portable_build(monkeypatch):
     monkeypatch.undo()
     monkeypatch.setenv("VPP_NO_AVX2", "1")
     assert backend._choose() is backend.portable
+
+
+def test_pooled_buffers_are_reset_between_calls(build):
+    """Work buffers are kept between calls: a call after a wider image, a taller
+    occlusion window, occlusion off, or after release_scratch() gives the bytes
+    of the reference (no state or capacity leaks from the previous call)."""
+    order = [0, 6, 5, 0, 7, 1, 6, 0]           # default, tall window, occlusion off, ...
+    for k, i in enumerate(order):
+        if k == 4:
+            assert backend.release_scratch() >= 1
+            assert backend.release_scratch() == 0   # nothing left to free
+        patch, C, splat, occ, alpha, window, t, shape, density = CASES[i]
+        cfg = VPPConfig(patch=patch, splat=splat, occlusion=occ, alpha=alpha,
+                        occ_window_x=window[0], occ_window_y=window[1], occ_t=t)
+        left, right, disp = case_arrays(i, shape, C, density, False)
+        rl, rr, rocc = ref_project(left, right, disp, cfg, seed=i)
+        res = project(left, right, disp, cfg, seed=i, num_threads=2)
+        np.testing.assert_array_equal(res.right, rr, err_msg=f"call {k} (case {i})")
+        np.testing.assert_array_equal(res.left, rl, err_msg=f"call {k} (case {i})")
+        np.testing.assert_array_equal(res.occluded, rocc if occ != "off" else False)
