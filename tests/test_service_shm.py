@@ -8,6 +8,7 @@ import pytest
 import zenoh
 
 from conftest import zenoh_test_config
+from test_sinks_zenoh import collect as receive   # keeps the samples (and the pool buffers they pin)
 from vpp_service.service.shm import MIN_SHM_BYTES, ShmPutter
 
 
@@ -21,18 +22,6 @@ def pair(zenoh_endpoint):
         while not pub.matching_status.matching and time.monotonic() < deadline:
             time.sleep(0.02)
         yield pub, sub
-
-
-def receive(sub, n, timeout=10.0):
-    """The next ``n`` samples (kept alive: their payloads may pin pool buffers)."""
-    out, deadline = [], time.monotonic() + timeout
-    while len(out) < n and time.monotonic() < deadline:
-        s = sub.try_recv()
-        if s is None:
-            time.sleep(0.005)
-        else:
-            out.append(s)
-    return out
 
 
 def payloads(sizes, seed=0):
