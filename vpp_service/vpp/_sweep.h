@@ -290,6 +290,119 @@ static inline void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* buck
     memcpy(keys, tmp, sizeof(uint64_t) * (size_t)n);
 }
 
+/* One point of a paint band (see _paint_band in _sweep.pyx). */
+typedef struct {
+    int32_t x;
+    int32_t s;          /* image row */
+    int32_t fl;         /* right-view column (see vpp_geometry) */
+    uint32_t w0;
+    uint32_t w1;
+    int32_t occl;       /* FGD-occluded */
+    float d;
+} vpp_band_pt;
+
+static inline void vpp_band_insertion_sort(vpp_band_pt* a, int n) {
+    int i, j;
+    for (i = 1; i < n; i++) {
+        vpp_band_pt v = a[i];
+        for (j = i; j > 0 && a[j - 1].d > v.d; j--) a[j] = a[j - 1];
+        a[j] = v;
+    }
+}
+
+#ifdef __cplusplus
+struct vpp_band_pt_less {
+    bool operator()(const vpp_band_pt& a, const vpp_band_pt& b) const { return a.d < b.d; }
+};
+#endif
+
+/* Stable sort of a band's points by d into out: in holds them in gather
+ * order (row, then x), so a stable sort by d gives the global paint order
+ * (d, y, x).  A bucket sort on the points themselves (no key array, no
+ * permutation pass afterwards), cheap on the bands' few thousand points:
+ *   1. bucket b = min(floor((d - dmin) * n / (dmax - dmin)), n - 1) in float,
+ *      8 points a vector (float subtraction and scaling by a positive
+ *      constant never reverse two values, so buckets are in d order);
+ *   2. count, prefix, scatter in input order (stable);
+ *   3. one insertion pass over the whole array puts each bucket in order
+ *      (buckets hold about one point, so it rarely moves anything and its
+ *      branch is predictable); a crowded bucket (> 32) gets std::stable_sort
+ *      first.
+ * dv: the points' d (n floats);
+ * dmin, dmax: their extremes.  Scratch: bucket holds n entries, cnt n + 1. */
+static inline void vpp_sort_band(const vpp_band_pt* in, const float* dv, int n, float dmin, float dmax,
+                                 vpp_band_pt* out, int* bucket, int* cnt) {
+    double scale_d = (double)n / ((double)dmax - (double)dmin);
+    float scale, top;
+    int i, j, b, s, e, crowded = 0;
+    if (n <= 24 || dmin == dmax || !(scale_d < 1e30)) {
+        memcpy(out, in, sizeof(vpp_band_pt) * (size_t)n);
+        if (dmin == dmax) return;
+        if (n <= 24) {
+            vpp_band_insertion_sort(out, n);
+        } else {
+#ifdef __cplusplus
+            std::stable_sort(out, out + n, vpp_band_pt_less());
+#else
+            vpp_band_insertion_sort(out, n);
+#endif
+        }
+        return;
+    }
+    scale = (float)scale_d;
+    top = (float)(n - 1);
+    i = 0;
+#if defined(__AVX2__)
+    {
+        const __m256 vmin = _mm256_set1_ps(dmin), vs = _mm256_set1_ps(scale), vt = _mm256_set1_ps(top);
+        for (; i + 8 <= n; i += 8) {
+            __m256 t = _mm256_min_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(dv + i), vmin), vs), vt);
+            _mm256_storeu_si256((__m256i*)(bucket + i), _mm256_cvttps_epi32(t));
+        }
+    }
+#elif VPP_HAVE_SSE2
+    {
+        const __m128 vmin = _mm_set1_ps(dmin), vs = _mm_set1_ps(scale), vt = _mm_set1_ps(top);
+        for (; i + 4 <= n; i += 4) {
+            __m128 t = _mm_min_ps(_mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(dv + i), vmin), vs), vt);
+            _mm_storeu_si128((__m128i*)(bucket + i), _mm_cvttps_epi32(t));
+        }
+    }
+#endif
+    for (; i < n; i++) {
+        float t = (dv[i] - dmin) * scale;
+        bucket[i] = (int)(t < top ? t : top);
+    }
+    memset(cnt, 0, sizeof(int) * (size_t)(n + 1));
+    for (i = 0; i < n; i++) cnt[bucket[i] + 1]++;
+    for (i = 0; i < n; i++) {
+        crowded |= cnt[i + 1] > 32;
+        cnt[i + 1] += cnt[i];
+    }
+    for (i = 0; i < n; i++) out[cnt[bucket[i]]++] = in[i];   /* cnt[b] ends at bucket b's end */
+    if (crowded) {
+        s = 0;
+        for (b = 0; b < n; b++) {
+            e = cnt[b];
+            if (e - s > 32) {
+#ifdef __cplusplus
+                std::stable_sort(out + s, out + e, vpp_band_pt_less());
+#else
+                vpp_band_insertion_sort(out + s, e - s);
+#endif
+            }
+            s = e;
+        }
+    }
+    for (i = 1; i < n; i++) {
+        if (out[i - 1].d > out[i].d) {
+            vpp_band_pt v = out[i];
+            for (j = i; j > 0 && out[j - 1].d > v.d; j--) out[j] = out[j - 1];
+            out[j] = v;
+        }
+    }
+}
+
 /* Candidate test of a whole occlusion window: is rows[k][off + c] >
  * pens[k][c] + thr for some row k < nr and column c < npad?  npad is a
  * multiple of 8; each pens row is padded with +inf past the window (and is

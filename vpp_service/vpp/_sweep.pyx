@@ -59,7 +59,17 @@ import numpy as np
 cdef extern from "_sweep.h" nogil:
     int vpp_scan_row_w(const float* d, int W, uint64_t* keys, int64_t* st)
     void vpp_scan_init()
-    void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* bucket, int* cnt)
+    ctypedef struct BandPt "vpp_band_pt":
+        # one point of a band, in gather order (compact: read in d order by the passes)
+        int32_t x
+        int32_t s           # image row
+        int32_t fl          # right-view column (see vpp_geometry)
+        uint32_t w0
+        uint32_t w1
+        int32_t occl        # FGD-occluded
+        float d
+    void vpp_sort_band(const BandPt* pts, const float* dv, int n, float dmin, float dmax,
+                       BandPt* out, int* bucket, int* cnt)
     float vpp_sw_u2f(uint32_t u)
     int vpp_build_avx2()
     int vpp_cpu_supports_avx2()
@@ -152,17 +162,6 @@ cdef struct Job:
     int woff            # warp index of column 0
 
 
-cdef struct BandPt:
-    # one point of a band, in gather order (compact: read in d order by the passes)
-    int32_t x
-    int32_t s           # image row
-    int32_t fl          # right-view column (see vpp_geometry)
-    uint32_t w0
-    uint32_t w1
-    int32_t occl        # FGD-occluded
-    float d
-
-
 cdef struct Scratch:
     uint64_t* keys      # ring x W
     uint8_t* flags      # ring x W (occluded, per key)
@@ -176,11 +175,10 @@ cdef struct Scratch:
     int64_t cap         # contribution capacity
     int32_t* geo_fl     # ring x W: right-view column floor(x') (or round(x') without splat)
     uint64_t* geo_w     # ring x W: right-view weights w0 | w1 << 32 (1/65536)
-    uint64_t* bkey      # band points: (float_bits(d) << 32) | gather position
-    BandPt* bpt         # by gather position
+    BandPt* bpt         # band points in gather order (row, x)
     BandPt* spt         # in paint order (d, y, x)
-    uint64_t* btmp      # sort scratch (cap), then bucket ids and counts below
-    int* bbucket        # cap
+    float* bd           # their d in gather order (cap)
+    int* bbucket        # sort scratch: bucket ids (cap) and counts (below)
     int* bcnt           # cap + 1
     int failed
     int64_t kcap        # capacity (entries) of keys, geo_fl, geo_w, xw, flags
@@ -322,10 +320,9 @@ def release_scratch():
 
 
 cdef void _free_band(Scratch* S) noexcept nogil:
-    free(S.bkey)
     free(S.bpt)
     free(S.spt)
-    free(S.btmp)
+    free(S.bd)
     free(S.bbucket)
     free(S.bcnt)
 
@@ -336,14 +333,12 @@ cdef int _reserve(const Job* J, Scratch* S, int64_t n) noexcept nogil:
         return 0
     n = n + n // 2 + 16
     _free_band(S)
-    S.bkey = <uint64_t*>malloc(sizeof(uint64_t) * n)
     S.bpt = <BandPt*>malloc(sizeof(BandPt) * n)
     S.spt = <BandPt*>malloc(sizeof(BandPt) * n)
-    S.btmp = <uint64_t*>malloc(sizeof(uint64_t) * n)
+    S.bd = <float*>malloc(sizeof(float) * n)
     S.bbucket = <int*>malloc(sizeof(int) * n)
     S.bcnt = <int*>malloc(sizeof(int) * (n + 1))
-    if (S.bkey == NULL or S.bpt == NULL or S.spt == NULL or S.btmp == NULL
-            or S.bbucket == NULL or S.bcnt == NULL):
+    if S.bpt == NULL or S.spt == NULL or S.bd == NULL or S.bbucket == NULL or S.bcnt == NULL:
         S.cap = 0
         S.failed = 1
         return 1
@@ -473,6 +468,7 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
     cdef uint8_t* oR
     cdef uint32_t w0, w1, wb
     cdef double xp, beta
+    cdef float d, dmin, dmax
     for r in range(b0, b1):
         memcpy(J.oL + r * rs, J.L + r * rs, rs)
         memcpy(J.oR + r * rs, J.R + r * rs, rs)
@@ -482,9 +478,11 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
         return
     if _reserve(J, S, total):
         return
-    # 1. gather the points in (row, x) order and sort them by (d, gather position):
-    #    the global order (d, y, x); NO-occluded points are dropped here
+    # 1. gather the points in (row, x) order and sort them stably by d: the global
+    #    order (d, y, x); NO-occluded points are dropped here
     m = 0
+    dmin = INFINITY
+    dmax = -INFINITY
     for s in range(s0, s1 + 1):
         slot = s & (J.ring - 1)
         base = slot * W
@@ -493,7 +491,6 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
             if flag and occmode == 1:
                 continue
             key = S.keys[base + i]
-            S.bkey[m] = (key & ~LOW32) | <uint64_t>m
             pt = &S.bpt[m]
             pt.x = <int32_t>(key & LOW32)
             pt.s = s
@@ -502,11 +499,14 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
             pt.w0 = <uint32_t>(wpair & LOW32)
             pt.w1 = <uint32_t>(wpair >> 32)
             pt.occl = flag
-            pt.d = vpp_sw_u2f(<uint32_t>(key >> 32))
+            d = vpp_sw_u2f(<uint32_t>(key >> 32))
+            pt.d = d
+            S.bd[m] = d
+            dmin = d if d < dmin else dmin
+            dmax = d if d > dmax else dmax
             m += 1
-    vpp_sort_keys(S.bkey, m, S.btmp, S.bbucket, S.bcnt)
-    for j in range(m):      # into paint order once: both passes then read sequentially
-        S.spt[j] = S.bpt[<int>(S.bkey[j] & LOW32)]
+    # into paint order once: both passes then read sequentially
+    vpp_sort_band(S.bpt, S.bd, m, dmin, dmax, S.spt, S.bbucket, S.bcnt)
     # 2. right view: each visible point's pattern span per covered band row (read
     #    in place from the table), splatted; geometry was computed at ingest
     for j in range(m):
