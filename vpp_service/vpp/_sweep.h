@@ -403,42 +403,90 @@ static inline void vpp_sort_band(const vpp_band_pt* in, const float* dv, int n, 
     }
 }
 
-/* Candidate test of a whole occlusion window: is rows[k][off + c] >
- * pens[k][c] + thr for some row k < nr and column c < npad?  npad is a
- * multiple of 8; each pens row is padded with +inf past the window (and is
- * +inf at the point's own cell), and the warp rows may be read up to npad.
- * Empty warp cells are -inf and never pass.  One branch per point; see
- * _classify for why the float test never misses a cell that the exact
- * (double) rule flags. */
-static inline int vpp_occ_window_cand(const float* const* rows, const float* const* pens, int nr,
-                                      int npad, int64_t off, float thr) {
-    int k, c;
+/* Occlusion screen of one row's points (see _classify in _sweep.pyx).  For
+ * point i (d from keys[i], warp column xw[i]) writes out[i] = 1 if it lost a
+ * collision in its own warp cell (wq[xw] > d), else 2 if some window cell
+ * passes the float screen
+ *     f32(w - pen_f) > thr,   thr = f32(d + t - (d + t + penmax + 1) 2^-20),
+ * i.e. rows[k][xw + c] - pens[k][c] > thr for a row k < nr and column c < npad
+ * (pens rows padded with +inf past the window and at the point's own cell;
+ * empty warp cells are -inf: neither ever passes), else 0.  Points marked 2
+ * are then tested exactly (double, as the reference).  The screen never
+ * misses a cell with (w - d) - pen > t in double: pen_f, the difference and
+ * thr are each rounded to float with a relative error below 2^-24, in all at
+ * most 2^-24 (3 pen + 2 (d + t) + ...), and the margin is 16 times that.
+ * The vector path keeps the running maximum of w - pen_f (one compare per
+ * point); the default 9 x 7 window (7 rows of 16 padded columns) keeps its
+ * 14 penalty vectors in registers. */
+static inline void vpp_occ_screen(const uint64_t* keys, const int32_t* xw, int n, const float* wq,
+                                  const float* const* rows, const float* const* pens, int nr, int npad,
+                                  double t, double penmax, uint8_t* out) {
+    int i, k, c;
 #if defined(__AVX2__)
-    const __m256 t = _mm256_set1_ps(thr);
-    __m256 acc = _mm256_setzero_ps();
-    for (k = 0; k < nr; k++) {
-        const float* w = rows[k] + off;
-        const float* p = pens[k];
-        for (c = 0; c < npad; c += 8)
-            acc = _mm256_or_ps(acc, _mm256_cmp_ps(_mm256_loadu_ps(w + c),
-                                                  _mm256_add_ps(_mm256_loadu_ps(p + c), t), _CMP_GT_OQ));
+    if (nr == 7 && npad == 16) {
+        const __m256 p00 = _mm256_loadu_ps(pens[0]), p01 = _mm256_loadu_ps(pens[0] + 8);
+        const __m256 p10 = _mm256_loadu_ps(pens[1]), p11 = _mm256_loadu_ps(pens[1] + 8);
+        const __m256 p20 = _mm256_loadu_ps(pens[2]), p21 = _mm256_loadu_ps(pens[2] + 8);
+        const __m256 p30 = _mm256_loadu_ps(pens[3]), p31 = _mm256_loadu_ps(pens[3] + 8);
+        const __m256 p40 = _mm256_loadu_ps(pens[4]), p41 = _mm256_loadu_ps(pens[4] + 8);
+        const __m256 p50 = _mm256_loadu_ps(pens[5]), p51 = _mm256_loadu_ps(pens[5] + 8);
+        const __m256 p60 = _mm256_loadu_ps(pens[6]), p61 = _mm256_loadu_ps(pens[6] + 8);
+        const float *r0 = rows[0], *r1 = rows[1], *r2 = rows[2], *r3 = rows[3], *r4 = rows[4],
+                    *r5 = rows[5], *r6 = rows[6];
+        for (i = 0; i < n; i++) {
+            const float d = vpp_sw_u2f((uint32_t)(keys[i] >> 32));
+            const double dd = d;
+            const int64_t o = xw[i];
+            __m256 a, b;
+            if (wq[o] > d) { out[i] = 1; continue; }
+#define VPP_ROW(r, p0, p1) \
+            a = _mm256_max_ps(a, _mm256_sub_ps(_mm256_loadu_ps(r + o), p0)); \
+            b = _mm256_max_ps(b, _mm256_sub_ps(_mm256_loadu_ps(r + o + 8), p1));
+            a = _mm256_sub_ps(_mm256_loadu_ps(r0 + o), p00);
+            b = _mm256_sub_ps(_mm256_loadu_ps(r0 + o + 8), p01);
+            VPP_ROW(r1, p10, p11) VPP_ROW(r2, p20, p21) VPP_ROW(r3, p30, p31)
+            VPP_ROW(r4, p40, p41) VPP_ROW(r5, p50, p51) VPP_ROW(r6, p60, p61)
+#undef VPP_ROW
+            {
+                const float thr = (float)(dd + t - (dd + t + penmax + 1.0) * 9.5367431640625e-07);
+                out[i] = _mm256_movemask_ps(_mm256_cmp_ps(_mm256_max_ps(a, b), _mm256_set1_ps(thr),
+                                                          _CMP_GT_OQ)) ? 2 : 0;
+            }
+        }
+        return;
     }
-    return _mm256_movemask_ps(acc);
-#elif VPP_HAVE_SSE2
-    const __m128 t = _mm_set1_ps(thr);
-    __m128 acc = _mm_setzero_ps();
-    for (k = 0; k < nr; k++) {
-        const float* w = rows[k] + off;
-        const float* p = pens[k];
-        for (c = 0; c < npad; c += 4)
-            acc = _mm_or_ps(acc, _mm_cmpgt_ps(_mm_loadu_ps(w + c), _mm_add_ps(_mm_loadu_ps(p + c), t)));
-    }
-    return _mm_movemask_ps(acc);
-#else
-    for (k = 0; k < nr; k++)
-        for (c = 0; c < npad; c++) if (rows[k][off + c] > pens[k][c] + thr) return 1;
-    return 0;
 #endif
+    for (i = 0; i < n; i++) {
+        const float d = vpp_sw_u2f((uint32_t)(keys[i] >> 32));
+        const double dd = d;
+        const int64_t o = xw[i];
+        float thr;
+        int pass = 0;
+        if (wq[o] > d) { out[i] = 1; continue; }
+        thr = (float)(dd + t - (dd + t + penmax + 1.0) * 9.5367431640625e-07);
+#if defined(__AVX2__)
+        {
+            __m256 m = _mm256_set1_ps(-INFINITY);
+            for (k = 0; k < nr; k++)
+                for (c = 0; c < npad; c += 8)
+                    m = _mm256_max_ps(m, _mm256_sub_ps(_mm256_loadu_ps(rows[k] + o + c), _mm256_loadu_ps(pens[k] + c)));
+            pass = _mm256_movemask_ps(_mm256_cmp_ps(m, _mm256_set1_ps(thr), _CMP_GT_OQ));
+        }
+#elif VPP_HAVE_SSE2
+        {
+            __m128 m = _mm_set1_ps(-INFINITY);
+            for (k = 0; k < nr; k++)
+                for (c = 0; c < npad; c += 4)
+                    m = _mm_max_ps(m, _mm_sub_ps(_mm_loadu_ps(rows[k] + o + c), _mm_loadu_ps(pens[k] + c)));
+            pass = _mm_movemask_ps(_mm_cmpgt_ps(m, _mm_set1_ps(thr)));
+        }
+#else
+        for (k = 0; k < nr && !pass; k++)
+            for (c = 0; c < npad; c++)
+                if (rows[k][o + c] - pens[k][c] > thr) { pass = 1; break; }
+#endif
+        out[i] = pass ? 2 : 0;
+    }
 }
 
 static inline uint8_t vpp_blend_u8(uint32_t a, uint32_t b, uint32_t w) {

@@ -73,8 +73,9 @@ cdef extern from "_sweep.h" nogil:
     float vpp_sw_u2f(uint32_t u)
     int vpp_build_avx2()
     int vpp_cpu_supports_avx2()
-    int vpp_occ_window_cand(const float* const* rows, const float* const* pens, int nr, int npad,
-                            int64_t off, float thr)
+    void vpp_occ_screen(const uint64_t* keys, const int32_t* xw, int n, const float* wq,
+                        const float* const* rows, const float* const* pens, int nr, int npad,
+                        double t, double penmax, uint8_t* out)
     void vpp_blend_span(uint8_t* dst, const uint8_t* val, int n, uint32_t w, int64_t room)
     int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, int k1,
                     uint32_t w0, uint32_t w1, int64_t room)
@@ -378,12 +379,10 @@ cdef void _ingest(const Job* J, Scratch* S, int y, bint own) noexcept nogil:
 
 
 cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
-    """Occlusion flags of row q's points.  The window is first screened in
-    float, 8 cells a vector: ``W > pen_f + thr`` with ``thr = f32(d + t - m)``
-    and ``m = (|d| + t + pen_max + 1) / 2**20``.  The float roundings of
-    ``pen_f``, ``thr`` and the sum are each below ``2**-24`` of those magnitudes,
-    so a cell with ``(W - d) - pen > t`` in double always passes the screen;
-    only points with a passing cell are checked exactly (in double, as the reference)."""
+    """Occlusion flags of row q's points.  The window is first screened in float,
+    8 cells a vector (``vpp_occ_screen`` in _sweep.h: a margin makes sure the
+    screen never misses a cell the exact rule flags); only points with a
+    passing cell are checked exactly (in double, as the reference)."""
     cdef int slot = q & (J.ring - 1)
     cdef int W = J.W, H = J.H, nwin = J.nwin, rx2 = J.rx2, ry2 = J.ry2, npad = J.npad
     cdef const uint64_t* keys = S.keys + <int64_t>slot * W
@@ -394,7 +393,6 @@ cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
     cdef const double* pr
     cdef int i, n = S.nk[slot], xw, dy, yn, j, k, nr = 0, found
     cdef int64_t cnt = 0
-    cdef float d, thr
     cdef double dd, t = J.t
     for dy in range(-ry2, ry2 + 1):            # the window rows inside the image
         yn = q + dy
@@ -403,28 +401,31 @@ cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
             S.prows[nr] = J.penf + <int64_t>(dy + ry2) * npad
             S.erows[nr] = J.pen + <int64_t>(dy + ry2) * nwin
             nr += 1
+    # flags: 1 lost a collision, 2 a window candidate, 0 visible
+    vpp_occ_screen(keys, xws, n, wq, S.wrows, S.prows, nr, npad, t, J.penmax, flags)
     for i in range(n):
-        d = vpp_sw_u2f(<uint32_t>(keys[i] >> 32))
-        dd = d
-        xw = xws[i]
-        found = wq[xw] > d                   # lost a collision
-        if not found:
-            thr = <float>(dd + t - (dd + t + J.penmax + 1.0) * 9.5367431640625e-07)   # d > 0, t >= 0
-            if vpp_occ_window_cand(S.wrows, S.prows, nr, npad, xw, thr):
-                for k in range(nr):
-                    wr = S.wrows[k] + xw
-                    pr = S.erows[k]
-                    for j in range(nwin):
-                        if (<double>wr[j] - dd) - pr[j] > t:
-                            found = 1
-                            break
-                    if found:
+        found = flags[i]
+        if found == 0:
+            continue
+        if found == 2:
+            found = 0
+            dd = vpp_sw_u2f(<uint32_t>(keys[i] >> 32))
+            xw = xws[i]
+            for k in range(nr):
+                wr = S.wrows[k] + xw
+                pr = S.erows[k]
+                for j in range(nwin):
+                    if (<double>wr[j] - dd) - pr[j] > t:
+                        found = 1
                         break
-        if found:
-            flags[i] = 1
-            cnt += 1
-            if own:
-                J.occ[<int64_t>q * W + <int>(keys[i] & LOW32)] = 1
+                if found:
+                    break
+            flags[i] = found
+            if not found:
+                continue
+        cnt += 1
+        if own:
+            J.occ[<int64_t>q * W + <int>(keys[i] & LOW32)] = 1
     if own:
         J.occ_cnt[q] = cnt
 
