@@ -320,19 +320,20 @@ struct vpp_band_pt_less {
  * order (row, then x), so a stable sort by d gives the global paint order
  * (d, y, x).  A bucket sort on the points themselves (no key array, no
  * permutation pass afterwards), cheap on the bands' few thousand points:
- *   1. bucket b = min(floor((d - dmin) * n / (dmax - dmin)), n - 1) in float,
+ *   1. bucket b = min(floor((d - dmin) * 2n / (dmax - dmin)), 2n - 1) in float,
  *      8 points a vector (float subtraction and scaling by a positive
  *      constant never reverse two values, so buckets are in d order);
  *   2. count, prefix, scatter in input order (stable);
  *   3. one insertion pass over the whole array puts each bucket in order
- *      (buckets hold about one point, so it rarely moves anything and its
- *      branch is predictable); a crowded bucket (> 32) gets std::stable_sort
- *      first.
+ *      (2n buckets hold about half a point each, so it rarely moves anything
+ *      and its branch is predictable); a crowded bucket (> 32) gets
+ *      std::stable_sort first.
  * dv: the points' d (n floats);
- * dmin, dmax: their extremes.  Scratch: bucket holds n entries, cnt n + 1. */
+ * dmin, dmax: their extremes.  Scratch: bucket holds n entries, cnt 2n + 1. */
 static inline void vpp_sort_band(const vpp_band_pt* in, const float* dv, int n, float dmin, float dmax,
                                  vpp_band_pt* out, int* bucket, int* cnt) {
-    double scale_d = (double)n / ((double)dmax - (double)dmin);
+    const int nb = 2 * n;
+    double scale_d = (double)nb / ((double)dmax - (double)dmin);
     float scale, top;
     int i, j, b, s, e, crowded = 0;
     if (n <= 24 || dmin == dmax || !(scale_d < 1e30)) {
@@ -350,7 +351,7 @@ static inline void vpp_sort_band(const vpp_band_pt* in, const float* dv, int n, 
         return;
     }
     scale = (float)scale_d;
-    top = (float)(n - 1);
+    top = (float)(nb - 1);
     i = 0;
 #if defined(__AVX2__)
     {
@@ -373,16 +374,16 @@ static inline void vpp_sort_band(const vpp_band_pt* in, const float* dv, int n, 
         float t = (dv[i] - dmin) * scale;
         bucket[i] = (int)(t < top ? t : top);
     }
-    memset(cnt, 0, sizeof(int) * (size_t)(n + 1));
+    memset(cnt, 0, sizeof(int) * (size_t)(nb + 1));
     for (i = 0; i < n; i++) cnt[bucket[i] + 1]++;
-    for (i = 0; i < n; i++) {
+    for (i = 0; i < nb; i++) {
         crowded |= cnt[i + 1] > 32;
         cnt[i + 1] += cnt[i];
     }
     for (i = 0; i < n; i++) out[cnt[bucket[i]]++] = in[i];   /* cnt[b] ends at bucket b's end */
     if (crowded) {
         s = 0;
-        for (b = 0; b < n; b++) {
+        for (b = 0; b < nb; b++) {
             e = cnt[b];
             if (e - s > 32) {
 #ifdef __cplusplus

@@ -180,7 +180,7 @@ cdef struct Scratch:
     BandPt* spt         # in paint order (d, y, x)
     float* bd           # their d in gather order (cap)
     int* bbucket        # sort scratch: bucket ids (cap) and counts (below)
-    int* bcnt           # cap + 1
+    int* bcnt           # 2 cap + 1
     int failed
     int64_t kcap        # capacity (entries) of keys, geo_fl, geo_w, xw, flags
     int64_t wcap        # of warp
@@ -338,7 +338,7 @@ cdef int _reserve(const Job* J, Scratch* S, int64_t n) noexcept nogil:
     S.spt = <BandPt*>malloc(sizeof(BandPt) * n)
     S.bd = <float*>malloc(sizeof(float) * n)
     S.bbucket = <int*>malloc(sizeof(int) * n)
-    S.bcnt = <int*>malloc(sizeof(int) * (n + 1))
+    S.bcnt = <int*>malloc(sizeof(int) * (2 * n + 1))
     if S.bpt == NULL or S.spt == NULL or S.bd == NULL or S.bbucket == NULL or S.bcnt == NULL:
         S.cap = 0
         S.failed = 1
