@@ -336,7 +336,7 @@ static inline void vpp_sort_band(const vpp_band_pt* in, const float* dv, int n, 
     double scale_d = (double)nb / ((double)dmax - (double)dmin);
     float scale, top;
     int i, j, b, s, e, crowded = 0;
-    if (n <= 24 || dmin == dmax || !(scale_d < 1e30)) {
+    if (n <= 24 || dmin == dmax || !(scale_d < 1e30) || nb >= (1 << 24)) {   /* float bucket ids exact below 2^24 */
         memcpy(out, in, sizeof(vpp_band_pt) * (size_t)n);
         if (dmin == dmax) return;
         if (n <= 24) {
