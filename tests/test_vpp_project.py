@@ -73,6 +73,30 @@ def test_reference_equality(i, cfg, shape, density):
     np.testing.assert_array_equal(res.left, rl)
 
 
+@pytest.fixture(params=[False, True], ids=["tables_portable", "tables_avx2"])
+def table_builder(request):
+    """Run with each builder of the histogram window tables this CPU can run."""
+    from vpp_service.vpp import _kernel
+    if not _kernel.tables_use_avx2(request.param) and request.param:
+        _kernel.tables_use_avx2(_kernel.TABLES_AVX2)
+        pytest.skip("no AVX2 on this CPU / platform")
+    yield request.param
+    _kernel.tables_use_avx2(_kernel.TABLES_AVX2)
+
+
+@pytest.mark.parametrize("shape,search", [((12, 97, 3), (64, 3)), ((9, 70, 1), (16, 1)),
+                                          ((7, 33, 3), (7, 3)), ((10, 131, 3), (100, 5))])
+def test_histogram_tables_both_builders_match_reference(table_builder, shape, search):
+    """Wider than the 32-column blocks (full, partial last block), both builders."""
+    rng = np.random.default_rng(shape[1])
+    left, right, disp = make_case(rng, *shape, 0.1)
+    cfg = VPPConfig(pattern="histogram", search_width=search[0], search_height=search[1])
+    res = project(left, right, disp, cfg, seed=1, num_threads=2)
+    rl, rr, _ = ref_project(left, right, disp, cfg, seed=1)
+    np.testing.assert_array_equal(res.right, rr)
+    np.testing.assert_array_equal(res.left, rl)
+
+
 def test_histogram_all_bins_filled_matches_reference():
     rng = np.random.default_rng(7)
     left = rng.integers(0, 256, (9, 140), dtype=np.uint8)

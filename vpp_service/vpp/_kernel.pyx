@@ -26,7 +26,9 @@ prefix-OR and suffix-OR tables of 256-bit occupancy (4 uint64) over the
 middle blocks | prefix[e]`` (3 lookups for L=64).  The tables are built in C
 (``vpp_build_tables``): the 256-bit one-hot of a byte comes from an 8 KiB table
 (``vpp_onehot``) and the words are ORed as two 128-bit vectors (GCC/Clang vector
-extensions; SSE2 on plain x86-64).  The gap search is bit-parallel
+extensions; SSE2 on plain x86-64), or as one 256-bit register on CPUs with AVX2
+(a copy compiled for AVX2 by a target attribute, chosen at import:
+:func:`tables_use_avx2`; same bytes).  The gap search is bit-parallel
 (``vpp_hist_pick``).  If every bin is filled the window is counted exactly (rare).
 """
 from cython.parallel cimport prange, parallel
@@ -38,9 +40,23 @@ from libc.math cimport floor, pow
 
 from vpp_service.vpp._pixel cimport _pidx, _w16, _blend16, _fgd_pixel
 
+import os
+
 import numpy as np
 
 vpp_init_onehot()
+
+
+def tables_use_avx2(bint on):
+    """Build the histogram window tables with AVX2 (when this CPU and build can)
+    or with the portable code; same bytes.  Returns whether AVX2 is now used.
+    Chosen once at import (AVX2 unless ``VPP_NO_AVX2=1``); tests switch it to
+    check both.  Not to be called while a kernel runs."""
+    return bool(vpp_tables_use_avx2(on))
+
+
+#: True when the histogram window tables are built with AVX2 (see :func:`tables_use_avx2`).
+TABLES_AVX2 = tables_use_avx2(os.environ.get("VPP_NO_AVX2", "0") != "1")
 
 cdef extern from *:
     """
@@ -156,7 +172,7 @@ cdef extern from *:
     static inline void vpp_st2(uint64_t* p, vpp_v2 v) { memcpy(p, &v, 16); }
     /* Per aligned 32-column block, prefix/suffix OR of the bin occupancy of the
        columns over rows r +- sh_half (clipped) of channel c. */
-    static void vpp_build_tables(const uint8_t* img, int H, int W, int C, int c, int r,
+    static void vpp_build_tables_portable(const uint8_t* img, int H, int W, int C, int c, int r,
                                  int sh_half, uint64_t* pre, uint64_t* suf) {
         int y0 = r - sh_half, y1 = r + sh_half, b0, b1, x, y;
         const int64_t rs = (int64_t)W * C;
@@ -191,12 +207,74 @@ cdef extern from *:
             }
         }
     }
+    #if defined(__GNUC__) && defined(__x86_64__)
+    #include <immintrin.h>
+    /* vpp_build_tables on 256-bit registers (a whole occupancy per load, OR and
+       store), compiled for AVX2 by a target attribute and chosen at run time. */
+    __attribute__((target("avx2")))
+    static void vpp_build_tables_avx2(const uint8_t* img, int H, int W, int C, int c, int r,
+                                      int sh_half, uint64_t* pre, uint64_t* suf) {
+        int y0 = r - sh_half, y1 = r + sh_half, b0, b1, x, y;
+        const int64_t rs = (int64_t)W * C;
+        if (y0 < 0) y0 = 0;
+        if (y1 > H - 1) y1 = H - 1;
+        for (b0 = 0; b0 < W; b0 += 32) {
+            __m256i acc = _mm256_setzero_si256();
+            b1 = b0 + 32 < W ? b0 + 32 : W;
+            for (x = b0; x < b1; x++) {
+                const uint8_t* p = img + ((int64_t)y0 * W + x) * C + c;
+                __m256i a = _mm256_loadu_si256((const __m256i*)vpp_onehot[p[0]]);
+                for (y = y0 + 1; y <= y1; y++) {
+                    p += rs;
+                    a = _mm256_or_si256(a, _mm256_loadu_si256((const __m256i*)vpp_onehot[p[0]]));
+                }
+                _mm256_storeu_si256((__m256i*)(suf + 4 * (int64_t)x), a);
+                acc = _mm256_or_si256(acc, a);
+                _mm256_storeu_si256((__m256i*)(pre + 4 * (int64_t)x), acc);
+            }
+            acc = _mm256_setzero_si256();
+            for (x = b1 - 1; x >= b0; x--) {
+                acc = _mm256_or_si256(acc, _mm256_loadu_si256((const __m256i*)(suf + 4 * (int64_t)x)));
+                _mm256_storeu_si256((__m256i*)(suf + 4 * (int64_t)x), acc);
+            }
+        }
+    }
+    #define VPP_TABLES_AVX2 1
+    #else
+    #define VPP_TABLES_AVX2 0
+    #endif
+    static int vpp_tables_avx2 = 0;   /* set once at import (vpp_tables_use_avx2), before any kernel runs */
+    /* 1 when this build has the AVX2 table builder and the CPU can run it */
+    static int vpp_tables_avx2_ok(void) {
+    #if VPP_TABLES_AVX2
+        __builtin_cpu_init();
+        return __builtin_cpu_supports("avx2");
+    #else
+        return 0;
+    #endif
+    }
+    /* choose the AVX2 builder (if it can run) or the portable one; returns the choice */
+    static int vpp_tables_use_avx2(int on) {
+        vpp_tables_avx2 = on && vpp_tables_avx2_ok();
+        return vpp_tables_avx2;
+    }
+    static void vpp_build_tables(const uint8_t* img, int H, int W, int C, int c, int r,
+                                 int sh_half, uint64_t* pre, uint64_t* suf) {
+    #if VPP_TABLES_AVX2
+        if (vpp_tables_avx2) {
+            vpp_build_tables_avx2(img, H, W, C, c, r, sh_half, pre, suf);
+            return;
+        }
+    #endif
+        vpp_build_tables_portable(img, H, W, C, c, r, sh_half, pre, suf);
+    }
     """
     int vpp_ctz64(uint64_t v) nogil
     uint32_t vpp_f2u(float f) nogil
     float vpp_u2f(uint32_t u) nogil
     int vpp_hist_pick(const uint64_t* o) nogil
     void vpp_init_onehot() nogil
+    int vpp_tables_use_avx2(int on) nogil
     void vpp_build_tables(const uint8_t* img, int H, int W, int C, int c, int r,
                           int sh_half, uint64_t* pre, uint64_t* suf) nogil
 
@@ -252,7 +330,7 @@ cdef inline void _window_rows(const Ctx* cx, int r, int* y0, int* y1) noexcept n
     y1[0] = r + cx.sh_half if r + cx.sh_half < cx.H - 1 else cx.H - 1
 
 
-cdef void _window_or(const Ctx* cx, const uint8_t* img, int c, int r,
+cdef inline void _window_or(const Ctx* cx, const uint8_t* img, int c, int r,
                      const uint64_t* pre, const uint64_t* suf, int cen, uint64_t* o) noexcept nogil:
     """OR the occupancy of columns [cen - L//2, cen - L//2 + L - 1] (clipped) into o."""
     cdef int W = cx.W
@@ -305,7 +383,7 @@ cdef void _window_count(const Ctx* cx, const uint8_t* img, int c, int r, int cen
             counts[img[(<int64_t>y * W + x) * cx.C + c]] += 1
 
 
-cdef uint8_t _hist_value(const Ctx* cx, int c, int r, const uint64_t* tabs, int cl, int cr) noexcept nogil:
+cdef inline uint8_t _hist_value(const Ctx* cx, int c, int r, const uint64_t* tabs, int cl, int cr) noexcept nogil:
     """Histogram pattern value of channel c for windows centred on (cl, r) in L and (cr, r) in R.
 
     ``tabs`` holds the tables of centre row r, channel c: preL, sufL, preR, sufR

@@ -5,7 +5,9 @@ build (SSE2 on x86-64, plain C elsewhere) and, on x86-64, ``_sweep_avx2``
 compiled for x86-64-v3 (AVX2, FMA, BMI2, ...).  Both give the same bytes.  The
 AVX2 build is imported only after the portable one has checked that the CPU
 supports it (importing it on an older CPU would crash); ``VPP_NO_AVX2=1`` in
-the environment keeps the portable build.
+the environment keeps the portable build (and the portable histogram table
+builder of :mod:`vpp_service.vpp._kernel`, which otherwise picks its AVX2 copy
+at import).
 
 Attributes
 ----------
