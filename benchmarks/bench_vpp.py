@@ -6,6 +6,14 @@ a copy right before each run (robust to the drift of a shared machine).  Sizes: 
 Middlebury half 1482x994 and full 2964x1988 (RGB); densities 1 % and 5 %;
 patterns random (vi) and histogram (vii), default 3x3 / alpha 0.4 / FGD;
 threads 1 and all.  ``--quick`` runs a smaller subset.
+
+Memory: by default freed memory is kept for reuse
+(:func:`vpp_service.service.allocator.reuse_freed_memory`, as the service
+does), so neither the copy nor VPP pays first-touch page faults for its
+outputs.  Without it glibc sometimes maps a copy's 2 x 17.7 MB afresh and
+sometimes not, and the copy reference swings between about 2.5 and 7 ms from
+one process to the next; with it the copy is at its fastest, the strictest
+reference.  ``--fresh-memory`` measures without it.
 """
 from __future__ import annotations
 
@@ -18,6 +26,7 @@ import numpy as np
 
 from _harness import median_ms, paired_ratio
 
+from vpp_service.service.allocator import reuse_freed_memory
 from vpp_service.vpp import VPPConfig, project
 
 SIZES = {"kitti": (375, 1242), "midd_half": (994, 1482), "midd_full": (1988, 2964)}
@@ -39,7 +48,13 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default="benchmarks/results/bench_vpp.json")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--reps", type=int, default=7)
+    ap.add_argument("--fresh-memory", action="store_true",
+                    help="do not keep freed memory for reuse (outputs may be mapped afresh)")
     a = ap.parse_args(argv)
+    memory = "fresh"
+    if not a.fresh_memory and reuse_freed_memory():
+        memory = "reused"
+    print(f"memory: {memory}")
     allt = os.cpu_count() or 1
     sizes = ["kitti", "midd_half"] if a.quick else list(SIZES)
     dens = [0.05] if a.quick else [0.01, 0.05]
@@ -73,7 +88,7 @@ def main(argv=None) -> int:
                     print(f"{name:10s} {density:5.2f} {pattern:10s} {nt:3d} {ms:8.2f} "
                           f"{ms / copy_ms:7.2f} {paired:7.2f} {npts:8d}")
     Path(a.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.json).write_text(json.dumps({"cpu_count": allt, "results": rows}, indent=1))
+    Path(a.json).write_text(json.dumps({"cpu_count": allt, "memory": memory, "results": rows}, indent=1))
     return 0
 
 
