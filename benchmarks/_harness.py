@@ -15,8 +15,8 @@ from typing import Any, Callable
 import numpy as np
 
 
-def median_ms(fn: Callable[[], Any], reps: int) -> float:
-    """Median wall time of ``fn()`` in milliseconds over ``reps`` runs after one warm-up run.
+def times_ms(fn: Callable[[], Any], reps: int) -> np.ndarray:
+    """Wall times of ``fn()`` in milliseconds, ``reps`` runs after one warm-up run.
 
     Parameters
     ----------
@@ -33,7 +33,13 @@ def median_ms(fn: Callable[[], Any], reps: int) -> float:
         t = time.perf_counter()
         fn()
         ts.append(time.perf_counter() - t)
-    return float(np.median(ts) * 1e3)
+    return np.asarray(ts) * 1e3
+
+
+def median_ms(fn: Callable[[], Any], reps: int) -> float:
+    """Median wall time of ``fn()`` in milliseconds over ``reps`` runs after one warm-up run
+    (see :func:`times_ms`)."""
+    return float(np.median(times_ms(fn, reps)))
 
 
 def paired_ratio(fn: Callable[[], Any], ref: Callable[[], Any], reps: int) -> float:
