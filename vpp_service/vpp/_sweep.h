@@ -301,12 +301,15 @@ typedef struct {
     float d;
 } vpp_band_pt;
 
+/* Stable insertion sort by d; a point already in place costs one compare. */
 static inline void vpp_band_insertion_sort(vpp_band_pt* a, int n) {
     int i, j;
     for (i = 1; i < n; i++) {
-        vpp_band_pt v = a[i];
-        for (j = i; j > 0 && a[j - 1].d > v.d; j--) a[j] = a[j - 1];
-        a[j] = v;
+        if (a[i - 1].d > a[i].d) {
+            vpp_band_pt v = a[i];
+            for (j = i; j > 0 && a[j - 1].d > v.d; j--) a[j] = a[j - 1];
+            a[j] = v;
+        }
     }
 }
 
@@ -335,7 +338,7 @@ static inline void vpp_sort_band(const vpp_band_pt* in, const float* dv, int n, 
     const int nb = 2 * n;
     double scale_d = (double)nb / ((double)dmax - (double)dmin);
     float scale, top;
-    int i, j, b, s, e, crowded = 0;
+    int i, b, s, e, crowded = 0;
     if (n <= 24 || dmin == dmax || !(scale_d < 1e30) || nb >= (1 << 24)) {   /* float bucket ids exact below 2^24 */
         memcpy(out, in, sizeof(vpp_band_pt) * (size_t)n);
         if (dmin == dmax) return;
@@ -395,13 +398,7 @@ static inline void vpp_sort_band(const vpp_band_pt* in, const float* dv, int n, 
             s = e;
         }
     }
-    for (i = 1; i < n; i++) {
-        if (out[i - 1].d > out[i].d) {
-            vpp_band_pt v = out[i];
-            for (j = i; j > 0 && out[j - 1].d > v.d; j--) out[j] = out[j - 1];
-            out[j] = v;
-        }
-    }
+    vpp_band_insertion_sort(out, n);
 }
 
 /* Occlusion screen of one row's points (see _classify in _sweep.pyx).  For
@@ -419,6 +416,11 @@ static inline void vpp_sort_band(const vpp_band_pt* in, const float* dv, int n, 
  * The vector path keeps the running maximum of w - pen_f (one compare per
  * point); the default 9 x 7 window (7 rows of 16 padded columns) keeps its
  * 14 penalty vectors in registers. */
+/* the screen's threshold f32(d + t - m), m = (d + t + penmax + 1) 2^-20 (d > 0, t >= 0) */
+static inline float vpp_occ_thr(double d, double t, double penmax) {
+    return (float)(d + t - (d + t + penmax + 1.0) * 9.5367431640625e-07);
+}
+
 static inline void vpp_occ_screen(const uint64_t* keys, const int32_t* xw, int n, const float* wq,
                                   const float* const* rows, const float* const* pens, int nr, int npad,
                                   double t, double penmax, uint8_t* out) {
@@ -449,7 +451,7 @@ static inline void vpp_occ_screen(const uint64_t* keys, const int32_t* xw, int n
             VPP_ROW(r4, p40, p41) VPP_ROW(r5, p50, p51) VPP_ROW(r6, p60, p61)
 #undef VPP_ROW
             {
-                const float thr = (float)(dd + t - (dd + t + penmax + 1.0) * 9.5367431640625e-07);
+                const float thr = vpp_occ_thr(dd, t, penmax);
                 out[i] = _mm256_movemask_ps(_mm256_cmp_ps(_mm256_max_ps(a, b), _mm256_set1_ps(thr),
                                                           _CMP_GT_OQ)) ? 2 : 0;
             }
@@ -464,7 +466,7 @@ static inline void vpp_occ_screen(const uint64_t* keys, const int32_t* xw, int n
         float thr;
         int pass = 0;
         if (wq[o] > d) { out[i] = 1; continue; }
-        thr = (float)(dd + t - (dd + t + penmax + 1.0) * 9.5367431640625e-07);
+        thr = vpp_occ_thr(dd, t, penmax);
 #if defined(__AVX2__)
         {
             __m256 m = _mm256_set1_ps(-INFINITY);
