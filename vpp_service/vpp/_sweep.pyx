@@ -157,7 +157,8 @@ cdef struct Job:
     double alpha
     uint32_t wa
     const uint8_t* pat  # padded pattern table (rng.py): a patch row is one span of it
-    int ring            # power of two
+    int ring            # power of two: rows of keys, flags and geometry kept
+    int wring           # power of two >= 2 ry2 + 1: warp rows kept (a smaller ring: less cache)
     int band            # output rows painted together
     int ww              # warp row length
     int woff            # warp index of column 0
@@ -167,8 +168,8 @@ cdef struct Scratch:
     uint64_t* keys      # ring x W
     uint8_t* flags      # ring x W (occluded, per key)
     int* nk             # ring
-    int* rowid          # ring
-    float* warp         # ring x ww
+    float* warp         # wring x ww
+    int* wrowid         # wring: the row each warp row holds (-1: none)
     int32_t* xw         # ring x W: warp column x - round(d) per key
     const float** wrows # 2 ry2 + 1: the current window's warp rows (column 0)
     const float** prows # 2 ry2 + 1: their float penalty rows
@@ -184,14 +185,15 @@ cdef struct Scratch:
     int failed
     int64_t kcap        # capacity (entries) of keys, geo_fl, geo_w, xw, flags
     int64_t wcap        # of warp
-    int rcap            # of nk, rowid
+    int rcap            # of nk
+    int wrcap           # of wrowid
     int ecap            # of wrows, prows, erows
 
 
 cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
     """Size ``S`` for ``J`` (reusing its buffers when large enough: a pooled
     Scratch comes back with the capacities of its last job) and reset its state."""
-    cdef int64_t i, nw = <int64_t>J.ring * J.ww if J.occ_on else 1
+    cdef int64_t i, nw = <int64_t>J.wring * J.ww if J.occ_on else 1
     cdef int64_t nk = <int64_t>J.ring * J.W + 1
     cdef int ne = 2 * J.ry2 + 1
     S.failed = 0
@@ -223,12 +225,17 @@ cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
             S.failed = 1
     if J.ring > S.rcap:
         free(S.nk)
-        free(S.rowid)
         S.nk = <int*>malloc(sizeof(int) * J.ring)
-        S.rowid = <int*>malloc(sizeof(int) * J.ring)
         S.rcap = J.ring
-        if S.nk == NULL or S.rowid == NULL:
+        if S.nk == NULL:
             S.rcap = 0
+            S.failed = 1
+    if J.wring > S.wrcap:
+        free(S.wrowid)
+        S.wrowid = <int*>malloc(sizeof(int) * J.wring)
+        S.wrcap = J.wring
+        if S.wrowid == NULL:
+            S.wrcap = 0
             S.failed = 1
     if nw > S.wcap:
         free(S.warp)
@@ -239,8 +246,9 @@ cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
     if S.failed:
         return 1
     for i in range(J.ring):
-        S.rowid[i] = -1
         S.nk[i] = 0
+    for i in range(J.wring):
+        S.wrowid[i] = -1
     if J.occ_on:
         for i in range(nw):
             S.warp[i] = -INFINITY
@@ -257,8 +265,8 @@ cdef void _scratch_free(Scratch* S) noexcept nogil:
     free(S.erows)
     free(S.flags)
     free(S.nk)
-    free(S.rowid)
     free(S.warp)
+    free(S.wrowid)
     _free_band(S)
 
 
@@ -352,20 +360,30 @@ cdef void _ingest(const Job* J, Scratch* S, int y, bint own) noexcept nogil:
     cdef int W = J.W
     cdef uint64_t* keys = S.keys + <int64_t>slot * W
     cdef int32_t* xw = S.xw + <int64_t>slot * W
-    cdef float* wp = S.warp + <int64_t>slot * J.ww + J.woff
-    cdef int i, n
+    cdef int ws = y & (J.wring - 1)
+    cdef float* wp = S.warp + <int64_t>ws * J.ww + J.woff
+    cdef int i, n, yo, ko
     cdef int64_t st[4]
     cdef float d
-    if J.occ_on and S.rowid[slot] >= 0:      # clear the evicted row's warp cells
-        for i in range(S.nk[slot]):
-            wp[xw[i]] = -INFINITY
+    cdef const int32_t* xo
+    if J.occ_on:
+        # clear the warp cells of the row this warp row held, from that row's keys:
+        # they are still in the key ring, because ring is a multiple of wring (both
+        # powers of two), so the row that takes over its key slot takes over its
+        # warp row too, and clears it first (here)
+        yo = S.wrowid[ws]
+        if yo >= 0:
+            ko = yo & (J.ring - 1)
+            xo = S.xw + <int64_t>ko * W
+            for i in range(S.nk[ko]):
+                wp[xo[i]] = -INFINITY
+        S.wrowid[ws] = y
     n = vpp_scan_row_w(J.disp + <int64_t>y * W, W, keys, st)   # in increasing x
     if own:
         for i in range(4):
             J.stats[<int64_t>y * 4 + i] = st[i]
         memset(J.occ + <int64_t>y * W, 0, W)   # the mask row (first touched by this thread)
     S.nk[slot] = n
-    S.rowid[slot] = y
     memset(S.flags + <int64_t>slot * W, 0, n)
     # warp columns (occlusion) and right-view column + splat weights (paint), once per point
     vpp_geometry(keys, n, xw if J.occ_on else NULL,
@@ -388,7 +406,7 @@ cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
     cdef const uint64_t* keys = S.keys + <int64_t>slot * W
     cdef const int32_t* xws = S.xw + <int64_t>slot * W
     cdef uint8_t* flags = S.flags + <int64_t>slot * W
-    cdef const float* wq = S.warp + <int64_t>slot * J.ww + J.woff
+    cdef const float* wq = S.warp + <int64_t>(q & (J.wring - 1)) * J.ww + J.woff
     cdef const float* wr
     cdef const double* pr
     cdef int i, n = S.nk[slot], xw, dy, yn, j, k, nr = 0, found
@@ -397,7 +415,7 @@ cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
     for dy in range(-ry2, ry2 + 1):            # the window rows inside the image
         yn = q + dy
         if yn >= 0 and yn < H:
-            S.wrows[nr] = S.warp + <int64_t>(yn & (J.ring - 1)) * J.ww + J.woff - rx2
+            S.wrows[nr] = S.warp + <int64_t>(yn & (J.wring - 1)) * J.ww + J.woff - rx2
             S.prows[nr] = J.penf + <int64_t>(dy + ry2) * npad
             S.erows[nr] = J.pen + <int64_t>(dy + ry2) * nwin
             nr += 1
@@ -676,6 +694,9 @@ def sweep_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, bint occ_on, int
     J.ring = 1
     while J.ring < need:
         J.ring *= 2
+    J.wring = 1                      # <= ring (need >= 2 ry2 + 1 when occ_on)
+    while J.wring < 2 * ry2 + 1:
+        J.wring *= 2
     J.ww = 2 * W + 2 * rx2 + 8       # warp columns -W .. W-1, +- rx2, SIMD over-read (npad - nwin <= 7)
     J.woff = W + rx2
     if nthreads <= 1:
