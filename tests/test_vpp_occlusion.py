@@ -69,13 +69,15 @@ def test_bad_disparity(disp, exc):
 
 @pytest.mark.parametrize("d0", [0.75, 37.3, 1500.6])
 @pytest.mark.parametrize("lam,gamma,t", [(2.0, 0.4375, 1.0), (0.3, 0.37, 0.1), (1.7, 0.9, 0.0)])
-def test_threshold_ties_match_reference(d0, lam, gamma, t):
+@pytest.mark.parametrize("window", [(9, 7), (3, 3), (5, 9), (9, 1)])   # each screen path of the kernel
+def test_threshold_ties_match_reference(d0, lam, gamma, t, window):
     """Neighbours at exactly ``d + t + pen`` and a few float32 ulps around it: the
     kernel's float screen must never miss a cell that the exact (double) rule flags."""
     H, W = 9, 4000
     x0, y0 = 2600, 4
     d0 = np.float32(d0)
-    for dx, dy in [(1, 0), (-3, 2), (4, -3), (0, 1), (-4, 3)]:
+    offsets = [(1, 0), (-3, 2), (4, -3), (0, 1), (-4, 3), (-1, -1), (2, 4)]
+    for dx, dy in [(dx, dy) for dx, dy in offsets if abs(dx) <= window[0] // 2 and abs(dy) <= window[1] // 2]:
         pen = lam * (gamma * abs(dx) + (1 - gamma) * abs(dy))
         base = np.float32(float(d0) + t + pen)
         for k in range(-3, 4):
@@ -86,7 +88,7 @@ def test_threshold_ties_match_reference(d0, lam, gamma, t):
             disp[y0, x0] = d0
             xn = x0 - int(np.floor(float(d0) + 0.5)) + dx + int(np.floor(float(dn) + 0.5))
             disp[y0 + dy, xn] = dn
-            occ = detect_occlusions(disp, lam=lam, gamma=gamma, t=t, num_threads=1)
-            ref = ref_occlusions(disp, window=(9, 7), lam=lam, gamma=gamma, t=t)
+            occ = detect_occlusions(disp, window=window, lam=lam, gamma=gamma, t=t, num_threads=1)
+            ref = ref_occlusions(disp, window=window, lam=lam, gamma=gamma, t=t)
             np.testing.assert_array_equal(occ, ref, err_msg=f"dx={dx} dy={dy} k={k}")
             assert ref[y0, x0] == ((float(dn) - float(d0)) - pen > t)

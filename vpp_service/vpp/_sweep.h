@@ -401,93 +401,84 @@ static inline void vpp_sort_band(const vpp_band_pt* in, const float* dv, int n, 
     vpp_band_insertion_sort(out, n);
 }
 
-/* Occlusion screen of one row's points (see _classify in _sweep.pyx).  For
- * point i (d from keys[i], warp column xw[i]) writes out[i] = 1 if it lost a
- * collision in its own warp cell (wq[xw] > d), else 2 if some window cell
- * passes the float screen
+/* Occlusion screen of one row's points (see _classify in _sweep.pyx).  The
+ * warp is column-major: cell (column c, ring slot l) at warp0[c * WL + l]
+ * (c counted from image column 0, may be negative).  For point i (d from
+ * keys[i], warp column xw[i]) writes out[i] = 1 if it lost a collision in its
+ * own cell (warp0[xw * WL + lq] > d), else 2 if some window cell passes the
+ * float screen
  *     f32(w - pen_f) > thr,   thr = f32(d + t - (d + t + penmax + 1) 2^-20),
- * i.e. rows[k][xw + c] - pens[k][c] > thr for a row k < nr and column c < npad
- * (pens rows padded with +inf past the window and at the point's own cell;
- * empty warp cells are -inf: neither ever passes), else 0.  Points marked 2
- * are then tested exactly (double, as the reference).  The screen never
- * misses a cell with (w - d) - pen > t in double: pen_f, the difference and
- * thr are each rounded to float with a relative error below 2^-24, in all at
- * most 2^-24 (3 pen + 2 (d + t) + ...), and the margin is 16 times that.
- * The vector path keeps the running maximum of w - pen_f (one compare per
- * point); the default 9 x 7 window (7 rows of 16 padded columns) keeps its
- * 14 penalty vectors in registers. */
-/* the screen's threshold f32(d + t - m), m = (d + t + penmax + 1) 2^-20 (d > 0, t >= 0) */
+ * i.e. warp0[(xw - rx2 + j) * WL + l] - pv[j * WL + l] > thr for a window
+ * column j < nwin and a slot l (pv is +inf for slots outside the window and
+ * at the point's own cell; empty cells are -inf: neither ever passes), else 0.
+ * Points marked 2 are then tested exactly (double, as the reference).  The
+ * screen never misses a cell with (w - d) - pen > t in double: pen_f, the
+ * difference and thr are each rounded to float with a relative error below
+ * 2^-24, in all at most 2^-24 (3 pen + 2 (d + t) + ...), and the margin is 16
+ * times that.  With AVX2 and an 8-slot ring (windows up to 7 rows) a window
+ * column is one vector: the running maximum of w - pen_f over the nwin
+ * columns, one compare per point; the default 9-column window keeps its 9
+ * penalty vectors in registers. */
 static inline float vpp_occ_thr(double d, double t, double penmax) {
     return (float)(d + t - (d + t + penmax + 1.0) * 9.5367431640625e-07);
 }
 
-static inline void vpp_occ_screen(const uint64_t* keys, const int32_t* xw, int n, const float* wq,
-                                  const float* const* rows, const float* const* pens, int nr, int npad,
-                                  double t, double penmax, uint8_t* out) {
-    int i, k, c;
+static inline void vpp_occ_screen(const uint64_t* keys, const int32_t* xw, int n, const float* warp0, int WL,
+                                  int lq, const float* pv, int nwin, int rx2, double t, double penmax,
+                                  uint8_t* out) {
+    int i, l;
 #if defined(__AVX2__)
-    if (nr == 7 && npad == 16) {
-        const __m256 p00 = _mm256_loadu_ps(pens[0]), p01 = _mm256_loadu_ps(pens[0] + 8);
-        const __m256 p10 = _mm256_loadu_ps(pens[1]), p11 = _mm256_loadu_ps(pens[1] + 8);
-        const __m256 p20 = _mm256_loadu_ps(pens[2]), p21 = _mm256_loadu_ps(pens[2] + 8);
-        const __m256 p30 = _mm256_loadu_ps(pens[3]), p31 = _mm256_loadu_ps(pens[3] + 8);
-        const __m256 p40 = _mm256_loadu_ps(pens[4]), p41 = _mm256_loadu_ps(pens[4] + 8);
-        const __m256 p50 = _mm256_loadu_ps(pens[5]), p51 = _mm256_loadu_ps(pens[5] + 8);
-        const __m256 p60 = _mm256_loadu_ps(pens[6]), p61 = _mm256_loadu_ps(pens[6] + 8);
-        const float *r0 = rows[0], *r1 = rows[1], *r2 = rows[2], *r3 = rows[3], *r4 = rows[4],
-                    *r5 = rows[5], *r6 = rows[6];
+    if (WL == 8 && nwin == 9) {
+        const __m256 q0 = _mm256_loadu_ps(pv), q1 = _mm256_loadu_ps(pv + 8), q2 = _mm256_loadu_ps(pv + 16);
+        const __m256 q3 = _mm256_loadu_ps(pv + 24), q4 = _mm256_loadu_ps(pv + 32), q5 = _mm256_loadu_ps(pv + 40);
+        const __m256 q6 = _mm256_loadu_ps(pv + 48), q7 = _mm256_loadu_ps(pv + 56), q8 = _mm256_loadu_ps(pv + 64);
         for (i = 0; i < n; i++) {
             const float d = vpp_sw_u2f((uint32_t)(keys[i] >> 32));
-            const double dd = d;
             const int64_t o = xw[i];
+            const float* c = warp0 + (o - rx2) * 8;
             __m256 a, b;
-            if (wq[o] > d) { out[i] = 1; continue; }
-#define VPP_ROW(r, p0, p1) \
-            a = _mm256_max_ps(a, _mm256_sub_ps(_mm256_loadu_ps(r + o), p0)); \
-            b = _mm256_max_ps(b, _mm256_sub_ps(_mm256_loadu_ps(r + o + 8), p1));
-            a = _mm256_sub_ps(_mm256_loadu_ps(r0 + o), p00);
-            b = _mm256_sub_ps(_mm256_loadu_ps(r0 + o + 8), p01);
-            VPP_ROW(r1, p10, p11) VPP_ROW(r2, p20, p21) VPP_ROW(r3, p30, p31)
-            VPP_ROW(r4, p40, p41) VPP_ROW(r5, p50, p51) VPP_ROW(r6, p60, p61)
-#undef VPP_ROW
-            {
-                const float thr = vpp_occ_thr(dd, t, penmax);
-                out[i] = _mm256_movemask_ps(_mm256_cmp_ps(_mm256_max_ps(a, b), _mm256_set1_ps(thr),
-                                                          _CMP_GT_OQ)) ? 2 : 0;
-            }
+            if (warp0[o * 8 + lq] > d) { out[i] = 1; continue; }
+            a = _mm256_max_ps(_mm256_sub_ps(_mm256_loadu_ps(c), q0), _mm256_sub_ps(_mm256_loadu_ps(c + 8), q1));
+            b = _mm256_max_ps(_mm256_sub_ps(_mm256_loadu_ps(c + 16), q2), _mm256_sub_ps(_mm256_loadu_ps(c + 24), q3));
+            a = _mm256_max_ps(a, _mm256_max_ps(_mm256_sub_ps(_mm256_loadu_ps(c + 32), q4),
+                                               _mm256_sub_ps(_mm256_loadu_ps(c + 40), q5)));
+            b = _mm256_max_ps(b, _mm256_max_ps(_mm256_sub_ps(_mm256_loadu_ps(c + 48), q6),
+                                               _mm256_sub_ps(_mm256_loadu_ps(c + 56), q7)));
+            a = _mm256_max_ps(_mm256_max_ps(a, b), _mm256_sub_ps(_mm256_loadu_ps(c + 64), q8));
+            out[i] = _mm256_movemask_ps(_mm256_cmp_ps(a, _mm256_set1_ps(vpp_occ_thr(d, t, penmax)),
+                                                      _CMP_GT_OQ)) ? 2 : 0;
         }
         return;
     }
 #endif
     for (i = 0; i < n; i++) {
         const float d = vpp_sw_u2f((uint32_t)(keys[i] >> 32));
-        const double dd = d;
         const int64_t o = xw[i];
+        const float* c = warp0 + (o - rx2) * WL;
+        const int cells = nwin * WL;
         float thr;
         int pass = 0;
-        if (wq[o] > d) { out[i] = 1; continue; }
-        thr = vpp_occ_thr(dd, t, penmax);
+        if (warp0[o * WL + lq] > d) { out[i] = 1; continue; }
+        thr = vpp_occ_thr(d, t, penmax);
+        l = 0;
 #if defined(__AVX2__)
-        {
+        if (WL % 8 == 0) {
             __m256 m = _mm256_set1_ps(-INFINITY);
-            for (k = 0; k < nr; k++)
-                for (c = 0; c < npad; c += 8)
-                    m = _mm256_max_ps(m, _mm256_sub_ps(_mm256_loadu_ps(rows[k] + o + c), _mm256_loadu_ps(pens[k] + c)));
+            for (; l < cells; l += 8)
+                m = _mm256_max_ps(m, _mm256_sub_ps(_mm256_loadu_ps(c + l), _mm256_loadu_ps(pv + l)));
             pass = _mm256_movemask_ps(_mm256_cmp_ps(m, _mm256_set1_ps(thr), _CMP_GT_OQ));
         }
-#elif VPP_HAVE_SSE2
-        {
+#endif
+#if VPP_HAVE_SSE2
+        if (l == 0 && WL % 4 == 0) {
             __m128 m = _mm_set1_ps(-INFINITY);
-            for (k = 0; k < nr; k++)
-                for (c = 0; c < npad; c += 4)
-                    m = _mm_max_ps(m, _mm_sub_ps(_mm_loadu_ps(rows[k] + o + c), _mm_loadu_ps(pens[k] + c)));
+            for (; l < cells; l += 4)
+                m = _mm_max_ps(m, _mm_sub_ps(_mm_loadu_ps(c + l), _mm_loadu_ps(pv + l)));
             pass = _mm_movemask_ps(_mm_cmpgt_ps(m, _mm_set1_ps(thr)));
         }
-#else
-        for (k = 0; k < nr && !pass; k++)
-            for (c = 0; c < npad; c++)
-                if (rows[k][o + c] - pens[k][c] > thr) { pass = 1; break; }
 #endif
+        for (; l < cells && !pass; l++)            /* the window's columns are contiguous */
+            pass = c[l] - pv[l] > thr;
         out[i] = pass ? 2 : 0;
     }
 }

@@ -12,23 +12,23 @@ walks its rows top to bottom with a small ring of per-row state, so nothing
 of size H x W is ever built besides the outputs:
 
 ingest(y)
-    scan the disparity row (SIMD compare + movemask; blocks of 8 empty values
-    cost one test) into keys ``(float_bits(d) << 32) | x`` in increasing x,
-    compute each point's right-view column and splat weights once, and warp
-    the points into a dense row of the right view, ``warp[x - round(d)] = max d``
-    (``-inf`` elsewhere).
+    scan the disparity row (SIMD compare + compress, no branches) into keys
+    ``(float_bits(d) << 32) | x`` in increasing x, compute each point's
+    right-view column and splat weights once, and warp the points into a dense
+    row of the right view, ``warp[x - round(d)] = max d`` (``-inf`` elsewhere).
+    The warp keeps the window's rows in a ring of ``wring`` slots stored
+    column-major: one column's rows are one vector.
 classify(q = y - r_y//2)
     a point is occluded if it lost a collision in its warp cell, or if a
     neighbour of its r_x x r_y window satisfies ``(W_n - d) - pen > t``
-    (float64, as in the reference).  Each window row is first screened in
-    float, 8 cells per vector compare, against ``pen + d + t`` lowered by a
-    margin larger than the float rounding, so the screen never misses a cell
-    the exact rule flags; only rows with a passing cell are tested cell by
-    cell (exact).
+    (float64, as in the reference).  The window is first screened in float,
+    one vector per window column, against ``d + t`` lowered by a margin larger
+    than the float rounding, so the screen never misses a cell the exact rule
+    flags; only points with a passing cell are tested cell by cell (exact).
 paint a band of 16 rows [b0, b1) once rows up to b1 - 1 + h are classified
     copy the band's rows of both inputs to the outputs; gather the points of
-    rows b0-h .. b1-1+h in (row, x) order and sort them by (d, gather
-    position) -- the global order (d, y, x) -- with a linear-time bucket sort;
+    rows b0-h .. b1-1+h in (row, x) order and sort them stably by d -- the
+    global order (d, y, x) -- with a linear-time bucket sort;
     then each point paints the band rows its patch covers: pattern bytes (the
     hash of each left pixel) and the splatted right view for every point
     first, then the left view (FGD reads the final right rows).  Each patch row
@@ -46,7 +46,7 @@ mask row is written by the chunk that owns the row only, and the result does
 not depend on the chunking or the thread count.
 """
 from cython.parallel cimport prange, parallel
-from libc.stdint cimport uint8_t, uint32_t, uint64_t, int64_t, int32_t
+from libc.stdint cimport uint8_t, uint32_t, uint64_t, int64_t, int32_t, uintptr_t
 from libc.stdlib cimport calloc, malloc, free
 from libc.string cimport memcpy, memset
 from libc.math cimport INFINITY
@@ -73,9 +73,8 @@ cdef extern from "_sweep.h" nogil:
     float vpp_sw_u2f(uint32_t u)
     int vpp_build_avx2()
     int vpp_cpu_supports_avx2()
-    void vpp_occ_screen(const uint64_t* keys, const int32_t* xw, int n, const float* wq,
-                        const float* const* rows, const float* const* pens, int nr, int npad,
-                        double t, double penmax, uint8_t* out)
+    void vpp_occ_screen(const uint64_t* keys, const int32_t* xw, int n, const float* warp0, int WL, int lq,
+                        const float* pv, int nwin, int rx2, double t, double penmax, uint8_t* out)
     void vpp_blend_span(uint8_t* dst, const uint8_t* val, int n, uint32_t w, int64_t room)
     int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, int k1,
                     uint32_t w0, uint32_t w1, int64_t room)
@@ -138,8 +137,6 @@ cdef struct Job:
     int ry2
     int nwin            # 2 * rx2 + 1
     const double* pen   # (2 ry2 + 1) x nwin, centre = +inf (a point is not its own neighbour)
-    const float* penf   # (2 ry2 + 1) x npad: pen as float, +inf past the window (candidate test)
-    int npad            # nwin rounded up to a multiple of 8
     double penmax       # largest finite penalty
     double t
     uint8_t* occ        # H x W mask
@@ -160,20 +157,21 @@ cdef struct Job:
     int ring            # power of two: rows of keys, flags and geometry kept
     int wring           # power of two >= 2 ry2 + 1: warp rows kept (a smaller ring: less cache)
     int band            # output rows painted together
-    int ww              # warp row length
-    int woff            # warp index of column 0
+    int ww              # warp columns (-W - rx2 .. W - 1 + rx2)
+    int woff            # warp column index of image column 0
 
 
 cdef struct Scratch:
     uint64_t* keys      # ring x W
     uint8_t* flags      # ring x W (occluded, per key)
     int* nk             # ring
-    float* warp         # wring x ww
-    int* wrowid         # wring: the row each warp row holds (-1: none)
+    float* warp_mem     # allocation of warp (aligned to 64 bytes in it)
+    float* warp         # ww columns x wring slots, column-major: the window's rows
+                        # of one column are one vector (see _ingest, _classify)
+    int* wrowid         # wring: the row each slot holds (-1: none)
     int32_t* xw         # ring x W: warp column x - round(d) per key
-    const float** wrows # 2 ry2 + 1: the current window's warp rows (column 0)
-    const float** prows # 2 ry2 + 1: their float penalty rows
-    const double** erows  # 2 ry2 + 1: their exact penalty rows
+    float* pvec         # nwin x wring: the current row's float penalty per (column, slot), +inf off the window
+    int* dyl            # wring: each slot's row offset from the classified row (ry2 + 1: not in the window)
     int64_t cap         # contribution capacity
     int32_t* geo_fl     # ring x W: right-view column floor(x') (or round(x') without splat)
     uint64_t* geo_w     # ring x W: right-view weights w0 | w1 << 32 (1/65536)
@@ -187,7 +185,7 @@ cdef struct Scratch:
     int64_t wcap        # of warp
     int rcap            # of nk
     int wrcap           # of wrowid
-    int ecap            # of wrows, prows, erows
+    int ecap            # of pvec (entries)
 
 
 cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
@@ -195,7 +193,7 @@ cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
     Scratch comes back with the capacities of its last job) and reset its state."""
     cdef int64_t i, nw = <int64_t>J.wring * J.ww if J.occ_on else 1
     cdef int64_t nk = <int64_t>J.ring * J.W + 1
-    cdef int ne = 2 * J.ry2 + 1
+    cdef int ne = J.nwin * J.wring
     S.failed = 0
     if nk > S.kcap:
         free(S.keys)
@@ -213,14 +211,10 @@ cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
             S.kcap = 0
             S.failed = 1
     if ne > S.ecap:
-        free(S.wrows)
-        free(S.prows)
-        free(S.erows)
-        S.wrows = <const float**>malloc(sizeof(float*) * ne)
-        S.prows = <const float**>malloc(sizeof(float*) * ne)
-        S.erows = <const double**>malloc(sizeof(double*) * ne)
+        free(S.pvec)
+        S.pvec = <float*>malloc(sizeof(float) * ne)
         S.ecap = ne
-        if S.wrows == NULL or S.prows == NULL or S.erows == NULL:
+        if S.pvec == NULL:
             S.ecap = 0
             S.failed = 1
     if J.ring > S.rcap:
@@ -232,16 +226,19 @@ cdef int _scratch_init(const Job* J, Scratch* S) noexcept nogil:
             S.failed = 1
     if J.wring > S.wrcap:
         free(S.wrowid)
+        free(S.dyl)
         S.wrowid = <int*>malloc(sizeof(int) * J.wring)
+        S.dyl = <int*>malloc(sizeof(int) * J.wring)
         S.wrcap = J.wring
-        if S.wrowid == NULL:
+        if S.wrowid == NULL or S.dyl == NULL:
             S.wrcap = 0
             S.failed = 1
     if nw > S.wcap:
-        free(S.warp)
-        S.warp = <float*>malloc(sizeof(float) * nw)
-        S.wcap = nw if S.warp != NULL else 0
-        if S.warp == NULL:
+        free(S.warp_mem)
+        S.warp_mem = <float*>malloc(sizeof(float) * nw + 64)
+        S.warp = <float*>((<uintptr_t>S.warp_mem + 63) & ~(<uintptr_t>63))
+        S.wcap = nw if S.warp_mem != NULL else 0
+        if S.warp_mem == NULL:
             S.failed = 1
     if S.failed:
         return 1
@@ -260,12 +257,11 @@ cdef void _scratch_free(Scratch* S) noexcept nogil:
     free(S.geo_fl)
     free(S.geo_w)
     free(S.xw)
-    free(S.wrows)
-    free(S.prows)
-    free(S.erows)
+    free(S.pvec)
+    free(S.dyl)
     free(S.flags)
     free(S.nk)
-    free(S.warp)
+    free(S.warp_mem)
     free(S.wrowid)
     _free_band(S)
 
@@ -361,7 +357,8 @@ cdef void _ingest(const Job* J, Scratch* S, int y, bint own) noexcept nogil:
     cdef uint64_t* keys = S.keys + <int64_t>slot * W
     cdef int32_t* xw = S.xw + <int64_t>slot * W
     cdef int ws = y & (J.wring - 1)
-    cdef float* wp = S.warp + <int64_t>ws * J.ww + J.woff
+    cdef float* wp = S.warp + <int64_t>J.woff * J.wring + ws    # column 0 of slot ws
+    cdef int64_t WL = J.wring
     cdef int i, n, yo, ko
     cdef int64_t st[4]
     cdef float d
@@ -376,7 +373,7 @@ cdef void _ingest(const Job* J, Scratch* S, int y, bint own) noexcept nogil:
             ko = yo & (J.ring - 1)
             xo = S.xw + <int64_t>ko * W
             for i in range(S.nk[ko]):
-                wp[xo[i]] = -INFINITY
+                wp[xo[i] * WL] = -INFINITY
         S.wrowid[ws] = y
     n = vpp_scan_row_w(J.disp + <int64_t>y * W, W, keys, st)   # in increasing x
     if own:
@@ -392,35 +389,39 @@ cdef void _ingest(const Job* J, Scratch* S, int y, bint own) noexcept nogil:
     if J.occ_on:
         for i in range(n):
             d = vpp_sw_u2f(<uint32_t>(keys[i] >> 32))
-            if d > wp[xw[i]]:
-                wp[xw[i]] = d
+            if d > wp[xw[i] * WL]:
+                wp[xw[i] * WL] = d
 
 
 cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
-    """Occlusion flags of row q's points.  The window is first screened in float,
-    8 cells a vector (``vpp_occ_screen`` in _sweep.h: a margin makes sure the
+    """Occlusion flags of row q's points.  The warp is column-major: a column's
+    ``wring`` slots hold the window's rows (slot ``y & (wring - 1)``), so one
+    vector per window column holds all its rows; ``pvec`` gives each (column,
+    slot) its float penalty for row q, +inf for slots outside the window (or
+    rows not ingested) and for the point's own cell.  The window is first
+    screened in float (``vpp_occ_screen`` in _sweep.h: a margin makes sure the
     screen never misses a cell the exact rule flags); only points with a
     passing cell are checked exactly (in double, as the reference)."""
     cdef int slot = q & (J.ring - 1)
-    cdef int W = J.W, H = J.H, nwin = J.nwin, rx2 = J.rx2, ry2 = J.ry2, npad = J.npad
+    cdef int W = J.W, nwin = J.nwin, rx2 = J.rx2, ry2 = J.ry2, WL = J.wring
     cdef const uint64_t* keys = S.keys + <int64_t>slot * W
     cdef const int32_t* xws = S.xw + <int64_t>slot * W
     cdef uint8_t* flags = S.flags + <int64_t>slot * W
-    cdef const float* wq = S.warp + <int64_t>(q & (J.wring - 1)) * J.ww + J.woff
-    cdef const float* wr
-    cdef const double* pr
-    cdef int i, n = S.nk[slot], xw, dy, yn, j, k, nr = 0, found
+    cdef const float* warp0 = S.warp + <int64_t>J.woff * WL     # column 0
+    cdef const float* col
+    cdef int i, n = S.nk[slot], xw, dy, j, L, found, yo
     cdef int64_t cnt = 0
     cdef double dd, t = J.t
-    for dy in range(-ry2, ry2 + 1):            # the window rows inside the image
-        yn = q + dy
-        if yn >= 0 and yn < H:
-            S.wrows[nr] = S.warp + <int64_t>(yn & (J.wring - 1)) * J.ww + J.woff - rx2
-            S.prows[nr] = J.penf + <int64_t>(dy + ry2) * npad
-            S.erows[nr] = J.pen + <int64_t>(dy + ry2) * nwin
-            nr += 1
+    for L in range(WL):                       # each slot's row offset, and its penalties
+        yo = S.wrowid[L]
+        dy = yo - q if yo >= 0 else ry2 + 1
+        if dy < -ry2 or dy > ry2:
+            dy = ry2 + 1
+        S.dyl[L] = dy
+        for j in range(nwin):
+            S.pvec[j * WL + L] = <float>J.pen[(dy + ry2) * nwin + j] if dy <= ry2 else INFINITY
     # flags: 1 lost a collision, 2 a window candidate, 0 visible
-    vpp_occ_screen(keys, xws, n, wq, S.wrows, S.prows, nr, npad, t, J.penmax, flags)
+    vpp_occ_screen(keys, xws, n, warp0, WL, q & (WL - 1), S.pvec, nwin, rx2, t, J.penmax, flags)
     for i in range(n):
         found = flags[i]
         if found == 0:
@@ -429,11 +430,11 @@ cdef void _classify(const Job* J, Scratch* S, int q, bint own) noexcept nogil:
             found = 0
             dd = vpp_sw_u2f(<uint32_t>(keys[i] >> 32))
             xw = xws[i]
-            for k in range(nr):
-                wr = S.wrows[k] + xw
-                pr = S.erows[k]
-                for j in range(nwin):
-                    if (<double>wr[j] - dd) - pr[j] > t:
+            for j in range(nwin):
+                col = warp0 + <int64_t>(xw - rx2 + j) * WL
+                for L in range(WL):
+                    dy = S.dyl[L]
+                    if dy <= ry2 and (<double>col[L] - dd) - J.pen[(dy + ry2) * nwin + j] > t:
                         found = 1
                         break
                 if found:
@@ -635,7 +636,7 @@ def sweep_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, bint occ_on, int
     Returns ``(row stats H x 4, occluded per row)``."""
     cdef int H = disp.shape[0], W = disp.shape[1]
     cdef int rx2 = rx // 2, ry2 = ry // 2
-    cdef int nwin = 2 * rx2 + 1, i, j, need, ci, nchunks, chunk, npad
+    cdef int nwin = 2 * rx2 + 1, i, j, need, ci, nchunks, chunk
     cdef Job J
     cdef Scratch* S = NULL
     failed_np = np.zeros(1, np.int32)
@@ -647,11 +648,7 @@ def sweep_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, bint occ_on, int
         for i in range(nwin):
             pen_full[j, i] = pen[abs(j - ry2), abs(i - rx2)]
     pen_full[ry2, rx2] = np.inf
-    npad = (nwin + 7) // 8 * 8
-    penf_np = np.full((2 * ry2 + 1, npad), np.inf, np.float32)
-    penf_np[:, :nwin] = pen_full
     cdef double[:, ::1] pf = pen_full
-    cdef float[:, ::1] penf = penf_np
     cdef int64_t[:, ::1] st = stats
     cdef int64_t[::1] cn = cnt
     if H == 0 or W == 0:
@@ -664,8 +661,6 @@ def sweep_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, bint occ_on, int
     J.ry2 = ry2
     J.nwin = nwin
     J.pen = &pf[0, 0]
-    J.penf = &penf[0, 0]
-    J.npad = npad
     J.penmax = float(pen_full[np.isfinite(pen_full)].max(initial=0.0))
     J.t = t
     J.occ = &occ[0, 0]
@@ -697,7 +692,7 @@ def sweep_kernel(const float[:, ::1] disp, uint8_t[:, ::1] occ, bint occ_on, int
     J.wring = 1                      # <= ring (need >= 2 ry2 + 1 when occ_on)
     while J.wring < 2 * ry2 + 1:
         J.wring *= 2
-    J.ww = 2 * W + 2 * rx2 + 8       # warp columns -W .. W-1, +- rx2, SIMD over-read (npad - nwin <= 7)
+    J.ww = 2 * W + 2 * rx2           # warp columns -W - rx2 .. W - 1 + rx2
     J.woff = W + rx2
     if nthreads <= 1:
         nchunks = 1
