@@ -137,22 +137,31 @@ static inline int vpp_scan_row_w(const float* d, int W, uint64_t* keys, int64_t*
     const __m256 zero = _mm256_setzero_ps(), wf = _mm256_set1_ps((float)W);
     const __m256 iota = _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7);
     const __m256i iotai = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-    for (; x + 8 <= W; x += 8) {
+    /* given / left-border counts per lane (a compare mask is -1 per counted lane) */
+    __m256i gacc = _mm256_setzero_si256(), oacc = _mm256_setzero_si256();
+    __m256 xf = iota;
+    for (; x + 8 <= W; x += 8, xf = _mm256_add_ps(xf, _mm256_set1_ps(8.0f))) {
         __m256 a = _mm256_loadu_ps(d + x);
-        unsigned g = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(a, zero, _CMP_NEQ_OQ));  /* not 0, not NaN */
-        unsigned m = (unsigned)_mm256_movemask_ps(_mm256_and_ps(_mm256_cmp_ps(a, zero, _CMP_GT_OQ),
-                                                                _mm256_cmp_ps(a, wf, _CMP_LT_OQ)));
-        unsigned o = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(_mm256_add_ps(iota, _mm256_set1_ps((float)x)),
-                                                                a, _CMP_LT_OQ)) & m;
+        __m256 valid = _mm256_and_ps(_mm256_cmp_ps(a, zero, _CMP_GT_OQ), _mm256_cmp_ps(a, wf, _CMP_LT_OQ));
+        unsigned m = (unsigned)_mm256_movemask_ps(valid);
         __m256i perm = _mm256_load_si256((const __m256i*)vpp_scan_lut[m]);
+        gacc = _mm256_sub_epi32(gacc, _mm256_castps_si256(_mm256_cmp_ps(a, zero, _CMP_NEQ_OQ)));  /* not 0, not NaN */
+        oacc = _mm256_sub_epi32(oacc, _mm256_castps_si256(_mm256_and_ps(_mm256_cmp_ps(xf, a, _CMP_LT_OQ), valid)));
         __m256i xs = _mm256_permutevar8x32_epi32(_mm256_add_epi32(_mm256_set1_epi32(x), iotai), perm);
         __m256i ds = _mm256_permutevar8x32_epi32(_mm256_castps_si256(a), perm);
         __m256i lo = _mm256_unpacklo_epi32(xs, ds), hi = _mm256_unpackhi_epi32(xs, ds);
         _mm256_storeu_si256((__m256i*)(keys + n), _mm256_permute2x128_si256(lo, hi, 0x20));
         _mm256_storeu_si256((__m256i*)(keys + n + 4), _mm256_permute2x128_si256(lo, hi, 0x31));
         n += __builtin_popcount(m);
-        given += __builtin_popcount(g);
-        oob += __builtin_popcount(o);
+    }
+    {
+        int32_t gl[8], ol[8], k;
+        _mm256_storeu_si256((__m256i*)gl, gacc);
+        _mm256_storeu_si256((__m256i*)ol, oacc);
+        for (k = 0; k < 8; k++) {
+            given += gl[k];
+            oob += ol[k];
+        }
     }
     return vpp_scan_finish(d, x, W, keys, n, given, oob, st);
 #else
