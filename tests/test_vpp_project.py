@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from vpp_service.vpp import VPPConfig, project
+from vpp_service.vpp import VPPConfig, backend, project
 from vpp_service.vpp.rng import pattern_bytes
 
 from vpp_reference import ref_project
@@ -78,10 +78,10 @@ def table_builder(request):
     """Run with each builder of the histogram window tables this CPU can run."""
     from vpp_service.vpp import _kernel
     if not _kernel.tables_use_avx2(request.param) and request.param:
-        _kernel.tables_use_avx2(_kernel.TABLES_AVX2)
+        _kernel.tables_use_avx2(backend.AVX2)
         pytest.skip("no AVX2 on this CPU / platform")
     yield request.param
-    _kernel.tables_use_avx2(_kernel.TABLES_AVX2)
+    _kernel.tables_use_avx2(backend.AVX2)
 
 
 @pytest.mark.parametrize("shape,search", [((12, 97, 3), (64, 3)), ((9, 70, 1), (16, 1)),

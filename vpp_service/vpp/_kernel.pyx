@@ -28,7 +28,7 @@ middle blocks | prefix[e]`` (3 lookups for L=64).  The tables are built in C
 (``vpp_onehot``) and the words are ORed as two 128-bit vectors (GCC/Clang vector
 extensions; SSE2 on plain x86-64), or as one 256-bit register on CPUs with AVX2
 (a copy compiled for AVX2 by a target attribute, chosen at import:
-:func:`tables_use_avx2`; same bytes).  The gap search is bit-parallel
+:func:`tables_use_avx2`, set by :mod:`~vpp_service.vpp.backend`; same bytes).  The gap search is bit-parallel
 (``vpp_hist_pick``).  If every bin is filled the window is counted exactly (rare).
 """
 from cython.parallel cimport prange, parallel
@@ -40,8 +40,6 @@ from libc.math cimport floor, pow
 
 from vpp_service.vpp._pixel cimport _pidx, _w16, _blend16, _fgd_pixel
 
-import os
-
 import numpy as np
 
 vpp_init_onehot()
@@ -50,13 +48,10 @@ vpp_init_onehot()
 def tables_use_avx2(bint on):
     """Build the histogram window tables with AVX2 (when this CPU and build can)
     or with the portable code; same bytes.  Returns whether AVX2 is now used.
-    Chosen once at import (AVX2 unless ``VPP_NO_AVX2=1``); tests switch it to
-    check both.  Not to be called while a kernel runs."""
+    :mod:`vpp_service.vpp.backend` sets it at import, with the sweep build it
+    chooses (``backend.AVX2``); tests switch it to check both.  Not to be
+    called while a kernel runs."""
     return bool(vpp_tables_use_avx2(on))
-
-
-#: True when the histogram window tables are built with AVX2 (see :func:`tables_use_avx2`).
-TABLES_AVX2 = tables_use_avx2(os.environ.get("VPP_NO_AVX2", "0") != "1")
 
 cdef extern from *:
     """
@@ -207,6 +202,7 @@ cdef extern from *:
             }
         }
     }
+    #include "_sweep.h"      /* vpp_cpu_supports_avx2 (include-guarded) */
     #if defined(__GNUC__) && defined(__x86_64__)
     #include <immintrin.h>
     /* vpp_build_tables on 256-bit registers (a whole occupancy per load, OR and
@@ -243,19 +239,11 @@ cdef extern from *:
     #else
     #define VPP_TABLES_AVX2 0
     #endif
-    static int vpp_tables_avx2 = 0;   /* set once at import (vpp_tables_use_avx2), before any kernel runs */
-    /* 1 when this build has the AVX2 table builder and the CPU can run it */
-    static int vpp_tables_avx2_ok(void) {
-    #if VPP_TABLES_AVX2
-        __builtin_cpu_init();
-        return __builtin_cpu_supports("avx2");
-    #else
-        return 0;
-    #endif
-    }
-    /* choose the AVX2 builder (if it can run) or the portable one; returns the choice */
+    static int vpp_tables_avx2 = 0;   /* set at import (vpp_tables_use_avx2), before any kernel runs */
+    /* choose the AVX2 builder (if built and the CPU can run the AVX2 sweep build:
+       the same test) or the portable one; returns the choice */
     static int vpp_tables_use_avx2(int on) {
-        vpp_tables_avx2 = on && vpp_tables_avx2_ok();
+        vpp_tables_avx2 = VPP_TABLES_AVX2 && on && vpp_cpu_supports_avx2();
         return vpp_tables_avx2;
     }
     static void vpp_build_tables(const uint8_t* img, int H, int W, int C, int c, int r,

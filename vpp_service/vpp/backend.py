@@ -5,9 +5,9 @@ build (SSE2 on x86-64, plain C elsewhere) and, on x86-64, ``_sweep_avx2``
 compiled for x86-64-v3 (AVX2, FMA, BMI2, ...).  Both give the same bytes.  The
 AVX2 build is imported only after the portable one has checked that the CPU
 supports it (importing it on an older CPU would crash); ``VPP_NO_AVX2=1`` in
-the environment keeps the portable build (and the portable histogram table
-builder of :mod:`vpp_service.vpp._kernel`, which otherwise picks its AVX2 copy
-at import).
+the environment keeps the portable build.  The histogram table builder of
+:mod:`vpp_service.vpp._kernel` follows the same choice (its AVX2 copy is used
+exactly when ``AVX2`` is true).
 
 Attributes
 ----------
@@ -21,6 +21,7 @@ from __future__ import annotations
 import os
 from types import ModuleType
 
+from . import _kernel
 from . import _sweep as portable
 
 
@@ -43,6 +44,8 @@ def _choose() -> ModuleType:
 
 sweep: ModuleType = _choose()
 AVX2: bool = bool(sweep.AVX2)
+# the histogram kernel's AVX2 table builder follows the same choice
+_kernel.tables_use_avx2(AVX2)
 
 
 def release_scratch() -> int:
