@@ -12,8 +12,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from skimage.data import stereo_motorcycle  # noqa: E402
 
+from vpp_service.datasets.skimage_scene import motorcycle_arrays  # noqa: E402
 from vpp_service.vpp import VPPConfig, project  # noqa: E402
 
 
@@ -21,7 +21,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--out", default="docs/img/vpp_pair.png")
     a = ap.parse_args(argv)
-    left, right, gt = stereo_motorcycle()
+    left, right, gt = motorcycle_arrays()
     rng = np.random.default_rng(0)
     sparse = np.where(np.isfinite(gt) & (rng.random(gt.shape) < 0.05), gt, 0).astype(np.float32)
     res = project(left, right, sparse, VPPConfig(), seed=0)

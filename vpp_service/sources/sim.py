@@ -20,7 +20,6 @@ Frames are paced at ``rate_hz`` (0 = as fast as possible); ``count = 0`` runs fo
 """
 from __future__ import annotations
 
-import functools
 import time
 from dataclasses import dataclass, field
 from typing import Any, Literal
@@ -28,23 +27,9 @@ from typing import Any, Literal
 import cv2
 import numpy as np
 
+from vpp_service.datasets.skimage_scene import MOTORCYCLE_CALIB, motorcycle
 from vpp_service.frame import Calibration, StereoFrame
 from vpp_service.sources.base import SOURCES, Emit, Pacer, Reject, Source, SourceContext
-
-#: Nominal calibration of scikit-image's quarter-size Motorcycle (see the module docstring).
-MOTORCYCLE_CALIB = Calibration(f=3979.911 / 4, baseline=0.193001, doffs=124.343 / 4)
-
-
-@functools.lru_cache(maxsize=1)
-def _motorcycle_arrays() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    from skimage import data
-
-    left, right, disp = data.stereo_motorcycle()
-    disp = np.asarray(disp, dtype=np.float32).copy()
-    disp[~np.isfinite(disp) | (disp <= 0)] = np.nan
-    for a in (left, right, disp):
-        a.setflags(write=False)
-    return left, right, disp
 
 
 def scale_frame(frame: StereoFrame, scale: float) -> StereoFrame:
@@ -90,9 +75,7 @@ def motorcycle_frame(scale: float = 1.0) -> StereoFrame:
     scale : float
         Resize factor in (0, 1] (disparities and calibration scale with it).
     """
-    left, right, disp = _motorcycle_arrays()
-    frame = StereoFrame(left=left, right=right, calib=MOTORCYCLE_CALIB, gt_disparity=disp,
-                        name="motorcycle")
+    frame = motorcycle()
     return scale_frame(frame, scale)
 
 
