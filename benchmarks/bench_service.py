@@ -103,13 +103,13 @@ def main() -> int:
 
     import zenoh
 
+    from vpp_service.fusion import fuse
     from vpp_service.matchers import build_matcher
     from vpp_service.service import wire
     from vpp_service.service.config import validate_config
     from vpp_service.service.shm import ShmPutter
     from vpp_service.sources.sensors import build_sensor
     from vpp_service.sources.synthetic import make_scene
-    from vpp_service.vpp import project
 
     n_unique = min(a.frames, 8)
     scene = make_scene(height=a.height, width=a.width, seed=0, max_disparity=96)
@@ -139,17 +139,12 @@ def main() -> int:
             raise RuntimeError("stamp placeholder not found in the encoded frame")
         payloads.append((p, off + 1))
 
-    # (a) matcher alone, on the very pairs the service matches (VPP-painted with its seed)
+    # (a) matcher alone, on the very pairs the service matches (its fusion step with its seeds)
     matcher = build_matcher("sgbm", {"max_disparity": a.max_disparity})
     painted = []
     for f in frames:
-        sparse = f.sparse_disparity
-        if sparse is None:
-            from vpp_service.vpp import depth_to_disparity
-            sparse = depth_to_disparity(f.sensor_depth, f.calib.f, f.calib.baseline, f.calib.doffs)
-        res = project(np.ascontiguousarray(f.left), np.ascontiguousarray(f.right), sparse, cfg.vpp,
-                      seed=int(f.seq))
-        painted.append((res.left, res.right))
+        r = fuse(f, matcher, cfg.vpp, seed=cfg.service.seed + int(f.seq), depth=False)
+        painted.append((f.left, f.right) if r.left_vpp is None else (r.left_vpp, r.right_vpp))
     for left, right in painted[:2]:
         matcher.compute(left, right)
     m_ms = []

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from vpp_service.frame import FusionResult
-from vpp_service.service.fusion import Fusion
+from vpp_service.fusion import Fusion
 from vpp_service.service.pipeline import BoundedQueue, Pipeline, StageTimer
 from vpp_service.sinks.base import Sink, SinkContext
 from vpp_service.sources.base import SourceContext, build_source

@@ -137,9 +137,10 @@ class FusionResult:
     occluded : ndarray or None
         H x W bool, sparse points classified occluded by VPP.
     vpp_stats : dict
-        VPP counters for the frame (points given/projected/occluded/...).
+        VPP point counts of the frame, :meth:`VPPStats.to_dict <vpp_service.vpp.VPPStats.to_dict>`
+        (``given``, ``projected``, ``occluded``, ``invalid``, ``out_of_bounds``); empty when VPP did not run.
     timing_ms : dict
-        Per-stage wall time in milliseconds (e.g. decode, vpp, match, total).
+        Per-stage wall time in milliseconds (e.g. decode, vpp, match, process).
     metrics : dict
         Accuracy vs ground truth when the frame has it (bad2, avg, ...).
     """
@@ -150,6 +151,6 @@ class FusionResult:
     left_vpp: np.ndarray | None = None
     right_vpp: np.ndarray | None = None
     occluded: np.ndarray | None = None
-    vpp_stats: dict[str, Any] = field(default_factory=dict)
+    vpp_stats: dict[str, int] = field(default_factory=dict)
     timing_ms: dict[str, float] = field(default_factory=dict)
     metrics: dict[str, float] = field(default_factory=dict)

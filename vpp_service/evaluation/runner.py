@@ -4,19 +4,21 @@ For every frame (and every density of a sweep) the runner
 
 1. draws the sparse points **once** with the sensor (seeded with ``seed``, the
    same seed for every scene, so filtering scenes does not change the points);
-2. runs each method on the same frame and points:
+2. runs each method on the same frame and points, each one call of the fusion
+   step :func:`vpp_service.fusion.fuse` (``protocol=True``):
 
-   * ``baseline`` - ``matcher.compute(left, right)`` (independent of the points,
+   * ``baseline`` - the matcher on the raw pair (independent of the points,
      so computed once per scene and repeated for each density of a sweep);
-   * ``guided`` - ``matcher.compute(left, right, hints=sparse)`` (only matchers
+   * ``guided`` - the matcher with the points as ``hints`` (only matchers
      with ``supports_guidance``);
-   * ``vpp`` - ``vpp_service.vpp.project(left, right, sparse, config, seed=seed)``
-     then the matcher on the painted pair;
+   * ``vpp`` - VPP on the points (pattern seed ``seed``), then the matcher on
+     the painted pair;
 
 3. fills the matcher's holes with background interpolation
    (:func:`vpp_service.matchers.fill_holes`), as the protocol says, and scores
    with :func:`~vpp_service.evaluation.metrics.compute_metrics` over all
-   valid-GT pixels, plus ``*_nocc`` metrics when the frame has a mask.
+   valid-GT pixels, plus ``*_nocc`` metrics when the frame has a mask
+   (:func:`vpp_service.fusion.score`).
 
 Matcher disparity range: when the matcher is given by name, each scene gets
 ``max_disparity`` = the given value, or by default the smallest multiple of 16
@@ -31,12 +33,10 @@ the measured fraction of valid-GT pixels that got a point as ``density``;
 from __future__ import annotations
 
 import math
-import time
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from vpp_service.evaluation.metrics import compute_metrics
 from vpp_service.frame import StereoFrame
 
 #: Methods understood by :func:`run_evaluation`, in report order.
@@ -157,7 +157,8 @@ def run_evaluation(
         Bad arguments: unknown method, ``guided`` with a matcher without
         guidance (names the matcher), frames without ground truth, ...
     """
-    from vpp_service.matchers import Matcher, build_matcher, fill_holes
+    from vpp_service.fusion import fuse
+    from vpp_service.matchers import Matcher, build_matcher
     from vpp_service.sources.sensors import Sensor, build_sensor
 
     methods = _check_methods(methods)
@@ -212,7 +213,7 @@ def run_evaluation(
             sensors[d] = build_sensor(sensor, opts)
 
     if "vpp" in methods:
-        from vpp_service.vpp import VPPConfig, project
+        from vpp_service.vpp import VPPConfig
 
         if vpp_config is None:
             vpp_config = VPPConfig()
@@ -246,25 +247,14 @@ def run_evaluation(
         else:
             m = matcher
         md = int(m.options.max_disparity)
-        left, right = np.ascontiguousarray(frame.left), np.ascontiguousarray(frame.right)
         common = {"dataset": dataset_name or frame.meta.get("dataset", ""), "scene": scene,
                   "matcher": matcher_name, "sensor": sensor_name, "max_disparity": md}
-
-        def score(disp: np.ndarray) -> dict[str, Any]:
-            filled = fill_holes(disp)
-            out = compute_metrics(filled, gt)
-            if frame.nocc_mask is not None:
-                for k, v in compute_metrics(filled, gt, mask=frame.nocc_mask.astype(bool)).items():
-                    out[f"{k}_nocc"] = v
-            return out
 
         baseline_row = None
         if "baseline" in methods:
             tick(f"{scene} {matcher_name} baseline")
-            t0 = time.perf_counter()
-            disp = m.compute(left, right)
-            ms = 1000.0 * (time.perf_counter() - t0)
-            baseline_row = {**score(disp), "ms": ms}
+            res = fuse(frame, m, None, depth=False, protocol=True)
+            baseline_row = {**res.metrics, "ms": res.timing_ms["match"]}
             done += 1
 
         for d in dens:
@@ -281,23 +271,19 @@ def run_evaluation(
             density = d if d is not None else (n_points / n_valid if n_valid else 0.0)
             base = {**common, "density": density, "n_points": n_points}
             dlabel = f"{d:g}" if d is not None else sensor_name
+            with_points = frame.with_(sparse_disparity=sparse, sensor_depth=None)
             for method in methods:
                 if method == "baseline":
                     rows.append({**base, "method": "baseline", **baseline_row})
                     continue
                 tick(f"{scene} {matcher_name} {method} {dlabel}")
-                extra: dict[str, Any] = {}
-                t0 = time.perf_counter()
                 if method == "guided":
-                    disp = m.compute(left, right, hints=sparse)
+                    res = fuse(with_points, m, None, guide=True, depth=False, protocol=True)
                 else:
-                    res = project(left, right, sparse, vpp_config, seed=int(seed))
-                    disp = m.compute(np.ascontiguousarray(res.left), np.ascontiguousarray(res.right))
-                    stats = getattr(res, "stats", None)
-                    stats = stats.to_dict() if hasattr(stats, "to_dict") else dict(stats or {})
-                    extra = {f"vpp_{k}": v for k, v in stats.items() if isinstance(v, (int, float))}
-                ms = 1000.0 * (time.perf_counter() - t0)
-                rows.append({**base, "method": method, **score(disp), "ms": ms, **extra})
+                    res = fuse(with_points, m, vpp_config, seed=int(seed), depth=False, protocol=True)
+                ms = res.timing_ms.get("vpp", 0.0) + res.timing_ms["match"]
+                extra = {f"vpp_{k}": v for k, v in res.vpp_stats.items()}
+                rows.append({**base, "method": method, **res.metrics, "ms": ms, **extra})
                 done += 1
     if progress is not None:
         progress(done, total, "done")

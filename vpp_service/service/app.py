@@ -19,7 +19,7 @@ from typing import Any, Iterator, TextIO
 
 from vpp_service.service.allocator import reuse_freed_memory
 from vpp_service.service.config import ServiceConfig, ZenohSection
-from vpp_service.service.fusion import Fusion
+from vpp_service.fusion import Fusion
 from vpp_service.service.pipeline import Pipeline
 
 log = logging.getLogger(__name__)

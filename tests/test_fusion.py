@@ -1,0 +1,108 @@
+"""The fusion step (``vpp_service.fusion``): fuse() against its parts composed by hand, and the service's Fusion."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vpp_service.evaluation.metrics import compute_metrics
+from vpp_service.frame import StereoFrame
+from vpp_service.fusion import Fusion, fuse, score, sparse_disparity
+from vpp_service.matchers import build_matcher, fill_holes
+from vpp_service.sources.sensors import build_sensor
+from vpp_service.sources.synthetic import make_scene
+from vpp_service.vpp import VPPConfig, depth_to_disparity, disparity_to_depth, project
+
+
+@pytest.fixture(scope="module")
+def frame() -> StereoFrame:
+    """A calibrated synthetic frame with ground truth, a non-occlusion mask and 5 % sparse points."""
+    scene = make_scene(64, 112, seed=2, texture="weak", noise=2.0, max_disparity=24)
+    return build_sensor("uniform", {"density": 0.05}).simulate(scene, seed=1)
+
+
+@pytest.fixture(scope="module")
+def matcher():
+    return build_matcher("census-sgm", {"max_disparity": 32})
+
+
+def test_fuse_with_vpp_is_project_then_match(frame, matcher):
+    cfg = VPPConfig()
+    res = fuse(frame, matcher, cfg, seed=5)
+    painted = project(frame.left, frame.right, frame.sparse_disparity, cfg, seed=5)
+    disp = matcher.compute(painted.left, painted.right)
+    np.testing.assert_array_equal(res.left_vpp, painted.left)
+    np.testing.assert_array_equal(res.right_vpp, painted.right)
+    np.testing.assert_array_equal(res.occluded, painted.occluded)
+    np.testing.assert_array_equal(res.disparity, disp)
+    assert res.vpp_stats == painted.stats.to_dict() and res.vpp_stats["projected"] > 0
+    assert res.metrics == compute_metrics(disp, frame.gt_disparity)     # the raw output, no *_nocc
+    c = frame.calib
+    np.testing.assert_array_equal(res.depth, disparity_to_depth(disp, c.f, c.baseline, c.doffs).astype(np.float32))
+    assert {"vpp", "match", "process"} <= res.timing_ms.keys()
+    assert res.timing_ms["process"] >= res.timing_ms["vpp"] + res.timing_ms["match"]
+
+
+def test_fuse_converts_metric_depth_and_keeps_frame_timings(frame, matcher):
+    c = frame.calib
+    depth_only = frame.with_(sparse_disparity=None, meta={"timing_ms": {"decode": 1.5}})
+    np.testing.assert_array_equal(sparse_disparity(depth_only),
+                                  depth_to_disparity(frame.sensor_depth, c.f, c.baseline, c.doffs))
+    res = fuse(depth_only, matcher, VPPConfig(), seed=5, depth=False)
+    ref = project(frame.left, frame.right, sparse_disparity(depth_only), VPPConfig(), seed=5)
+    np.testing.assert_array_equal(res.left_vpp, ref.left)
+    assert res.depth is None and res.timing_ms["decode"] == 1.5
+    assert sparse_disparity(depth_only.with_(calib=None)) is None
+
+
+def test_fuse_without_vpp_or_points_runs_the_raw_pair(frame, matcher):
+    disp = matcher.compute(frame.left, frame.right)
+    for res in (fuse(frame, matcher, None), fuse(frame.with_(sparse_disparity=None, sensor_depth=None), matcher,
+                                                 VPPConfig())):
+        np.testing.assert_array_equal(res.disparity, disp)
+        assert res.left_vpp is None and res.right_vpp is None and res.occluded is None
+        assert res.vpp_stats == {} and "vpp" not in res.timing_ms
+
+
+def test_fuse_protocol_fills_holes_for_scoring_only(frame, matcher):
+    res = fuse(frame, matcher, None, protocol=True)
+    raw = matcher.compute(frame.left, frame.right)
+    assert np.isnan(raw).any()
+    np.testing.assert_array_equal(res.disparity, raw)             # the output keeps its holes
+    filled = fill_holes(raw)
+    expected = compute_metrics(filled, frame.gt_disparity)
+    expected.update({f"{k}_nocc": v for k, v in compute_metrics(filled, frame.gt_disparity,
+                                                                mask=frame.nocc_mask).items()})
+    assert res.metrics == expected
+    assert score(raw, frame.with_(gt_disparity=None), protocol=True) == {}
+
+
+def test_fuse_guided_passes_the_points_as_hints(frame, matcher):
+    res = fuse(frame, matcher, None, guide=True)
+    np.testing.assert_array_equal(res.disparity, matcher.compute(frame.left, frame.right,
+                                                                 hints=frame.sparse_disparity))
+    assert not np.array_equal(res.disparity, matcher.compute(frame.left, frame.right), equal_nan=True)
+    with pytest.raises(ValueError, match="no sparse points"):
+        fuse(frame.with_(sparse_disparity=None, sensor_depth=None), matcher, None, guide=True)
+    with pytest.raises(ValueError, match="guidance"):
+        fuse(frame, build_matcher("sgbm", {"max_disparity": 32}), None, guide=True)
+
+
+def test_service_fusion_seeds_with_seq_and_counts(frame, matcher):
+    fusion = Fusion(matcher, VPPConfig(), seed=100)
+    res = fusion(frame.with_(seq=7))
+    ref = fuse(frame, matcher, VPPConfig(), seed=107)
+    np.testing.assert_array_equal(res.left_vpp, ref.left_vpp)
+    np.testing.assert_array_equal(res.disparity, ref.disparity)
+    fusion(frame.with_(sparse_disparity=None, sensor_depth=None))
+    assert fusion.counters == {"vpp": 1, "no_depth": 1}
+    plain = Fusion(matcher, None)
+    plain(frame)                                                   # points present: neither counter
+    plain(frame.with_(sparse_disparity=np.full(frame.shape, np.nan, np.float32), sensor_depth=None))
+    assert plain.counters == {"vpp": 0, "no_depth": 1}
+
+
+def test_service_fusion_rejects_bad_arguments(matcher):
+    with pytest.raises(TypeError, match="Matcher"):
+        Fusion(object())
+    with pytest.raises(TypeError, match="VPPConfig"):
+        Fusion(matcher, {"alpha": 0.4})

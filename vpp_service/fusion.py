@@ -1,0 +1,225 @@
+"""The per-frame fusion step: sparse depth -> VPP -> matcher -> depth, metrics.
+
+:func:`fuse` is the one implementation of the step; the service's
+:class:`Fusion` (the pipeline's process stage), the ``eval`` runner, the
+``demo`` command and the benchmarks all call it.
+
+* **Sparse points.** The frame's ``sparse_disparity``, or its metric
+  ``sensor_depth`` converted with its calibration (``d = f * b / Z - doffs``)
+  (:func:`sparse_disparity`).
+* **VPP.** With a :class:`~vpp_service.vpp.VPPConfig` and sparse points, the
+  pair is painted (:func:`vpp_service.vpp.project`, pattern seed ``seed``) and
+  the matcher runs on the painted pair. When none of the points is usable
+  (none with ``0 < d < width``, as counted by VPP itself) the matcher runs on
+  the raw pair and ``left_vpp`` / ``right_vpp`` / ``occluded`` stay None;
+  ``vpp_stats`` holds the counts either way (:meth:`VPPStats.to_dict
+  <vpp_service.vpp.VPPStats.to_dict>`).
+* **Guided stereo** (``guide=True``). The sparse points are passed to the
+  matcher as ``hints`` (only matchers with ``supports_guidance``).
+* **Depth.** With ``depth=True`` and a calibration, metric depth of the result.
+* **Metrics.** When the frame carries ground truth,
+  :func:`~vpp_service.evaluation.metrics.compute_metrics` of the disparity over
+  all valid-GT pixels. ``protocol=True`` scores as the evaluation protocol
+  does: the matcher's holes are filled first
+  (:func:`~vpp_service.matchers.fill_holes`) and ``*_nocc`` metrics are added
+  when the frame has a non-occlusion mask. ``FusionResult.disparity`` is the
+  matcher's output either way (holes not filled).
+
+``FusionResult.timing_ms`` gets ``vpp`` (when VPP ran), ``match`` and
+``process`` (the whole step) on top of the frame's own ``meta["timing_ms"]``.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from vpp_service.evaluation.metrics import compute_metrics
+from vpp_service.frame import FusionResult, StereoFrame
+from vpp_service.matchers.base import Matcher
+from vpp_service.vpp import VPPConfig, depth_to_disparity, disparity_to_depth, project
+
+
+def sparse_disparity(frame: StereoFrame) -> np.ndarray | None:
+    """The frame's sparse disparity (converting metric depth when needed), or None.
+
+    ``sparse_disparity`` wins over ``sensor_depth``; metric depth needs a
+    calibration (without one the frame has no usable sparse points).
+    """
+    if frame.sparse_disparity is not None:
+        return frame.sparse_disparity
+    if frame.sensor_depth is not None and frame.calib is not None:
+        c = frame.calib
+        return depth_to_disparity(frame.sensor_depth, c.f, c.baseline, c.doffs)
+    return None
+
+
+def score(disparity: np.ndarray, frame: StereoFrame, protocol: bool = False) -> dict[str, float]:
+    """Error of ``disparity`` against the frame's ground truth; ``{}`` without ground truth.
+
+    Parameters
+    ----------
+    disparity : ndarray
+        H x W float32 disparity of the frame's left view, NaN = invalid.
+    frame : StereoFrame
+        The frame (``gt_disparity``, ``nocc_mask``).
+    protocol : bool
+        Score as the evaluation protocol: fill the holes first and add
+        ``*_nocc`` metrics when the frame has a mask. False: the raw output
+        over all valid-GT pixels (what the service reports).
+    """
+    if frame.gt_disparity is None:
+        return {}
+    if not protocol:
+        return compute_metrics(disparity, frame.gt_disparity)
+    from vpp_service.matchers.holes import fill_holes
+
+    filled = fill_holes(disparity)
+    out = compute_metrics(filled, frame.gt_disparity)
+    if frame.nocc_mask is not None:
+        for k, v in compute_metrics(filled, frame.gt_disparity, mask=frame.nocc_mask.astype(bool)).items():
+            out[f"{k}_nocc"] = v
+    return out
+
+
+def fuse(frame: StereoFrame, matcher: Matcher, vpp_config: VPPConfig | None = None, *, seed: int = 0,
+         guide: bool = False, depth: bool = True, protocol: bool = False) -> FusionResult:
+    """Process one frame: VPP (or guidance) on its sparse points, the matcher, depth and metrics.
+
+    Parameters
+    ----------
+    frame : StereoFrame
+        Rectified pair with optional sparse points, calibration and ground truth.
+    matcher : Matcher
+        A built matcher (:func:`vpp_service.matchers.build_matcher`).
+    vpp_config : VPPConfig or None
+        VPP settings; None disables VPP (plain or guided stereo).
+    seed : int
+        Seed of VPP's random pattern (used as given).
+    guide : bool
+        Pass the sparse points to the matcher as ``hints`` (guided stereo).
+    depth : bool
+        Compute metric depth when the frame is calibrated (skip it when unused).
+    protocol : bool
+        Score as the evaluation protocol (see :func:`score`).
+
+    Returns
+    -------
+    FusionResult
+
+    Raises
+    ------
+    TypeError, ValueError
+        Invalid frame for the matcher/VPP (e.g. image narrower than the
+        disparity range), ``guide`` with a matcher without guidance or a
+        frame without sparse points.
+    """
+    timing: dict[str, float] = dict(frame.meta.get("timing_ms", {}))
+    t_start = time.perf_counter()
+    left, right = np.ascontiguousarray(frame.left), np.ascontiguousarray(frame.right)
+    sparse = sparse_disparity(frame) if vpp_config is not None or guide else None
+    left_vpp = right_vpp = occluded = None
+    stats: dict[str, int] = {}
+    m_left, m_right = left, right
+    if vpp_config is not None and sparse is not None:
+        t0 = time.perf_counter()
+        res = project(left, right, sparse, vpp_config, seed=seed)
+        timing["vpp"] = (time.perf_counter() - t0) * 1e3
+        stats = res.stats.to_dict()
+        # the kernel counted the usable points: no second pass over the map here
+        if res.stats.given - res.stats.invalid > 0:
+            left_vpp, right_vpp, occluded = res.left, res.right, res.occluded
+            m_left, m_right = left_vpp, right_vpp
+    hints = None
+    if guide:
+        if sparse is None:
+            raise ValueError(f"guide: frame {frame.name or frame.seq!r} has no sparse points")
+        hints = sparse
+    t0 = time.perf_counter()
+    disp = np.asarray(matcher.compute(m_left, m_right, hints=hints), dtype=np.float32)
+    timing["match"] = (time.perf_counter() - t0) * 1e3
+    depth_map = None
+    if depth and frame.calib is not None:
+        c = frame.calib
+        depth_map = np.asarray(disparity_to_depth(disp, c.f, c.baseline, c.doffs), dtype=np.float32)
+    metrics = score(disp, frame, protocol)
+    timing["process"] = (time.perf_counter() - t_start) * 1e3
+    return FusionResult(frame=frame, disparity=disp, depth=depth_map, left_vpp=left_vpp, right_vpp=right_vpp,
+                        occluded=occluded, vpp_stats=stats, timing_ms=timing, metrics=metrics)
+
+
+class Fusion:
+    """The service's process stage: :func:`fuse` with a per-frame seed and counters.
+
+    Parameters
+    ----------
+    matcher : Matcher
+        A built matcher (:func:`vpp_service.matchers.build_matcher`).
+    vpp_config : VPPConfig or None
+        VPP settings; None disables VPP (plain stereo).
+    seed : int
+        Pattern seed; the frame's ``seq`` is added so every frame differs.
+    depth : bool
+        Compute metric depth (skip it when no sink uses it).
+
+    Attributes
+    ----------
+    counters : dict
+        ``vpp``: frames matched on a painted pair; ``no_depth``: frames
+        without a usable point (with VPP disabled: without any positive
+        finite point).
+    """
+
+    def __init__(self, matcher: Matcher, vpp_config: VPPConfig | None = None, seed: int = 0,
+                 depth: bool = True) -> None:
+        if not isinstance(matcher, Matcher):
+            raise TypeError(f"matcher must be a Matcher (vpp_service.matchers.build_matcher), "
+                            f"got {type(matcher).__name__}")
+        if vpp_config is not None and not isinstance(vpp_config, VPPConfig):
+            raise TypeError(f"vpp_config must be a VPPConfig or None, got {type(vpp_config).__name__}")
+        self.matcher = matcher
+        self.vpp_config = vpp_config
+        self.seed = int(seed)
+        self.depth = bool(depth)
+        self.counters = {"vpp": 0, "no_depth": 0}
+
+    def prepare_next(self, frame: StereoFrame) -> None:
+        """Build the random-pattern table the next frame (``seq + 1``) will use.
+
+        The pipeline calls this after handing ``frame``'s result on, off the
+        latency path: the table (65536 entries per channel, built per seed) is
+        then already cached when that frame arrives instead of being built
+        inside its VPP step.  Does nothing for other patterns.
+        """
+        cfg = self.vpp_config
+        if cfg is None or cfg.pattern != "random":
+            return
+        from vpp_service.vpp.rng import kernel_table
+
+        seed = self.seed + int(frame.seq) + 1
+        if 0 <= seed < 2 ** 64:
+            kernel_table(seed, frame.left.shape[2] if frame.left.ndim == 3 else 1, (cfg.patch - 1) // 2)
+
+    def __call__(self, frame: StereoFrame) -> FusionResult:
+        """Process one frame (:func:`fuse` with seed ``seed + frame.seq``).
+
+        Raises
+        ------
+        TypeError, ValueError
+            Invalid frame for the matcher/VPP (e.g. image narrower than the
+            disparity range); the pipeline counts it as rejected.
+        """
+        result = fuse(frame, self.matcher, self.vpp_config, seed=self.seed + int(frame.seq), depth=self.depth)
+        if result.left_vpp is not None:
+            self.counters["vpp"] += 1
+        elif self.vpp_config is not None or not _has_points(sparse_disparity(frame)):
+            self.counters["no_depth"] += 1
+        return result
+
+
+def _has_points(sparse: np.ndarray | None) -> bool:
+    """True when the map has a positive finite point."""
+    return sparse is not None and bool(np.any(np.isfinite(sparse) & (sparse > 0)))
+
+
+__all__ = ["Fusion", "fuse", "score", "sparse_disparity"]
