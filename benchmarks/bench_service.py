@@ -103,6 +103,9 @@ def main() -> int:
 
     import zenoh
 
+    from vpp_service.threads import configure_openmp
+
+    configure_openmp()  # the camera side measures as the service runs; before the kernels load
     from vpp_service.fusion import fuse
     from vpp_service.matchers import build_matcher
     from vpp_service.service import wire

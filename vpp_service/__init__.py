@@ -10,20 +10,13 @@ Packages, by architectural role:
 - :mod:`vpp_service.sinks` -- result sinks (Zenoh, Rerun, files).
 - :mod:`vpp_service.evaluation` -- metrics and the benchmark harness.
 - :mod:`vpp_service.service` -- wire format, config and the streaming pipeline.
+- :mod:`vpp_service.fusion` -- the per-frame step (sparse depth -> VPP -> matcher -> depth, metrics).
+- :mod:`vpp_service.threads` -- the OpenMP thread-count and wait policy of the kernels.
 - :mod:`vpp_service.cli` -- the ``vpp-service`` command.
+
+Importing the package has no side effects (it does not touch the environment);
+the ``vpp-service`` command sets the OpenMP wait policy
+(:func:`vpp_service.threads.configure_openmp`) before it loads any kernel.
 """
-
-import os as _os
-
-# OpenMP threads of the kernels sleep as soon as a parallel region ends
-# (OMP_WAIT_POLICY=PASSIVE) unless the user chose a policy or a spin count.  A
-# streaming service calls the kernels once per frame with idle gaps between; with
-# libgomp's default (spin, then sleep) the first region after a gap took 2-8 ms
-# on virtualised 2-core hosts, against 0.03 ms when passive (docs/deployment.md,
-# "Process tuning", also for the spinning low-latency alternative).  It must be
-# set before libgomp loads, i.e. before any kernel module is imported; it has no
-# effect if another library loaded OpenMP first.
-if "OMP_WAIT_POLICY" not in _os.environ and "GOMP_SPINCOUNT" not in _os.environ:
-    _os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
 
 __version__ = "0.1.0"

@@ -2,7 +2,10 @@
 
 Each sub-command lives in its own module of this package and exposes
 ``add_parser(subparsers)`` (which sets ``func`` on its parser); this module only
-dispatches.
+dispatches. :func:`main` first sets the OpenMP wait policy
+(:func:`vpp_service.threads.configure_openmp`): it must run before any kernel
+module is imported, so neither this module nor the sub-command modules import
+kernels at module level.
 """
 from __future__ import annotations
 
@@ -10,6 +13,8 @@ import argparse
 import importlib
 import logging
 import sys
+
+from vpp_service.threads import configure_openmp
 
 #: Sub-command modules, in the order ``--help`` lists them.
 COMMANDS = ("run", "publish", "status", "eval", "demo")
@@ -36,6 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``vpp-service`` console script."""
+    configure_openmp()  # before libgomp loads, i.e. before any sub-command imports a kernel
     parser = build_parser()
     args = parser.parse_args(argv)
     level = logging.WARNING - 10 * min(args.verbose, 2)

@@ -20,7 +20,6 @@ Conventions (all matchers)
 """
 from __future__ import annotations
 
-import os
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, ClassVar, Mapping
@@ -62,28 +61,6 @@ class MatcherOptions:
             raise ValueError(f"max_disparity must be <= 4096, got {self.max_disparity}")
         if not isinstance(self.fill, bool):
             raise ValueError(f"fill must be a bool, got {self.fill!r}")
-
-
-def resolve_threads(threads: int | None) -> int:
-    """Number of OpenMP threads for a kernel: ``threads`` if > 0, else all usable cores.
-
-    ``None`` or 0 means ``OMP_NUM_THREADS`` when set, else the CPUs this
-    process may run on.
-    """
-    if threads is not None:
-        if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)):
-            raise TypeError(f"threads must be an integer or None, got {threads!r}")
-        if threads < 0:
-            raise ValueError(f"threads must be >= 0, got {threads}")
-        if threads > 0:
-            return int(threads)
-    env = os.environ.get("OMP_NUM_THREADS", "").split(",")[0].strip()
-    if env.isdigit() and int(env) > 0:
-        return int(env)
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
 
 
 def check_image(img: Any, name: str) -> np.ndarray:

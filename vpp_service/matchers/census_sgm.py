@@ -26,9 +26,9 @@ reused; the :class:`CensusSGM` matcher chains them):
    blobs (rSGM's speckle filter; ``speckle_size`` 0 turns it off).
 
 Everything invalid is NaN. Threads: every function takes ``threads``
-(None/0 = all usable cores, ``OMP_NUM_THREADS`` respected); the matcher's
-``threads`` option defaults to 1 (see :class:`CensusSGMOptions`). Results do
-not depend on the thread count.
+(None = the project's default, :func:`vpp_service.threads.default_threads`);
+the matcher's ``threads`` option defaults to 1 (see :class:`CensusSGMOptions`).
+Results do not depend on the thread count.
 
 Speed (1 thread, 450 x 375, D = 128, shared 2-core dev box): about 120-170 ms
 per frame, of which aggregation ~45-70 ms; KITTI 1242 x 375, D = 192: ~430 ms.
@@ -52,11 +52,11 @@ from vpp_service.matchers.base import (
     check_image,
     check_max_disparity,
     check_pair,
-    resolve_threads,
     to_gray,
 )
 from vpp_service.matchers.guided import modulate_cost
 from vpp_service.matchers.speckle import remove_speckles
+from vpp_service.threads import resolve_threads
 
 #: Census bits (5 x 5 window minus the centre) = the largest Hamming cost.
 CENSUS_BITS = 24
@@ -94,7 +94,7 @@ def census_transform(gray: np.ndarray, threads: int | None = None) -> np.ndarray
     gray : ndarray
         H x W uint8, C-contiguous.
     threads : int or None
-        OpenMP threads (None/0 = all usable cores).
+        OpenMP threads (None = :func:`~vpp_service.threads.default_threads`).
 
     Returns
     -------
@@ -313,7 +313,7 @@ class CensusSGMOptions(MatcherOptions):
     guided_k, guided_c : float
         Guided-stereo modulation height and width (10 and 1) used with ``hints``.
     threads : int
-        OpenMP threads (default 1; 0 = all usable cores). One thread is the
+        OpenMP threads (default 1; 0 = :func:`~vpp_service.threads.default_threads`). One thread is the
         default because the row-to-row SGM passes synchronise once per image
         row: on an oversubscribed machine (evaluation running several scenes
         in parallel, shared CI) more threads are *slower*; set 0 or N on a
@@ -374,7 +374,7 @@ class CensusSGM(Matcher):
         """H x W x D uint16 Hamming cost of the 5 x 5 census of the gray pair."""
         check_pair(left, right)
         check_max_disparity(self.options.max_disparity, left.shape[1])
-        t = self.options.threads
+        t = self.options.threads or None  # 0: the default policy
         return hamming_cost_volume(
             census_transform(to_gray(left), t), census_transform(to_gray(right), t), self.options.max_disparity, t
         )
@@ -404,7 +404,7 @@ class CensusSGM(Matcher):
         if gray.shape != cost.shape[:2]:
             raise ValueError(f"left_gray must be {cost.shape[:2]} (H x W), got {left_gray.shape}")
         o = self.options
-        t = o.threads
+        t = o.threads or None  # 0: the default policy
         if hints is not None:
             hints = check_hints(hints, cost.shape[:2])
             cost = modulate_cost(cost, hints, o.guided_k, o.guided_c, threads=t)

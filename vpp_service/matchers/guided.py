@@ -21,7 +21,8 @@ from typing import Any
 import numpy as np
 
 from vpp_service.matchers._guided import modulate
-from vpp_service.matchers.base import check_array, check_hints, resolve_threads
+from vpp_service.matchers.base import check_array, check_hints
+from vpp_service.threads import resolve_threads
 
 _DTYPES = (np.uint8, np.uint16, np.float32)
 
@@ -49,7 +50,7 @@ def modulate_cost(
     inplace : bool
         Modify ``cost`` and return it instead of a modulated copy.
     threads : int or None
-        OpenMP threads (None/0 = all usable cores).
+        OpenMP threads (None = :func:`~vpp_service.threads.default_threads`).
 
     Returns
     -------

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from vpp_service.matchers._holes import fill_rows
-from vpp_service.matchers.base import resolve_threads
+from vpp_service.threads import resolve_threads
 
 
 def fill_holes(disparity: Any, empty: float = float("nan"), threads: int | None = None) -> np.ndarray:
@@ -28,7 +28,7 @@ def fill_holes(disparity: Any, empty: float = float("nan"), threads: int | None 
     empty : float, optional
         Value for rows with no valid pixel at all (NaN by default; e.g. 0.0).
     threads : int or None, optional
-        OpenMP threads (None/0 = all usable cores).
+        OpenMP threads (None = :func:`~vpp_service.threads.default_threads`).
 
     Returns
     -------

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from vpp_service.threads import resolve_threads
+
 
 def as_image(name: str, a: object) -> np.ndarray:
     """Validate a uint8 H x W or H x W x C (C in {1, 3}) image; returns a C-contiguous H x W x C view/copy."""
@@ -40,13 +42,5 @@ def as_disparity(name: str, a: object, shape: tuple[int, int] | None = None) -> 
 
 
 def as_threads(num_threads: object) -> int:
-    """None -> OpenMP default (os.cpu_count()); else an int >= 1."""
-    import os
-
-    if num_threads is None:
-        return max(1, os.cpu_count() or 1)
-    if isinstance(num_threads, bool) or not isinstance(num_threads, (int, np.integer)):
-        raise TypeError(f"num_threads must be an int or None, got {type(num_threads).__name__}")
-    if num_threads < 1:
-        raise ValueError(f"num_threads must be >= 1, got {num_threads}")
-    return int(num_threads)
+    """None -> the project's default (:func:`vpp_service.threads.default_threads`); else an int >= 1."""
+    return resolve_threads(num_threads, "num_threads")  # type: ignore[arg-type]  # validated there
