@@ -183,3 +183,21 @@ def test_census_sgm_thread_count_does_not_change_result(pair, threads):
     ref = build_matcher("census-sgm", {"max_disparity": 16, "threads": 1}).compute(left, right)
     got = build_matcher("census-sgm", {"max_disparity": 16, "threads": threads}).compute(left, right)
     np.testing.assert_array_equal(got, ref)
+
+
+def test_check_disparity_strict_kernel_input_or_converted():
+    from vpp_service.matchers.base import check_disparity
+
+    a = np.array([[1.0, np.nan, 3.0], [4.0, 5.0, 6.0]])
+    got = check_disparity(a[:, ::2], "d", (2, 2), convert=True)          # float64, strided: converted
+    assert got.dtype == np.float32 and got.flags.c_contiguous
+    np.testing.assert_array_equal(got, a[:, ::2].astype(np.float32))
+    f32 = a.astype(np.float32)
+    assert check_disparity(f32, "d") is f32                              # a kernel input: unchanged
+    for bad, exc, match in [(a, TypeError, "d must be float32"), (f32[:, ::2], ValueError, "contiguous"),
+                            (np.full((2, 3), np.inf, np.float32), ValueError, "inf"),
+                            (f32[None], ValueError, "2-D"), (np.zeros((2, 3), np.int16), TypeError, "float")]:
+        with pytest.raises(exc, match=match):
+            check_disparity(bad, "d")
+    with pytest.raises(ValueError, match="d must have shape"):
+        check_disparity(f32, "d", (3, 2), convert=True)

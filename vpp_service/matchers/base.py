@@ -63,27 +63,12 @@ class MatcherOptions:
             raise ValueError(f"fill must be a bool, got {self.fill!r}")
 
 
-def check_image(img: Any, name: str) -> np.ndarray:
-    """Validate one image: C-contiguous uint8, H x W or H x W x C (C = 1 | 3), non-empty.
-
-    Returns the array unchanged. Raises TypeError (not an array / wrong dtype)
-    or ValueError (shape, emptiness, contiguity) naming ``name``.
-    """
-    if not isinstance(img, np.ndarray):
-        raise TypeError(f"{name} must be a numpy array, got {type(img).__name__}")
-    if img.dtype != np.uint8:
-        raise TypeError(f"{name} must be uint8, got dtype {img.dtype}")
-    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 3)):
-        raise ValueError(f"{name} must be H x W or H x W x C with C in (1, 3), got shape {img.shape}")
-    if img.shape[0] == 0 or img.shape[1] == 0:
-        raise ValueError(f"{name} is empty (shape {img.shape})")
-    if not img.flags.c_contiguous:
-        raise ValueError(f"{name} must be C-contiguous (use np.ascontiguousarray)")
-    return img
-
-
-def check_array(a: Any, name: str, dtypes: tuple[type, ...], ndim: int, layout: str) -> np.ndarray:
+def check_array(a: Any, name: str, dtypes: tuple[type, ...], ndim: int | tuple[int, ...], layout: str,
+                contiguous: bool = True) -> np.ndarray:
     """Validate a kernel input array: one of ``dtypes``, ``ndim`` dimensions, non-empty, C-contiguous.
+
+    The one family every matcher input check builds on (:func:`check_image`,
+    :func:`check_disparity`, the cost volumes).
 
     Parameters
     ----------
@@ -93,10 +78,12 @@ def check_array(a: Any, name: str, dtypes: tuple[type, ...], ndim: int, layout: 
         Argument name used in the messages.
     dtypes : tuple of numpy scalar types
         Accepted dtypes.
-    ndim : int
-        Required number of dimensions.
+    ndim : int or tuple of int
+        Required number of dimensions (one of them).
     layout : str
         Human-readable shape named in the message, e.g. ``"H x W x D"``.
+    contiguous : bool
+        Require C-contiguity (inputs handed to a kernel as they are).
 
     Returns
     -------
@@ -116,13 +103,66 @@ def check_array(a: Any, name: str, dtypes: tuple[type, ...], ndim: int, layout: 
     if a.dtype not in [np.dtype(d) for d in dtypes]:
         allowed = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " or " + names[-1]
         raise TypeError(f"{name} must be {allowed}, got dtype {a.dtype}")
-    if a.ndim != ndim:
+    if a.ndim not in ((ndim,) if isinstance(ndim, int) else ndim):
         raise ValueError(f"{name} must be {layout}, got shape {a.shape}")
     if a.size == 0:
         raise ValueError(f"{name} is empty (shape {a.shape})")
-    if not a.flags.c_contiguous:
+    if contiguous and not a.flags.c_contiguous:
         raise ValueError(f"{name} must be C-contiguous (use np.ascontiguousarray)")
     return a
+
+
+#: Float dtypes a disparity map may arrive in (converted to float32 where accepted).
+FLOAT_DTYPES: tuple[type, ...] = (np.float16, np.float32, np.float64, np.longdouble)
+_IMAGE_LAYOUT = "H x W or H x W x C with C in (1, 3)"
+
+
+def check_image(img: Any, name: str) -> np.ndarray:
+    """Validate one image: C-contiguous uint8, H x W or H x W x C (C = 1 | 3), non-empty.
+
+    Returns the array unchanged. Raises TypeError (not an array / wrong dtype)
+    or ValueError (shape, emptiness, contiguity) naming ``name``.
+    """
+    check_array(img, name, (np.uint8,), (2, 3), _IMAGE_LAYOUT)
+    if img.ndim == 3 and img.shape[2] not in (1, 3):
+        raise ValueError(f"{name} must be {_IMAGE_LAYOUT}, got shape {img.shape}")
+    return img
+
+
+def check_disparity(a: Any, name: str, shape: tuple[int, ...] | None = None, *, convert: bool = False) -> np.ndarray:
+    """Validate an H x W disparity map: float, non-empty, NaN = invalid, no +-inf.
+
+    Parameters
+    ----------
+    a : Any
+        The value to check.
+    name : str
+        Argument name used in the messages.
+    shape : tuple of int or None
+        Required (H, W), e.g. the images'.
+    convert : bool
+        False: a kernel input, C-contiguous float32, returned unchanged.
+        True: any float dtype and layout, returned as C-contiguous float32
+        (copied only when needed).
+
+    Returns
+    -------
+    ndarray
+        The map (float32).
+
+    Raises
+    ------
+    TypeError
+        Not an array or not float (float32 when ``convert`` is False).
+    ValueError
+        Not 2-D, empty, not C-contiguous (``convert`` False), wrong shape, or +-inf.
+    """
+    check_array(a, name, FLOAT_DTYPES if convert else (np.float32,), 2, "a 2-D (H x W) map", contiguous=not convert)
+    if shape is not None and a.shape != tuple(shape):
+        raise ValueError(f"{name} must have shape {tuple(shape)}, got {a.shape}")
+    if np.isinf(a).any():
+        raise ValueError(f"{name} contains +-inf; use NaN for 'no value'")
+    return np.ascontiguousarray(a, dtype=np.float32) if convert else a
 
 
 def check_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -145,17 +185,9 @@ def check_max_disparity(max_disparity: int, width: int, name: str = "max_dispari
 def check_hints(hints: Any, shape: tuple[int, int]) -> np.ndarray:
     """Validate a sparse-disparity hint map; return it as C-contiguous float32.
 
-    NaN or values <= 0 mean "no hint"; +-inf is rejected.
+    NaN or values <= 0 mean "no hint"; +-inf is rejected (:func:`check_disparity`).
     """
-    if not isinstance(hints, np.ndarray):
-        raise TypeError(f"hints must be a numpy array, got {type(hints).__name__}")
-    if hints.dtype.kind != "f":
-        raise TypeError(f"hints must be a float array, got dtype {hints.dtype}")
-    if hints.shape != tuple(shape):
-        raise ValueError(f"hints must have shape {tuple(shape)}, got {hints.shape}")
-    if np.isinf(hints).any():
-        raise ValueError("hints contains +-inf; use NaN (or <= 0) for 'no hint'")
-    return np.ascontiguousarray(hints, dtype=np.float32)
+    return check_disparity(hints, "hints", shape, convert=True)
 
 
 def to_gray(img: np.ndarray) -> np.ndarray:

@@ -48,6 +48,7 @@ from vpp_service.matchers.base import (
     Matcher,
     MatcherOptions,
     check_array,
+    check_disparity,
     check_hints,
     check_image,
     check_max_disparity,
@@ -77,13 +78,6 @@ def _check_gray(img: Any, name: str) -> np.ndarray:
 
 def _check_volume(vol: Any, name: str) -> np.ndarray:
     return check_array(vol, name, (np.uint16,), 3, "H x W x D")
-
-
-def _check_disparity(disp: Any, name: str) -> np.ndarray:
-    check_array(disp, name, (np.float32,), 2, "an H x W map")
-    if np.isinf(disp).any():
-        raise ValueError(f"{name} contains +-inf; use NaN for invalid")
-    return disp
 
 
 def census_transform(gray: np.ndarray, threads: int | None = None) -> np.ndarray:
@@ -262,8 +256,8 @@ def left_right_check(
     ndarray
         New H x W float32 map, NaN where rejected or already invalid.
     """
-    _check_disparity(disp_left, "disp_left")
-    _check_disparity(disp_right, "disp_right")
+    check_disparity(disp_left, "disp_left")
+    check_disparity(disp_right, "disp_right")
     if disp_left.shape != disp_right.shape:
         raise ValueError(f"disp_left and disp_right must have the same shape, got {disp_left.shape} and {disp_right.shape}")
     if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not tolerance >= 0 or math.isinf(tolerance):
@@ -279,7 +273,7 @@ def median_filter3x3(disparity: np.ndarray, threads: int | None = None) -> np.nd
     Even counts take the mean of the two middle values (as ``np.median``);
     NaN pixels stay NaN. Returns a new H x W float32 map.
     """
-    _check_disparity(disparity, "disparity")
+    check_disparity(disparity, "disparity")
     out = np.empty_like(disparity)
     _k.median3x3(disparity, out, resolve_threads(threads))
     return out

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from vpp_service.matchers._holes import fill_rows
+from vpp_service.matchers.base import check_disparity
 from vpp_service.threads import resolve_threads
 
 
@@ -48,19 +49,9 @@ def fill_holes(disparity: Any, empty: float = float("nan"), threads: int | None 
     >>> fill_holes(np.array([[np.nan, 3, np.nan, np.nan, 5, 1, np.nan]], np.float32))
     array([[3., 3., 3., 3., 5., 1., 1.]], dtype=float32)
     """
-    if not isinstance(disparity, np.ndarray):
-        raise TypeError(f"disparity must be a numpy array, got {type(disparity).__name__}")
-    if disparity.dtype.kind != "f":
-        raise TypeError(f"disparity must be a float array, got dtype {disparity.dtype}")
-    if disparity.ndim != 2:
-        raise ValueError(f"disparity must be 2-D (H x W), got shape {disparity.shape}")
-    if disparity.size == 0:
-        raise ValueError(f"disparity is empty (shape {disparity.shape})")
-    if np.isinf(disparity).any():
-        raise ValueError("disparity contains +-inf; holes must be NaN")
+    src = check_disparity(disparity, "disparity", convert=True)
     if not isinstance(empty, (int, float)) or np.isinf(empty):
         raise ValueError(f"empty must be a finite number or NaN, got {empty!r}")
-    src = np.ascontiguousarray(disparity, dtype=np.float32)
     out = np.empty_like(src)
     fill_rows(src, out, float(empty), resolve_threads(threads))
     return out

@@ -11,6 +11,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from vpp_service.matchers.base import check_array
+
 #: Fixed-point scale used for region growing (OpenCV works on int16).
 SUBPIXEL_SCALE = 16
 
@@ -44,10 +46,7 @@ def remove_speckles(disparity: np.ndarray, max_size: int = 200, max_diff: float 
     ValueError
         If it is not 2-D, or ``max_size`` / ``max_diff`` are out of range.
     """
-    if not isinstance(disparity, np.ndarray) or disparity.dtype != np.float32:
-        raise TypeError(f"disparity must be a float32 ndarray, got {getattr(disparity, 'dtype', type(disparity))}")
-    if disparity.ndim != 2 or disparity.size == 0:
-        raise ValueError(f"disparity must be a non-empty H x W array, got shape {disparity.shape}")
+    check_array(disparity, "disparity", (np.float32,), 2, "a 2-D (H x W) map", contiguous=False)
     if isinstance(max_size, bool) or not isinstance(max_size, (int, np.integer)) or max_size < 0:
         raise ValueError(f"max_size must be an integer >= 0, got {max_size!r}")
     if not (np.isfinite(max_diff) and max_diff >= 0):
