@@ -110,6 +110,6 @@ def _libgomp_spincount(args: list[str], **extra: str) -> str:
 
 
 def test_libgomp_sees_the_passive_policy_only_through_the_command():
-    assert _libgomp_spincount(["-m", "vpp_service", "run", "--check"]) == "0"          # PASSIVE: never spin
-    assert _libgomp_spincount(["-c", "import vpp_service.vpp"]) != "0"                 # a plain import: libgomp's default
+    assert _libgomp_spincount(["-m", "vpp_service", "run", "--check"]) == "0"     # PASSIVE: never spin
+    assert _libgomp_spincount(["-c", "import vpp_service.vpp"]) != "0"            # plain import: libgomp's default
     assert _libgomp_spincount(["-m", "vpp_service", "run", "--check"], GOMP_SPINCOUNT="1234") == "1234"

@@ -17,6 +17,7 @@ import numpy as np
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Register the ``demo`` sub-command."""
     p = sub.add_parser("demo", help="VPP + SGBM on the built-in Middlebury scene (no data needed)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="vpp-demo", help="output folder for PNGs and summary.json (default: %(default)s)")

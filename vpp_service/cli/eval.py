@@ -20,7 +20,11 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from vpp_service.evaluation.runner import Frames
+    from vpp_service.vpp import VPPConfig
 
 
 def _kv(text: str) -> tuple[str, Any]:
@@ -44,7 +48,7 @@ def _densities(text: str) -> list[float]:
     return values
 
 
-def add_parser(subparsers: Any) -> argparse.ArgumentParser:
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register the ``eval`` sub-command."""
     p = subparsers.add_parser("eval", help="evaluate matcher / guided / VPP against ground truth",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -86,7 +90,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     return p
 
 
-def _vpp_config(args: argparse.Namespace) -> Any:
+def _vpp_config(args: argparse.Namespace) -> VPPConfig:
     from vpp_service.vpp import VPPConfig
 
     opts = {k: getattr(args, k) for k in ("pattern", "patch", "uniform_patch", "alpha", "splat", "occlusion",
@@ -94,7 +98,7 @@ def _vpp_config(args: argparse.Namespace) -> Any:
     return VPPConfig(**opts)
 
 
-def _frames(args: argparse.Namespace) -> tuple[Any, str]:
+def _frames(args: argparse.Namespace) -> tuple[Frames, str]:
     if args.dataset == "synthetic":
         from vpp_service.sources.synthetic import make_scene
 

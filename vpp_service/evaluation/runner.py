@@ -33,11 +33,20 @@ the measured fraction of valid-GT pixels that got a point as ``density``;
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping, Sequence, Union, cast
 
 import numpy as np
 
 from vpp_service.frame import StereoFrame
+
+if TYPE_CHECKING:
+    from vpp_service.datasets.base import Dataset
+    from vpp_service.matchers.base import Matcher
+    from vpp_service.sources.sensors import Sensor
+    from vpp_service.vpp import VPPConfig
+
+#: What :func:`run_evaluation` reads frames from.
+Frames = Union["Dataset", StereoFrame, Iterable[StereoFrame]]
 
 #: Methods understood by :func:`run_evaluation`, in report order.
 METHODS = ("baseline", "guided", "vpp")
@@ -54,11 +63,12 @@ def default_max_disparity(gt: np.ndarray, width: int) -> int:
     return int(min(d, width - 1))
 
 
-def _frames(source: Any) -> tuple[int, Callable[[int], StereoFrame]]:
+def _frames(source: Frames) -> tuple[int, Callable[[int], StereoFrame]]:
     if isinstance(source, StereoFrame):
         return 1, lambda i: source
     if hasattr(source, "__len__") and hasattr(source, "__getitem__"):
-        return len(source), lambda i: source[i]
+        indexed = cast("Dataset | Sequence[StereoFrame]", source)
+        return len(indexed), lambda i: indexed[i]
     if isinstance(source, Iterable):
         items = list(source)
         return len(items), items.__getitem__
@@ -79,12 +89,12 @@ def _check_methods(methods: Sequence[str]) -> list[str]:
     return methods
 
 
-def _check_densities(densities: Any, sensor_name: str | None) -> list[float | None]:
+def _check_densities(densities: float | Sequence[float] | None, sensor_name: str | None) -> list[float | None]:
     if densities is None:
         return [None]
     if isinstance(densities, (int, float)) and not isinstance(densities, bool):
         densities = [densities]
-    densities = list(densities)
+    densities = list(densities)  # type: ignore[arg-type]  # a bool is rejected below
     if not densities:
         raise ValueError("densities: must not be empty (use None for sensors without a density)")
     if densities == [None]:
@@ -100,12 +110,12 @@ def _check_densities(densities: Any, sensor_name: str | None) -> list[float | No
 
 
 def run_evaluation(
-    frames_or_dataset: Any,
-    matcher: Any = "census-sgm",
+    frames_or_dataset: Frames,
+    matcher: str | Matcher = "census-sgm",
     methods: Sequence[str] = METHODS,
-    densities: Any = (0.05,),
-    sensor: Any = "uniform",
-    vpp_config: Any = None,
+    densities: float | Sequence[float] | None = (0.05,),
+    sensor: str | Sensor = "uniform",
+    vpp_config: VPPConfig | None = None,
     seed: int = 0,
     progress: Progress | None = None,
     *,
@@ -200,7 +210,7 @@ def run_evaluation(
     else:
         raise TypeError(f"sensor: must be a sensor name or a Sensor, got {type(sensor).__name__}")
     dens = _check_densities(densities, sensor_name if isinstance(sensor, str) else None)
-    sensors: dict[float | None, Any] = {}
+    sensors: dict[float | None, Sensor | None] = {}
     for d in dens:
         if isinstance(sensor, Sensor):
             sensors[d] = sensor
@@ -250,7 +260,7 @@ def run_evaluation(
         common = {"dataset": dataset_name or frame.meta.get("dataset", ""), "scene": scene,
                   "matcher": matcher_name, "sensor": sensor_name, "max_disparity": md}
 
-        baseline_row = None
+        baseline_row: dict[str, float] = {}
         if "baseline" in methods:
             tick(f"{scene} {matcher_name} baseline")
             res = fuse(frame, m, None, depth=False, protocol=True)
@@ -259,12 +269,10 @@ def run_evaluation(
 
         for d in dens:
             s = sensors[d]
-            if s is None:
-                if frame.sparse_disparity is None:
-                    raise ValueError(f"sensor: 'frame' needs sparse_disparity, frame {scene!r} has none")
-                sparse = frame.sparse_disparity.astype(np.float32)
-            else:
-                sparse = s.simulate(frame, seed=int(seed)).sparse_disparity
+            drawn = frame.sparse_disparity if s is None else s.simulate(frame, seed=int(seed)).sparse_disparity
+            if drawn is None:
+                raise ValueError(f"sensor: 'frame' needs sparse_disparity, frame {scene!r} has none")
+            sparse = drawn.astype(np.float32)
             sparse = np.where(np.isfinite(sparse) & (sparse > 0), sparse, np.nan).astype(np.float32)
             n_points = int(np.isfinite(sparse).sum())
             n_valid = int((np.isfinite(gt) & (gt > 0)).sum())
