@@ -9,7 +9,8 @@ Packages, by architectural role:
   depth-sensor / synthetic-scene simulators.
 - :mod:`vpp_service.sinks` -- result sinks (Zenoh, Rerun, files).
 - :mod:`vpp_service.evaluation` -- metrics and the benchmark harness.
-- :mod:`vpp_service.service` -- wire format, config and the streaming pipeline.
+- :mod:`vpp_service.transport` -- wire format, topic sync, shared-memory publishing.
+- :mod:`vpp_service.service` -- config and the streaming pipeline (composes the rest).
 - :mod:`vpp_service.cli` -- the ``vpp-service`` command.
 """
 

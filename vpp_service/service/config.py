@@ -76,7 +76,7 @@ class ServiceSection:
     reuse_memory: bool = True
 
     def __post_init__(self) -> None:
-        from vpp_service.service.wire import topic
+        from vpp_service.transport.wire import topic
 
         topic(self.prefix, self.rig, "x")  # validates both
         if self.max_frames < 0:

@@ -308,7 +308,7 @@ class Pipeline:
                 sink.close(1.0)
             raise
         if self.session is not None:
-            from vpp_service.service.wire import topic
+            from vpp_service.transport.wire import topic
 
             self._queryable = self.session.declare_queryable(topic(self.prefix, self.rig, "@status"), self._on_query)
             self._token = self.session.liveliness().declare_token(topic(self.prefix, self.rig, "@alive"))

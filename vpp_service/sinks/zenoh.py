@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from vpp_service.frame import FusionResult
-from vpp_service.service import wire
-from vpp_service.service.shm import ShmPutter
+from vpp_service.transport import wire
+from vpp_service.transport.shm import ShmPutter
 from vpp_service.sinks.base import SINKS, Sink, SinkContext
 
 log = logging.getLogger(__name__)
@@ -44,7 +44,7 @@ class ZenohSinkOptions:
         Results buffered between the pipeline and the publishing thread.
     shm_pool_mb : int
         Shared-memory pool the large outputs are published from
-        (:mod:`vpp_service.service.shm`); 0 = plain puts only.
+        (:mod:`vpp_service.transport.shm`); 0 = plain puts only.
     """
 
     outputs: list[str] = field(default_factory=lambda: ["disparity", "depth"])
