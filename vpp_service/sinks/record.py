@@ -134,6 +134,11 @@ class RecordSink(FolderSink):
 
     Options = RecordSinkOptions
 
+    @classmethod
+    def needs_depth(cls, options: RecordSinkOptions) -> bool:
+        """False: a recording holds the input frame, not the fused depth."""
+        return False
+
     DIR_KEY = "sinks.record.dir"
     DIR_WHAT = "recording folder"
 

@@ -72,6 +72,12 @@ class ZenohSink(Sink):
     """Publish results over Zenoh (see the module docstring). Needs ``context.session``."""
 
     Options = ZenohSinkOptions
+    needs_session = True
+
+    @classmethod
+    def needs_depth(cls, options: ZenohSinkOptions) -> bool:
+        """True when ``depth`` is among the published ``outputs``."""
+        return "depth" in options.outputs
 
     def __init__(self, options: ZenohSinkOptions, context: SinkContext) -> None:
         super().__init__(options, context)

@@ -91,6 +91,7 @@ class ZenohSource(Source):
     """Frames from Zenoh (see the module docstring). Needs ``context.session``."""
 
     Options = ZenohSourceOptions
+    needs_session = True
 
     def __init__(self, options: ZenohSourceOptions, context: SourceContext) -> None:
         super().__init__(options, context)
