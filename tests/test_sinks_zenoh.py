@@ -117,3 +117,14 @@ def test_bad_options(opts):
 def test_needs_session():
     with pytest.raises(ValueError, match="session"):
         build_sink("zenoh", {}).open()
+
+
+def test_results_left_unpublished_at_close_are_counted_as_dropped(sessions):
+    svc, _ = sessions
+    sink = build_sink("zenoh", {"queue_size": 4}, SinkContext(session=svc))
+    for seq in range(3):          # never opened: nothing publishes them
+        sink.write(result(seq))
+    assert sink.stats()["dropped"] == 0
+    sink.close(1.0)
+    st = sink.stats()
+    assert st["dropped"] == 3 and st["written"] == 0
