@@ -66,3 +66,10 @@ def test_plugin_defaults_need_no_session_and_check_nothing():
     assert Plugin.check_options(object(), "x") is None
     p = RangePlugin(RangeOptions(), PluginContext())
     assert p.stats() == {} and p.context.rig == "rig0"
+
+
+def test_a_registered_non_plugin_cannot_parse_options():
+    reg: Registry = Registry("thing")
+    reg.register("func")(lambda options, context: None)
+    with pytest.raises(TypeError, match="not as a Plugin class"):
+        parse_plugin_options(reg, "func", {}, "things[0]")

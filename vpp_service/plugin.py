@@ -87,7 +87,7 @@ class Plugin(ABC):
             Unknown key, wrong type, out-of-range value or a failed plugin check;
             the message starts with ``section`` or ``section.key``.
         """
-        parsed = from_mapping(cls.Options, options or {}, section)
+        parsed: Any = from_mapping(cls.Options, options or {}, section)
         cls.check_options(parsed, section)
         return parsed
 
@@ -138,7 +138,10 @@ def parse_plugin_options(registry: Registry, name: str, options: Mapping[str, An
     Any
         The plugin's ``Options`` instance (see :meth:`Plugin.parse_options`).
     """
-    return registry.get(name).parse_options(options, section)
+    cls = registry.get(name)
+    if not (isinstance(cls, type) and issubclass(cls, Plugin)):
+        raise TypeError(f"{registry.kind} {name!r} is registered as {cls!r}, not as a Plugin class")
+    return cls.parse_options(options, section)
 
 
 __all__ = ["PluginContext", "Plugin", "parse_plugin_options"]

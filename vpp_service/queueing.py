@@ -284,11 +284,11 @@ class QueueWorker(Generic[T]):
         return False
 
     # --------------------------------------------------------------- thread
-    def _call(self, what: str, fn: Callable[[], None] | None) -> None:
+    def _call(self, what: str, fn: Callable[..., None] | None, *args: object) -> None:
         if fn is None:
             return
         try:
-            fn()
+            fn(*args)
         except Exception as exc:  # a hook must not kill the worker
             self.errors += 1
             log.warning("%s: %s failed: %r", self.name, what, exc)
@@ -307,7 +307,7 @@ class QueueWorker(Generic[T]):
                 if self._on_error is None:
                     log.warning("%s: handling an item failed: %r", self.name, exc)
                 else:
-                    self._call("on_error", lambda: self._on_error(item, exc))  # type: ignore[misc]
+                    self._call("on_error", self._on_error, item, exc)
         self._call("on_exit", self._on_exit)
 
 

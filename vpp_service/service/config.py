@@ -13,8 +13,9 @@ Sections (every key is documented in ``deploy/config.example.toml``)::
 :func:`load_config` reads a file (or starts from :data:`DEFAULT_CONFIG`, the
 embedded default of ``vpp-service run`` with no arguments), applies overrides,
 and validates every section with :func:`vpp_service.settings.from_mapping` and
-each plugin's own ``parse_options`` (its ``Options`` plus its ``check_options`` hook). Errors are :class:`~vpp_service.settings.SettingsError`
-naming the key (``source.rate_hz: must be a number ...``).
+each plugin's own ``parse_options`` (its ``Options`` plus its ``check_options``
+hook). Errors are :class:`~vpp_service.settings.SettingsError` naming the key
+(``source.rate_hz: must be a number ...``).
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, Mapping
 
+from vpp_service.queueing import Policy
 from vpp_service.settings import SettingsError, from_mapping
 
 #: Top-level tables a config may contain.
@@ -137,13 +139,13 @@ class QueuesSection:
     input_policy, output_policy : {"latest", "block"}
         ``latest`` drops the oldest item when full (live camera: freshest
         frame wins; drops counted); ``block`` makes the producer wait (lossless
-        replay; the source slows down instead).
+        replay; the source slows down instead). See :mod:`vpp_service.queueing`.
     """
 
     input_size: int = 2
-    input_policy: Literal["latest", "block"] = "latest"
+    input_policy: Policy = "latest"
     output_size: int = 4
-    output_policy: Literal["latest", "block"] = "latest"
+    output_policy: Policy = "latest"
 
     def __post_init__(self) -> None:
         for key in ("input_size", "output_size"):

@@ -9,8 +9,8 @@ Each stage is a :class:`~vpp_service.queueing.QueueWorker` (a bounded queue and
 its thread) with a policy: ``latest`` drops the oldest item when full (a live
 camera: the freshest frame wins, drops are counted) or ``block`` (lossless: the
 producer waits). When the source has finished, the process stage handles what
-is queued and finishes the sink stage, which sets :attr:`Pipeline.done`. Counters (``received``,
-``rejected``, ``dropped``, ``processed``, ``published``, ``no_depth``,
+is queued and finishes the sink stage, which sets :attr:`Pipeline.done`.
+Counters (``received``, ``rejected``, ``dropped``, ``processed``, ``published``, ``no_depth``,
 ``errors``) and per-stage timings (mean, p50, p99 over a sliding window) are
 reported by :meth:`Pipeline.status`, which the service also serves as JSON on
 the ``<prefix>/<rig>/@status`` queryable; a liveliness token
