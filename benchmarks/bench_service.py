@@ -97,7 +97,7 @@ def main() -> int:
                          "instead of sleeping: lower latency, one core busy); 0 = the default policy")
     ap.add_argument("--shm-pool-mb", type=int, default=64,
                     help="shared-memory pool of the camera's and the service's publishers "
-                         "(vpp_service.service.shm); 0 = plain puts")
+                         "(vpp_service.transport.shm); 0 = plain puts")
     ap.add_argument("--json", default=str(DEFAULT_JSON))
     a = ap.parse_args()
 
@@ -108,9 +108,9 @@ def main() -> int:
     configure_openmp()  # the camera side measures as the service runs; before the kernels load
     from vpp_service.fusion import fuse
     from vpp_service.matchers import build_matcher
-    from vpp_service.service import wire
+    from vpp_service.transport import wire
     from vpp_service.service.config import validate_config
-    from vpp_service.service.shm import ShmPutter
+    from vpp_service.transport.shm import ShmPutter
     from vpp_service.sources.sensors import build_sensor
     from vpp_service.sources.synthetic import make_scene
 

@@ -136,3 +136,36 @@ def test_cli_check_reports_bad_key(tmp_path, capsys):
     assert main(["run", "--config", str(p), "--check"]) == 2
     assert "service.rigg" in capsys.readouterr().err
     assert main(["run", "--check", "--max-frames", "2"]) == 0
+
+
+@pytest.mark.parametrize("source, sinks, where", [
+    ({"type": "zenoh"}, [], "source (source 'zenoh')"),
+    ({"type": "sim"}, [{"type": "rerun"}, {"type": "zenoh"}], "sinks[1] (sink 'zenoh')"),
+])
+def test_zenoh_disabled_names_the_plugin_that_needs_a_session(source, sinks, where):
+    data = {"zenoh": {"enabled": False}, "source": source, "sinks": sinks}
+    with pytest.raises(SettingsError) as exc:
+        validate_config(data)
+    assert str(exc.value).startswith(f"zenoh.enabled: {where} needs a zenoh session"), str(exc.value)
+
+
+def test_zenoh_disabled_is_fine_without_zenoh_plugins(tmp_path):
+    cfg = validate_config({"zenoh": {"enabled": False}, "source": {"type": "sim"},
+                           "sinks": [{"type": "rerun", "path": str(tmp_path / "x.rrd")}]})
+    assert not cfg.zenoh.enabled and [s.name for s in cfg.sinks] == ["rerun"]
+
+
+@pytest.mark.parametrize("sensor, options, message", [
+    ("radar", {}, "unknown sensor 'radar'"),
+    ("uniform", {"densty": 0.1}, "sensor.uniform.densty: unknown option"),
+    ("uniform", {"density": 2.0}, "sensor.uniform"),
+])
+def test_sim_source_checks_its_own_sensor(sensor, options, message):
+    """The sim source's check_options builds the sensor: the error names the config key."""
+    from vpp_service.sources import parse_source_options
+
+    with pytest.raises(SettingsError) as exc:
+        parse_source_options("sim", {"sensor": sensor, "sensor_options": options}, "source")
+    assert str(exc.value).startswith("source.sensor_options: ") and message in str(exc.value), str(exc.value)
+    opts = parse_source_options("sim", {"sensor": "none", "sensor_options": options}, "source")
+    assert opts.sensor == "none"   # no sensor: its options are not checked

@@ -109,7 +109,7 @@ def test_publisher_to_service_to_subscriber(tmp_path, baseline_bad2, mode, sig):
     import zenoh
 
     from vpp_service.evaluation.metrics import compute_metrics
-    from vpp_service.service import wire
+    from vpp_service.transport import wire
 
     base, gt = baseline_bad2
     port = free_port()

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
-from vpp_service.service import wire
+from vpp_service.transport import wire
 from vpp_service.settings import SettingsError
 from vpp_service.vpp import depth_to_disparity
 from vpp_service.sinks import SINKS, build_sink

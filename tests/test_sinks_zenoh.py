@@ -8,9 +8,10 @@ import pytest
 import zenoh
 
 from conftest import zenoh_test_config
-from test_wire import make_frame
+from helpers.frames import make_frame
+from helpers.zenoh_samples import collect
 from vpp_service.frame import FusionResult
-from vpp_service.service import wire
+from vpp_service.transport import wire
 from vpp_service.sinks.base import SinkContext, build_sink
 
 
@@ -26,17 +27,6 @@ def result(seq):
     disp = np.full(fr.shape, 2.0 + seq, np.float32)
     return FusionResult(frame=fr, disparity=disp, depth=disp + 1, left_vpp=fr.left, right_vpp=fr.right,
                         timing_ms={"match": 1.0})
-
-
-def collect(sub, n, timeout=5.0):
-    out, deadline = [], time.monotonic() + timeout
-    while len(out) < n and time.monotonic() < deadline:
-        s = sub.try_recv()
-        if s is None:
-            time.sleep(0.01)
-        else:
-            out.append(s)
-    return out
 
 
 @pytest.mark.parametrize("outputs", [["disparity"], ["disparity", "depth", "left_vpp", "right_vpp"]])
@@ -127,3 +117,14 @@ def test_bad_options(opts):
 def test_needs_session():
     with pytest.raises(ValueError, match="session"):
         build_sink("zenoh", {}).open()
+
+
+def test_results_left_unpublished_at_close_are_counted_as_dropped(sessions):
+    svc, _ = sessions
+    sink = build_sink("zenoh", {"queue_size": 4}, SinkContext(session=svc))
+    for seq in range(3):          # never opened: nothing publishes them
+        sink.write(result(seq))
+    assert sink.stats()["dropped"] == 0
+    sink.close(1.0)
+    st = sink.stats()
+    assert st["dropped"] == 3 and st["written"] == 0

@@ -6,7 +6,7 @@ import time
 import numpy as np
 import pytest
 
-from vpp_service.service import wire
+from vpp_service.transport import wire
 from vpp_service.sources.base import Pacer, SourceContext, build_source
 from vpp_service.sources.sim import MOTORCYCLE_CALIB, motorcycle_frame, scale_frame
 from vpp_service.settings import SettingsError

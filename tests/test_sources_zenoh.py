@@ -10,8 +10,8 @@ import pytest
 import zenoh
 
 from conftest import zenoh_test_config
-from test_wire import make_frame
-from vpp_service.service import wire
+from helpers.frames import make_frame
+from vpp_service.transport import wire
 from vpp_service.sources.base import SourceContext, build_source
 
 

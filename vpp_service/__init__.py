@@ -9,9 +9,11 @@ Packages, by architectural role:
   depth-sensor / synthetic-scene simulators.
 - :mod:`vpp_service.sinks` -- result sinks (Zenoh, Rerun, files).
 - :mod:`vpp_service.evaluation` -- metrics and the benchmark harness.
-- :mod:`vpp_service.service` -- wire format, config and the streaming pipeline.
+- :mod:`vpp_service.transport` -- wire format, message view, topic sync, shared-memory publishing.
 - :mod:`vpp_service.fusion` -- the per-frame step (sparse depth -> VPP -> matcher -> depth, metrics).
+- :mod:`vpp_service.queueing` -- the bounded queue with its worker thread (pipeline stages, buffering sinks).
 - :mod:`vpp_service.threads` -- the OpenMP thread-count and wait policy of the kernels.
+- :mod:`vpp_service.service` -- config, app and the streaming pipeline (composes the rest).
 - :mod:`vpp_service.cli` -- the ``vpp-service`` command.
 
 Importing the package has no side effects (it does not touch the environment);

@@ -6,6 +6,13 @@ are plugins with the same shape: a frozen ``Options`` dataclass validated with
 ``cls(options, context)``, an optional :meth:`Plugin.open` hook and counters
 reported by :meth:`Plugin.stats`. This module holds that shape once; each base
 module adds its own life-cycle methods (``write``/``close`` or ``start``/``stop``).
+
+Each plugin validates its own options (CNES Pandora's ``check_conf`` idea):
+:meth:`Plugin.parse_options` checks types and ranges (the dataclass) and then
+calls the plugin's :meth:`Plugin.check_options` hook for what the dataclass
+cannot check alone (e.g. the simulator source builds its sensor). What the
+service must know about a plugin it asks the plugin (:attr:`Plugin.needs_session`,
+``Sink.needs_depth``), so the service never reads a plugin's option names.
 """
 from __future__ import annotations
 
@@ -54,6 +61,50 @@ class Plugin(ABC):
     Options: ClassVar[type] = None  # type: ignore[assignment]
     #: Counters every instance starts at 0 (subclasses may add more in ``__init__``).
     counter_names: ClassVar[tuple[str, ...]] = ()
+    #: True when the plugin needs the service's Zenoh session (``context.session``);
+    #: the config is rejected when such a plugin is chosen with ``zenoh.enabled = false``.
+    needs_session: ClassVar[bool] = False
+
+    @classmethod
+    def parse_options(cls, options: Mapping[str, Any] | None, section: str) -> Any:
+        """Build and check this plugin's ``Options`` from a plain mapping.
+
+        Parameters
+        ----------
+        options : Mapping or None
+            Plain option values; None means all defaults.
+        section : str
+            Config section named in error messages (e.g. ``"source"``, ``"sinks[0]"``).
+
+        Returns
+        -------
+        Any
+            The ``Options`` instance, checked by the dataclass and by :meth:`check_options`.
+
+        Raises
+        ------
+        SettingsError
+            Unknown key, wrong type, out-of-range value or a failed plugin check;
+            the message starts with ``section`` or ``section.key``.
+        """
+        parsed: Any = from_mapping(cls.Options, options or {}, section)
+        cls.check_options(parsed, section)
+        return parsed
+
+    @classmethod
+    def check_options(cls, options: Any, section: str) -> None:
+        """Check what the ``Options`` dataclass cannot check alone; nothing by default.
+
+        Runs when the config is validated, before anything opens. Override it to
+        raise :class:`~vpp_service.settings.SettingsError` naming ``section.key``.
+
+        Parameters
+        ----------
+        options : Any
+            The parsed ``Options`` instance.
+        section : str
+            Config section of this plugin (prefix of error messages).
+        """
 
     def __init__(self, options: Any, context: PluginContext) -> None:
         self.options = options
@@ -85,10 +136,12 @@ def parse_plugin_options(registry: Registry, name: str, options: Mapping[str, An
     Returns
     -------
     Any
-        The plugin's ``Options`` instance.
+        The plugin's ``Options`` instance (see :meth:`Plugin.parse_options`).
     """
     cls = registry.get(name)
-    return from_mapping(cls.Options, options or {}, section)
+    if not (isinstance(cls, type) and issubclass(cls, Plugin)):
+        raise TypeError(f"{registry.kind} {name!r} is registered as {cls!r}, not as a Plugin class")
+    return cls.parse_options(options, section)
 
 
 __all__ = ["PluginContext", "Plugin", "parse_plugin_options"]

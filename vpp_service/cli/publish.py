@@ -77,10 +77,10 @@ def main(args: argparse.Namespace) -> int:
 
     import zenoh
 
-    from vpp_service.service import wire
+    from vpp_service.transport import wire
     from vpp_service.service.app import open_session
     from vpp_service.service.config import ZenohSection
-    from vpp_service.service.shm import ShmPutter
+    from vpp_service.transport.shm import ShmPutter
     from vpp_service.sources.base import Pacer
 
     if not 0 < args.scale <= 1:

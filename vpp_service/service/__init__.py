@@ -1,8 +1,11 @@
-"""The streaming service: wire format, configuration, topic sync and the pipeline.
+"""The streaming service: it composes sources, the fusion step and sinks, and runs them.
 
-- :mod:`.wire` -- msgpack wire format v1 (encode/decode, full validation).
 - :mod:`.config` -- the TOML service configuration, validated before start.
-- :mod:`.sync` -- separate-topics synchronizer (exact / approximate).
 - :mod:`.fusion` -- the per-frame processing step (depth -> VPP -> matcher).
 - :mod:`.pipeline` -- threaded ingest -> process -> sink pipeline with counters.
+- :mod:`.app` -- builds the pipeline from a config and runs it.
+- :mod:`.allocator` -- process memory tuning the service applies at start.
+
+The wire format, topic sync and shared-memory publishing live one layer down,
+in :mod:`vpp_service.transport`.
 """

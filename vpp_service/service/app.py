@@ -62,8 +62,8 @@ def build_pipeline(cfg: ServiceConfig, session: Any = None) -> Pipeline:
     sink_ctx = SinkContext(rig=s.rig, prefix=s.prefix, session=session)
     sinks = [SINKS.get(sp.name)(sp.options, sink_ctx) for sp in cfg.sinks]
     matcher = build_matcher(cfg.matcher.name, cfg.matcher.raw)
-    # metric depth is computed only when a sink may use it (lazy outputs)
-    needs_depth = any(sp.name != "zenoh" or "depth" in sp.options.outputs for sp in cfg.sinks)
+    # metric depth is computed only when a sink reads it (each sink says so)
+    needs_depth = any(SINKS.get(sp.name).needs_depth(sp.options) for sp in cfg.sinks)
     fusion = Fusion(matcher, cfg.vpp, seed=s.seed, depth=needs_depth)
     q = cfg.queues
     return Pipeline(source, fusion, sinks, input_size=q.input_size, input_policy=q.input_policy,

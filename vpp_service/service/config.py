@@ -13,8 +13,9 @@ Sections (every key is documented in ``deploy/config.example.toml``)::
 :func:`load_config` reads a file (or starts from :data:`DEFAULT_CONFIG`, the
 embedded default of ``vpp-service run`` with no arguments), applies overrides,
 and validates every section with :func:`vpp_service.settings.from_mapping` and
-each plugin's ``Options``. Errors are :class:`~vpp_service.settings.SettingsError`
-naming the key (``source.rate_hz: must be a number ...``).
+each plugin's own ``parse_options`` (its ``Options`` plus its ``check_options``
+hook). Errors are :class:`~vpp_service.settings.SettingsError` naming the key
+(``source.rate_hz: must be a number ...``).
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, Mapping
 
+from vpp_service.queueing import Policy
 from vpp_service.settings import SettingsError, from_mapping
 
 #: Top-level tables a config may contain.
@@ -76,7 +78,7 @@ class ServiceSection:
     reuse_memory: bool = True
 
     def __post_init__(self) -> None:
-        from vpp_service.service.wire import topic
+        from vpp_service.transport.wire import topic
 
         topic(self.prefix, self.rig, "x")  # validates both
         if self.max_frames < 0:
@@ -137,13 +139,13 @@ class QueuesSection:
     input_policy, output_policy : {"latest", "block"}
         ``latest`` drops the oldest item when full (live camera: freshest
         frame wins; drops counted); ``block`` makes the producer wait (lossless
-        replay; the source slows down instead).
+        replay; the source slows down instead). See :mod:`vpp_service.queueing`.
     """
 
     input_size: int = 2
-    input_policy: Literal["latest", "block"] = "latest"
+    input_policy: Policy = "latest"
     output_size: int = 4
-    output_policy: Literal["latest", "block"] = "latest"
+    output_policy: Policy = "latest"
 
     def __post_init__(self) -> None:
         for key in ("input_size", "output_size"):
@@ -265,15 +267,6 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
     source = _plugin(data.get("source", {"type": "sim"}), "source", "type", SOURCES,
                      lambda n, raw, sec: parse_source_options(n, raw, sec))
 
-    sensor = getattr(source.options, "sensor", "none")
-    if sensor != "none":
-        from vpp_service.sources.sensors import build_sensor
-
-        try:
-            build_sensor(sensor, dict(getattr(source.options, "sensor_options", {})))
-        except ValueError as exc:
-            raise SettingsError(f"source.sensor_options: {exc}") from None
-
     def parse_matcher(name: str, raw: Mapping[str, Any], sec: str) -> Any:
         cls = MATCHERS.get(name)
         return from_mapping(cls.Options, raw, sec)
@@ -291,9 +284,11 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
         if isinstance(s, Mapping):
             s = {k: (v.replace("{out}", out_dir) if isinstance(v, str) else v) for k, v in s.items()}
         sinks.append(_plugin(s, f"sinks[{i}]", "type", SINKS, lambda n, raw, sec: _psink(n, raw, sec)))
-    uses_zenoh = source.name == "zenoh" or any(s.name == "zenoh" for s in sinks)
-    if uses_zenoh and not zen.enabled:
-        raise SettingsError("zenoh.enabled: the zenoh source/sink needs a zenoh session")
+    if not zen.enabled:
+        plugins = [("source", source, SOURCES)] + [(f"sinks[{i}]", s, SINKS) for i, s in enumerate(sinks)]
+        for sec, spec, registry in plugins:
+            if registry.get(spec.name).needs_session:
+                raise SettingsError(f"zenoh.enabled: {sec} ({registry.kind} {spec.name!r}) needs a zenoh session")
     return ServiceConfig(service=service, zenoh=zen, source=source, vpp=vpp, vpp_raw=vpp_raw,
                          matcher=matcher, queues=queues, sinks=tuple(sinks))
 

@@ -5,10 +5,12 @@
     source thread --emit--> [input queue] --> process thread --> [output queue] --> sink thread
                                                  (Fusion)                          (every sink.write)
 
-Queues are bounded (:class:`BoundedQueue`) with a policy: ``latest`` drops the
-oldest item when full (a live camera: the freshest frame wins, drops are
-counted) or ``block`` (lossless: the producer waits). Counters (``received``,
-``rejected``, ``dropped``, ``processed``, ``published``, ``no_depth``,
+Each stage is a :class:`~vpp_service.queueing.QueueWorker` (a bounded queue and
+its thread) with a policy: ``latest`` drops the oldest item when full (a live
+camera: the freshest frame wins, drops are counted) or ``block`` (lossless: the
+producer waits). When the source has finished, the process stage handles what
+is queued and finishes the sink stage, which sets :attr:`Pipeline.done`.
+Counters (``received``, ``rejected``, ``dropped``, ``processed``, ``published``, ``no_depth``,
 ``errors``) and per-stage timings (mean, p50, p99 over a sliding window) are
 reported by :meth:`Pipeline.status`, which the service also serves as JSON on
 the ``<prefix>/<rig>/@status`` queryable; a liveliness token
@@ -30,72 +32,9 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from vpp_service.frame import FusionResult, StereoFrame
+from vpp_service.queueing import Policy, QueueWorker
 
 log = logging.getLogger(__name__)
-
-
-class BoundedQueue:
-    """A thread-safe FIFO of at most ``size`` items with a full-queue policy.
-
-    Parameters
-    ----------
-    size : int
-        Capacity (>= 1).
-    policy : {"latest", "block"}
-        ``latest``: ``put`` on a full queue drops the oldest item (counted in
-        :attr:`dropped`); ``block``: ``put`` waits for room.
-    """
-
-    def __init__(self, size: int, policy: str = "latest") -> None:
-        if isinstance(size, bool) or not isinstance(size, int) or size < 1:
-            raise ValueError(f"size must be an integer >= 1, got {size!r}")
-        if policy not in ("latest", "block"):
-            raise ValueError(f"policy must be 'latest' or 'block', got {policy!r}")
-        self.size = size
-        self.policy = policy
-        self._items: deque[Any] = deque()
-        self._cond = threading.Condition()
-        self._closed = False
-        self.dropped = 0
-        self.high_water = 0
-
-    def put(self, item: Any, timeout: float | None = None) -> bool:
-        """Add ``item``; False when it could not be queued (closed, or block timed out)."""
-        with self._cond:
-            if self.policy == "block":
-                ok = self._cond.wait_for(lambda: self._closed or len(self._items) < self.size, timeout)
-                if not ok or self._closed:
-                    return False
-            elif self._closed:
-                return False
-            elif len(self._items) >= self.size:
-                self._items.popleft()
-                self.dropped += 1
-            self._items.append(item)
-            self.high_water = max(self.high_water, len(self._items))
-            self._cond.notify_all()
-            return True
-
-    def get(self, timeout: float | None = None) -> Any:
-        """Remove and return the oldest item; None on timeout or when closed and empty."""
-        with self._cond:
-            if not self._cond.wait_for(lambda: self._items or self._closed, timeout):
-                return None
-            if not self._items:
-                return None
-            item = self._items.popleft()
-            self._cond.notify_all()
-            return item
-
-    def close(self) -> None:
-        """Refuse new items and wake every waiter (queued items can still be taken)."""
-        with self._cond:
-            self._closed = True
-            self._cond.notify_all()
-
-    def __len__(self) -> int:
-        with self._cond:
-            return len(self._items)
 
 
 class StageTimer:
@@ -130,7 +69,7 @@ class Pipeline:
     source : Source
         Built (not opened) source.
     process : callable
-        ``process(frame) -> FusionResult`` (normally :class:`~vpp_service.service.fusion.Fusion`).
+        ``process(frame) -> FusionResult`` (normally :class:`~vpp_service.fusion.Fusion`).
     sinks : sequence of Sink
         Built (not opened) sinks.
     input_size, output_size : int
@@ -150,8 +89,8 @@ class Pipeline:
     """
 
     def __init__(self, source: Any, process: Callable[[StereoFrame], FusionResult], sinks: Sequence[Any] = (),
-                 *, input_size: int = 2, input_policy: str = "latest", output_size: int = 4,
-                 output_policy: str = "latest", max_frames: int = 0, session: Any = None,
+                 *, input_size: int = 2, input_policy: Policy = "latest", output_size: int = 4,
+                 output_policy: Policy = "latest", max_frames: int = 0, session: Any = None,
                  prefix: str = "vpp", rig: str = "rig0", timing_window: int = 200,
                  reject_log_period_s: float = 5.0) -> None:
         if not callable(process):
@@ -161,8 +100,12 @@ class Pipeline:
         self.source = source
         self.process = process
         self.sinks = list(sinks)
-        self.input = BoundedQueue(input_size, input_policy)
-        self.output = BoundedQueue(output_size, output_policy)
+        # the process stage finishes the sink stage when it ends; the sink stage then sets `done`
+        self.output: QueueWorker[FusionResult] = QueueWorker(
+            self._publish, size=output_size, policy=output_policy, name="pipeline-sinks", on_exit=self._sinks_done)
+        self.input: QueueWorker[StereoFrame] = QueueWorker(
+            self._process, size=input_size, policy=input_policy, name="pipeline-process",
+            on_exit=self.output.finish, on_error=self._process_failed)
         self.max_frames = max_frames
         self.session = session
         self.prefix, self.rig = prefix, rig
@@ -174,7 +117,6 @@ class Pipeline:
         self._stop = threading.Event()
         self._enough = threading.Event()
         self.done = threading.Event()
-        self._threads: list[threading.Thread] = []
         self._last_reject_log = 0.0
         self._last_error_log = 0.0
         self._suppressed = 0
@@ -219,73 +161,66 @@ class Pipeline:
             self._suppressed += 1
 
     # -------------------------------------------------------------- stages
-    def _process_loop(self) -> None:
-        while True:
-            frame = self.input.get(timeout=0.05)
-            if frame is None:
-                if self._stop.is_set() or (self.source.finished.is_set() and len(self.input) == 0):
+    def _process(self, frame: StereoFrame) -> None:
+        """Process stage (its worker thread): one frame through ``process``, the result to the sinks."""
+        if self._enough.is_set():
+            return
+        result = self.process(frame)
+        for stage, ms in result.timing_ms.items():
+            self.timer.add(stage, ms)
+        if result.metrics:
+            self._last_metrics = dict(result.metrics)
+            if "bad2" in result.metrics:
+                self._bad2.append(result.metrics["bad2"])
+        if result.frame.sparse_disparity is None and result.frame.sensor_depth is None:
+            self._inc("no_depth")
+        self._inc("processed")
+        if self.output.policy == "block":
+            while not self.output.put(result, timeout=0.1):
+                if self._stop.is_set() or self.output.closed:
                     break
-                continue
+        else:
+            before = self.output.dropped
+            self.output.put(result)
+            if self.output.dropped != before:
+                self._inc("dropped", self.output.dropped - before)
+        prepare = getattr(self.process, "prepare_next", None)
+        if prepare is not None:
             try:
-                result = self.process(frame)
-            except ValueError as exc:  # a frame the matcher/VPP cannot take (size, range)
-                self._reject(f"frame seq={frame.seq}: {exc}")
-                continue
-            except Exception as exc:  # never let one frame kill the service
-                self._inc("errors")
-                now = time.monotonic()
-                if now - self._last_error_log >= self.reject_log_period_s:
-                    self._last_error_log = now
-                    log.error("processing frame seq=%s failed: %r", frame.seq, exc)
-                continue
-            for stage, ms in result.timing_ms.items():
-                self.timer.add(stage, ms)
-            if result.metrics:
-                self._last_metrics = dict(result.metrics)
-                if "bad2" in result.metrics:
-                    self._bad2.append(result.metrics["bad2"])
-            if result.frame.sparse_disparity is None and result.frame.sensor_depth is None:
-                self._inc("no_depth")
-            self._inc("processed")
-            if self.output.policy == "block":
-                while not self.output.put(result, timeout=0.1):
-                    if self._stop.is_set():
-                        break
-            else:
-                before = self.output.dropped
-                self.output.put(result)
-                if self.output.dropped != before:
-                    self._inc("dropped", self.output.dropped - before)
-            prepare = getattr(self.process, "prepare_next", None)
-            if prepare is not None:
-                try:
-                    prepare(result.frame)   # optional idle-time work for the next frame
-                except Exception as exc:
-                    log.debug("prepare_next(seq=%s): %r", result.frame.seq, exc)
-            if self.max_frames and self.counters["processed"] >= self.max_frames:
-                self._enough.set()
-                self.source.request_stop()  # no more input wanted
-                break
-        self.output.close()
+                prepare(result.frame)   # optional idle-time work for the next frame
+            except Exception as exc:
+                log.debug("prepare_next(seq=%s): %r", result.frame.seq, exc)
+        if self.max_frames and self.counters["processed"] >= self.max_frames:
+            self._enough.set()
+            self.source.request_stop()  # no more input wanted
+            self.input.abort()          # frames still queued are not processed
 
-    def _sink_loop(self) -> None:
-        while True:
-            result = self.output.get(timeout=0.05)
-            if result is None:
-                if self.output._closed and len(self.output) == 0:
-                    break
-                continue
-            for sink in self.sinks:
-                try:
-                    sink.write(result)
-                except Exception as exc:  # a broken sink must not stop the others
-                    self._inc("errors")
-                    log.warning("sink %s: %s", type(sink).__name__, exc)
-            fr = result.frame
-            now_ns = time.time_ns()
-            if fr.stamp_ns > 0:
-                self.timer.add("latency", (now_ns - fr.stamp_ns) / 1e6)
-            self._inc("published")
+    def _process_failed(self, frame: StereoFrame, exc: Exception) -> None:
+        """A frame ``process`` raised on: a ValueError rejects it, anything else is counted as an error."""
+        if isinstance(exc, ValueError):  # a frame the matcher/VPP cannot take (size, range)
+            self._reject(f"frame seq={frame.seq}: {exc}")
+            return
+        self._inc("errors")  # never let one frame kill the service
+        now = time.monotonic()
+        if now - self._last_error_log >= self.reject_log_period_s:
+            self._last_error_log = now
+            log.error("processing frame seq=%s failed: %r", frame.seq, exc)
+
+    def _publish(self, result: FusionResult) -> None:
+        """Sink stage (its worker thread): one result to every sink."""
+        for sink in self.sinks:
+            try:
+                sink.write(result)
+            except Exception as exc:  # a broken sink must not stop the others
+                self._inc("errors")
+                log.warning("sink %s: %s", type(sink).__name__, exc)
+        fr = result.frame
+        now_ns = time.time_ns()
+        if fr.stamp_ns > 0:
+            self.timer.add("latency", (now_ns - fr.stamp_ns) / 1e6)
+        self._inc("published")
+
+    def _sinks_done(self) -> None:
         self.done.set()
 
     # ----------------------------------------------------------- lifecycle
@@ -308,16 +243,14 @@ class Pipeline:
                 sink.close(1.0)
             raise
         if self.session is not None:
-            from vpp_service.service.wire import topic
+            from vpp_service.transport.wire import topic
 
             self._queryable = self.session.declare_queryable(topic(self.prefix, self.rig, "@status"), self._on_query)
             self._token = self.session.liveliness().declare_token(topic(self.prefix, self.rig, "@alive"))
         self._started = time.monotonic()
-        for target, name in ((self._process_loop, "process"), (self._sink_loop, "sinks")):
-            t = threading.Thread(target=target, name=f"pipeline-{name}", daemon=True)
-            t.start()
-            self._threads.append(t)
-        self.source.start(self._emit, self._source_reject)
+        self.output.start()
+        self.input.start()
+        self.source.start(self._emit, self._source_reject, on_finished=self.input.finish)
 
     def _on_query(self, query: Any) -> None:
         # runs on a Zenoh thread: build a small JSON reply, never block
@@ -335,15 +268,17 @@ class Pipeline:
         self.source.stop(timeout)
         self.source.finished.set()
         deadline = time.monotonic() + timeout
-        for t in self._threads:
-            t.join(max(0.05, deadline - time.monotonic()))
-        if any(t.is_alive() for t in self._threads):
+        self.input.finish()
+        drained = self.input.join(max(0.05, deadline - time.monotonic()))
+        drained = self.output.join(max(0.05, deadline - time.monotonic())) and drained
+        if not drained:
             log.warning("pipeline threads did not drain within %.1f s; abandoning the queued frames", timeout)
             self._stop.set()
-            self.input.close()
-            self.output.close()
-            for t in self._threads:
-                t.join(1.0)
+            for worker in (self.input, self.output):
+                worker.abort()
+            self.output.finish()   # in case the process stage never ends
+            for worker in (self.input, self.output):
+                worker.join(1.0)
         self._stop.set()
         for sink in self._opened:
             try:
@@ -399,4 +334,4 @@ class Pipeline:
                 f"pub {c['published']} drop {c['dropped']} rej {c['rejected']} no-depth {c['no_depth']}")
 
 
-__all__ = ["BoundedQueue", "StageTimer", "Pipeline"]
+__all__ = ["StageTimer", "Pipeline"]

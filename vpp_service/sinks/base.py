@@ -4,8 +4,10 @@ A sink receives every :class:`~vpp_service.frame.FusionResult` the pipeline
 produces. The pipeline calls, in order:
 
 1. ``cls.Options`` -- a frozen dataclass of the sink's options; the whole
-   service config is parsed with :func:`vpp_service.settings.from_mapping`
-   before anything opens, so a bad key fails the start, not frame 1000.
+   service config is parsed with ``cls.parse_options`` (the dataclass, then the
+   sink's own :meth:`~vpp_service.plugin.Plugin.check_options`) before anything
+   opens, so a bad key fails the start, not frame 1000. ``cls.needs_depth(options)``
+   tells the service whether to compute metric depth for this sink.
 2. ``sink = cls(options, context)`` then ``sink.open()`` -- acquire resources.
 3. ``sink.write(result)`` from the pipeline's sink thread, once per frame. It
    must not block for long: a slow consumer (a Rerun viewer, the network) is
@@ -45,6 +47,20 @@ class Sink(Plugin):
     """
 
     counter_names = ("written", "dropped", "errors")
+
+    @classmethod
+    def needs_depth(cls, options: Any) -> bool:
+        """Whether this sink, with these options, reads ``FusionResult.depth``.
+
+        The service computes metric depth only when some sink does. The default
+        (True) is safe for a sink that may read it; sinks that never do say so.
+
+        Parameters
+        ----------
+        options : Any
+            The parsed ``Options`` instance.
+        """
+        return True
 
     @abstractmethod
     def write(self, result: FusionResult) -> None:

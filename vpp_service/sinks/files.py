@@ -186,6 +186,11 @@ class FilesSink(FolderSink):
 
     Options = FilesSinkOptions
 
+    @classmethod
+    def needs_depth(cls, options: FilesSinkOptions) -> bool:
+        """True when the ``depth`` files are written."""
+        return options.depth
+
     DIR_KEY = "sinks.files.dir"
     DIR_WHAT = "output folder"
 

@@ -4,7 +4,7 @@ Like a dora-rs recording, the service can record what it received and a later
 run (or ``vpp-service publish``) can play it back. For each
 :class:`~vpp_service.frame.FusionResult` the sink writes ``result.frame`` --
 the stereo pair, calibration, sparse depth and ground truth when present -- as
-one ``in/frame`` message (:func:`vpp_service.service.wire.encode_frame`) to
+one ``in/frame`` message (:func:`vpp_service.transport.wire.encode_frame`) to
 ``<dir>/<pattern>.msgpack``. That is exactly the layout the ``files`` source
 replays (``format = "msgpack"``, files in name order), so a recording is played
 back unchanged by::
@@ -50,7 +50,7 @@ from pathlib import Path
 from typing import Literal
 
 from vpp_service.frame import FusionResult
-from vpp_service.service import wire
+from vpp_service.transport import wire
 from vpp_service.sinks.folder import FolderSink, check_pattern, write_atomic
 from vpp_service.sinks.base import SINKS, Sink, SinkContext
 
@@ -133,6 +133,11 @@ class RecordSink(FolderSink):
     """
 
     Options = RecordSinkOptions
+
+    @classmethod
+    def needs_depth(cls, options: RecordSinkOptions) -> bool:
+        """False: a recording holds the input frame, not the fused depth."""
+        return False
 
     DIR_KEY = "sinks.record.dir"
     DIR_WHAT = "recording folder"

@@ -18,8 +18,8 @@ Modes
 Threading and back-pressure
 ---------------------------
 :meth:`RerunSink.write` never blocks: it applies the ``max_hz`` throttle and
-appends to a bounded queue (``queue_size``, drop-oldest); a dedicated thread
-converts and logs. Throttled and overflowed frames are counted in ``stats()``
+hands the result to a :class:`~vpp_service.queueing.QueueWorker` (``queue_size``,
+drop-oldest) whose thread converts and logs. Throttled and overflowed frames are counted in ``stats()``
 (``throttled``, ``queue_dropped``; ``dropped`` is their sum). The sink uses its
 own :class:`rerun.RecordingStream` (never the global one) and sets the time
 per frame on the ``seq`` (sequence) and ``stamp`` (timestamp) timelines.
@@ -54,7 +54,6 @@ dead URL) the logging thread is abandoned (daemon) rather than hanging.
 """
 from __future__ import annotations
 
-import collections
 import logging
 import math
 import os
@@ -72,6 +71,7 @@ from typing import Literal
 import numpy as np
 
 from vpp_service.frame import FusionResult
+from vpp_service.queueing import QueueWorker
 from vpp_service.sinks.base import SINKS, Sink, SinkContext
 from vpp_service.sinks.colorize import colorize_disparity, disparity_range
 
@@ -228,10 +228,9 @@ class RerunSink(Sink):
             raise ValueError(f"context.rig: must be letters, digits, '_', '-', '.', got {context.rig!r}")
         super().__init__(options, context)
         self._counters.update({"throttled": 0, "queue_dropped": 0})
-        self._queue: collections.deque[FusionResult] = collections.deque()
-        self._cond = threading.Condition()
-        self._stop = False
-        self._thread: threading.Thread | None = None
+        self._worker: QueueWorker[FusionResult] = QueueWorker(
+            self._log_one, size=options.queue_size, policy="latest", name=f"rerun-sink-{context.rig}",
+            on_start=self._attach_once, on_exit=self._flush, on_error=self._failed)
         self._rec = None
         self._last_accept = -math.inf
         self._ready = threading.Event()
@@ -274,7 +273,7 @@ class RerunSink(Sink):
         """
         import rerun as rr
 
-        if self._thread is not None:
+        if self._worker.started:
             raise RuntimeError("rerun sink: already open")
         o = self.options
         rec_id = o.recording_id or f"{self.context.rig}-{uuid.uuid4()}"
@@ -287,9 +286,7 @@ class RerunSink(Sink):
                 raise IsADirectoryError(f"sinks.rerun.path: {str(path)!r} is a folder, expected a .rrd file")
             self._rec.save(str(path), default_blueprint=self.blueprint())
             self._ready.set()
-        self._stop = False
-        self._thread = threading.Thread(target=self._run, name=f"rerun-sink-{self.context.rig}", daemon=True)
-        self._thread.start()
+        self._worker.start()
 
     def _attach(self) -> None:
         """Attach the network output (runs on the logging thread)."""
@@ -318,7 +315,7 @@ class RerunSink(Sink):
             True when attached (or attaching failed and was counted in
             ``stats()["errors"]``), False on timeout or when not open.
         """
-        return self._thread is not None and self._ready.wait(timeout)
+        return self._worker.started and self._ready.wait(timeout)
 
     def write(self, result: FusionResult) -> None:
         """Enqueue ``result`` for logging (non-blocking; throttled; drop-oldest).
@@ -332,21 +329,14 @@ class RerunSink(Sink):
         """
         if not isinstance(result, FusionResult):
             raise TypeError(f"result: must be a FusionResult, got {type(result).__name__}")
-        if self._thread is None or self._stop:
+        if not self._worker.started or self._worker.closed:
             raise RuntimeError("rerun sink: write() before open() or after close()")
         now = time.monotonic()
         if self.options.max_hz > 0 and now - self._last_accept < 1.0 / self.options.max_hz:
             self._counters["throttled"] += 1
-            self._counters["dropped"] += 1
             return
         self._last_accept = now
-        with self._cond:
-            if len(self._queue) >= self.options.queue_size:
-                self._queue.popleft()
-                self._counters["queue_dropped"] += 1
-                self._counters["dropped"] += 1
-            self._queue.append(result)
-            self._cond.notify()
+        self._worker.put(result)
 
     def close(self, timeout: float = 5.0) -> None:
         """Drain, flush and disconnect within ``timeout`` seconds (never hangs).
@@ -354,46 +344,41 @@ class RerunSink(Sink):
         Frames still queued when time runs out are dropped (counted); a logging
         thread stuck on a dead viewer is abandoned (it is a daemon thread).
         """
-        if self._thread is None:
+        if not self._worker.started or self._worker.closed:
             return
-        deadline = time.monotonic() + max(0.0, float(timeout))
-        self._close_deadline = deadline
-        with self._cond:
-            self._stop = True
-            self._cond.notify_all()
-        self._thread.join(max(0.0, deadline - time.monotonic()))
-        if self._thread.is_alive():
+        self._close_deadline = time.monotonic() + max(0.0, float(timeout))
+        if not self._worker.close(timeout):
             log.warning("rerun sink: close() timed out after %.1f s; abandoning the logging thread", timeout)
             self._counters["errors"] += 1
-            with self._cond:
-                n = len(self._queue)
-                self._queue.clear()
-            self._counters["dropped"] += n
-            self._counters["queue_dropped"] += n
-        self._thread = None
+
+    def stats(self) -> dict[str, int]:
+        """Counters: ``written``, ``errors``, ``throttled``, ``queue_dropped`` and ``dropped`` (their sum)."""
+        out = dict(self._counters)
+        out["queue_dropped"] = self._worker.dropped + self._worker.discarded
+        out["dropped"] = out["throttled"] + out["queue_dropped"]
+        return out
 
     # -- logging thread -------------------------------------------------------------
-    def _run(self) -> None:
-        if not self._ready.is_set():
-            try:
-                self._attach()
-            except Exception as exc:  # noqa: BLE001 - reported via stats and log
-                log.error("rerun sink: cannot attach %s output: %s", self.options.mode, exc)
-                self._counters["errors"] += 1
-            self._ready.set()
-        while True:
-            with self._cond:
-                while not self._queue and not self._stop:
-                    self._cond.wait()
-                if not self._queue and self._stop:
-                    break
-                result = self._queue.popleft()
-            try:
-                self._log(result)
-                self._counters["written"] += 1
-            except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the sink
-                log.warning("rerun sink: cannot log frame %s: %s", result.frame.seq, exc)
-                self._counters["errors"] += 1
+    def _attach_once(self) -> None:
+        if self._ready.is_set():
+            return
+        try:
+            self._attach()
+        except Exception as exc:  # noqa: BLE001 - reported via stats and log
+            log.error("rerun sink: cannot attach %s output: %s", self.options.mode, exc)
+            self._counters["errors"] += 1
+        self._ready.set()
+
+    def _log_one(self, result: FusionResult) -> None:
+        self._log(result)
+        self._counters["written"] += 1
+
+    def _failed(self, result: FusionResult, exc: Exception) -> None:
+        # a bad frame must not kill the sink
+        log.warning("rerun sink: cannot log frame %s: %s", result.frame.seq, exc)
+        self._counters["errors"] += 1
+
+    def _flush(self) -> None:
         rec = self._rec
         try:
             rec.flush(timeout_sec=min(5.0, max(0.05, self._close_deadline - time.monotonic())))

@@ -7,24 +7,25 @@ Outputs (``outputs`` option, lazy: only the listed ones are serialized):
 product. ``left_vpp`` / ``right_vpp`` (visualization images) go at
 ``Priority.DATA_LOW`` with ``CongestionControl.DROP``: under load they give way.
 
-``write`` never blocks the pipeline: results go through a bounded queue
-(``queue_size``, oldest dropped and counted) to this sink's own thread, which
-serializes and publishes. ``close(timeout)`` flushes what is queued within the
-timeout, then undeclares the publishers (the session belongs to the service).
+``write`` never blocks the pipeline: results go through a
+:class:`~vpp_service.queueing.QueueWorker` (``queue_size``, oldest dropped and
+counted) to this sink's own thread, which serializes and publishes.
+``close(timeout)`` flushes what is queued within the timeout (results still
+queued then are dropped and counted), then undeclares the publishers (the
+session belongs to the service).
 """
 from __future__ import annotations
 
 import logging
-import queue
-import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from vpp_service.frame import FusionResult
-from vpp_service.service import wire
-from vpp_service.service.shm import ShmPutter
+from vpp_service.queueing import QueueWorker
+from vpp_service.transport import wire
+from vpp_service.transport.shm import ShmPutter
 from vpp_service.sinks.base import SINKS, Sink, SinkContext
 
 log = logging.getLogger(__name__)
@@ -44,7 +45,7 @@ class ZenohSinkOptions:
         Results buffered between the pipeline and the publishing thread.
     shm_pool_mb : int
         Shared-memory pool the large outputs are published from
-        (:mod:`vpp_service.service.shm`); 0 = plain puts only.
+        (:mod:`vpp_service.transport.shm`); 0 = plain puts only.
     """
 
     outputs: list[str] = field(default_factory=lambda: ["disparity", "depth"])
@@ -72,13 +73,18 @@ class ZenohSink(Sink):
     """Publish results over Zenoh (see the module docstring). Needs ``context.session``."""
 
     Options = ZenohSinkOptions
+    needs_session = True
+
+    @classmethod
+    def needs_depth(cls, options: ZenohSinkOptions) -> bool:
+        """True when ``depth`` is among the published ``outputs``."""
+        return "depth" in options.outputs
 
     def __init__(self, options: ZenohSinkOptions, context: SinkContext) -> None:
         super().__init__(options, context)
         self._pubs: dict[str, Any] = {}
-        self._queue: queue.Queue[FusionResult | None] = queue.Queue(maxsize=options.queue_size)
-        self._thread: threading.Thread | None = None
-        self._abort = threading.Event()
+        self._worker: QueueWorker[FusionResult] = QueueWorker(
+            self._publish, size=options.queue_size, policy="latest", name="sink-zenoh", on_error=self._failed)
         # per-result serialization / put durations (ms), reported by stats()
         self._encode_ms: deque[float] = deque(maxlen=200)
         self._put_ms: deque[float] = deque(maxlen=200)
@@ -98,61 +104,35 @@ class ZenohSink(Sink):
                 congestion_control=zenoh.CongestionControl.DROP if visual else zenoh.CongestionControl.BLOCK,
                 priority=zenoh.Priority.DATA_LOW if visual else zenoh.Priority.DATA,
             )
-        self._thread = threading.Thread(target=self._loop, name="sink-zenoh", daemon=True)
-        self._thread.start()
+        self._worker.start()
 
     def write(self, result: FusionResult) -> None:
         """Queue ``result`` for publishing; drops (and counts) the oldest when full."""
-        while True:
-            try:
-                self._queue.put_nowait(result)
-                return
-            except queue.Full:
-                try:
-                    self._queue.get_nowait()
-                    self._counters["dropped"] += 1
-                except queue.Empty:
-                    pass
+        self._worker.put(result)
 
-    def _loop(self) -> None:
-        while True:
-            result = self._queue.get()
-            if result is None or self._abort.is_set():
-                return
-            try:
-                enc_s = put_s = 0.0
-                for name, pub in self._pubs.items():
-                    t0 = time.perf_counter()
-                    payload = wire.encode_output_parts(result, name, self.options.image_enc)
-                    t1 = time.perf_counter()
-                    if payload is not None:
-                        self._putter.put(pub, payload)
-                    enc_s += t1 - t0
-                    put_s += time.perf_counter() - t1
-                self._encode_ms.append(enc_s * 1e3)
-                self._put_ms.append(put_s * 1e3)
-                self._counters["written"] += 1
-            except Exception as exc:  # a closed session, a bad result: count, keep going
-                self._counters["errors"] += 1
-                log.warning("zenoh sink: %s", exc)
+    def _publish(self, result: FusionResult) -> None:
+        """Serialize and publish every output of one result (on the sink's thread)."""
+        enc_s = put_s = 0.0
+        for name, pub in self._pubs.items():
+            t0 = time.perf_counter()
+            payload = wire.encode_output_parts(result, name, self.options.image_enc)
+            t1 = time.perf_counter()
+            if payload is not None:
+                self._putter.put(pub, payload)
+            enc_s += t1 - t0
+            put_s += time.perf_counter() - t1
+        self._encode_ms.append(enc_s * 1e3)
+        self._put_ms.append(put_s * 1e3)
+        self._counters["written"] += 1
+
+    def _failed(self, result: FusionResult, exc: Exception) -> None:
+        # a closed session, a bad result: count, keep going
+        self._counters["errors"] += 1
+        log.warning("zenoh sink: %s", exc)
 
     def close(self, timeout: float = 5.0) -> None:
         """Flush the queue within ``timeout`` seconds, then undeclare the publishers."""
-        if self._thread is not None:
-            deadline = time.monotonic() + timeout
-            while True:
-                try:
-                    self._queue.put(None, timeout=0.05)
-                    break
-                except queue.Full:
-                    if time.monotonic() > deadline:
-                        self._abort.set()
-                        break
-            self._thread.join(max(0.0, deadline - time.monotonic()))
-            if self._thread.is_alive():
-                self._abort.set()
-                log.warning("zenoh sink: publishing thread did not finish within %.1f s", timeout)
-            self._thread = None
+        self._worker.close(timeout)
         for pub in self._pubs.values():
             try:
                 pub.undeclare()
@@ -163,6 +143,7 @@ class ZenohSink(Sink):
     def stats(self) -> dict[str, Any]:
         """Counters plus ``timing_ms``: median ``encode`` / ``put`` time per result (recent window)."""
         out: dict[str, Any] = dict(self._counters)
+        out["dropped"] = self._worker.dropped + self._worker.discarded
         out["shm"] = self._putter.stats()
         timing = {}
         for key, d in (("encode", self._encode_ms), ("put", self._put_ms)):

@@ -11,7 +11,7 @@ pipeline. Life cycle, mirroring :mod:`vpp_service.sinks.base`:
    ``emit(frame)`` hands over a frame (the pipeline's queue policy decides what
    happens when it is full), ``reject(reason)`` reports a bad input message,
    which the pipeline counts and logs (rate-limited). When a finite source has
-   nothing left it sets :attr:`Source.finished`.
+   nothing left it sets :attr:`Source.finished` and calls ``on_finished()`` when given.
 4. ``src.stop(timeout)`` -- stop producing and release, within ``timeout`` seconds.
 
 ``src.stats()`` returns counters (``emitted``, ``rejected`` and extras) for ``@status``.
@@ -59,8 +59,20 @@ class Source(Plugin):
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
-    def start(self, emit: Emit, reject: Reject | None = None) -> None:
-        """Start producing frames from a daemon thread running :meth:`run`."""
+    def start(self, emit: Emit, reject: Reject | None = None,
+              on_finished: Callable[[], None] | None = None) -> None:
+        """Start producing frames from a daemon thread running :meth:`run`.
+
+        Parameters
+        ----------
+        emit : callable
+            ``emit(frame)``: hands a frame over.
+        reject : callable or None
+            ``reject(reason)``: reports a bad input message.
+        on_finished : callable or None
+            Called on the source's thread once :meth:`run` has returned (after
+            :attr:`finished` is set): the consumer learns that no frame follows.
+        """
         if self._thread is not None:
             raise RuntimeError("source already started")
         reject = reject or (lambda reason: None)
@@ -70,6 +82,8 @@ class Source(Plugin):
                 self.run(emit, reject)
             finally:
                 self.finished.set()
+                if on_finished is not None:
+                    on_finished()
 
         self._stop.clear()
         self._thread = threading.Thread(target=body, name=f"source-{type(self).__name__}", daemon=True)

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from vpp_service.frame import StereoFrame
-from vpp_service.service import wire
+from vpp_service.transport import wire
 from vpp_service.sources.base import SOURCES, Emit, Pacer, Reject, Source, SourceContext
 from vpp_service.sources.sim import build_sensor_or_none, scale_frame
 

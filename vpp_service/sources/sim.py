@@ -29,6 +29,7 @@ import numpy as np
 
 from vpp_service.datasets.skimage_scene import MOTORCYCLE_CALIB, motorcycle
 from vpp_service.frame import Calibration, StereoFrame
+from vpp_service.settings import SettingsError
 from vpp_service.sources.base import SOURCES, Emit, Pacer, Reject, Source, SourceContext
 
 
@@ -141,6 +142,20 @@ class SimSource(Source):
     """Simulated camera rig (see the module docstring)."""
 
     Options = SimSourceOptions
+
+    @classmethod
+    def check_options(cls, options: SimSourceOptions, section: str) -> None:
+        """Build the sensor once, so a bad ``sensor`` / ``sensor_options`` fails the config check.
+
+        Raises
+        ------
+        SettingsError
+            ``<section>.sensor_options: ...`` (unknown sensor or invalid option).
+        """
+        try:
+            build_sensor_or_none(options.sensor, dict(options.sensor_options))
+        except ValueError as exc:
+            raise SettingsError(f"{section}.sensor_options: {exc}") from None
 
     def __init__(self, options: SimSourceOptions, context: SourceContext) -> None:
         super().__init__(options, context)

@@ -5,12 +5,12 @@ Subscribes with a callback that only appends the sample to a bounded ring
 dropped and counted in ``ring_dropped``) and signals an event: no decoding and
 no blocking in Zenoh's thread.  This source's thread wakes on that event (no
 polling delay), drains the rings, decodes and validates every message
-(:mod:`vpp_service.service.wire`) and emits frames; a bad message is rejected
+(:mod:`vpp_service.transport.wire`) and emits frames; a bad message is rejected
 (counted, reason reported) and the source keeps serving.
 
 Topics: ``<prefix>/<rig>/in/frame`` (default), or with ``topics = "separate"``
 ``in/left``, ``in/right`` and ``in/depth`` joined by
-:class:`vpp_service.service.sync.Synchronizer` (``sync = "exact"`` by seq or
+:class:`vpp_service.transport.sync.Synchronizer` (``sync = "exact"`` by seq or
 ``"approximate"`` by stamp within ``sync_threshold_ms``).
 """
 from __future__ import annotations
@@ -21,8 +21,8 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from vpp_service.service import wire
-from vpp_service.service.sync import Synchronizer
+from vpp_service.transport import wire
+from vpp_service.transport.sync import Synchronizer
 from vpp_service.sources.base import SOURCES, Emit, Reject, Source, SourceContext
 
 
@@ -91,6 +91,7 @@ class ZenohSource(Source):
     """Frames from Zenoh (see the module docstring). Needs ``context.session``."""
 
     Options = ZenohSourceOptions
+    needs_session = True
 
     def __init__(self, options: ZenohSourceOptions, context: SourceContext) -> None:
         super().__init__(options, context)

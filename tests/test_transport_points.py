@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from vpp_service.frame import Calibration
-from vpp_service.service import _points, wire
+from vpp_service.transport import _points, wire
 from vpp_service.vpp import depth_to_disparity
 
 

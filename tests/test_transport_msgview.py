@@ -1,4 +1,4 @@
-"""Zero-copy msgpack decoding (vpp_service.service.msgview) against msgpack itself."""
+"""Zero-copy msgpack decoding (vpp_service.transport.msgview) against msgpack itself."""
 from __future__ import annotations
 
 import msgpack
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings, strategies as st
 
-from vpp_service.service.msgview import Limits, MsgViewError, loads
+from vpp_service.transport.msgview import Limits, MsgViewError, loads
 
 BIG = Limits(max_bin_len=1 << 30, max_str_len=1 << 30, max_array_len=1 << 30, max_map_len=1 << 30)
 

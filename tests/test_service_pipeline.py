@@ -9,7 +9,7 @@ import pytest
 
 from vpp_service.frame import FusionResult
 from vpp_service.fusion import Fusion
-from vpp_service.service.pipeline import BoundedQueue, Pipeline, StageTimer
+from vpp_service.service.pipeline import Pipeline, StageTimer
 from vpp_service.sinks.base import Sink, SinkContext
 from vpp_service.sources.base import SourceContext, build_source
 
@@ -54,51 +54,6 @@ def run(pipe: Pipeline, timeout: float = 20.0) -> None:
     pipe.start()
     assert pipe.wait(timeout), "pipeline did not finish"
     pipe.stop(2.0)
-
-
-def reference_queue(items, size):
-    """Plain reference of the 'latest' policy: what remains after pushing items into a size-bounded FIFO."""
-    q = []
-    dropped = 0
-    for it in items:
-        q.append(it)
-        if len(q) > size:
-            q.pop(0)
-            dropped += 1
-    return q, dropped
-
-
-@pytest.mark.parametrize("size", [1, 3, 5])
-def test_bounded_queue_latest_matches_reference(size):
-    q = BoundedQueue(size, "latest")
-    for i in range(12):
-        q.put(i)
-        assert len(q) <= size
-    ref, dropped = reference_queue(range(12), size)
-    assert [q.get(0) for _ in range(len(q))] == ref
-    assert q.dropped == dropped and q.high_water == size
-
-
-def test_bounded_queue_block_waits_for_room():
-    q = BoundedQueue(1, "block")
-    assert q.put("a")
-    assert not q.put("b", timeout=0.05)  # full: times out, nothing lost silently
-    threading.Timer(0.05, q.get).start()
-    assert q.put("b", timeout=2.0)
-    assert q.get(0) == "b" and q.dropped == 0
-
-
-def test_bounded_queue_close_wakes_getters():
-    q = BoundedQueue(2)
-    threading.Timer(0.05, q.close).start()
-    assert q.get(timeout=2.0) is None
-    assert not q.put(1)
-
-
-@pytest.mark.parametrize("size,policy", [(0, "latest"), (2, "newest"), (True, "latest")])
-def test_bounded_queue_bad_args(size, policy):
-    with pytest.raises(ValueError):
-        BoundedQueue(size, policy)
 
 
 def test_stage_timer_matches_numpy():

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from vpp_service.service.sync import Synchronizer
+from vpp_service.transport.sync import Synchronizer
 
 MS = 1_000_000
 

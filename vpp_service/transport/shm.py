@@ -71,7 +71,7 @@ class ShmPutter:
         """Publish ``payload`` on ``publisher``: from the pool if it fits, else plainly.
 
         ``payload`` may be a list of parts whose concatenation is the message
-        (:func:`vpp_service.service.wire.encode_output_parts`): they are
+        (:func:`vpp_service.transport.wire.encode_output_parts`): they are
         written one after the other into the pool buffer, never joined there.
         """
         parts = [payload] if isinstance(payload, (bytes, bytearray)) else list(payload)

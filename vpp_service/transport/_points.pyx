@@ -1,6 +1,6 @@
 # Sparse wire points -> dense float32 maps, validated and scattered in one pass.
-# The typed wrapper is vpp_service.service.wire.points_to_maps; the literal NumPy
-# version it must equal is tests/test_service_points.py::reference_maps.
+# The typed wrapper is vpp_service.transport.wire.points_to_maps; the literal NumPy
+# version it must equal is tests/test_transport_points.py::reference_maps.
 from libc.math cimport NAN, isfinite, isnan, nearbyint
 from libc.stdint cimport int64_t
 

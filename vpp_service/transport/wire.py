@@ -33,7 +33,7 @@ import msgpack
 import numpy as np
 
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
-from vpp_service.service import _points, msgview
+from vpp_service.transport import _points, msgview
 
 #: Wire format version written and accepted.
 VERSION = 1
@@ -152,7 +152,7 @@ def unpack(payload: bytes | bytearray | memoryview, limits: WireLimits = DEFAULT
     """Unpack one msgpack message with hard container limits.
 
     ``bin`` fields come back as read-only ``memoryview`` slices of ``payload``
-    (:mod:`vpp_service.service.msgview`: no second copy of the images).
+    (:mod:`vpp_service.transport.msgview`: no second copy of the images).
 
     Raises
     ------

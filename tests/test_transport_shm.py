@@ -8,8 +8,8 @@ import pytest
 import zenoh
 
 from conftest import zenoh_test_config
-from test_sinks_zenoh import collect as receive   # keeps the samples (and the pool buffers they pin)
-from vpp_service.service.shm import MIN_SHM_BYTES, ShmPutter
+from helpers.zenoh_samples import collect as receive   # keeps the samples (and the pool buffers they pin)
+from vpp_service.transport.shm import MIN_SHM_BYTES, ShmPutter
 
 
 @pytest.fixture

@@ -7,26 +7,11 @@ import msgpack
 import numpy as np
 import pytest
 
+from helpers.frames import make_frame
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
-from vpp_service.service import wire
-from vpp_service.service.wire import WireError
+from vpp_service.transport import wire
+from vpp_service.transport.wire import WireError
 from vpp_service.vpp import depth_to_disparity
-
-
-def make_frame(h=6, w=8, c=3, seed=0, depth="metric"):
-    rng = np.random.default_rng(seed)
-    shape = (h, w) if c == 1 else (h, w, 3)
-    left = rng.integers(0, 256, shape, dtype=np.uint8)
-    right = rng.integers(0, 256, shape, dtype=np.uint8)
-    gt = rng.uniform(1, 5, (h, w)).astype(np.float32)
-    calib = Calibration(f=100.0, baseline=0.1, doffs=2.0)
-    sparse = np.full((h, w), np.nan, np.float32)
-    sparse[1, 2], sparse[3, 5] = 2.5, 4.0
-    z = np.full((h, w), np.nan, np.float32)
-    z[1, 2], z[3, 5] = 1.5, 3.25
-    return StereoFrame(left=left, right=right, calib=calib, gt_disparity=gt,
-                       sparse_disparity=None if depth == "metric" else sparse,
-                       sensor_depth=z if depth == "metric" else None, rig="r1", seq=7, stamp_ns=123456789)
 
 
 def raw_msg(**changes):
