@@ -77,9 +77,9 @@ def configure_openmp(environ: MutableMapping[str, str] | None = None) -> bool:
     ``GOMP_SPINCOUNT`` is set. A streaming service calls the kernels once per
     frame with idle gaps in between: with libgomp's default (spin a while,
     then sleep) the workers burn CPU that the matcher and the transport need
-    on a small host, and the first region after a gap was measured slower than
-    with passive workers (``docs/deployment.md``, "Process tuning", also for
-    the spinning low-latency alternative, ``GOMP_SPINCOUNT``).
+    on a small host, and the first region after a gap starts later than with
+    passive workers (``docs/deployment.md``, "Process tuning", also for the
+    spinning low-latency alternative, ``GOMP_SPINCOUNT``).
 
     libgomp reads the variable once, when it is loaded: call this before the
     first import of a compiled kernel (``vpp_service.vpp``,

@@ -30,9 +30,9 @@ Everything invalid is NaN. Threads: every function takes ``threads``
 the matcher's ``threads`` option defaults to 1 (see :class:`CensusSGMOptions`).
 Results do not depend on the thread count.
 
-Speed (1 thread, 450 x 375, D = 128, shared 2-core dev box): about 120-170 ms
-per frame, of which aggregation ~45-70 ms; KITTI 1242 x 375, D = 192: ~430 ms.
-See ``benchmarks/bench_matchers.py``.
+Speed: ``benchmarks/bench_matchers.py`` times the matcher and each of its
+stages (aggregation is the largest); the latest numbers are in
+``benchmarks/results/bench_matchers.json``.
 """
 from __future__ import annotations
 
