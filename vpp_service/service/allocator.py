@@ -3,8 +3,7 @@
 Every frame allocates a few multi-MB arrays (decoded images, the painted pair,
 disparity).  With glibc's defaults an array above the mmap threshold (128 KiB,
 raised dynamically up to 32 MiB) gets fresh pages from the kernel, and each
-4 KiB page costs a fault on first touch (2-3 us on virtualised hosts: ~0.8 ms
-per KITTI-size frame inside VPP alone), and freed heap tops are returned to the
+4 KiB page costs a fault on first touch, and freed heap tops are returned to the
 kernel (``M_TRIM_THRESHOLD``) only to be faulted in again next frame.
 :func:`reuse_freed_memory` raises both thresholds so freed frames are reused:
 the resident size then stays at the peak of a steady stream (a few frames in

@@ -24,8 +24,8 @@ Fields the wire format does not carry (``name``, ``nocc_mask``, ``meta``) are
 not recorded.
 
 Images are stored as lossless PNG by default (``enc = "png"``: the Motorcycle
-pair, 500 x 741 RGB, takes 1.37 MB instead of 2.22 MB raw, but costs about 50 ms
-to encode against about 1 ms; choose ``raw`` for high frame rates). Ground
+pair, 500 x 741 RGB, takes about 0.6x the bytes of raw but is far slower to
+encode; choose ``raw`` for high frame rates). Ground
 truth and sparse depth are float32 and always stored raw. Lossy JPEG is not
 offered: a recording must replay bit-exactly. Writes are synchronous, in the
 pipeline's sink thread, like the ``files`` sink.

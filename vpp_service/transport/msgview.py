@@ -1,9 +1,8 @@
 """Zero-copy msgpack decoding: ``bin`` fields come back as views of the payload.
 
 ``msgpack.unpackb`` copies every ``bin`` field into a new ``bytes`` object; for
-a stereo frame that is a second copy of both images (about 0.4 ms per KITTI
-frame with cold caches, on top of the unavoidable copy out of the Zenoh
-buffer). :func:`loads` decodes the same format but returns each ``bin`` as a
+a stereo frame that is a second copy of both images, on top of the
+unavoidable copy out of the Zenoh buffer. :func:`loads` decodes the same format but returns each ``bin`` as a
 read-only ``memoryview`` slice of the payload (``numpy.frombuffer`` wraps it
 without copying; the view keeps the payload alive).
 
