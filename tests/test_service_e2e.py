@@ -1,4 +1,4 @@
-"""End to end: publisher PROCESS -> Zenoh (127.0.0.1) -> service PROCESS -> subscriber in the test.
+"""End to end: the installed ``vpp-service`` commands (publish -> Zenoh on 127.0.0.1 -> run) and a subscriber in the test.
 
 Every received disparity is checked against ground truth: bad-2 must be well
 below the no-depth baseline of the same matcher; ``@status`` counters must
@@ -11,14 +11,14 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from conftest import free_port, zenoh_test_config
+from helpers.cli import vpp_service_command
+from helpers.zenoh_net import free_port, zenoh_test_config
 
 ROOT = Path(__file__).resolve().parents[1]
 SCALE = 0.5
@@ -58,7 +58,7 @@ outputs = ["disparity", "depth"]
 
 def start_service(cfg: Path) -> subprocess.Popen:
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    return subprocess.Popen([sys.executable, "-m", "vpp_service", "run", "--config", str(cfg)], cwd=ROOT,
+    return subprocess.Popen([*vpp_service_command(), "run", "--config", str(cfg)], cwd=ROOT,
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -125,7 +125,7 @@ def test_publisher_to_service_to_subscriber(tmp_path, baseline_bad2, mode, sig):
             # one malformed message: rejected, counted, the service keeps serving
             bad_key = f"vpp/{rig}/in/frame" if mode == "frame" else f"vpp/{rig}/in/left"
             session.put(bad_key, b"\x85garbage", congestion_control=zenoh.CongestionControl.BLOCK)
-            cmd = [sys.executable, "-m", "vpp_service", "publish", "--scale", str(SCALE), "--count", str(COUNT),
+            cmd = [*vpp_service_command(), "publish", "--scale", str(SCALE), "--count", str(COUNT),
                    "--rate", "5", "--density", "0.1", "--rig", rig, "--connect", f"tcp/127.0.0.1:{port}", "--enc", "png"]
             if mode == "separate":
                 cmd.append("--separate-topics")

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import zenoh
 
-from conftest import zenoh_test_config
+from helpers.zenoh_net import zenoh_test_config
 from helpers.frames import make_frame
 from helpers.zenoh_samples import collect
 from vpp_service.frame import FusionResult

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import zenoh
 
-from conftest import zenoh_test_config
+from helpers.zenoh_net import zenoh_test_config
 from helpers.zenoh_samples import collect as receive   # keeps the samples (and the pool buffers they pin)
 from vpp_service.transport.shm import MIN_SHM_BYTES, ShmPutter
 
