@@ -1,11 +1,16 @@
 """Shared fixtures: a free TCP port on 127.0.0.1 and Zenoh configs with multicast scouting off."""
+
 from __future__ import annotations
 
 import json
 import socket
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import pytest
+
+if TYPE_CHECKING:
+    import zenoh
 
 
 def free_port() -> int:
@@ -15,7 +20,7 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def zenoh_test_config(listen: Sequence[str] = (), connect: Sequence[str] = (), mode: str = "peer"):
+def zenoh_test_config(listen: Sequence[str] = (), connect: Sequence[str] = (), mode: str = "peer") -> zenoh.Config:
     """A ``zenoh.Config`` for tests: explicit endpoints on 127.0.0.1, multicast scouting OFF."""
     import zenoh
 
@@ -40,6 +45,6 @@ def zenoh_endpoint(tcp_port: int) -> str:
 
 
 @pytest.fixture
-def zenoh_config() -> Callable[..., object]:
+def zenoh_config() -> Callable[..., zenoh.Config]:
     """Builder ``zenoh_config(listen=[...], connect=[...], mode="peer")`` -> ``zenoh.Config``."""
     return zenoh_test_config
