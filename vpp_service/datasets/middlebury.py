@@ -169,9 +169,11 @@ class _OldMiddlebury(Dataset):
         left_path: Path,
         right_path: Path,
         gt_path: Path,
-        gt_right_path: Path | None,
+        *,
+        gt_right_path: Path | None = None,
         nocc_path: Path | None = None,
     ) -> StereoFrame:
+        """The frame of scene ``index``; its mask comes from ``nocc_path`` or else a check against ``gt_right_path``."""
         d = self._dirs[index]
         scale = self._scene_scale(d)
         gt = read_scaled_disparity(gt_path, scale)
@@ -196,7 +198,9 @@ class _OldMiddlebury(Dataset):
 
     def _load(self, index: int) -> StereoFrame:
         d = self._dirs[index]
-        return self._frame(index, d / self.left_name, d / self.right_name, d / self.gt_name, d / self.gt_right_name)
+        return self._frame(
+            index, d / self.left_name, d / self.right_name, d / self.gt_name, gt_right_path=d / self.gt_right_name
+        )
 
 
 @DATASETS.register("middlebury2006")
@@ -319,8 +323,8 @@ class Middlebury2001(_OldMiddlebury):
         if pair is None:  # files removed since construction
             raise FileNotFoundError(f"root: scene {d} lost its images")
         if (d / "truedisp.pgm").is_file():
-            return self._frame(index, pair[0], pair[1], d / "truedisp.pgm", None, d / "nonocc.png")
-        frame = self._frame(index, pair[0], pair[1], d / "disp2.pgm", d / "disp6.pgm")
+            return self._frame(index, pair[0], pair[1], d / "truedisp.pgm", nocc_path=d / "nonocc.png")
+        frame = self._frame(index, pair[0], pair[1], d / "disp2.pgm", gt_right_path=d / "disp6.pgm")
         if pair[0].suffix == ".jpg" or pair[1].suffix == ".jpg":
             frame.meta["lossy"] = True
         return frame
