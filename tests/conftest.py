@@ -1,26 +1,28 @@
 """Shared fixtures: a free TCP port on 127.0.0.1 and Zenoh configs with multicast scouting off."""
+
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import pytest
 
-from helpers.zenoh_net import free_port, zenoh_test_config
+from helpers.zenoh_loopback import free_port, zenoh_test_config
 
+if TYPE_CHECKING:
+    import zenoh
 
 @pytest.fixture
 def tcp_port() -> int:
     """A free TCP port on 127.0.0.1."""
     return free_port()
 
-
 @pytest.fixture
 def zenoh_endpoint(tcp_port: int) -> str:
     """``tcp/127.0.0.1:<free port>``."""
     return f"tcp/127.0.0.1:{tcp_port}"
 
-
 @pytest.fixture
-def zenoh_config() -> Callable[..., object]:
+def zenoh_config() -> Callable[..., zenoh.Config]:
     """Builder ``zenoh_config(listen=[...], connect=[...], mode="peer")`` -> ``zenoh.Config``."""
     return zenoh_test_config

@@ -1,4 +1,5 @@
 """Dataset readers on the real benchmark files and on small layouts written to tmp_path."""
+
 from __future__ import annotations
 
 import logging
@@ -8,7 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from vpp_service.datasets import DATASETS, open_dataset, read_pfm, write_pfm
+from vpp_service.datasets import AUTO_ORDER, DATASETS, Dataset, open_dataset, read_pfm, write_pfm
+from vpp_service.datasets.base import reader_class
 from vpp_service.datasets.calibfile import parse_kitti_calib, parse_middlebury_calib
 from vpp_service.datasets.nocc import lr_consistency_mask
 from vpp_service.datasets.velodyne import project_points, read_velodyne_bin, velo_to_camera
@@ -52,6 +54,7 @@ def warp_error(frame: StereoFrame, gt: np.ndarray) -> float:
 
 # ---------------------------------------------------------------- PFM
 
+
 @pytest.mark.parametrize("shape", [(5, 7), (4, 3, 3)])
 def test_pfm_round_trip(tmp_path, shape):
     a = np.random.default_rng(0).normal(size=shape).astype(np.float32)
@@ -86,7 +89,8 @@ def test_pfm_errors(tmp_path):
 
 # ---------------------------------------------------------------- real data
 
-@pytest.mark.parametrize("folder,reader,count,shape,gray", REAL)
+
+@pytest.mark.parametrize(("folder", "reader", "count", "shape", "gray"), REAL)
 def test_auto_detects_real_layouts(folder, reader, count, shape, gray):
     ds = open_dataset("auto", need(folder))
     assert ds.name == reader
@@ -101,15 +105,18 @@ def test_auto_detects_real_layouts(folder, reader, count, shape, gray):
     assert f.meta["dataset"] == reader and Path(f.meta["path"]).exists()
 
 
-@pytest.mark.parametrize("folder,scene", [
-    ("middlebury2005_2006_thirdsize", "Art"),
-    ("middlebury2005_2006_thirdsize", "Wood2"),
-    ("middlebury2003_quartersize", "Teddy"),
-    ("middlebury2001", "Tsukuba"),
-    ("middlebury2001", "Venus"),
-    ("eth3d_two_view_training", "playground_1l"),
-    ("kitti2012_training", "000070/000070_10"),
-])
+@pytest.mark.parametrize(
+    ("folder", "scene"),
+    [
+        ("middlebury2005_2006_thirdsize", "Art"),
+        ("middlebury2005_2006_thirdsize", "Wood2"),
+        ("middlebury2003_quartersize", "Teddy"),
+        ("middlebury2001", "Tsukuba"),
+        ("middlebury2001", "Venus"),
+        ("eth3d_two_view_training", "playground_1l"),
+        ("kitti2012_training", "000070/000070_10"),
+    ],
+)
 def test_ground_truth_scale_aligns_views(folder, scene):
     """Warping the right view by the decoded GT matches the left; a wrong scale does not."""
     frame = open_dataset("auto", need(folder))[scene]
@@ -192,7 +199,7 @@ vmax=245
 """
 
 
-@pytest.fixture()
+@pytest.fixture
 def midd2014_root(tmp_path):
     rng = np.random.default_rng(1)
     scene = tmp_path / "Toy-perfect"
@@ -234,7 +241,7 @@ def test_middlebury_calib_parser_tolerates_whitespace(tmp_path):
         parse_middlebury_calib(tmp_path / "bad.txt")
 
 
-@pytest.fixture()
+@pytest.fixture
 def folder_root(tmp_path):
     rng = np.random.default_rng(2)
     for sub in ("left", "right", "disp"):
@@ -295,6 +302,25 @@ def test_open_dataset_errors(tmp_path):
         open_dataset("auto", 3)
 
 
+def test_auto_order_tries_every_reader_once_specific_first():
+    assert sorted(AUTO_ORDER) == DATASETS.names()
+    assert len(set(AUTO_ORDER)) == len(AUTO_ORDER)
+    assert AUTO_ORDER[-1] == "folder"
+    # ETH3D is the Middlebury-2014 layout without vmin: it must be tried before its parent.
+    assert AUTO_ORDER.index("eth3d") < AUTO_ORDER.index("middlebury2014")
+
+
+def test_reader_class_returns_dataset_classes_and_rejects_other_factories(monkeypatch):
+    for name in DATASETS.names():
+        cls = reader_class(name)
+        assert issubclass(cls, Dataset) and cls.name == name
+    monkeypatch.setitem(DATASETS._items, "not-a-reader", lambda root: root)
+    with pytest.raises(TypeError, match="not-a-reader"):
+        reader_class("not-a-reader")
+    with pytest.raises(ValueError, match="unknown dataset"):
+        reader_class("nope")
+
+
 def test_reader_option_validation():
     root = need("middlebury2005_2006_thirdsize")
     with pytest.raises(ValueError, match="scale"):
@@ -306,6 +332,7 @@ def test_reader_option_validation():
 
 
 # ---------------------------------------------------------------- nocc, velodyne, kitti layout
+
 
 def test_lr_consistency_mask_matches_reference():
     rng = np.random.default_rng(3)
@@ -360,7 +387,8 @@ def test_kitti_layout_with_velodyne(tmp_path):
     # velodyne: x forward, y left, z up -> camera: x = -y, y = -z, z = x
     tr = "0 -1 0 0 0 0 -1 0 1 0 0 0"
     (tmp_path / "calib" / "000001.txt").write_text(
-        f"P0: {p0}\nP1: {p1}\nP2: {p0}\nP3: {p1}\nR0_rect: 1 0 0 0 1 0 0 0 1\nTr_velo_to_cam: {tr}\n")
+        f"P0: {p0}\nP1: {p1}\nP2: {p0}\nP3: {p1}\nR0_rect: 1 0 0 0 1 0 0 0 1\nTr_velo_to_cam: {tr}\n"
+    )
     scan = np.array([[10.0, 0.0, 0.0, 1], [5.0, -1.0, 0.5, 1], [-5.0, 0, 0, 1]], np.float32)
     scan.tofile(tmp_path / "velodyne" / "000001.bin")
     ds = open_dataset("auto", tmp_path)

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from helpers.cli import vpp_service_command
-from helpers.zenoh_net import free_port, zenoh_test_config
+from helpers.zenoh_loopback import free_port, zenoh_test_config
 
 ROOT = Path(__file__).resolve().parents[1]
 SCALE = 0.5

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import zenoh
 
-from helpers.zenoh_net import zenoh_test_config
+from helpers.zenoh_loopback import zenoh_test_config
 from helpers.frames import make_frame
-from helpers.zenoh_samples import collect
+from helpers.zenoh_loopback import collect
 from vpp_service.frame import FusionResult
 from vpp_service.transport import wire
 from vpp_service.sinks.base import SinkContext, build_sink

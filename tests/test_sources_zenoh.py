@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import zenoh
 
-from helpers.zenoh_net import zenoh_test_config
+from helpers.zenoh_loopback import zenoh_test_config
 from helpers.frames import make_frame
 from vpp_service.transport import wire
 from vpp_service.sources.base import SourceContext, build_source

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import zenoh
 
-from helpers.zenoh_net import zenoh_test_config
-from helpers.zenoh_samples import collect as receive   # keeps the samples (and the pool buffers they pin)
+from helpers.zenoh_loopback import zenoh_test_config
+from helpers.zenoh_loopback import collect as receive   # keeps the samples (and the pool buffers they pin)
 from vpp_service.transport.shm import MIN_SHM_BYTES, ShmPutter
 
 

@@ -5,11 +5,12 @@ A dataset is a folder of rectified stereo scenes. Readers subclass
 "nothing matched" error of auto-detection) and implement :meth:`Dataset.detect`
 and :meth:`Dataset._load`. Frames are read lazily, one per ``__getitem__``.
 """
+
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Callable, Iterator
 
 from vpp_service.frame import StereoFrame
 from vpp_service.registry import Registry
@@ -17,10 +18,20 @@ from vpp_service.registry import Registry
 log = logging.getLogger(__name__)
 
 #: Reader classes by name (``middlebury2014``, ``kitti2012``, ``folder``, ...).
-DATASETS: Registry["Dataset"] = Registry("dataset")
+DATASETS: Registry[Dataset] = Registry("dataset")
 
-#: Order in which ``open_dataset("auto", ...)`` tries the readers (more specific first).
-AUTO_ORDER: list[str] = []
+#: Order in which ``open_dataset("auto", ...)`` tries the readers: more specific layouts first (ETH3D is
+#: Middlebury 2014 without ``vmin``), the generic ``folder`` last. Readers registered elsewhere follow.
+AUTO_ORDER: tuple[str, ...] = (
+    "eth3d",
+    "middlebury2014",
+    "middlebury2006",
+    "middlebury2003",
+    "middlebury2001",
+    "kitti2015",
+    "kitti2012",
+    "folder",
+)
 
 
 def scene_dirs(root: Path, predicate: Callable[[Path], bool]) -> list[Path]:
@@ -92,7 +103,7 @@ class Dataset:
         for i in range(len(self.scenes)):
             yield self._load(i)
 
-    def select(self, names: list[str] | None = None, limit: int | None = None) -> "Dataset":
+    def select(self, names: list[str] | None = None, limit: int | None = None) -> Dataset:
         """Restrict to the scenes in ``names`` (in that order) and/or the first ``limit``; returns self."""
         if names is not None:
             unknown = [s for s in names if s not in self.scenes]
@@ -117,7 +128,23 @@ class Dataset:
         return f"{type(self).__name__}(root={str(self.root)!r}, scenes={len(self.scenes)})"
 
 
-def open_dataset(name: str, root: str | Path, **opts: Any) -> Dataset:
+def reader_class(name: str) -> type[Dataset]:
+    """The reader class registered as ``name``.
+
+    Raises
+    ------
+    ValueError
+        If no reader has that name (the message lists the known ones).
+    TypeError
+        If what is registered under ``name`` is not a :class:`Dataset` subclass.
+    """
+    cls = DATASETS.get(name)
+    if not (isinstance(cls, type) and issubclass(cls, Dataset)):
+        raise TypeError(f"dataset {name!r} is registered as {cls!r}, not a Dataset subclass")
+    return cls
+
+
+def open_dataset(name: str, root: str | Path, **opts: object) -> Dataset:
     """Open a dataset folder with a named reader, or detect the layout.
 
     Parameters
@@ -146,16 +173,15 @@ def open_dataset(name: str, root: str | Path, **opts: Any) -> Dataset:
     if not root.is_dir():
         raise FileNotFoundError(f"root: dataset folder not found: {root}")
     if name == "auto":
-        order = AUTO_ORDER + [n for n in DATASETS.names() if n not in AUTO_ORDER]
+        order = [*AUTO_ORDER, *(n for n in DATASETS.names() if n not in AUTO_ORDER)]
         for candidate in order:
-            cls = DATASETS.get(candidate)
+            cls = reader_class(candidate)
             if cls.detect(root):
                 log.info("dataset at %s detected as %s", root, candidate)
                 return cls(root, **opts)
-        looked = "\n".join(f"  - {n}: {DATASETS.get(n).layout}" for n in order)
+        looked = "\n".join(f"  - {n}: {reader_class(n).layout}" for n in order)
         raise ValueError(f"root: no known dataset layout found in {root}; looked for:\n{looked}")
-    cls = DATASETS.get(name)
-    return cls(root, **opts)
+    return reader_class(name)(root, **opts)
 
 
-__all__ = ["DATASETS", "AUTO_ORDER", "Dataset", "open_dataset", "scene_dirs"]
+__all__ = ["AUTO_ORDER", "DATASETS", "Dataset", "open_dataset", "reader_class", "scene_dirs"]

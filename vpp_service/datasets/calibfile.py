@@ -1,4 +1,4 @@
-"""Parsing of the calibration text files shipped with stereo benchmarks.
+r"""Parsing of the calibration text files shipped with stereo benchmarks.
 
 * Middlebury 2014 / ETH3D ``calib.txt``: ``key=value`` lines, where ``cam0`` and
   ``cam1`` are 3x3 matrices written ``[f 0 cx; 0 f cy; 0 0 1]`` and the
@@ -7,23 +7,28 @@
   ``key: v1 v2 ...`` lines of row-major matrices (``P0``..``P3`` are 3x4).
 
 Both parsers are whitespace tolerant (spaces around ``=``, ``;`` or ``,`` as
-row separators, blank lines, ``\\r\\n`` line ends).
+row separators, blank lines, ``\r\n`` line ends).
 """
+
 from __future__ import annotations
 
 import re
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 
 from vpp_service.frame import Calibration
+
+#: A parsed Middlebury ``calib.txt``: 3x3 matrices (``cam0``, ``cam1``), numbers, or the raw text of other values.
+MiddleburyCalib = dict[str, float | str | npt.NDArray[np.float64]]
 
 
 def _numbers(text: str) -> list[float]:
     return [float(t) for t in re.split(r"[\s,;\[\]]+", text.strip()) if t]
 
 
-def parse_middlebury_calib(path: str | Path) -> dict[str, object]:
+def parse_middlebury_calib(path: str | Path) -> MiddleburyCalib:
     """Parse a Middlebury-2014 / ETH3D ``calib.txt``.
 
     Returns
@@ -40,7 +45,7 @@ def parse_middlebury_calib(path: str | Path) -> dict[str, object]:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"path: calibration file not found: {path}")
-    out: dict[str, object] = {}
+    out: MiddleburyCalib = {}
     for line in path.read_text().splitlines():
         if "=" not in line:
             continue
@@ -61,7 +66,7 @@ def parse_middlebury_calib(path: str | Path) -> dict[str, object]:
     return out
 
 
-def middlebury_calibration(calib: dict[str, object], scale: float = 1.0) -> Calibration:
+def middlebury_calibration(calib: MiddleburyCalib, scale: float = 1.0) -> Calibration:
     """Build a :class:`Calibration` from a parsed ``calib.txt`` (baseline mm -> m).
 
     Parameters
@@ -129,4 +134,10 @@ def kitti_calibration(p_left: np.ndarray, p_right: np.ndarray) -> Calibration:
     return Calibration(f=f, baseline=baseline, doffs=0.0, cx=float(p_left[0, 2]), cy=float(p_left[1, 2]))
 
 
-__all__ = ["parse_middlebury_calib", "middlebury_calibration", "parse_kitti_calib", "kitti_calibration"]
+__all__ = [
+    "MiddleburyCalib",
+    "kitti_calibration",
+    "middlebury_calibration",
+    "parse_kitti_calib",
+    "parse_middlebury_calib",
+]

@@ -5,11 +5,12 @@ Layout: ``<scene>/im0.png``, ``im1.png`` (gray stored as RGB; kept RGB),
 ``disp0GT.pfm`` or ``disp0.pfm`` (+inf invalid -> NaN) and optionally
 ``mask0nocc.png`` (255 = non-occluded).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
 
-from vpp_service.datasets.base import AUTO_ORDER, DATASETS
+from vpp_service.datasets.base import DATASETS
 from vpp_service.datasets.middlebury import Middlebury2014
 
 
@@ -36,7 +37,5 @@ class ETH3D(Middlebury2014):
         super().__init__(root)
         self.max_disparity = None
 
-
-AUTO_ORDER.insert(0, "eth3d")
 
 __all__ = ["ETH3D"]

@@ -13,6 +13,7 @@ Ground truth decoding: ``.pfm`` and ``.npy`` as stored (non-finite or <= 0 ->
 NaN); ``.png``/``.pgm`` integer-coded, divided by ``disp_scale`` (default 256,
 KITTI style), 0 invalid. Scene names are the left file stems.
 """
+
 from __future__ import annotations
 
 import json
@@ -20,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vpp_service.datasets.base import AUTO_ORDER, DATASETS, Dataset
+from vpp_service.datasets.base import DATASETS, Dataset
 from vpp_service.datasets.imageio import read_image, read_mask, read_scaled_disparity
 from vpp_service.datasets.middlebury import read_pfm_disparity
 from vpp_service.frame import Calibration, StereoFrame
@@ -50,11 +51,17 @@ class FolderDataset(Dataset):
 
     @classmethod
     def detect(cls, root: Path) -> bool:
+        """True if ``root`` has image files in both ``left/`` and ``right/``."""
         return bool(_files(root / "left", _IMAGE_EXT)) and bool(_files(root / "right", _IMAGE_EXT))
 
     def __init__(self, root: str | Path, disp_scale: float = 256.0) -> None:
         super().__init__(root)
-        if isinstance(disp_scale, bool) or not isinstance(disp_scale, (int, float)) or not np.isfinite(disp_scale) or disp_scale <= 0:
+        if (
+            isinstance(disp_scale, bool)
+            or not isinstance(disp_scale, (int, float))
+            or not np.isfinite(disp_scale)
+            or disp_scale <= 0
+        ):
             raise ValueError(f"disp_scale: must be a finite number > 0, got {disp_scale!r}")
         self.disp_scale = float(disp_scale)
         self._left = _files(self.root / "left", _IMAGE_EXT)
@@ -97,14 +104,20 @@ class FolderDataset(Dataset):
         left, right = read_image(self._left[index]), read_image(self._right[index])
         if left.shape != right.shape:
             raise ValueError(f"root: {self._left[index].name} and {self._right[index].name} differ in shape")
-        gt = self._read_disp(self._disp[index]) if self._disp[index] is not None else None
-        nocc = read_mask(self._nocc[index], threshold=255) if self._nocc[index] is not None else None
-        if gt is not None and gt.shape != left.shape[:2]:
-            raise ValueError(f"root: ground truth {self._disp[index].name} shape {gt.shape} != image {left.shape[:2]}")
-        return StereoFrame(left=left, right=right, calib=self.calib, gt_disparity=gt, nocc_mask=nocc,
-                           name=self.scenes[index], meta={"dataset": self.name, "path": str(self._left[index])})
+        disp_path, nocc_path = self._disp[index], self._nocc[index]
+        gt = self._read_disp(disp_path) if disp_path is not None else None
+        nocc = read_mask(nocc_path, threshold=255) if nocc_path is not None else None
+        if disp_path is not None and gt is not None and gt.shape != left.shape[:2]:
+            raise ValueError(f"root: ground truth {disp_path.name} shape {gt.shape} != image {left.shape[:2]}")
+        return StereoFrame(
+            left=left,
+            right=right,
+            calib=self.calib,
+            gt_disparity=gt,
+            nocc_mask=nocc,
+            name=self.scenes[index],
+            meta={"dataset": self.name, "path": str(self._left[index])},
+        )
 
-
-AUTO_ORDER.append("folder")
 
 __all__ = ["FolderDataset"]

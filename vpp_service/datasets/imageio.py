@@ -1,4 +1,5 @@
 """Reading benchmark images, masks and integer-coded disparity maps from disk."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -80,4 +81,4 @@ def read_mask(path: str | Path, threshold: int = 128) -> np.ndarray:
     return raw >= threshold
 
 
-__all__ = ["read_image", "read_scaled_disparity", "read_mask"]
+__all__ = ["read_image", "read_mask", "read_scaled_disparity"]

@@ -22,14 +22,16 @@ all pixels, ``nocc_mask`` is the validity of the ``noc`` map. Frames are the
 ground truth). When a Velodyne scan and its extrinsics exist, it is projected
 into ``sensor_depth`` (metres, 0 = none) and converted to ``sparse_disparity``.
 """
+
 from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
-from vpp_service.datasets.base import AUTO_ORDER, DATASETS, Dataset, scene_dirs
+from vpp_service.datasets.base import DATASETS, Dataset, scene_dirs
 from vpp_service.datasets.calibfile import kitti_calibration, parse_kitti_calib
 from vpp_service.datasets.imageio import read_image, read_scaled_disparity
 from vpp_service.datasets.velodyne import project_points, read_velodyne_bin, velo_to_camera
@@ -41,8 +43,10 @@ log = logging.getLogger(__name__)
 class _Kitti(Dataset):
     """Shared code of the KITTI readers."""
 
-    pairs: dict[bool, tuple[str, str, int, int]] = {}  # color -> (left dir, right dir, P index L, R)
-    gt_dirs: dict[str, str] = {}
+    #: color -> (left image folder, right image folder, index of P for the left, for the right).
+    pairs: ClassVar[dict[bool, tuple[str, str, int, int]]] = {}
+    #: ground-truth kind ("occ", "noc") -> folder.
+    gt_dirs: ClassVar[dict[str, str]] = {}
     default_color = False
 
     @classmethod
@@ -120,7 +124,7 @@ class _Kitti(Dataset):
         meta = {"dataset": self.name, "path": str(seq), "frame_id": stem}
         sensor_depth = sparse = None
         velo = seq / "velodyne" / f"{frame_id}.bin"
-        if velo.is_file() and calib is not None and "Tr_velo_to_cam" in entries:
+        if velo.is_file() and calib is not None and p_l is not None and "Tr_velo_to_cam" in entries:
             r0 = entries.get("R0_rect", entries.get("R_rect_00"))
             cam = velo_to_camera(read_velodyne_bin(velo), entries["Tr_velo_to_cam"], r0)
             sensor_depth = project_points(cam, p_l, left.shape[:2])
@@ -130,9 +134,17 @@ class _Kitti(Dataset):
             meta["sensor"] = "velodyne"
         elif velo.is_file():
             log.warning("%s: %s has no Tr_velo_to_cam calibration; scan ignored", self.name, velo)
-        return StereoFrame(left=left, right=right, calib=calib, gt_disparity=gt, nocc_mask=nocc,
-                           sensor_depth=sensor_depth, sparse_disparity=sparse,
-                           name=self.scenes[index], meta=meta)
+        return StereoFrame(
+            left=left,
+            right=right,
+            calib=calib,
+            gt_disparity=gt,
+            nocc_mask=nocc,
+            sensor_depth=sensor_depth,
+            sparse_disparity=sparse,
+            name=self.scenes[index],
+            meta=meta,
+        )
 
 
 @DATASETS.register("kitti2012")
@@ -151,8 +163,11 @@ class Kitti2012(_Kitti):
 
     name = "kitti2012"
     layout = "image_0/, image_1/ [colored_0/, colored_1/], disp_occ/ or disp_noc/ <id>_10.png, calib/<id>.txt"
-    pairs = {False: ("image_0", "image_1", 0, 1), True: ("colored_0", "colored_1", 2, 3)}
-    gt_dirs = {"occ": "disp_occ", "noc": "disp_noc"}
+    pairs: ClassVar[dict[bool, tuple[str, str, int, int]]] = {
+        False: ("image_0", "image_1", 0, 1),
+        True: ("colored_0", "colored_1", 2, 3),
+    }
+    gt_dirs: ClassVar[dict[str, str]] = {"occ": "disp_occ", "noc": "disp_noc"}
 
 
 @DATASETS.register("kitti2015")
@@ -171,11 +186,9 @@ class Kitti2015(_Kitti):
 
     name = "kitti2015"
     layout = "image_2/, image_3/, disp_occ_0/ or disp_noc_0/ <id>_10.png, calib/ or calib_cam_to_cam/<id>.txt"
-    pairs = {True: ("image_2", "image_3", 2, 3)}
-    gt_dirs = {"occ": "disp_occ_0", "noc": "disp_noc_0"}
+    pairs: ClassVar[dict[bool, tuple[str, str, int, int]]] = {True: ("image_2", "image_3", 2, 3)}
+    gt_dirs: ClassVar[dict[str, str]] = {"occ": "disp_occ_0", "noc": "disp_noc_0"}
     default_color = True
 
-
-AUTO_ORDER.extend(["kitti2015", "kitti2012"])
 
 __all__ = ["Kitti2012", "Kitti2015"]

@@ -15,6 +15,7 @@ Tsukuba reads ``nonocc.png``; the other older sets derive the mask from the
 right-view ground truth with a left-right check (``meta["nocc_source"]``).
 Only 2014 ships a calibration (``calib.txt``; baseline mm -> m).
 """
+
 from __future__ import annotations
 
 import logging
@@ -23,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vpp_service.datasets.base import AUTO_ORDER, DATASETS, Dataset, scene_dirs
+from vpp_service.datasets.base import DATASETS, Dataset, scene_dirs
 from vpp_service.datasets.calibfile import middlebury_calibration, parse_middlebury_calib
 from vpp_service.datasets.imageio import read_image, read_mask, read_scaled_disparity
 from vpp_service.datasets.nocc import lr_consistency_mask
@@ -34,7 +35,9 @@ log = logging.getLogger(__name__)
 
 
 def _check_scale(scale: float | None, arg: str = "scale") -> None:
-    if scale is not None and (isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale <= 0):
+    if scale is None:
+        return
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale <= 0:
         raise ValueError(f"{arg}: must be a finite number > 0, got {scale!r}")
 
 
@@ -84,6 +87,7 @@ class Middlebury2014(Dataset):
 
     @classmethod
     def detect(cls, root: Path) -> bool:
+        """True if ``root`` (or a sub-folder) is a scene whose ``calib.txt`` has ``vmin`` exactly when expected."""
         return bool(scene_dirs(root, cls._is_mine))
 
     def __init__(self, root: str | Path) -> None:
@@ -122,8 +126,9 @@ class Middlebury2014(Dataset):
         meta = {"dataset": self.name, "path": str(d)}
         if nocc is not None:
             meta["nocc_source"] = "mask0nocc.png"
-        return StereoFrame(left=left, right=right, calib=calib, gt_disparity=gt, nocc_mask=nocc,
-                           name=self.scenes[index], meta=meta)
+        return StereoFrame(
+            left=left, right=right, calib=calib, gt_disparity=gt, nocc_mask=nocc, name=self.scenes[index], meta=meta
+        )
 
 
 class _OldMiddlebury(Dataset):
@@ -158,8 +163,17 @@ class _OldMiddlebury(Dataset):
     def _scene_scale(self, d: Path) -> float:
         return self.scale or self.default_scale
 
-    def _frame(self, index: int, left_path: Path, right_path: Path, gt_path: Path,
-               gt_right_path: Path | None, nocc_path: Path | None = None) -> StereoFrame:
+    def _frame(
+        self,
+        index: int,
+        left_path: Path,
+        right_path: Path,
+        gt_path: Path,
+        *,
+        gt_right_path: Path | None = None,
+        nocc_path: Path | None = None,
+    ) -> StereoFrame:
+        """The frame of scene ``index``; its mask comes from ``nocc_path`` or else a check against ``gt_right_path``."""
         d = self._dirs[index]
         scale = self._scene_scale(d)
         gt = read_scaled_disparity(gt_path, scale)
@@ -172,12 +186,21 @@ class _OldMiddlebury(Dataset):
             gt_r = read_scaled_disparity(gt_right_path, scale)
             nocc = lr_consistency_mask(gt, gt_r, tol=self.lr_tol)
             meta["nocc_source"] = f"lr-check({gt_right_path.name})"
-        return StereoFrame(left=read_image(left_path), right=read_image(right_path), calib=None,
-                           gt_disparity=gt, nocc_mask=nocc, name=self.scenes[index], meta=meta)
+        return StereoFrame(
+            left=read_image(left_path),
+            right=read_image(right_path),
+            calib=None,
+            gt_disparity=gt,
+            nocc_mask=nocc,
+            name=self.scenes[index],
+            meta=meta,
+        )
 
     def _load(self, index: int) -> StereoFrame:
         d = self._dirs[index]
-        return self._frame(index, d / self.left_name, d / self.right_name, d / self.gt_name, d / self.gt_right_name)
+        return self._frame(
+            index, d / self.left_name, d / self.right_name, d / self.gt_name, gt_right_path=d / self.gt_right_name
+        )
 
 
 @DATASETS.register("middlebury2006")
@@ -222,8 +245,10 @@ class Middlebury2003(_OldMiddlebury):
 
 @DATASETS.register("middlebury2001")
 class Middlebury2001(_OldMiddlebury):
-    """Middlebury 2001 scenes: Tsukuba (``imL.png``, ``imR.png``, ``truedisp.pgm``,
-    ``nonocc.png``) and the piecewise-planar scenes (``im2.ppm``, ``im6.ppm``, ``disp2.pgm``).
+    """Middlebury 2001 scenes: Tsukuba and the piecewise-planar scenes.
+
+    Tsukuba ships ``imL.png``, ``imR.png``, ``truedisp.pgm`` and ``nonocc.png``; the
+    piecewise-planar scenes ship ``im2.ppm``, ``im6.ppm`` and ``disp2.pgm``.
 
     Scenes without a lossless left *and* right image are skipped with a warning,
     unless ``allow_jpeg=True`` lets a JPEG stand in (bull ships ``im2.jpg`` only).
@@ -244,8 +269,9 @@ class Middlebury2001(_OldMiddlebury):
     layout = "Tsukuba/imL.png, imR.png, truedisp.pgm | <scene>/im2.ppm, im6.ppm, disp2.pgm"
     default_scale = 8.0
 
-    def __init__(self, root: str | Path, scale: float | None = None, lr_tol: float = 1.0,
-                 allow_jpeg: bool = False) -> None:
+    def __init__(
+        self, root: str | Path, scale: float | None = None, lr_tol: float = 1.0, allow_jpeg: bool = False
+    ) -> None:
         self.allow_jpeg = bool(allow_jpeg)
         Dataset.__init__(self, root)
         _check_scale(scale)
@@ -256,8 +282,11 @@ class Middlebury2001(_OldMiddlebury):
         self._dirs = []
         for d in candidates:
             if self._pair(d) is None:
-                log.warning("middlebury2001: skipping scene %s: no lossless left and right image "
-                            "(pass allow_jpeg=True to use a JPEG)", d.name)
+                log.warning(
+                    "middlebury2001: skipping scene %s: no lossless left and right image "
+                    "(pass allow_jpeg=True to use a JPEG)",
+                    d.name,
+                )
                 continue
             self._dirs.append(d)
         if not self._dirs:
@@ -294,13 +323,11 @@ class Middlebury2001(_OldMiddlebury):
         if pair is None:  # files removed since construction
             raise FileNotFoundError(f"root: scene {d} lost its images")
         if (d / "truedisp.pgm").is_file():
-            return self._frame(index, pair[0], pair[1], d / "truedisp.pgm", None, d / "nonocc.png")
-        frame = self._frame(index, pair[0], pair[1], d / "disp2.pgm", d / "disp6.pgm")
+            return self._frame(index, pair[0], pair[1], d / "truedisp.pgm", nocc_path=d / "nonocc.png")
+        frame = self._frame(index, pair[0], pair[1], d / "disp2.pgm", gt_right_path=d / "disp6.pgm")
         if pair[0].suffix == ".jpg" or pair[1].suffix == ".jpg":
             frame.meta["lossy"] = True
         return frame
 
 
-AUTO_ORDER.extend(["middlebury2014", "middlebury2006", "middlebury2003", "middlebury2001"])
-
-__all__ = ["Middlebury2014", "Middlebury2006", "Middlebury2003", "Middlebury2001", "read_pfm_disparity"]
+__all__ = ["Middlebury2001", "Middlebury2003", "Middlebury2006", "Middlebury2014", "read_pfm_disparity"]

@@ -5,6 +5,7 @@ Middlebury 2001-2006 ship the ground truth of both views (``disp1``/``disp5``,
 its match in the right view carries (nearly) the same disparity: the standard
 left-right consistency check, which is how the benchmark's own masks were made.
 """
+
 from __future__ import annotations
 
 import numpy as np

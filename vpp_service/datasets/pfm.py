@@ -5,14 +5,16 @@ header is ``Pf`` (1 channel) or ``PF`` (3 channels), then ``width height``, then
 scale whose *sign* gives the byte order (negative = little-endian). Rows are
 stored bottom-up, so they are flipped after reading and before writing.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
 
-def _token(fh) -> bytes:
+def _token(fh: BinaryIO) -> bytes:
     """Read the next whitespace-separated header token (skipping ``#`` comments)."""
     out = b""
     while True:
@@ -93,7 +95,10 @@ def write_pfm(path: str | Path, array: np.ndarray) -> None:
     ValueError
         If ``array`` has the wrong number of dimensions/channels or is empty.
     """
-    if not isinstance(array, np.ndarray) or not (np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)):
+    real = isinstance(array, np.ndarray) and (
+        np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)
+    )
+    if not real:
         raise TypeError(f"array: must be a real numeric ndarray, got {type(array).__name__}")
     if array.ndim == 3 and array.shape[2] == 1:
         array = array[..., 0]

@@ -5,6 +5,7 @@ The projection follows the same rules as ``vpp_service.vpp.points_to_depth_map``
 point wins a pixel) but takes KITTI's full 3 x 4 rectified projection matrix:
 ``P2``/``P3`` carry a translation column that a 3 x 3 ``K`` would drop.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -79,4 +80,4 @@ def project_points(points_cam: np.ndarray, p_rect: np.ndarray, shape: tuple[int,
     return depth.reshape(h, w).astype(np.float32)
 
 
-__all__ = ["read_velodyne_bin", "velo_to_camera", "project_points"]
+__all__ = ["project_points", "read_velodyne_bin", "velo_to_camera"]
