@@ -10,6 +10,7 @@ warm-up run (the first call also pays page faults for the cost volumes).
 Also reports the census-SGM stages at 1 thread. Prints a table and writes
 JSON (default ``benchmarks/results/bench_matchers.json``).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -71,11 +72,24 @@ def main(argv=None) -> int:
         for name, opts, h, t in cases:
             m = build_matcher(name, {"max_disparity": D, **opts})
             ms = median_ms(lambda: m.compute(left, right, hints=h), reps)
-            label = name + (f" paths={opts['paths']}" if "paths" in opts else "") + (" +guided" if h is not None else "")
+            label = (
+                name + (f" paths={opts['paths']}" if "paths" in opts else "") + (" +guided" if h is not None else "")
+            )
             thr = "cv" if t is None else str(t)
             print(f"{size:11s} {W:4d}x{H:<4d} {D:4d} {label:22s} {thr:>4s} {ms:9.1f}")
-            rows.append({"size": size, "width": W, "height": H, "max_disparity": D, "matcher": name,
-                         "options": opts, "guided": h is not None, "threads": t, "ms": ms})
+            rows.append(
+                {
+                    "size": size,
+                    "width": W,
+                    "height": H,
+                    "max_disparity": D,
+                    "matcher": name,
+                    "options": opts,
+                    "guided": h is not None,
+                    "threads": t,
+                    "ms": ms,
+                }
+            )
         # census-SGM stages, 1 thread
         gl, gr = to_gray(left), to_gray(right)
         cl, cr = cs.census_transform(gl, 1), cs.census_transform(gr, 1)
@@ -96,8 +110,18 @@ def main(argv=None) -> int:
         for stage, fn in stages.items():
             ms = median_ms(fn, reps)
             print(f"{size:11s} {W:4d}x{H:<4d} {D:4d} {'  stage ' + stage:22s} {1:>4d} {ms:9.1f}")
-            rows.append({"size": size, "width": W, "height": H, "max_disparity": D, "matcher": "census-sgm",
-                         "stage": stage, "threads": 1, "ms": ms})
+            rows.append(
+                {
+                    "size": size,
+                    "width": W,
+                    "height": H,
+                    "max_disparity": D,
+                    "matcher": "census-sgm",
+                    "stage": stage,
+                    "threads": 1,
+                    "ms": ms,
+                }
+            )
     out = write_report(a.json, rows, threads_all=allt, opencv=cv2.__version__, reps=reps)
     print(f"wrote {out}")
     return 0

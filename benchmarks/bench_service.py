@@ -26,6 +26,7 @@ which also carries any drift of the matcher's own time between the two runs.
 
     python benchmarks/bench_service.py --frames 40
 """
+
 from __future__ import annotations
 
 import argparse
@@ -59,6 +60,7 @@ def _port() -> int:
 
 def _toml(cfg: dict) -> str:
     """Minimal TOML writer for the flat tables / arrays of tables used here."""
+
     def val(v):
         if isinstance(v, bool):
             return "true" if v else "false"
@@ -69,9 +71,10 @@ def _toml(cfg: dict) -> str:
         if isinstance(v, list):
             return "[" + ", ".join(val(x) for x in v) + "]"
         raise TypeError(type(v))
+
     lines = []
     for table, body in cfg.items():
-        for entry in (body if isinstance(body, list) else [body]):
+        for entry in body if isinstance(body, list) else [body]:
             lines.append(f"[[{table}]]" if isinstance(body, list) else f"[{table}]")
             lines += [f"{k} = {val(v)}" for k, v in entry.items()]
             lines.append("")
@@ -90,14 +93,27 @@ def main() -> int:
     ap.add_argument("--max-disparity", type=int, default=128)
     ap.add_argument("--rate", type=float, default=5.0, help="paced run rate (Hz)")
     ap.add_argument("--warmup", type=int, default=3)
-    ap.add_argument("--source-poll-s", type=float, default=0.05,
-                    help="zenoh source idle poll period (service default 0.002; adds ~half of it to e2e)")
-    ap.add_argument("--omp-spincount", type=int, default=0, metavar="N",
-                    help="run the service with GOMP_SPINCOUNT=N (OpenMP workers spin between frames "
-                         "instead of sleeping: lower latency, one core busy); 0 = the default policy")
-    ap.add_argument("--shm-pool-mb", type=int, default=64,
-                    help="shared-memory pool of the camera's and the service's publishers "
-                         "(vpp_service.transport.shm); 0 = plain puts")
+    ap.add_argument(
+        "--source-poll-s",
+        type=float,
+        default=0.05,
+        help="zenoh source idle poll period (service default 0.002; adds ~half of it to e2e)",
+    )
+    ap.add_argument(
+        "--omp-spincount",
+        type=int,
+        default=0,
+        metavar="N",
+        help="run the service with GOMP_SPINCOUNT=N (OpenMP workers spin between frames "
+        "instead of sleeping: lower latency, one core busy); 0 = the default policy",
+    )
+    ap.add_argument(
+        "--shm-pool-mb",
+        type=int,
+        default=64,
+        help="shared-memory pool of the camera's and the service's publishers "
+        "(vpp_service.transport.shm); 0 = plain puts",
+    )
     ap.add_argument("--json", default=str(DEFAULT_JSON))
     a = ap.parse_args()
 
@@ -108,11 +124,11 @@ def main() -> int:
     configure_openmp()  # the camera side measures as the service runs; before the kernels load
     from vpp_service.fusion import fuse
     from vpp_service.matchers import build_matcher
-    from vpp_service.transport import wire
     from vpp_service.service.config import validate_config
-    from vpp_service.transport.shm import ShmPutter
     from vpp_service.sources.sensors import build_sensor
     from vpp_service.sources.synthetic import make_scene
+    from vpp_service.transport import wire
+    from vpp_service.transport.shm import ShmPutter
 
     n_unique = min(a.frames, 8)
     scene = make_scene(height=a.height, width=a.width, seed=0, max_disparity=96)
@@ -122,14 +138,12 @@ def main() -> int:
     port = _port()
     ep = f"tcp/127.0.0.1:{port}"
     raw_cfg = {
-        "service": {"rig": RIG, "out": str(tmp / "out"), "summary": False, "timing_window": a.frames,
-                    "seed": 0},
+        "service": {"rig": RIG, "out": str(tmp / "out"), "summary": False, "timing_window": a.frames, "seed": 0},
         "zenoh": {"listen": [ep], "multicast_scouting": False},
         "source": {"type": "zenoh", "ring_size": 64, "poll_s": a.source_poll_s},
         "matcher": {"name": "sgbm", "max_disparity": a.max_disparity},
         "queues": {"input_size": 64, "input_policy": "block", "output_size": 64, "output_policy": "block"},
-        "sinks": [{"type": "zenoh", "outputs": ["disparity"], "queue_size": 64,
-                   "shm_pool_mb": a.shm_pool_mb}],
+        "sinks": [{"type": "zenoh", "outputs": ["disparity"], "queue_size": 64, "shm_pool_mb": a.shm_pool_mb}],
     }
     cfg = validate_config(raw_cfg)
 
@@ -163,12 +177,17 @@ def main() -> int:
     toml_path.write_text(_toml(raw_cfg))
     log_path = tmp / "service.log"
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    if a.omp_spincount:     # low-latency mode: OpenMP workers spin between frames
+    if a.omp_spincount:  # low-latency mode: OpenMP workers spin between frames
         env.pop("OMP_WAIT_POLICY", None)
         env["GOMP_SPINCOUNT"] = str(a.omp_spincount)
     with open(log_path, "w") as log:
-        proc = subprocess.Popen([sys.executable, "-m", "vpp_service", "run", "--config", str(toml_path)],
-                                cwd=str(REPO), stdout=log, stderr=subprocess.STDOUT, env=env)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "vpp_service", "run", "--config", str(toml_path)],
+            cwd=str(REPO),
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=env,
+        )
     cc = zenoh.Config()
     cc.insert_json5("connect/endpoints", json.dumps([ep]))
     cc.insert_json5("scouting/multicast/enabled", "false")
@@ -204,12 +223,13 @@ def main() -> int:
 
             sub = cli.declare_subscriber(wire.topic("vpp", RIG, "out/disparity"), on_out)
             putter = ShmPutter(a.shm_pool_mb)
-            pub = cli.declare_publisher(wire.topic("vpp", RIG, "in/frame"),
-                                        congestion_control=zenoh.CongestionControl.BLOCK)
+            pub = cli.declare_publisher(
+                wire.topic("vpp", RIG, "in/frame"), congestion_control=zenoh.CongestionControl.BLOCK
+            )
 
             def send(i: int) -> None:
                 buf, off = payloads[i % n_unique]
-                buf[off:off + 8] = struct.pack(">Q", time.time_ns())
+                buf[off : off + 8] = struct.pack(">Q", time.time_ns())
                 putter.put(pub, buf)
 
             # warm-up (also waits for the routes to be up)
@@ -284,18 +304,33 @@ def main() -> int:
     # Zenoh both ways, queue hand-offs, the client: what is left of each frame's e2e
     transport = _pct([lt - st["decode"] - st["process"] - enc - put for lt, st in frames], 50)
     results = {
-        "size": [a.width, a.height], "frames": a.frames, "rate_hz": a.rate, "matcher": "sgbm",
-        "max_disparity": a.max_disparity, "service": "separate process, loopback Zenoh tcp",
-        "matcher_alone_ms": {"p50": m_p50, "p99": _pct(m_ms, 99), "mean": float(np.mean(m_ms)),
-                             "fps": 1e3 / float(np.mean(m_ms))},
+        "size": [a.width, a.height],
+        "frames": a.frames,
+        "rate_hz": a.rate,
+        "matcher": "sgbm",
+        "max_disparity": a.max_disparity,
+        "service": "separate process, loopback Zenoh tcp",
+        "matcher_alone_ms": {
+            "p50": m_p50,
+            "p99": _pct(m_ms, 99),
+            "mean": float(np.mean(m_ms)),
+            "fps": 1e3 / float(np.mean(m_ms)),
+        },
         "matcher_alone_before_service_ms": {"p50": _pct(m_before, 50), "p99": _pct(m_before, 99)},
         "e2e_minus_in_service_match_ms": {"p50": _pct(paired, 50), "p99": _pct(paired, 99)},
         "paired_overhead_pct_vs_in_service_match": 100.0 * _pct(paired, 50) / match,
         "service_e2e_ms": {"p50": e2e_p50, "p99": e2e_p99, "mean": float(np.mean(paced))},
         "service_fps": fps,
         "throughput_latency_ms": {"p50": _pct(thr_lat, 50), "p99": _pct(thr_lat, 99)},
-        "breakdown_ms_p50": {"decode": dec, "vpp": vpp, "match_in_service": match, "process_other": other,
-                             "encode": enc, "put": put, "transport": transport},
+        "breakdown_ms_p50": {
+            "decode": dec,
+            "vpp": vpp,
+            "match_in_service": match,
+            "process_other": other,
+            "encode": enc,
+            "put": put,
+            "transport": transport,
+        },
         "overhead_pct_vs_matcher": 100.0 * (e2e_p50 - m_p50) / m_p50,
         "paired_overhead_pct_vs_matcher_alone": 100.0 * _pct(paired, 50) / m_p50,
         "overhead_breakdown_pct_vs_matcher": 100.0 * (vpp + dec + enc + put + transport + other) / m_p50,
@@ -305,8 +340,10 @@ def main() -> int:
         "shm_pool_mb": a.shm_pool_mb,
         "camera_shm": putter.stats(),
     }
-    print(f"SGBM, {a.width}x{a.height}, {a.max_disparity} disparities, {a.frames} frames; "
-          f"service in its own process over tcp/127.0.0.1")
+    print(
+        f"SGBM, {a.width}x{a.height}, {a.max_disparity} disparities, {a.frames} frames; "
+        f"service in its own process over tcp/127.0.0.1"
+    )
     print(f"{'':34s}{'p50 ms':>9s}{'p99 ms':>9s}{'fps':>8s}")
     print(f"{'matcher alone (SGBM)':34s}{m_p50:9.1f}{_pct(m_ms, 99):9.1f}{1e3 / np.mean(m_ms):8.1f}")
     print(f"{f'service e2e, paced {a.rate:g} Hz':34s}{e2e_p50:9.1f}{e2e_p99:9.1f}{'':8s}")
@@ -315,14 +352,20 @@ def main() -> int:
     for k, v in results["breakdown_ms_p50"].items():
         pct = 100.0 * v / m_p50
         print(f"  {k:32s}{v:9.2f} ms {pct:6.1f} % of matcher")
-    print(f"overhead per frame, p50 of (e2e - in-service match): {_pct(paired, 50):.2f} ms = "
-          f"{results['paired_overhead_pct_vs_matcher_alone']:.1f} % of the matcher alone "
-          f"(p50 {m_p50:.1f} ms; {results['paired_overhead_pct_vs_in_service_match']:.1f} % of the "
-          f"in-service match, p50 {match:.1f} ms)")
-    print(f"sum of the per-stage p50s above (vpp+decode+encode+put+other+transport): "
-          f"{results['overhead_breakdown_pct_vs_matcher']:.1f} % of the matcher alone")
-    print(f"unpaired, (e2e p50 - matcher p50) / matcher p50: {results['overhead_pct_vs_matcher']:.1f} % "
-          f"(matcher alone before the service started: p50 {_pct(m_before, 50):.1f} ms)")
+    print(
+        f"overhead per frame, p50 of (e2e - in-service match): {_pct(paired, 50):.2f} ms = "
+        f"{results['paired_overhead_pct_vs_matcher_alone']:.1f} % of the matcher alone "
+        f"(p50 {m_p50:.1f} ms; {results['paired_overhead_pct_vs_in_service_match']:.1f} % of the "
+        f"in-service match, p50 {match:.1f} ms)"
+    )
+    print(
+        f"sum of the per-stage p50s above (vpp+decode+encode+put+other+transport): "
+        f"{results['overhead_breakdown_pct_vs_matcher']:.1f} % of the matcher alone"
+    )
+    print(
+        f"unpaired, (e2e p50 - matcher p50) / matcher p50: {results['overhead_pct_vs_matcher']:.1f} % "
+        f"(matcher alone before the service started: p50 {_pct(m_before, 50):.1f} ms)"
+    )
     out = Path(a.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(results, indent=2))

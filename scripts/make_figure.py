@@ -2,6 +2,7 @@
 
 Usage: ``python scripts/make_figure.py [--out docs/img/vpp_pair.png]``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -10,11 +11,11 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from vpp_service.datasets.skimage_scene import motorcycle_arrays  # noqa: E402
-from vpp_service.vpp import VPPConfig, project  # noqa: E402
+from vpp_service.datasets.skimage_scene import motorcycle_arrays
+from vpp_service.vpp import VPPConfig, project
 
 
 def main(argv=None) -> int:
@@ -25,11 +26,12 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(0)
     sparse = np.where(np.isfinite(gt) & (rng.random(gt.shape) < 0.05), gt, 0).astype(np.float32)
     res = project(left, right, sparse, VPPConfig(), seed=0)
-    ys, xs = slice(180, 300), slice(300, 480)     # zoomed crop
+    ys, xs = slice(180, 300), slice(300, 480)  # zoomed crop
     fig, ax = plt.subplots(2, 2, figsize=(10, 6.2))
     ax[0, 0].imshow(res.left)
-    ax[0, 0].add_patch(plt.Rectangle((xs.start, ys.start), xs.stop - xs.start, ys.stop - ys.start,
-                                     fill=False, ec="yellow", lw=1.5))
+    ax[0, 0].add_patch(
+        plt.Rectangle((xs.start, ys.start), xs.stop - xs.start, ys.stop - ys.start, fill=False, ec="yellow", lw=1.5)
+    )
     ax[0, 0].set_title("painted left (pattern vi, 3x3, alpha 0.4, FGD)")
     ax[0, 1].imshow(res.right)
     ax[0, 1].set_title("painted right")

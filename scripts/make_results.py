@@ -22,6 +22,7 @@ protocol); metrics cover all pixels with valid ground truth (occluded included),
 Markdown and the plot from an existing ``results.json`` without evaluating anything.
 Progress goes to stderr.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -59,17 +60,29 @@ SEED = 0
 
 #: Paper, Table 2 (5 % points, rSGM) and Table 4 (KITTI 2015, raw LiDAR); see vpp-spec.md.
 PAPER = {
-    "middlebury2006": {"label": "Middlebury 2014 training, full res", "bad2": (41.86, 30.64, 20.37),
-                       "avg": (13.62, 9.98, 7.81)},
+    "middlebury2006": {
+        "label": "Middlebury 2014 training, full res",
+        "bad2": (41.86, 30.64, 20.37),
+        "avg": (13.62, 9.98, 7.81),
+    },
     "eth3d": {"label": "ETH3D training (all scenes)", "bad2": (9.11, 3.18, 0.62), "avg": (1.18, 0.76, 0.58)},
     "kitti2012": {"label": "KITTI 2015, raw LiDAR", "bad2": (15.66, 10.00, 6.12), "avg": None},
 }
 #: Which of our rows each paper line is compared with: (dataset, sensor).
-PAPER_OURS = {"middlebury2006": ("middlebury2006", "uniform"), "eth3d": ("eth3d", "uniform"),
-              "kitti2012": ("kitti2012", "lidar")}
+PAPER_OURS = {
+    "middlebury2006": ("middlebury2006", "uniform"),
+    "eth3d": ("eth3d", "uniform"),
+    "kitti2012": ("kitti2012", "lidar"),
+}
 
-COLS = (("bad1", "bad-1"), ("bad2", "bad-2"), ("bad4", "bad-4"), ("avg", "avg px"),
-        ("bad2_nocc", "bad-2 nocc"), ("avg_nocc", "avg nocc"))
+COLS = (
+    ("bad1", "bad-1"),
+    ("bad2", "bad-2"),
+    ("bad4", "bad-4"),
+    ("avg", "avg px"),
+    ("bad2_nocc", "bad-2 nocc"),
+    ("avg_nocc", "avg nocc"),
+)
 
 
 # --------------------------------------------------------------------------- running
@@ -113,8 +126,15 @@ def _machine() -> dict[str, Any]:
         usable = len(os.sched_getaffinity(0))
     except AttributeError:
         usable = os.cpu_count()
-    return {"cpu": cpu, "usable_cores": usable, "threads_used": 1, "system": platform.platform(),
-            "python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__}
+    return {
+        "cpu": cpu,
+        "usable_cores": usable,
+        "threads_used": 1,
+        "system": platform.platform(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "opencv": cv2.__version__,
+    }
 
 
 def _jobs(data: Path) -> list[dict[str, Any]]:
@@ -127,11 +147,27 @@ def _jobs(data: Path) -> list[dict[str, Any]]:
         for matcher in MATCHERS:
             methods = [m for m in METHODS if not (m == "guided" and matcher != "census-sgm")]
             dens = list(SWEEP) if (key == SWEEP_DATASET and matcher == "census-sgm") else [DENSITY]
-            jobs.append({"folder": folder, "dataset": key, "matcher": matcher, "methods": methods,
-                         "sensor": "uniform", "densities": dens})
+            jobs.append(
+                {
+                    "folder": folder,
+                    "dataset": key,
+                    "matcher": matcher,
+                    "methods": methods,
+                    "sensor": "uniform",
+                    "densities": dens,
+                }
+            )
             if key == "kitti2012":
-                jobs.append({"folder": folder, "dataset": key, "matcher": matcher, "methods": methods,
-                             "sensor": "lidar", "densities": None})
+                jobs.append(
+                    {
+                        "folder": folder,
+                        "dataset": key,
+                        "matcher": matcher,
+                        "methods": methods,
+                        "sensor": "lidar",
+                        "densities": None,
+                    }
+                )
     return jobs
 
 
@@ -155,30 +191,57 @@ def run_all(data: Path, limit: int | None) -> dict[str, Any]:
         ds.select(None, limit)
         prefix = f"[job {j}/{len(jobs)} {job['dataset']} {job['matcher']} {job['sensor']}]"
         tj = time.perf_counter()
-        out = run_evaluation(ds, job["matcher"], job["methods"], job["densities"], job["sensor"], vpp_config, SEED,
-                             progress=_Progress(prefix, t0), matcher_options={"threads": 1} if job["matcher"] == "census-sgm" else None,
-                             dataset_name=job["dataset"])
+        out = run_evaluation(
+            ds,
+            job["matcher"],
+            job["methods"],
+            job["densities"],
+            job["sensor"],
+            vpp_config,
+            SEED,
+            progress=_Progress(prefix, t0),
+            matcher_options={"threads": 1} if job["matcher"] == "census-sgm" else None,
+            dataset_name=job["dataset"],
+        )
         job["seconds"] = round(time.perf_counter() - tj, 2)
         job["scenes"] = sorted({r["scene"] for r in out})
         rows += out
     total = time.perf_counter() - t0
     config = {
-        "seed": SEED, "density": DENSITY, "sweep_densities": list(SWEEP), "sweep_dataset": SWEEP_DATASET,
-        "matchers": list(MATCHERS), "matcher_options": {"census-sgm threads": 1, "sgbm": "cv2.setNumThreads(1), defaults", "max_disparity": "per scene: "
-                                                        "smallest multiple of 16 above max GT (runner default)"},
-        "methods": list(METHODS), "guided": "census-sgm only (cost-volume modulation k=10, c=1)",
+        "seed": SEED,
+        "density": DENSITY,
+        "sweep_densities": list(SWEEP),
+        "sweep_dataset": SWEEP_DATASET,
+        "matchers": list(MATCHERS),
+        "matcher_options": {
+            "census-sgm threads": 1,
+            "sgbm": "cv2.setNumThreads(1), defaults",
+            "max_disparity": "per scene: smallest multiple of 16 above max GT (runner default)",
+        },
+        "methods": list(METHODS),
+        "guided": "census-sgm only (cost-volume modulation k=10, c=1)",
         "vpp": {k: getattr(vpp_config, k) for k in vpp_config.__dataclass_fields__},
         "lidar": "vpp_service.sources.sensors.LidarSensor defaults (64 beams, +2/-24.8 deg, 0.2 deg, "
-                 "0.5-120 m, no noise), sampled from the KITTI GT",
+        "0.5-120 m, no noise), sampled from the KITTI GT",
         "holes": "filled before scoring (vpp_service.matchers.fill_holes, background interpolation)",
         "scored": "all valid-GT pixels (occluded included); *_nocc over the dataset's non-occlusion mask",
-        "limit": limit, "data": str(data), "jobs": jobs,
+        "limit": limit,
+        "data": str(data),
+        "jobs": jobs,
     }
     commit = _git("rev-parse", "HEAD")
-    dirty = [line.split(maxsplit=1)[-1] for line in _git("status", "--porcelain", "--", "vpp_service",
-                                                          "setup.py").splitlines() if line.strip()]
-    meta = {"date_utc": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-            "git_commit": commit, "git_dirty_library": dirty, "seconds": round(total, 1), **_machine()}
+    dirty = [
+        line.split(maxsplit=1)[-1]
+        for line in _git("status", "--porcelain", "--", "vpp_service", "setup.py").splitlines()
+        if line.strip()
+    ]
+    meta = {
+        "date_utc": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "git_commit": commit,
+        "git_dirty_library": dirty,
+        "seconds": round(total, 1),
+        **_machine(),
+    }
     return {"meta": meta, "config": config, "paper": PAPER, "results": rows}
 
 
@@ -212,8 +275,9 @@ def summaries(rows: list[dict]) -> dict[str, Any]:
 
 def sweep_summary(rows: list[dict]) -> dict[str, Any]:
     """``{method: {density: means}}`` of the sweep; density 0 = the matcher alone for every method."""
-    srows = [r for r in rows if r["dataset"] == SWEEP_DATASET and r["matcher"] == "census-sgm"
-             and r["sensor"] == "uniform"]
+    srows = [
+        r for r in rows if r["dataset"] == SWEEP_DATASET and r["matcher"] == "census-sgm" and r["sensor"] == "uniform"
+    ]
     base = [r for r in srows if r["method"] == "baseline" and math.isclose(r["density"], SWEEP[0])]
     out: dict[str, Any] = {}
     for method in METHODS:
@@ -254,8 +318,11 @@ def _dataset_table(block: dict[str, Any]) -> str:
             if s is None:
                 lines.append([matcher, method] + ["n/a"] * (len(COLS) + 2))
                 continue
-            lines.append([matcher, method if method != "vpp" else "**vpp**"] + [_f(s.get(k)) for k, _ in COLS]
-                         + [f"{s['n_points']:.0f}" if method != "baseline" else "-", f"{s['ms']:.0f}"])
+            lines.append(
+                [matcher, method if method != "vpp" else "**vpp**"]
+                + [_f(s.get(k)) for k, _ in COLS]
+                + [f"{s['n_points']:.0f}" if method != "baseline" else "-", f"{s['ms']:.0f}"]
+            )
     return _table(header, lines, text_cols)
 
 
@@ -267,8 +334,11 @@ def plot(path: Path, sweep: dict[str, Any], n_scenes: int) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), dpi=90)
-    style = {"baseline": ("k", "--", "census-sgm alone"), "guided": ("tab:blue", "-", "guided stereo"),
-             "vpp": ("tab:red", "-", "VPP")}
+    style = {
+        "baseline": ("k", "--", "census-sgm alone"),
+        "guided": ("tab:blue", "-", "guided stereo"),
+        "vpp": ("tab:red", "-", "VPP"),
+    }
     for ax, metric, ylabel in ((axes[0], "bad2", "bad-2 (%)"), (axes[1], "avg", "avg error (px)")):
         for method, per in sweep.items():
             xs = [100 * float(d) for d in per]
@@ -280,8 +350,11 @@ def plot(path: Path, sweep: dict[str, Any], n_scenes: int) -> None:
         ax.set_ylim(bottom=0)
         ax.grid(True, alpha=0.3)
     axes[0].legend()
-    fig.suptitle(f"Middlebury 2005/2006 third size, {n_scenes} scenes, census-sgm, seed {SEED} "
-                 "(means over scenes, holes filled, all valid-GT pixels)", fontsize=9)
+    fig.suptitle(
+        f"Middlebury 2005/2006 third size, {n_scenes} scenes, census-sgm, seed {SEED} "
+        "(means over scenes, holes filled, all valid-GT pixels)",
+        fontsize=9,
+    )
     fig.tight_layout()
     fig.savefig(str(path), format="png")
     plt.close(fig)
@@ -290,8 +363,12 @@ def plot(path: Path, sweep: dict[str, Any], n_scenes: int) -> None:
 def _per_scene_table(rows: list[dict]) -> str:
     by: dict[str, dict[str, dict]] = defaultdict(dict)
     for r in rows:
-        if (r["dataset"] == SWEEP_DATASET and r["matcher"] == "census-sgm" and r["sensor"] == "uniform"
-                and math.isclose(r["density"], DENSITY)):
+        if (
+            r["dataset"] == SWEEP_DATASET
+            and r["matcher"] == "census-sgm"
+            and r["sensor"] == "uniform"
+            and math.isclose(r["density"], DENSITY)
+        ):
             by[r["scene"]][r["method"]] = r
     header = ["scene", "baseline bad-2", "guided bad-2", "vpp bad-2", "vpp / baseline", "baseline avg", "vpp avg"]
     lines = []
@@ -299,8 +376,17 @@ def _per_scene_table(rows: list[dict]) -> str:
         m = by[scene]
         b, g, v = (m.get(k, {}) for k in METHODS)
         ratio = v.get("bad2", float("nan")) / b["bad2"] if b.get("bad2") else float("nan")
-        lines.append([scene, _f(b.get("bad2")), _f(g.get("bad2")), _f(v.get("bad2")), _f(ratio),
-                      _f(b.get("avg")), _f(v.get("avg"))])
+        lines.append(
+            [
+                scene,
+                _f(b.get("bad2")),
+                _f(g.get("bad2")),
+                _f(v.get("bad2")),
+                _f(ratio),
+                _f(b.get("avg")),
+                _f(v.get("avg")),
+            ]
+        )
     return _table(header, lines)
 
 
@@ -311,43 +397,57 @@ def render(doc: dict[str, Any], out: Path) -> str:
     meta, cfg = doc["meta"], doc["config"]
     names = {k: n for _, k, n in DATASETS}
     P: list[str] = []
-    P += ["# Results: matcher alone vs guided stereo vs VPP on the real datasets", "",
-          "Regenerate everything on this page (tables, JSON, plot) with one command from the repository root:", "",
-          "```", "python scripts/make_results.py [--data ../shared/data] [--out docs]", "```", "",
-          f"Last run: {meta['date_utc']}, commit `{meta['git_commit'][:12]}`"
-          f"{' + uncommitted changes in ' + ', '.join(f'`{p}`' for p in meta['git_dirty_library']) if meta.get('git_dirty_library') else ''}, "
-          f"{meta['seconds']:.0f} s on {meta['cpu']} ({meta['threads_used']} thread, "
-          f"{meta['usable_cores']} usable cores), Python {meta['python']}, NumPy {meta['numpy']}, "
-          f"OpenCV {meta['opencv']}. Everything (config, machine, every per-scene row) is in "
-          "[`results/results.json`](results/results.json)."
-          + (f" **Partial run: first {cfg['limit']} scene(s) per dataset.**" if cfg.get("limit") else ""), "",
-          "## Protocol", "",
-          f"- Sparse points: {100 * cfg['density']:g} % of the valid ground-truth pixels drawn uniformly at random, "
-          f"seed {cfg['seed']} (same points for guided and VPP). KITTI also with a simulated 64-beam LiDAR "
-          "(`--sensor lidar`, sampled from the accumulated-laser ground truth: the folder ships no raw scan).",
-          "- VPP: default `VPPConfig` = the paper's setting (random pattern, per-pixel 3x3 patches, alpha 0.4, "
-          "sub-pixel splatting, occlusion handling FGD).",
-          "- Guided stereo (Poggi et al. 2019): cost modulation k = 10, c = 1 inside `census-sgm`; `sgbm` "
-          "(OpenCV StereoSGBM, 3-way, block 5) exposes no cost volume, so guided is n/a for it.",
-          "- `census-sgm`: our re-implementation of the rSGM recipe (5x5 census, 8-path SGM with "
-          "intensity-adaptive P2, left-right check, 3x3 median, speckle filter), 1 thread. Disparity range "
-          "per scene = smallest multiple of 16 above the largest GT disparity.",
-          "- Holes of every matcher filled before scoring (background interpolation). bad-τ = % of pixels with "
-          "|d - gt| > τ, avg = mean absolute error (px), over **all** pixels with valid ground truth "
-          "(occluded included); `nocc` columns use the non-occlusion mask where one exists (Middlebury: "
-          "`nonocc.png` for Tsukuba, left-right check of the two GT maps otherwise; KITTI: `disp_noc`; "
-          "ETH3D: no mask in the folder). Numbers are means over scenes; `ms` = VPP + matching time per "
-          "scene; `points` = mean number of sparse points.", ""]
+    P += [
+        "# Results: matcher alone vs guided stereo vs VPP on the real datasets",
+        "",
+        "Regenerate everything on this page (tables, JSON, plot) with one command from the repository root:",
+        "",
+        "```",
+        "python scripts/make_results.py [--data ../shared/data] [--out docs]",
+        "```",
+        "",
+        f"Last run: {meta['date_utc']}, commit `{meta['git_commit'][:12]}`"
+        f"{' + uncommitted changes in ' + ', '.join(f'`{p}`' for p in meta['git_dirty_library']) if meta.get('git_dirty_library') else ''}, "
+        f"{meta['seconds']:.0f} s on {meta['cpu']} ({meta['threads_used']} thread, "
+        f"{meta['usable_cores']} usable cores), Python {meta['python']}, NumPy {meta['numpy']}, "
+        f"OpenCV {meta['opencv']}. Everything (config, machine, every per-scene row) is in "
+        "[`results/results.json`](results/results.json)."
+        + (f" **Partial run: first {cfg['limit']} scene(s) per dataset.**" if cfg.get("limit") else ""),
+        "",
+        "## Protocol",
+        "",
+        f"- Sparse points: {100 * cfg['density']:g} % of the valid ground-truth pixels drawn uniformly at random, "
+        f"seed {cfg['seed']} (same points for guided and VPP). KITTI also with a simulated 64-beam LiDAR "
+        "(`--sensor lidar`, sampled from the accumulated-laser ground truth: the folder ships no raw scan).",
+        "- VPP: default `VPPConfig` = the paper's setting (random pattern, per-pixel 3x3 patches, alpha 0.4, "
+        "sub-pixel splatting, occlusion handling FGD).",
+        "- Guided stereo (Poggi et al. 2019): cost modulation k = 10, c = 1 inside `census-sgm`; `sgbm` "
+        "(OpenCV StereoSGBM, 3-way, block 5) exposes no cost volume, so guided is n/a for it.",
+        "- `census-sgm`: our re-implementation of the rSGM recipe (5x5 census, 8-path SGM with "
+        "intensity-adaptive P2, left-right check, 3x3 median, speckle filter), 1 thread. Disparity range "
+        "per scene = smallest multiple of 16 above the largest GT disparity.",
+        "- Holes of every matcher filled before scoring (background interpolation). bad-τ = % of pixels with "
+        "|d - gt| > τ, avg = mean absolute error (px), over **all** pixels with valid ground truth "
+        "(occluded included); `nocc` columns use the non-occlusion mask where one exists (Middlebury: "
+        "`nonocc.png` for Tsukuba, left-right check of the two GT maps otherwise; KITTI: `disp_noc`; "
+        "ETH3D: no mask in the folder). Numbers are means over scenes; `ms` = VPP + matching time per "
+        "scene; `points` = mean number of sparse points.",
+        "",
+    ]
 
     # headline
     mb = summ.get(SWEEP_DATASET, {}).get("uniform", {}).get("census-sgm", {})
     if all(k in mb for k in METHODS):
         b, g, v = (mb[k] for k in METHODS)
-        P += ["## Headline", "",
-              f"Middlebury 2005/2006 ({b['scenes']} scenes), census-sgm, 5 % points, mean bad-2: "
-              f"**baseline {b['bad2']:.2f} % → guided {g['bad2']:.2f} % → VPP {v['bad2']:.2f} %** "
-              f"(VPP / baseline = {v['bad2'] / b['bad2']:.2f}; paper on Middlebury 2014: 20.37 / 41.86 = 0.49). "
-              f"Mean avg error {b['avg']:.2f} → {g['avg']:.2f} → {v['avg']:.2f} px.", ""]
+        P += [
+            "## Headline",
+            "",
+            f"Middlebury 2005/2006 ({b['scenes']} scenes), census-sgm, 5 % points, mean bad-2: "
+            f"**baseline {b['bad2']:.2f} % → guided {g['bad2']:.2f} % → VPP {v['bad2']:.2f} %** "
+            f"(VPP / baseline = {v['bad2'] / b['bad2']:.2f}; paper on Middlebury 2014: 20.37 / 41.86 = 0.49). "
+            f"Mean avg error {b['avg']:.2f} → {g['avg']:.2f} → {v['avg']:.2f} px.",
+            "",
+        ]
 
     P += ["## Per dataset (5 % uniform points unless noted)", ""]
     for _, key, name in DATASETS:
@@ -358,17 +458,31 @@ def render(doc: dict[str, Any], out: Path) -> str:
             if not block:
                 continue
             any_s = next(iter(next(iter(block.values())).values()))
-            extra = (f"simulated 64-beam LiDAR, {100 * any_s['density']:.1f} % of valid GT pixels"
-                     if sensor == "lidar" else "5 % uniform points")
-            P += [f"### {name} - {extra} ({any_s['scenes']} scene{'s' if any_s['scenes'] != 1 else ''})", "",
-                  _dataset_table(block), ""]
-    P += ["bad-τ in %, errors in px. `-` in the nocc columns: no non-occlusion mask for this dataset; "
-          "in `points`: the matcher alone uses no points.", ""]
+            extra = (
+                f"simulated 64-beam LiDAR, {100 * any_s['density']:.1f} % of valid GT pixels"
+                if sensor == "lidar"
+                else "5 % uniform points"
+            )
+            P += [
+                f"### {name} - {extra} ({any_s['scenes']} scene{'s' if any_s['scenes'] != 1 else ''})",
+                "",
+                _dataset_table(block),
+                "",
+            ]
+    P += [
+        "bad-τ in %, errors in px. `-` in the nocc columns: no non-occlusion mask for this dataset; "
+        "in `points`: the matcher alone uses no points.",
+        "",
+    ]
 
     # paper comparison
-    P += ["## Beside the paper", "",
-          "The paper's numbers (Table 2, 5 % points, rSGM; Table 4 for KITTI) and ours for the closest "
-          "dataset we have. bad-2 (%) / avg (px), baseline → guided → VPP.", ""]
+    P += [
+        "## Beside the paper",
+        "",
+        "The paper's numbers (Table 2, 5 % points, rSGM; Table 4 for KITTI) and ours for the closest "
+        "dataset we have. bad-2 (%) / avg (px), baseline → guided → VPP.",
+        "",
+    ]
     lines = []
     for pkey, p in PAPER.items():
         ds, sensor = PAPER_OURS[pkey]
@@ -383,17 +497,25 @@ def render(doc: dict[str, Any], out: Path) -> str:
             ob = oa = r_ours = "not run"
         oname = names[ds] + (" (sim. LiDAR)" if sensor == "lidar" else "")
         lines.append([p["label"], pb, pa, f"{p['bad2'][2] / p['bad2'][0]:.2f}", oname, ob, oa, r_ours])
-    P += [_table(["paper: dataset", "bad-2", "avg", "VPP/base", "ours: dataset", "bad-2", "avg", "VPP/base"],
-                 lines, (0, 4)), ""]
+    P += [
+        _table(
+            ["paper: dataset", "bad-2", "avg", "VPP/base", "ours: dataset", "bad-2", "avg", "VPP/base"], lines, (0, 4)
+        ),
+        "",
+    ]
     P += _comment(summ, doc["results"], sweep)
 
     # sweep
     if sweep and sweep.get("baseline"):
         n = next(iter(sweep["baseline"].values()))["scenes"]
-        P += ["## Density sweep (Middlebury 2005/2006, census-sgm)", "",
-              "![bad-2 and avg error vs density](results/sweep_middlebury2006.png)", "",
-              "Data: [`results/sweep_middlebury2006.json`](results/sweep_middlebury2006.json). "
-              "0 % = census-sgm alone.", ""]
+        P += [
+            "## Density sweep (Middlebury 2005/2006, census-sgm)",
+            "",
+            "![bad-2 and avg error vs density](results/sweep_middlebury2006.png)",
+            "",
+            "Data: [`results/sweep_middlebury2006.json`](results/sweep_middlebury2006.json). 0 % = census-sgm alone.",
+            "",
+        ]
         dens = list(sweep["baseline"].keys())
         header = ["method"] + [f"{100 * float(d):g} %" for d in dens]
         lines = []
@@ -403,9 +525,12 @@ def render(doc: dict[str, Any], out: Path) -> str:
                 lines.append([f"{method} {unit}"] + [_f(per[d][metric]) if d in per else "-" for d in dens])
         P += [_table(header, lines), "", f"({n} scenes; bad-2 in %, avg in px.)", ""]
         P += ["### Per scene at 5 % (Middlebury 2005/2006, census-sgm)", "", _per_scene_table(doc["results"]), ""]
-    P += ["Data: Middlebury (Scharstein & Szeliski 2002/2003, Scharstein & Pal 2007, Hirschmüller & Scharstein "
-          "2007), KITTI (Geiger et al. 2012), ETH3D (Schöps et al. 2017); non-commercial research use for "
-          "KITTI and ETH3D.", ""]
+    P += [
+        "Data: Middlebury (Scharstein & Szeliski 2002/2003, Scharstein & Pal 2007, Hirschmüller & Scharstein "
+        "2007), KITTI (Geiger et al. 2012), ETH3D (Schöps et al. 2017); non-commercial research use for "
+        "KITTI and ETH3D.",
+        "",
+    ]
     return "\n".join(P)
 
 
@@ -420,6 +545,7 @@ def _occluded_share(rows: list[dict], dataset: str) -> float:
 
 def _comment(summ: dict[str, Any], rows: list[dict], sweep: dict[str, Any]) -> list[str]:
     """Honest comparison with the paper: the differences and which way they push."""
+
     def get(ds: str, sensor: str, method: str, metric: str, matcher: str = "census-sgm") -> float:
         try:
             v = summ[ds][sensor][matcher][method][metric]
@@ -438,15 +564,22 @@ def _comment(summ: dict[str, Any], rows: list[dict], sweep: dict[str, Any]) -> l
     sb, sv = (get(M, "uniform", m, "bad2", "sgbm") for m in ("baseline", "vpp"))
     per: dict[str, dict[str, float]] = defaultdict(dict)
     for r in rows:
-        if r["dataset"] == M and r["matcher"] == "census-sgm" and r["sensor"] == "uniform" \
-                and math.isclose(r["density"], DENSITY):
+        if (
+            r["dataset"] == M
+            and r["matcher"] == "census-sgm"
+            and r["sensor"] == "uniform"
+            and math.isclose(r["density"], DENSITY)
+        ):
             per[r["scene"]][r["method"]] = r["bad2"]
     ratio = {k: v["vpp"] / v["baseline"] for k, v in per.items() if v.get("baseline") and v.get("vpp") is not None}
     med = statistics.median(ratio.values()) if ratio else float("nan")
     big = sorted(k for k, r in ratio.items() if r < 0.2)
     small = sorted(k for k, r in ratio.items() if r > 0.9)
-    big_txt = (f"{', '.join(big)}: VPP / baseline {_f(min(ratio[k] for k in big))} - "
-               f"{_f(max(ratio[k] for k in big))}") if big else "none below 0.2"
+    big_txt = (
+        (f"{', '.join(big)}: VPP / baseline {_f(min(ratio[k] for k in big))} - {_f(max(ratio[k] for k in big))}")
+        if big
+        else "none below 0.2"
+    )
     # does every (dataset, sensor, matcher) block order baseline > guided > vpp on bad-2 and avg?
     ordered = True
     for ds in summ.values():
@@ -456,53 +589,60 @@ def _comment(summ: dict[str, Any], rows: list[dict], sweep: dict[str, Any]) -> l
                 for metric in ("bad2", "avg"):
                     vals = [x[metric] for x in seq]
                     ordered &= all(a > b for a, b in zip(vals, vals[1:]))
-    trend = ("**The trend is the paper's**: on every dataset and with both matchers VPP has the lowest bad-2 and "
-             "avg error, and guided stereo sits between the matcher alone and VPP." if ordered else
-             "**Mostly the paper's trend, with exceptions**: not every table orders matcher alone > guided > VPP "
-             "on both bad-2 and avg (see the tables above).")
+    trend = (
+        "**The trend is the paper's**: on every dataset and with both matchers VPP has the lowest bad-2 and "
+        "avg error, and guided stereo sits between the matcher alone and VPP."
+        if ordered
+        else "**Mostly the paper's trend, with exceptions**: not every table orders matcher alone > guided > VPP "
+        "on both bad-2 and avg (see the tables above)."
+    )
     s1 = sweep.get("vpp", {}).get("0.01", {}).get("bad2", float("nan")) if sweep else float("nan")
     s5 = sweep.get("vpp", {}).get("0.05", {}).get("bad2", float("nan")) if sweep else float("nan")
     g1 = sweep.get("guided", {}).get("0.01", {}).get("bad2", float("nan")) if sweep else float("nan")
-    L = ["### How our setting differs, and which way it pushes", "",
-         f"- {trend} On Middlebury 2005/2006 VPP / baseline bad-2 is "
-         f"{_f(mv / mb)} (paper, Middlebury 2014: 0.49), VPP / guided {_f(mv / mg)} (paper 0.66). As in the "
-         f"paper, VPP at 1 % is already close to its 5 % result ({_f(s1)} vs {_f(s5)} % bad-2), while guided "
-         f"stereo at 1 % is still at {_f(g1)} %.",
-         f"- **Middlebury: 2005/2006 at third size, not 2014 at full resolution.** Our scenes are ~430 x 370 px "
-         "with disparities below ~90 px; the paper's are ~2900 x 1950 with disparities of several hundred px. "
-         "A 2-px error at third size is ~6 px at full size, and the matcher searches a much smaller range: this "
-         f"*favours our absolute numbers* ({_f(mb)} % vs 41.86 % baseline bad-2, {_f(mv)} % vs 20.37 % with "
-         "VPP); compare ratios, not absolute values. The mean is pulled by a few scenes where census-sgm fails "
-         f"on large weakly textured areas ({big_txt}); the per-scene median ratio is {_f(med)}, and on "
-         f"{len(small)} well-textured scene(s) ({', '.join(small) or '-'}) VPP changes bad-2 by less than 10 %.",
-         f"- **Occluded pixels are scored**, as in the paper: {_f(occ, 1)} % of the scored Middlebury 2005/2006 "
-         "pixels are outside our non-occlusion mask, and they hold most of the remaining error (non-occluded "
-         f"bad-2: {_f(mbn)} → {_f(mgn)} → {_f(mvn)} %). Our masks for the 2003/2005/2006 sets are a left-right "
-         "check of the two ground-truth maps (the folders ship no official masks), so the `nocc` columns are "
-         "approximate.",
-         "- **`census-sgm` is our own re-implementation of the rSGM recipe**, not the authors' rSGM code "
-         "(own penalties, sub-pixel step and post-processing; holes left by the left-right check and speckle "
-         "filter are filled by background interpolation before scoring). Absolute numbers differ for that "
-         "reason alone; guided stereo is the k = 10, c = 1 modulation applied to our census cost volume.",
-         f"- **ETH3D: one scene (playground_1l), not the 27 training scenes**, and no non-occlusion mask in the "
-         f"folder. One scene is anecdotal: {_f(eb)} → {_f(eg)} → {_f(ev)} % bad-2 vs 9.11 → 3.18 → 0.62 % in "
-         "the paper (same ordering, similar VPP level).",
-         f"- **KITTI: one 2012 frame with a simulated LiDAR, not KITTI 2015 with raw scans.** The folder ships "
-         f"no Velodyne scan, so our 64-beam LiDAR ({_f(100 * kd, 1)} % of valid GT pixels) is sampled *from the "
-         "ground truth itself* (accumulated, cleaned laser scans) at the left camera centre: every point is "
-         "exact, noise-free, registered and visible from the camera. This **favours** guided stereo and VPP "
-         "over the paper's raw single sweep, which has range noise, points seen by the LiDAR but occluded for "
-         "the camera, and calibration / timing misalignment. Yet our gain is smaller "
-         f"({_f(kb)} → {_f(kg)} → {_f(kv)} % bad-2, ratio {_f(kv / kb)}, vs 15.66 → 10.00 → 6.12 %, 0.39): the "
-         "KITTI ground truth covers only ~29 % of the pixels (road, cars, near structures; no sky), where "
-         "census-sgm is already fairly good (our baseline is lower than the paper's 15.66 %), so there is "
-         "likely less to fix; and it is one frame of KITTI 2012, not the 200 of KITTI 2015. 5 % uniform points give "
-         f"{_f(kub)} → {_f(kug)} → {_f(kuv)} %.",
-         "- **One draw of points (seed 0).** Scene-to-scene spread is large (per-scene table below); the "
-         "seed-to-seed spread of the means was not measured here.",
-         f"- `sgbm` (OpenCV StereoSGBM) is not in the paper's tables; VPP takes it from {_f(sb)} to {_f(sv)} % "
-         "bad-2 on Middlebury 2005/2006 (guided stereo needs a cost volume, which OpenCV does not expose).",
-         "- The paper's deep networks (RAFT-Stereo, PSMNet) are not evaluated here (no weights, CPU only).", ""]
+    L = [
+        "### How our setting differs, and which way it pushes",
+        "",
+        f"- {trend} On Middlebury 2005/2006 VPP / baseline bad-2 is "
+        f"{_f(mv / mb)} (paper, Middlebury 2014: 0.49), VPP / guided {_f(mv / mg)} (paper 0.66). As in the "
+        f"paper, VPP at 1 % is already close to its 5 % result ({_f(s1)} vs {_f(s5)} % bad-2), while guided "
+        f"stereo at 1 % is still at {_f(g1)} %.",
+        f"- **Middlebury: 2005/2006 at third size, not 2014 at full resolution.** Our scenes are ~430 x 370 px "
+        "with disparities below ~90 px; the paper's are ~2900 x 1950 with disparities of several hundred px. "
+        "A 2-px error at third size is ~6 px at full size, and the matcher searches a much smaller range: this "
+        f"*favours our absolute numbers* ({_f(mb)} % vs 41.86 % baseline bad-2, {_f(mv)} % vs 20.37 % with "
+        "VPP); compare ratios, not absolute values. The mean is pulled by a few scenes where census-sgm fails "
+        f"on large weakly textured areas ({big_txt}); the per-scene median ratio is {_f(med)}, and on "
+        f"{len(small)} well-textured scene(s) ({', '.join(small) or '-'}) VPP changes bad-2 by less than 10 %.",
+        f"- **Occluded pixels are scored**, as in the paper: {_f(occ, 1)} % of the scored Middlebury 2005/2006 "
+        "pixels are outside our non-occlusion mask, and they hold most of the remaining error (non-occluded "
+        f"bad-2: {_f(mbn)} → {_f(mgn)} → {_f(mvn)} %). Our masks for the 2003/2005/2006 sets are a left-right "
+        "check of the two ground-truth maps (the folders ship no official masks), so the `nocc` columns are "
+        "approximate.",
+        "- **`census-sgm` is our own re-implementation of the rSGM recipe**, not the authors' rSGM code "
+        "(own penalties, sub-pixel step and post-processing; holes left by the left-right check and speckle "
+        "filter are filled by background interpolation before scoring). Absolute numbers differ for that "
+        "reason alone; guided stereo is the k = 10, c = 1 modulation applied to our census cost volume.",
+        f"- **ETH3D: one scene (playground_1l), not the 27 training scenes**, and no non-occlusion mask in the "
+        f"folder. One scene is anecdotal: {_f(eb)} → {_f(eg)} → {_f(ev)} % bad-2 vs 9.11 → 3.18 → 0.62 % in "
+        "the paper (same ordering, similar VPP level).",
+        f"- **KITTI: one 2012 frame with a simulated LiDAR, not KITTI 2015 with raw scans.** The folder ships "
+        f"no Velodyne scan, so our 64-beam LiDAR ({_f(100 * kd, 1)} % of valid GT pixels) is sampled *from the "
+        "ground truth itself* (accumulated, cleaned laser scans) at the left camera centre: every point is "
+        "exact, noise-free, registered and visible from the camera. This **favours** guided stereo and VPP "
+        "over the paper's raw single sweep, which has range noise, points seen by the LiDAR but occluded for "
+        "the camera, and calibration / timing misalignment. Yet our gain is smaller "
+        f"({_f(kb)} → {_f(kg)} → {_f(kv)} % bad-2, ratio {_f(kv / kb)}, vs 15.66 → 10.00 → 6.12 %, 0.39): the "
+        "KITTI ground truth covers only ~29 % of the pixels (road, cars, near structures; no sky), where "
+        "census-sgm is already fairly good (our baseline is lower than the paper's 15.66 %), so there is "
+        "likely less to fix; and it is one frame of KITTI 2012, not the 200 of KITTI 2015. 5 % uniform points give "
+        f"{_f(kub)} → {_f(kug)} → {_f(kuv)} %.",
+        "- **One draw of points (seed 0).** Scene-to-scene spread is large (per-scene table below); the "
+        "seed-to-seed spread of the means was not measured here.",
+        f"- `sgbm` (OpenCV StereoSGBM) is not in the paper's tables; VPP takes it from {_f(sb)} to {_f(sv)} % "
+        "bad-2 on Middlebury 2005/2006 (guided stereo needs a cost volume, which OpenCV does not expose).",
+        "- The paper's deep networks (RAFT-Stereo, PSMNet) are not evaluated here (no weights, CPU only).",
+        "",
+    ]
     return L
 
 
@@ -528,10 +668,12 @@ def write_outputs(doc: dict[str, Any], out: Path) -> None:
     doc = _json_safe(doc)
     (res_dir / "results.json").write_text(json.dumps(doc, indent=1) + "\n")
     if doc["sweep"].get("baseline"):
-        srows = [r for r in doc["results"] if r["dataset"] == SWEEP_DATASET and r["matcher"] == "census-sgm"
-                 and r["sensor"] == "uniform"]
-        sweep_doc = {"meta": doc["meta"], "densities": [0.0] + list(SWEEP), "summary": doc["sweep"],
-                     "results": srows}
+        srows = [
+            r
+            for r in doc["results"]
+            if r["dataset"] == SWEEP_DATASET and r["matcher"] == "census-sgm" and r["sensor"] == "uniform"
+        ]
+        sweep_doc = {"meta": doc["meta"], "densities": [0.0, *list(SWEEP)], "summary": doc["sweep"], "results": srows}
         (res_dir / "sweep_middlebury2006.json").write_text(json.dumps(sweep_doc, indent=1) + "\n")
         n = next(iter(doc["sweep"]["baseline"].values()))["scenes"]
         plot(res_dir / "sweep_middlebury2006.png", doc["sweep"], n)
@@ -540,12 +682,17 @@ def write_outputs(doc: dict[str, Any], out: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data",
-                    help="folder holding the dataset folders (default ../shared/data)")
+    ap.add_argument(
+        "--data",
+        type=Path,
+        default=REPO.parent / "shared" / "data",
+        help="folder holding the dataset folders (default ../shared/data)",
+    )
     ap.add_argument("--out", type=Path, default=REPO / "docs", help="docs folder (default docs)")
     ap.add_argument("--limit", type=int, help="first N scenes per dataset only (quick check)")
-    ap.add_argument("--render-only", action="store_true",
-                    help="rebuild results.md and the plot from <out>/results/results.json")
+    ap.add_argument(
+        "--render-only", action="store_true", help="rebuild results.md and the plot from <out>/results/results.json"
+    )
     a = ap.parse_args(argv)
     if a.limit is not None and a.limit < 1:
         ap.error(f"--limit: must be >= 1, got {a.limit}")

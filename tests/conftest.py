@@ -12,15 +12,18 @@ from helpers.zenoh_loopback import free_port, zenoh_test_config
 if TYPE_CHECKING:
     import zenoh
 
+
 @pytest.fixture
 def tcp_port() -> int:
     """A free TCP port on 127.0.0.1."""
     return free_port()
 
+
 @pytest.fixture
 def zenoh_endpoint(tcp_port: int) -> str:
     """``tcp/127.0.0.1:<free port>``."""
     return f"tcp/127.0.0.1:{tcp_port}"
+
 
 @pytest.fixture
 def zenoh_config() -> Callable[..., zenoh.Config]:

@@ -1,4 +1,5 @@
 """The scikit-image Motorcycle scene: one loader (NaN rule, calibration) for the demo and the simulator."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,10 +18,10 @@ def test_motorcycle_nan_rule_and_calibration():
     gt = fr.gt_disparity
     assert gt.dtype == np.float32 and fr.calib == MOTORCYCLE_CALIB and fr.name == "motorcycle"
     usable = np.isfinite(raw) & (raw > 0)
-    assert np.isnan(gt[~usable]).all() and (~usable).any()         # +inf (and <= 0) -> NaN
+    assert np.isnan(gt[~usable]).all() and (~usable).any()  # +inf (and <= 0) -> NaN
     np.testing.assert_array_equal(gt[usable], raw[usable])
     with pytest.raises(ValueError):
-        gt[0, 0] = 1.0                                               # the cached arrays are read-only
+        gt[0, 0] = 1.0  # the cached arrays are read-only
 
 
 def test_simulator_and_demo_share_the_loader():

@@ -1,4 +1,5 @@
 """Evaluation runner, reports and the ``vpp-service eval`` command, end to end with real matchers."""
+
 from __future__ import annotations
 
 import io
@@ -11,8 +12,15 @@ import pytest
 
 from vpp_service.cli import main
 from vpp_service.datasets import open_dataset
-from vpp_service.evaluation import (ProgressBar, compute_metrics, default_max_disparity, markdown_report,
-                                    run_evaluation, summarize, write_json)
+from vpp_service.evaluation import (
+    ProgressBar,
+    compute_metrics,
+    default_max_disparity,
+    markdown_report,
+    run_evaluation,
+    summarize,
+    write_json,
+)
 from vpp_service.matchers import build_matcher, fill_holes
 from vpp_service.sources.sensors import build_sensor
 from vpp_service.sources.synthetic import make_scene
@@ -35,8 +43,11 @@ def scenes():
 def test_rows_and_reference_equality(scenes):
     rows = run_evaluation(scenes, "sgbm", ["baseline", "vpp"], [0.05], seed=3)
     assert [(r["scene"], r["method"]) for r in rows] == [
-        ("synthetic-planes-0", "baseline"), ("synthetic-planes-0", "vpp"),
-        ("synthetic-planes-1", "baseline"), ("synthetic-planes-1", "vpp")]
+        ("synthetic-planes-0", "baseline"),
+        ("synthetic-planes-0", "vpp"),
+        ("synthetic-planes-1", "baseline"),
+        ("synthetic-planes-1", "vpp"),
+    ]
     for r, f in zip(rows, [scenes[0], scenes[0], scenes[1], scenes[1]]):
         for k in ("bad1", "bad2", "bad3", "bad4", "avg", "rms", "n", "bad2_nocc", "n_points", "ms", "density"):
             assert k in r
@@ -95,7 +106,7 @@ def test_density_sweep_summary_and_progress(scenes):
     assert lines[-1].startswith("[3/3] done")
 
 
-@pytest.mark.parametrize("sensor,opts", [("lidar", {"nominal_f": 300.0}), ("tof", {"grid_w": 40, "grid_h": 30})])
+@pytest.mark.parametrize(("sensor", "opts"), [("lidar", {"nominal_f": 300.0}), ("tof", {"grid_w": 40, "grid_h": 30})])
 def test_other_sensors_report_measured_density(scenes, sensor, opts):
     rows = run_evaluation(scenes[:1], "sgbm", ["vpp"], None, sensor, sensor_options=opts)
     r = rows[0]
@@ -151,9 +162,34 @@ def test_reports(tmp_path, scenes):
 def test_cli_end_to_end_real_scenes(tmp_path, capsys):
     root = need_midd06()
     out = tmp_path / "out.json"
-    rc = main(["eval", "--dataset", "auto", "--root", str(root), "--scenes", "Art,Wood2", "--matcher", "sgbm",
-               "--methods", "baseline,vpp", "--density", "0.01,0.05", "--seed", "1", "--json", str(out),
-               "--markdown", str(tmp_path / "out.md"), "--patch", "5", "--alpha", "0.5", "--no-splat"])
+    rc = main(
+        [
+            "eval",
+            "--dataset",
+            "auto",
+            "--root",
+            str(root),
+            "--scenes",
+            "Art,Wood2",
+            "--matcher",
+            "sgbm",
+            "--methods",
+            "baseline,vpp",
+            "--density",
+            "0.01,0.05",
+            "--seed",
+            "1",
+            "--json",
+            str(out),
+            "--markdown",
+            str(tmp_path / "out.md"),
+            "--patch",
+            "5",
+            "--alpha",
+            "0.5",
+            "--no-splat",
+        ]
+    )
     assert rc == 0
     doc = json.loads(out.read_text())
     assert {r["scene"] for r in doc["results"]} == {"Art", "Wood2"} and len(doc["results"]) == 8
@@ -170,8 +206,22 @@ def test_cli_end_to_end_real_scenes(tmp_path, capsys):
 
 
 def test_cli_synthetic_and_errors(tmp_path, capsys):
-    rc = main(["eval", "--dataset", "synthetic", "--limit", "1", "--matcher", "sgbm", "--methods", "baseline,vpp",
-               "--quiet", "--json", str(tmp_path / "s.json")])
+    rc = main(
+        [
+            "eval",
+            "--dataset",
+            "synthetic",
+            "--limit",
+            "1",
+            "--matcher",
+            "sgbm",
+            "--methods",
+            "baseline,vpp",
+            "--quiet",
+            "--json",
+            str(tmp_path / "s.json"),
+        ]
+    )
     assert rc == 0
     doc = json.loads((tmp_path / "s.json").read_text())
     assert [r["method"] for r in doc["results"]] == ["baseline", "vpp"] and "bad2" in doc["summary"]["vpp"]

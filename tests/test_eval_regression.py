@@ -6,6 +6,7 @@ matcher alone and below guided stereo. Compared against the benchmark's ground
 truth; if a change to VPP, the matcher or the harness makes VPP quietly worse,
 this fails. Takes ~30-60 s on 2 cores.
 """
+
 from pathlib import Path
 
 import pytest

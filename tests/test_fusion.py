@@ -1,4 +1,5 @@
 """The fusion step (``vpp_service.fusion``): fuse() against its parts composed by hand, and the service's Fusion."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -35,7 +36,7 @@ def test_fuse_with_vpp_is_project_then_match(frame, matcher):
     np.testing.assert_array_equal(res.occluded, painted.occluded)
     np.testing.assert_array_equal(res.disparity, disp)
     assert res.vpp_stats == painted.stats.to_dict() and res.vpp_stats["projected"] > 0
-    assert res.metrics == compute_metrics(disp, frame.gt_disparity)     # the raw output, no *_nocc
+    assert res.metrics == compute_metrics(disp, frame.gt_disparity)  # the raw output, no *_nocc
     c = frame.calib
     np.testing.assert_array_equal(res.depth, disparity_to_depth(disp, c.f, c.baseline, c.doffs).astype(np.float32))
     assert {"vpp", "match", "process"} <= res.timing_ms.keys()
@@ -45,8 +46,9 @@ def test_fuse_with_vpp_is_project_then_match(frame, matcher):
 def test_fuse_converts_metric_depth_and_keeps_frame_timings(frame, matcher):
     c = frame.calib
     depth_only = frame.with_(sparse_disparity=None, meta={"timing_ms": {"decode": 1.5}})
-    np.testing.assert_array_equal(sparse_disparity(depth_only),
-                                  depth_to_disparity(frame.sensor_depth, c.f, c.baseline, c.doffs))
+    np.testing.assert_array_equal(
+        sparse_disparity(depth_only), depth_to_disparity(frame.sensor_depth, c.f, c.baseline, c.doffs)
+    )
     res = fuse(depth_only, matcher, VPPConfig(), seed=5, depth=False)
     ref = project(frame.left, frame.right, sparse_disparity(depth_only), VPPConfig(), seed=5)
     np.testing.assert_array_equal(res.left_vpp, ref.left)
@@ -56,8 +58,10 @@ def test_fuse_converts_metric_depth_and_keeps_frame_timings(frame, matcher):
 
 def test_fuse_without_vpp_or_points_runs_the_raw_pair(frame, matcher):
     disp = matcher.compute(frame.left, frame.right)
-    for res in (fuse(frame, matcher, None), fuse(frame.with_(sparse_disparity=None, sensor_depth=None), matcher,
-                                                 VPPConfig())):
+    for res in (
+        fuse(frame, matcher, None),
+        fuse(frame.with_(sparse_disparity=None, sensor_depth=None), matcher, VPPConfig()),
+    ):
         np.testing.assert_array_equal(res.disparity, disp)
         assert res.left_vpp is None and res.right_vpp is None and res.occluded is None
         assert res.vpp_stats == {} and "vpp" not in res.timing_ms
@@ -67,19 +71,19 @@ def test_fuse_protocol_fills_holes_for_scoring_only(frame, matcher):
     res = fuse(frame, matcher, None, protocol=True)
     raw = matcher.compute(frame.left, frame.right)
     assert np.isnan(raw).any()
-    np.testing.assert_array_equal(res.disparity, raw)             # the output keeps its holes
+    np.testing.assert_array_equal(res.disparity, raw)  # the output keeps its holes
     filled = fill_holes(raw)
     expected = compute_metrics(filled, frame.gt_disparity)
-    expected.update({f"{k}_nocc": v for k, v in compute_metrics(filled, frame.gt_disparity,
-                                                                mask=frame.nocc_mask).items()})
+    expected.update(
+        {f"{k}_nocc": v for k, v in compute_metrics(filled, frame.gt_disparity, mask=frame.nocc_mask).items()}
+    )
     assert res.metrics == expected
     assert score(raw, frame.with_(gt_disparity=None), protocol=True) == {}
 
 
 def test_fuse_guided_passes_the_points_as_hints(frame, matcher):
     res = fuse(frame, matcher, None, guide=True)
-    np.testing.assert_array_equal(res.disparity, matcher.compute(frame.left, frame.right,
-                                                                 hints=frame.sparse_disparity))
+    np.testing.assert_array_equal(res.disparity, matcher.compute(frame.left, frame.right, hints=frame.sparse_disparity))
     assert not np.array_equal(res.disparity, matcher.compute(frame.left, frame.right), equal_nan=True)
     with pytest.raises(ValueError, match="no sparse points"):
         fuse(frame.with_(sparse_disparity=None, sensor_depth=None), matcher, None, guide=True)
@@ -96,7 +100,7 @@ def test_service_fusion_seeds_with_seq_and_counts(frame, matcher):
     fusion(frame.with_(sparse_disparity=None, sensor_depth=None))
     assert fusion.counters == {"vpp": 1, "no_depth": 1}
     plain = Fusion(matcher, None)
-    plain(frame)                                                   # points present: neither counter
+    plain(frame)  # points present: neither counter
     plain(frame.with_(sparse_disparity=np.full(frame.shape, np.nan, np.float32), sensor_depth=None))
     assert plain.counters == {"vpp": 0, "no_depth": 1}
 

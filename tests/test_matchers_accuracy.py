@@ -1,4 +1,5 @@
 """Matcher accuracy against exact ground truth: a synthetic two-plane scene and Motorcycle."""
+
 from __future__ import annotations
 
 import cv2
@@ -78,7 +79,7 @@ def hard_scene():
 
 
 @pytest.mark.parametrize(
-    "name, opts, max_bad, min_density, max_bad_filled",
+    ("name", "opts", "max_bad", "min_density", "max_bad_filled"),
     [
         ("census-sgm", {}, 0.01, 0.95, 0.01),
         ("census-sgm", {"paths": 4}, 0.01, 0.95, 0.01),
@@ -124,10 +125,13 @@ def test_guided_improves_on_weak_texture(hard_scene):
     assert b_guided < 0.6 * b_plain
 
 
-@pytest.mark.parametrize("speckle_size,min_gain", [
-    (0, 0.01),  # raw SGM output: guidance must remove >= 1 point of bad-2
-    (200, 0.003),  # default rSGM post-filter (speckles) already removes much of the error
-])
+@pytest.mark.parametrize(
+    ("speckle_size", "min_gain"),
+    [
+        (0, 0.01),  # raw SGM output: guidance must remove >= 1 point of bad-2
+        (200, 0.003),  # default rSGM post-filter (speckles) already removes much of the error
+    ],
+)
 def test_guided_helps_on_motorcycle(speckle_size, min_gain):
     skimage_data = pytest.importorskip("skimage.data")
     left, right, gt = skimage_data.stereo_motorcycle()

@@ -1,4 +1,5 @@
 """Matcher registry, options validation, input contract and the census-SGM cost-volume API."""
+
 from __future__ import annotations
 
 import cv2
@@ -74,7 +75,7 @@ def test_defaults_and_options_instance():
 
 
 @pytest.mark.parametrize(
-    "name, opts, match",
+    ("name", "opts", "match"),
     [
         ("sgbm", {"foo": 1}, "matcher.sgbm.foo: unknown option"),
         ("census-sgm", {"max_disparity": 0}, "max_disparity"),
@@ -102,7 +103,7 @@ def test_bad_options(name, opts, match):
 
 @pytest.mark.parametrize("name", NAMES)
 @pytest.mark.parametrize(
-    "make, exc, match",
+    ("make", "exc", "match"),
     [
         (lambda l, r: (l, r[:-1]), ValueError, "same shape"),
         (lambda l, r: (l.astype(np.float32), r), TypeError, "left must be uint8"),
@@ -137,7 +138,7 @@ def test_hints_rejected_without_guidance(pair):
 
 
 @pytest.mark.parametrize(
-    "hints, exc, match",
+    ("hints", "exc", "match"),
     [
         (np.zeros((3, 3), np.float32), ValueError, "hints must have shape"),
         (np.zeros((40, 100), np.int32), TypeError, "float"),
@@ -189,14 +190,18 @@ def test_check_disparity_strict_kernel_input_or_converted():
     from vpp_service.matchers.base import check_disparity
 
     a = np.array([[1.0, np.nan, 3.0], [4.0, 5.0, 6.0]])
-    got = check_disparity(a[:, ::2], "d", (2, 2), convert=True)          # float64, strided: converted
+    got = check_disparity(a[:, ::2], "d", (2, 2), convert=True)  # float64, strided: converted
     assert got.dtype == np.float32 and got.flags.c_contiguous
     np.testing.assert_array_equal(got, a[:, ::2].astype(np.float32))
     f32 = a.astype(np.float32)
-    assert check_disparity(f32, "d") is f32                              # a kernel input: unchanged
-    for bad, exc, match in [(a, TypeError, "d must be float32"), (f32[:, ::2], ValueError, "contiguous"),
-                            (np.full((2, 3), np.inf, np.float32), ValueError, "inf"),
-                            (f32[None], ValueError, "2-D"), (np.zeros((2, 3), np.int16), TypeError, "float")]:
+    assert check_disparity(f32, "d") is f32  # a kernel input: unchanged
+    for bad, exc, match in [
+        (a, TypeError, "d must be float32"),
+        (f32[:, ::2], ValueError, "contiguous"),
+        (np.full((2, 3), np.inf, np.float32), ValueError, "inf"),
+        (f32[None], ValueError, "2-D"),
+        (np.zeros((2, 3), np.int16), TypeError, "float"),
+    ]:
         with pytest.raises(exc, match=match):
             check_disparity(bad, "d")
     with pytest.raises(ValueError, match="d must have shape"):

@@ -1,4 +1,5 @@
 """Census-SGM kernels vs plain reference implementations (exact equality)."""
+
 from __future__ import annotations
 
 import math
@@ -211,25 +212,61 @@ def test_median_removes_isolated_outlier():
 
 
 @pytest.mark.parametrize(
-    "call, exc, match",
+    ("call", "exc", "match"),
     [
         (lambda: cs.census_transform(np.zeros((4, 4), np.float32)), TypeError, "gray"),
         (lambda: cs.census_transform(np.zeros((4, 4, 3), np.uint8)), ValueError, "gray"),
         (lambda: cs.census_transform(np.zeros((4, 8), np.uint8)[:, ::2]), ValueError, "contiguous"),
         (lambda: cs.census_transform(np.zeros((0, 4), np.uint8)), ValueError, "empty"),
-        (lambda: cs.hamming_cost_volume(np.zeros((3, 4), np.uint32), np.zeros((3, 5), np.uint32), 2), ValueError, "same shape"),
-        (lambda: cs.hamming_cost_volume(np.zeros((3, 4), np.uint32), np.zeros((3, 4), np.uint32), 4), ValueError, "max_disparity"),
-        (lambda: cs.hamming_cost_volume(np.zeros((3, 4), np.uint32), np.zeros((3, 4), np.uint32), 0), ValueError, "max_disparity"),
-        (lambda: cs.hamming_cost_volume(np.zeros((3, 4), np.int32), np.zeros((3, 4), np.uint32), 2), TypeError, "census_left"),
+        (
+            lambda: cs.hamming_cost_volume(np.zeros((3, 4), np.uint32), np.zeros((3, 5), np.uint32), 2),
+            ValueError,
+            "same shape",
+        ),
+        (
+            lambda: cs.hamming_cost_volume(np.zeros((3, 4), np.uint32), np.zeros((3, 4), np.uint32), 4),
+            ValueError,
+            "max_disparity",
+        ),
+        (
+            lambda: cs.hamming_cost_volume(np.zeros((3, 4), np.uint32), np.zeros((3, 4), np.uint32), 0),
+            ValueError,
+            "max_disparity",
+        ),
+        (
+            lambda: cs.hamming_cost_volume(np.zeros((3, 4), np.int32), np.zeros((3, 4), np.uint32), 2),
+            TypeError,
+            "census_left",
+        ),
         (lambda: cs.aggregate_costs(np.zeros((3, 4, 2), np.float32), np.zeros((3, 4), np.uint8)), TypeError, "cost"),
         (lambda: cs.aggregate_costs(np.zeros((3, 4, 2), np.uint16), np.zeros((3, 5), np.uint8)), ValueError, "gray"),
-        (lambda: cs.aggregate_costs(np.zeros((3, 4, 2), np.uint16), np.zeros((3, 4), np.uint8), paths=6), ValueError, "paths"),
-        (lambda: cs.aggregate_costs(np.zeros((3, 4, 2), np.uint16), np.zeros((3, 4), np.uint8), p1=-1), ValueError, "p1"),
-        (lambda: cs.aggregate_costs(np.zeros((3, 4, 2), np.uint16), np.zeros((3, 4), np.uint8), gamma=np.nan), ValueError, "gamma"),
+        (
+            lambda: cs.aggregate_costs(np.zeros((3, 4, 2), np.uint16), np.zeros((3, 4), np.uint8), paths=6),
+            ValueError,
+            "paths",
+        ),
+        (
+            lambda: cs.aggregate_costs(np.zeros((3, 4, 2), np.uint16), np.zeros((3, 4), np.uint8), p1=-1),
+            ValueError,
+            "p1",
+        ),
+        (
+            lambda: cs.aggregate_costs(np.zeros((3, 4, 2), np.uint16), np.zeros((3, 4), np.uint8), gamma=np.nan),
+            ValueError,
+            "gamma",
+        ),
         (lambda: cs.select_disparity(np.zeros((3, 4, 2), np.uint16), uniqueness=0), ValueError, "uniqueness"),
         (lambda: cs.select_disparity(np.zeros((3, 4), np.uint16)), ValueError, "H x W x D"),
-        (lambda: cs.left_right_check(np.zeros((3, 4), np.float32), np.zeros((3, 5), np.float32)), ValueError, "same shape"),
-        (lambda: cs.left_right_check(np.zeros((3, 4), np.float32), np.zeros((3, 4), np.float32), -1), ValueError, "tolerance"),
+        (
+            lambda: cs.left_right_check(np.zeros((3, 4), np.float32), np.zeros((3, 5), np.float32)),
+            ValueError,
+            "same shape",
+        ),
+        (
+            lambda: cs.left_right_check(np.zeros((3, 4), np.float32), np.zeros((3, 4), np.float32), -1),
+            ValueError,
+            "tolerance",
+        ),
         (lambda: cs.median_filter3x3(np.full((3, 4), np.inf, np.float32)), ValueError, "inf"),
         (lambda: cs.median_filter3x3(np.zeros((3, 4), np.float64)), TypeError, "float32"),
     ],

@@ -1,4 +1,5 @@
 """Guided-stereo modulation vs the numpy formula."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -27,7 +28,7 @@ def volume():
     return cost, hints
 
 
-@pytest.mark.parametrize("k, c", [(10.0, 1.0), (3.0, 2.5), (1.0, 0.5)])
+@pytest.mark.parametrize(("k", "c"), [(10.0, 1.0), (3.0, 2.5), (1.0, 0.5)])
 def test_float_volume_matches_formula(volume, k, c):
     cost, hints = volume
     f = cost.astype(np.float32)
@@ -73,7 +74,7 @@ def test_inplace(volume):
 
 
 @pytest.mark.parametrize(
-    "cost, hints, kw, exc, match",
+    ("cost", "hints", "kw", "exc", "match"),
     [
         (np.zeros((2, 3, 4), np.int32), np.zeros((2, 3), np.float32), {}, TypeError, "cost"),
         (np.zeros((2, 3), np.uint16), np.zeros((2, 3), np.float32), {}, ValueError, "cost"),

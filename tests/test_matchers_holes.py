@@ -1,4 +1,5 @@
 """fill_holes (background interpolation) vs a python reference and hand cases."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -23,7 +24,7 @@ def ref_fill(a, empty=np.nan):
 
 
 @pytest.mark.parametrize(
-    "row, expected",
+    ("row", "expected"),
     [
         ([1, N, 3], [1, 1, 3]),
         ([5, N, N, 2], [5, 2, 2, 2]),
@@ -66,7 +67,7 @@ def test_non_contiguous_input_accepted():
 
 
 @pytest.mark.parametrize(
-    "arg, exc, match",
+    ("arg", "exc", "match"),
     [
         ([[1.0, N]], TypeError, "numpy"),
         (np.zeros((2, 2), np.int32), TypeError, "float"),

@@ -1,4 +1,5 @@
 """Speckle filter vs a plain flood-fill reference."""
+
 from collections import deque
 
 import numpy as np
@@ -23,8 +24,13 @@ def reference_speckles(disp: np.ndarray, max_size: int, max_diff: float) -> np.n
                 y, x = todo.popleft()
                 region.append((y, x))
                 for yy, xx in ((y - 1, x), (y + 1, x), (y, x - 1), (y, x + 1)):
-                    if 0 <= yy < h and 0 <= xx < w and not seen[yy, xx] and not np.isnan(q[yy, xx]) \
-                            and abs(q[yy, xx] - q[y, x]) <= round(max_diff * 16):
+                    if (
+                        0 <= yy < h
+                        and 0 <= xx < w
+                        and not seen[yy, xx]
+                        and not np.isnan(q[yy, xx])
+                        and abs(q[yy, xx] - q[y, x]) <= round(max_diff * 16)
+                    ):
                         seen[yy, xx] = True
                         todo.append((yy, xx))
             if len(region) <= max_size:
@@ -34,7 +40,7 @@ def reference_speckles(disp: np.ndarray, max_size: int, max_diff: float) -> np.n
 
 
 @pytest.mark.parametrize("seed", range(6))
-@pytest.mark.parametrize("max_size,max_diff", [(3, 1.0), (10, 2.0), (40, 0.5)])
+@pytest.mark.parametrize(("max_size", "max_diff"), [(3, 1.0), (10, 2.0), (40, 0.5)])
 def test_matches_reference(seed, max_size, max_diff):
     rng = np.random.default_rng(seed)
     disp = np.repeat(rng.integers(0, 6, (6, 8)), 3, axis=1).astype(np.float32) * 2.5
@@ -53,13 +59,16 @@ def test_small_island_removed_large_kept():
     assert remove_speckles(disp, max_size=0).tolist() == disp.tolist()
 
 
-@pytest.mark.parametrize("bad,exc", [
-    (dict(disparity=np.zeros((4, 4), np.float64)), TypeError),
-    (dict(disparity=np.zeros((4, 4, 1), np.float32)), ValueError),
-    (dict(disparity=np.zeros((0, 4), np.float32)), ValueError),
-    (dict(max_size=-1), ValueError),
-    (dict(max_diff=float("nan")), ValueError),
-])
+@pytest.mark.parametrize(
+    ("bad", "exc"),
+    [
+        (dict(disparity=np.zeros((4, 4), np.float64)), TypeError),
+        (dict(disparity=np.zeros((4, 4, 1), np.float32)), ValueError),
+        (dict(disparity=np.zeros((0, 4), np.float32)), ValueError),
+        (dict(max_size=-1), ValueError),
+        (dict(max_diff=float("nan")), ValueError),
+    ],
+)
 def test_bad_input(bad, exc):
     kwargs = dict(disparity=np.zeros((4, 4), np.float32), max_size=5, max_diff=1.0) | bad
     with pytest.raises(exc):

@@ -1,4 +1,5 @@
 """compute_metrics against hand-computed values and a plain reference."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -7,7 +8,7 @@ import pytest
 from vpp_service.evaluation.metrics import compute_metrics, metric_key
 
 
-@pytest.fixture()
+@pytest.fixture
 def pair():
     gt = np.array([[1.0, 2.0, np.nan], [4.0, 5.0, 6.0]], np.float32)
     pred = np.array([[1.5, 4.5, 9.0], [4.0, np.nan, 2.0]], np.float32)
@@ -45,7 +46,7 @@ def test_matches_reference_on_random_maps():
     pred = gt + rng.normal(0, 2, gt.shape).astype(np.float32)
     pred[rng.random(gt.shape) < 0.05] = np.nan
     m = compute_metrics(pred, gt)
-    bad = {t: 0 for t in (1, 2, 3, 4)}
+    bad = dict.fromkeys((1, 2, 3, 4), 0)
     errs, n = [], 0
     for p, g in zip(pred.ravel(), gt.ravel()):
         if not np.isfinite(g) or g <= 0:
@@ -76,17 +77,20 @@ def test_perfect_and_empty():
     assert allnan["bad1"] == 100.0 and np.isnan(allnan["avg"]) and allnan["invalid"] == 100.0
 
 
-@pytest.mark.parametrize("pred,gt,kw,exc,match", [
-    ([[1.0]], np.ones((1, 1)), {}, TypeError, "pred"),
-    (np.ones((2, 2)), np.ones((2, 3)), {}, ValueError, "pred"),
-    (np.ones(4), np.ones(4), {}, ValueError, "pred"),
-    (np.array([[np.inf]]), np.ones((1, 1)), {}, ValueError, "inf"),
-    (np.ones((2, 2)), np.ones((2, 2)), {"mask": np.ones((2, 2))}, TypeError, "mask"),
-    (np.ones((2, 2)), np.ones((2, 2)), {"mask": np.ones((1, 2), bool)}, ValueError, "mask"),
-    (np.ones((2, 2)), np.ones((2, 2)), {"taus": ()}, ValueError, "taus"),
-    (np.ones((2, 2)), np.ones((2, 2)), {"taus": (0,)}, ValueError, "taus"),
-    (np.ones((2, 2)), np.array([["a", "b"], ["c", "d"]]), {}, TypeError, "gt"),
-])
+@pytest.mark.parametrize(
+    ("pred", "gt", "kw", "exc", "match"),
+    [
+        ([[1.0]], np.ones((1, 1)), {}, TypeError, "pred"),
+        (np.ones((2, 2)), np.ones((2, 3)), {}, ValueError, "pred"),
+        (np.ones(4), np.ones(4), {}, ValueError, "pred"),
+        (np.array([[np.inf]]), np.ones((1, 1)), {}, ValueError, "inf"),
+        (np.ones((2, 2)), np.ones((2, 2)), {"mask": np.ones((2, 2))}, TypeError, "mask"),
+        (np.ones((2, 2)), np.ones((2, 2)), {"mask": np.ones((1, 2), bool)}, ValueError, "mask"),
+        (np.ones((2, 2)), np.ones((2, 2)), {"taus": ()}, ValueError, "taus"),
+        (np.ones((2, 2)), np.ones((2, 2)), {"taus": (0,)}, ValueError, "taus"),
+        (np.ones((2, 2)), np.array([["a", "b"], ["c", "d"]]), {}, TypeError, "gt"),
+    ],
+)
 def test_errors(pred, gt, kw, exc, match):
     with pytest.raises(exc, match=match):
         compute_metrics(pred, gt, **kw)

@@ -1,4 +1,5 @@
 """Plugin option hooks: parse_options runs the dataclass checks, then the plugin's own check_options."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass

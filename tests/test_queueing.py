@@ -1,4 +1,5 @@
 """vpp_service.queueing: the bounded queue's policies and the worker thread that drains it."""
+
 from __future__ import annotations
 
 import logging
@@ -49,7 +50,7 @@ def test_bounded_queue_close_wakes_getters():
     assert not q.put(1)
 
 
-@pytest.mark.parametrize("size,policy", [(0, "latest"), (2, "newest"), (True, "latest")])
+@pytest.mark.parametrize(("size", "policy"), [(0, "latest"), (2, "newest"), (True, "latest")])
 def test_bounded_queue_bad_args(size, policy):
     with pytest.raises(ValueError):
         BoundedQueue(size, policy)
@@ -94,15 +95,15 @@ def test_worker_handles_every_item_in_order_with_block():
 
 def test_worker_latest_drops_the_oldest_and_the_newest_survives():
     rec = Recorder()
-    rec.release.clear()                      # the thread is stuck on item 0
+    rec.release.clear()  # the thread is stuck on item 0
     w = QueueWorker(rec, size=3, policy="latest", name="t-latest")
     w.start()
     assert w.put(0)
     deadline = time.monotonic() + 5
-    while len(w) and time.monotonic() < deadline:   # wait until the thread took item 0
+    while len(w) and time.monotonic() < deadline:  # wait until the thread took item 0
         time.sleep(0.005)
     for i in range(1, 11):
-        assert w.put(i)                      # never blocks
+        assert w.put(i)  # never blocks
     assert len(w) == 3 and w.dropped == 7
     rec.release.set()
     assert w.close(5.0)
@@ -128,18 +129,18 @@ def test_close_while_a_producer_is_blocked_wakes_it():
     deadline = time.monotonic() + 5
     while len(w) and time.monotonic() < deadline:
         time.sleep(0.005)
-    w.put("b")                                # fills the queue
+    w.put("b")  # fills the queue
     got: list[bool] = []
-    producer = threading.Thread(target=lambda: got.append(w.put("c")))   # blocks: no room
+    producer = threading.Thread(target=lambda: got.append(w.put("c")))  # blocks: no room
     producer.start()
     time.sleep(0.05)
     assert producer.is_alive()
     t0 = time.monotonic()
-    assert not w.close(0.2)                   # the handle is stuck: close gives up after its timeout
+    assert not w.close(0.2)  # the handle is stuck: close gives up after its timeout
     assert time.monotonic() - t0 < 1.0
     producer.join(2.0)
     assert got == [False] and not producer.is_alive()
-    assert w.discarded == 1 and w.closed      # "b" never handled
+    assert w.discarded == 1 and w.closed  # "b" never handled
     rec.release.set()
     assert w.join(2.0) and rec.items == ["a"]  # the abandoned thread exits after its item
 
@@ -176,10 +177,15 @@ def test_exception_in_handle_is_logged_counted_and_not_fatal(caplog):
 def test_on_error_gets_the_item_and_hooks_run_on_the_thread():
     seen: list = []
     threads: set[str] = set()
-    w = QueueWorker(lambda i: 1 / i, size=4, policy="block", name="t-hooks",
-                    on_start=lambda: threads.add(threading.current_thread().name),
-                    on_exit=lambda: seen.append("exit"),
-                    on_error=lambda item, exc: seen.append((item, type(exc).__name__)))
+    w = QueueWorker(
+        lambda i: 1 / i,
+        size=4,
+        policy="block",
+        name="t-hooks",
+        on_start=lambda: threads.add(threading.current_thread().name),
+        on_exit=lambda: seen.append("exit"),
+        on_error=lambda item, exc: seen.append((item, type(exc).__name__)),
+    )
     w.start()
     for i in (1, 0, 2):
         w.put(i)
@@ -235,7 +241,7 @@ def test_start_twice_and_bad_arguments():
 
 def test_close_without_start_discards_at_once():
     w = QueueWorker(lambda i: None, size=2)
-    assert QueueWorker(lambda i: None, size=2).close(5.0)   # nothing queued: nothing lost
+    assert QueueWorker(lambda i: None, size=2).close(5.0)  # nothing queued: nothing lost
     w.put(1)
     t0 = time.monotonic()
     assert w.close(5.0) is False and time.monotonic() - t0 < 0.5

@@ -1,4 +1,5 @@
 """vpp_service.service.allocator: freed frame buffers are reused (no fresh page faults)."""
+
 from __future__ import annotations
 
 import json
@@ -32,17 +33,17 @@ print(json.dumps(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0))
 
 
 def faults(reuse: bool) -> int:
-    out = subprocess.run([sys.executable, "-c", _PROBE, "1" if reuse else "0"],
-                         capture_output=True, text=True, timeout=60, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", _PROBE, "1" if reuse else "0"], capture_output=True, text=True, timeout=60, check=True
+    )
     return json.loads(out.stdout)
 
 
-@pytest.mark.skipif(platform.system() != "Linux" or platform.libc_ver()[0] != "glibc",
-                    reason="mallopt is glibc-only")
+@pytest.mark.skipif(platform.system() != "Linux" or platform.libc_ver()[0] != "glibc", reason="mallopt is glibc-only")
 def test_second_round_reuses_pages():
     pages = 3 * (6 << 20) // 4096
-    assert faults(False) > pages // 4          # default: freed arrays go back to the kernel, fault again
-    assert faults(True) < pages // 50          # reuse: the freed frames are still mapped
+    assert faults(False) > pages // 4  # default: freed arrays go back to the kernel, fault again
+    assert faults(True) < pages // 50  # reuse: the freed frames are still mapped
 
 
 @pytest.mark.parametrize("bad", [0, 2048, True, 1.5, "64"])

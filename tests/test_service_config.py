@@ -1,8 +1,9 @@
 """Service config: the example file and the embedded default validate; every error names its key."""
+
 from __future__ import annotations
 
-import copy
 import argparse
+import copy
 from pathlib import Path
 
 import pytest
@@ -55,37 +56,40 @@ def test_vpp_disabled():
     assert load_config(None, {"vpp": {"enabled": False}}).vpp is None
 
 
-@pytest.mark.parametrize("change,key", [
-    ({"bogus": {}}, "bogus"),
-    ({"service": {"rgi": "x"}}, "service.rgi"),
-    ({"service": {"max_frames": "10"}}, "service.max_frames"),
-    ({"service": {"max_frames": -1}}, "service"),
-    ({"service": {"rig": "a/b"}}, "service"),
-    ({"zenoh": {"mode": "mesh"}}, "zenoh.mode"),
-    ({"zenoh": {"listen": "tcp/127.0.0.1:1"}}, "zenoh.listen"),
-    ({"zenoh": {"listen": ["127.0.0.1"]}}, "zenoh"),
-    ({"zenoh": {"enabled": False}}, "zenoh.enabled"),
-    ({"source": {"type": "camera"}}, "source.type"),
-    ({"source": {"type": "sim", "rate": 3}}, "source.rate"),
-    ({"source": {"type": "sim", "rate_hz": "fast"}}, "source.rate_hz"),
-    ({"source": {"type": "sim", "sensor": "radar"}}, "source.sensor_options"),
-    ({"source": {"type": "sim", "sensor_options": {"densty": 0.1}}}, "source.sensor_options"),
-    ({"source": {"type": "files"}}, "source"),
-    ({"source": {"type": "zenoh", "sync": "fuzzy"}}, "source.sync"),
-    ({"source": {"rate_hz": 3}}, "source.type"),
-    ({"matcher": {"name": "deep"}}, "matcher.name"),
-    ({"matcher": {"name": "sgbm", "max_disp": 3}}, "matcher.max_disp"),
-    ({"vpp": {"alpah": 0.3}}, "vpp"),
-    ({"vpp": {"enabled": "yes"}}, "vpp.enabled"),
-    ({"queues": {"input_policy": "newest"}}, "queues.input_policy"),
-    ({"queues": {"input_size": 0}}, "queues"),
-    ({"sinks": [{"type": "printer"}]}, "sinks[0].type"),
-    ({"sinks": [{"type": "zenoh", "outputs": ["disparity", "normals"]}]}, "sinks[0]"),
-    ({"sinks": [{"outputs": []}]}, "sinks[0].type"),
-    ({"sinks": {"type": "zenoh"}}, "sinks"),
-    ({"sinks": [{"type": "record"}]}, "sinks[0].dir"),     # a required option is missing
-    ({"sinks": [{"type": "files"}]}, "sinks[0].dir"),
-])
+@pytest.mark.parametrize(
+    ("change", "key"),
+    [
+        ({"bogus": {}}, "bogus"),
+        ({"service": {"rgi": "x"}}, "service.rgi"),
+        ({"service": {"max_frames": "10"}}, "service.max_frames"),
+        ({"service": {"max_frames": -1}}, "service"),
+        ({"service": {"rig": "a/b"}}, "service"),
+        ({"zenoh": {"mode": "mesh"}}, "zenoh.mode"),
+        ({"zenoh": {"listen": "tcp/127.0.0.1:1"}}, "zenoh.listen"),
+        ({"zenoh": {"listen": ["127.0.0.1"]}}, "zenoh"),
+        ({"zenoh": {"enabled": False}}, "zenoh.enabled"),
+        ({"source": {"type": "camera"}}, "source.type"),
+        ({"source": {"type": "sim", "rate": 3}}, "source.rate"),
+        ({"source": {"type": "sim", "rate_hz": "fast"}}, "source.rate_hz"),
+        ({"source": {"type": "sim", "sensor": "radar"}}, "source.sensor_options"),
+        ({"source": {"type": "sim", "sensor_options": {"densty": 0.1}}}, "source.sensor_options"),
+        ({"source": {"type": "files"}}, "source"),
+        ({"source": {"type": "zenoh", "sync": "fuzzy"}}, "source.sync"),
+        ({"source": {"rate_hz": 3}}, "source.type"),
+        ({"matcher": {"name": "deep"}}, "matcher.name"),
+        ({"matcher": {"name": "sgbm", "max_disp": 3}}, "matcher.max_disp"),
+        ({"vpp": {"alpah": 0.3}}, "vpp"),
+        ({"vpp": {"enabled": "yes"}}, "vpp.enabled"),
+        ({"queues": {"input_policy": "newest"}}, "queues.input_policy"),
+        ({"queues": {"input_size": 0}}, "queues"),
+        ({"sinks": [{"type": "printer"}]}, "sinks[0].type"),
+        ({"sinks": [{"type": "zenoh", "outputs": ["disparity", "normals"]}]}, "sinks[0]"),
+        ({"sinks": [{"outputs": []}]}, "sinks[0].type"),
+        ({"sinks": {"type": "zenoh"}}, "sinks"),
+        ({"sinks": [{"type": "record"}]}, "sinks[0].dir"),  # a required option is missing
+        ({"sinks": [{"type": "files"}]}, "sinks[0].dir"),
+    ],
+)
 def test_errors_name_the_key(change, key):
     data = copy.deepcopy(DEFAULT_CONFIG)
     for k, v in change.items():
@@ -108,11 +112,22 @@ def test_file_config_and_cli_overrides(tmp_path):
     from vpp_service.cli.run import overrides_from_args
 
     p = tmp_path / "c.toml"
-    p.write_text('[service]\nrig = "a"\n[source]\ntype = "sim"\nrate_hz = 0.0\n[matcher]\nname = "bm"\n'
-                 'max_disparity = 64\n[[sinks]]\ntype = "zenoh"\n')
-    args = argparse.Namespace(rig="b", max_frames=3, out=str(tmp_path / "o"), no_summary=True, source=None,
-                              matcher="bm", zenoh_listen=["tcp/127.0.0.1:1234"], zenoh_connect=None,
-                              sink=["zenoh", "rerun"], rerun_save=None)
+    p.write_text(
+        '[service]\nrig = "a"\n[source]\ntype = "sim"\nrate_hz = 0.0\n[matcher]\nname = "bm"\n'
+        'max_disparity = 64\n[[sinks]]\ntype = "zenoh"\n'
+    )
+    args = argparse.Namespace(
+        rig="b",
+        max_frames=3,
+        out=str(tmp_path / "o"),
+        no_summary=True,
+        source=None,
+        matcher="bm",
+        zenoh_listen=["tcp/127.0.0.1:1234"],
+        zenoh_connect=None,
+        sink=["zenoh", "rerun"],
+        rerun_save=None,
+    )
     cfg = validate_config(overrides_from_args(read_toml(p), args))
     assert (cfg.service.rig, cfg.service.max_frames, cfg.service.summary) == ("b", 3, False)
     assert cfg.matcher.options.max_disparity == 64  # same matcher: options kept
@@ -122,7 +137,7 @@ def test_file_config_and_cli_overrides(tmp_path):
     args.rerun_save, args.sink = str(tmp_path / "x.rrd"), None
     cfg = validate_config(overrides_from_args(read_toml(p), args))
     assert [s.name for s in cfg.sinks] == ["zenoh", "rerun"] and cfg.sinks[1].options.path.endswith("x.rrd")
-    args.rerun_save, args.sink = None, ["files", "record"]   # file sinks get folders under --out
+    args.rerun_save, args.sink = None, ["files", "record"]  # file sinks get folders under --out
     cfg = validate_config(overrides_from_args(read_toml(p), args))
     assert [s.name for s in cfg.sinks] == ["files", "record"]
     assert [s.options.dir for s in cfg.sinks] == [str(tmp_path / "o" / "frames"), str(tmp_path / "o" / "recording")]
@@ -138,10 +153,13 @@ def test_cli_check_reports_bad_key(tmp_path, capsys):
     assert main(["run", "--check", "--max-frames", "2"]) == 0
 
 
-@pytest.mark.parametrize("source, sinks, where", [
-    ({"type": "zenoh"}, [], "source (source 'zenoh')"),
-    ({"type": "sim"}, [{"type": "rerun"}, {"type": "zenoh"}], "sinks[1] (sink 'zenoh')"),
-])
+@pytest.mark.parametrize(
+    ("source", "sinks", "where"),
+    [
+        ({"type": "zenoh"}, [], "source (source 'zenoh')"),
+        ({"type": "sim"}, [{"type": "rerun"}, {"type": "zenoh"}], "sinks[1] (sink 'zenoh')"),
+    ],
+)
 def test_zenoh_disabled_names_the_plugin_that_needs_a_session(source, sinks, where):
     data = {"zenoh": {"enabled": False}, "source": source, "sinks": sinks}
     with pytest.raises(SettingsError) as exc:
@@ -150,16 +168,24 @@ def test_zenoh_disabled_names_the_plugin_that_needs_a_session(source, sinks, whe
 
 
 def test_zenoh_disabled_is_fine_without_zenoh_plugins(tmp_path):
-    cfg = validate_config({"zenoh": {"enabled": False}, "source": {"type": "sim"},
-                           "sinks": [{"type": "rerun", "path": str(tmp_path / "x.rrd")}]})
+    cfg = validate_config(
+        {
+            "zenoh": {"enabled": False},
+            "source": {"type": "sim"},
+            "sinks": [{"type": "rerun", "path": str(tmp_path / "x.rrd")}],
+        }
+    )
     assert not cfg.zenoh.enabled and [s.name for s in cfg.sinks] == ["rerun"]
 
 
-@pytest.mark.parametrize("sensor, options, message", [
-    ("radar", {}, "unknown sensor 'radar'"),
-    ("uniform", {"densty": 0.1}, "sensor.uniform.densty: unknown option"),
-    ("uniform", {"density": 2.0}, "sensor.uniform"),
-])
+@pytest.mark.parametrize(
+    ("sensor", "options", "message"),
+    [
+        ("radar", {}, "unknown sensor 'radar'"),
+        ("uniform", {"densty": 0.1}, "sensor.uniform.densty: unknown option"),
+        ("uniform", {"density": 2.0}, "sensor.uniform"),
+    ],
+)
 def test_sim_source_checks_its_own_sensor(sensor, options, message):
     """The sim source's check_options builds the sensor: the error names the config key."""
     from vpp_service.sources import parse_source_options
@@ -168,4 +194,4 @@ def test_sim_source_checks_its_own_sensor(sensor, options, message):
         parse_source_options("sim", {"sensor": sensor, "sensor_options": options}, "source")
     assert str(exc.value).startswith("source.sensor_options: ") and message in str(exc.value), str(exc.value)
     opts = parse_source_options("sim", {"sensor": "none", "sensor_options": options}, "source")
-    assert opts.sensor == "none"   # no sensor: its options are not checked
+    assert opts.sensor == "none"  # no sensor: its options are not checked

@@ -5,6 +5,7 @@ below the no-depth baseline of the same matcher; ``@status`` counters must
 match what was sent (including one malformed message, rejected); SIGINT /
 SIGTERM shut the service down cleanly (exit 0) within a bound.
 """
+
 from __future__ import annotations
 
 import json
@@ -31,7 +32,7 @@ def service_config(tmp_path: Path, port: int, rig: str, source_extra: str = "") 
     cfg.write_text(f"""
 [service]
 rig = "{rig}"
-out = "{tmp_path / 'run'}"
+out = "{tmp_path / "run"}"
 summary_period_s = 0.5
 shutdown_timeout_s = 3.0
 [zenoh]
@@ -58,8 +59,14 @@ outputs = ["disparity", "depth"]
 
 def start_service(cfg: Path) -> subprocess.Popen:
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    return subprocess.Popen([*vpp_service_command(), "run", "--config", str(cfg)], cwd=ROOT,
-                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [*vpp_service_command(), "run", "--config", str(cfg)],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
 
 def wait_alive(session, key: str, proc: subprocess.Popen, timeout: float = 20.0) -> None:
@@ -104,7 +111,7 @@ def collect(sub, n: int, timeout: float) -> list:
     return out
 
 
-@pytest.mark.parametrize("mode,sig", [("frame", signal.SIGINT), ("separate", signal.SIGTERM)])
+@pytest.mark.parametrize(("mode", "sig"), [("frame", signal.SIGINT), ("separate", signal.SIGTERM)])
 def test_publisher_to_service_to_subscriber(tmp_path, baseline_bad2, mode, sig):
     import zenoh
 
@@ -125,8 +132,24 @@ def test_publisher_to_service_to_subscriber(tmp_path, baseline_bad2, mode, sig):
             # one malformed message: rejected, counted, the service keeps serving
             bad_key = f"vpp/{rig}/in/frame" if mode == "frame" else f"vpp/{rig}/in/left"
             session.put(bad_key, b"\x85garbage", congestion_control=zenoh.CongestionControl.BLOCK)
-            cmd = [*vpp_service_command(), "publish", "--scale", str(SCALE), "--count", str(COUNT),
-                   "--rate", "5", "--density", "0.1", "--rig", rig, "--connect", f"tcp/127.0.0.1:{port}", "--enc", "png"]
+            cmd = [
+                *vpp_service_command(),
+                "publish",
+                "--scale",
+                str(SCALE),
+                "--count",
+                str(COUNT),
+                "--rate",
+                "5",
+                "--density",
+                "0.1",
+                "--rig",
+                rig,
+                "--connect",
+                f"tcp/127.0.0.1:{port}",
+                "--enc",
+                "png",
+            ]
             if mode == "separate":
                 cmd.append("--separate-topics")
             pub = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=60)

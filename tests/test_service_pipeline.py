@@ -1,7 +1,7 @@
 """Pipeline: queue policies under a fast source and slow processing, counters, timings, errors."""
+
 from __future__ import annotations
 
-import threading
 import time
 
 import numpy as np
@@ -45,9 +45,18 @@ class SlowProcess:
 
 
 def sim_source(count: int, rate_hz: float = 0.0, sensor: str = "none"):
-    return build_source("sim", {"scene": "synthetic", "scene_options": {"height": 48, "width": 96, "max_disparity": 16},
-                                "sensor": sensor, "sensor_options": {}, "count": count, "rate_hz": rate_hz},
-                        SourceContext(rig="t"))
+    return build_source(
+        "sim",
+        {
+            "scene": "synthetic",
+            "scene_options": {"height": 48, "width": 96, "max_disparity": 16},
+            "sensor": sensor,
+            "sensor_options": {},
+            "count": count,
+            "rate_hz": rate_hz,
+        },
+        SourceContext(rig="t"),
+    )
 
 
 def run(pipe: Pipeline, timeout: float = 20.0) -> None:
@@ -91,8 +100,9 @@ def test_block_policy_loses_nothing():
     ref = []
     proc = SlowProcess(ref, delay=0.005)
     sink = CollectSink()
-    pipe = Pipeline(sim_source(40), proc, [sink], input_size=2, input_policy="block",
-                    output_size=1, output_policy="block")
+    pipe = Pipeline(
+        sim_source(40), proc, [sink], input_size=2, input_policy="block", output_size=1, output_policy="block"
+    )
     ref.append(pipe)
     run(pipe)
     assert [r.frame.seq for r in sink.results] == list(range(40))
@@ -104,8 +114,13 @@ def test_block_policy_loses_nothing():
 
 def test_max_frames_stops_early():
     sink = CollectSink()
-    pipe = Pipeline(sim_source(0, rate_hz=200), lambda f: FusionResult(f, np.zeros(f.shape, np.float32)),
-                    [sink], input_policy="block", max_frames=5)
+    pipe = Pipeline(
+        sim_source(0, rate_hz=200),
+        lambda f: FusionResult(f, np.zeros(f.shape, np.float32)),
+        [sink],
+        input_policy="block",
+        max_frames=5,
+    )
     run(pipe)
     assert pipe.counters["processed"] == 5 and len(sink.results) == 5
 
@@ -123,7 +138,7 @@ def test_bad_frames_are_rejected_and_service_keeps_running():
     run(pipe)
     c = pipe.counters
     assert c["rejected"] == 5  # 0, 3, 6, 9, 12
-    assert c["errors"] == 2    # 5, 10
+    assert c["errors"] == 2  # 5, 10
     assert c["processed"] == len(sink.results) == 8
 
 
@@ -134,8 +149,12 @@ def test_real_fusion_counts_no_depth_and_scores_against_gt():
     sink = CollectSink()
     src = sim_source(4, sensor="uniform")
     fusion = Fusion(build_matcher("sgbm", {"max_disparity": 32}), VPPConfig())
-    pipe = Pipeline(src, lambda f: fusion(f if f.seq % 2 else f.with_(sparse_disparity=None, sensor_depth=None)),
-                    [sink], input_policy="block")
+    pipe = Pipeline(
+        src,
+        lambda f: fusion(f if f.seq % 2 else f.with_(sparse_disparity=None, sensor_depth=None)),
+        [sink],
+        input_policy="block",
+    )
     run(pipe)
     assert pipe.counters["no_depth"] == 2 and fusion.counters == {"vpp": 2, "no_depth": 2}
     for r in sink.results:
@@ -156,7 +175,8 @@ def test_pipeline_bad_args():
 @pytest.mark.parametrize("values", ["too_far", "negative", "nan"])
 def test_fusion_without_usable_points_is_no_depth(values):
     """A sparse map whose points are all unusable (d >= width, d < 0, NaN) runs the
-    matcher on the raw pair and counts no_depth, like a frame without depth."""
+    matcher on the raw pair and counts no_depth, like a frame without depth.
+    """
     from vpp_service.matchers import build_matcher
     from vpp_service.vpp import VPPConfig
 
@@ -199,7 +219,7 @@ def test_prepare_next_runs_after_each_result_and_cannot_break_the_service():
     assert pipe.counters["processed"] == 6 and pipe.counters["errors"] == 0
 
 
-@pytest.mark.parametrize("pattern, cached", [("random", True), ("histogram", False)])
+@pytest.mark.parametrize(("pattern", "cached"), [("random", True), ("histogram", False)])
 def test_fusion_prepare_next_caches_the_next_frames_pattern_table(pattern, cached):
     from vpp_service.matchers import build_matcher
     from vpp_service.vpp import VPPConfig
@@ -214,7 +234,7 @@ def test_fusion_prepare_next_caches_the_next_frames_pattern_table(pattern, cache
     fusion.prepare_next(frame)
     assert _kernel_table.cache_info().currsize == int(cached)
     before = _kernel_table.cache_info()
-    res = fusion(frame.with_(seq=42))                  # seed 1042: the prepared table
+    res = fusion(frame.with_(seq=42))  # seed 1042: the prepared table
     after = _kernel_table.cache_info()
     if cached:
         assert (after.hits - before.hits, after.misses - before.misses) == (1, 0)

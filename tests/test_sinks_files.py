@@ -1,4 +1,5 @@
 """Tests of the ``files`` sink (real files in tmp_path, read back with OpenCV/numpy)."""
+
 from __future__ import annotations
 
 import os
@@ -71,7 +72,7 @@ def test_pfm_round_trip_and_layout(tmp_path, result):
     raw = path.read_bytes()
     header = b"Pf\n%d %d\n-1\n" % (W, H)
     assert raw.startswith(header)
-    rows = np.frombuffer(raw[len(header):], "<f4").reshape(H, W)
+    rows = np.frombuffer(raw[len(header) :], "<f4").reshape(H, W)
     assert np.array_equal(rows[0], result.disparity[-1])  # stored bottom-up, little-endian
 
 
@@ -185,7 +186,7 @@ def test_open_unwritable_dir(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "opts, key",
+    ("opts", "key"),
     [
         ({}, "dir"),
         ({"dir": ""}, "dir"),
@@ -212,8 +213,13 @@ def test_encode_png16_reference():
 
 
 @pytest.mark.parametrize(
-    "bad, exc",
-    [("x", TypeError), (np.zeros((2, 2), bool), TypeError), (np.zeros((2, 2, 2)), ValueError), (np.zeros((0, 3)), ValueError)],
+    ("bad", "exc"),
+    [
+        ("x", TypeError),
+        (np.zeros((2, 2), bool), TypeError),
+        (np.zeros((2, 2, 2)), ValueError),
+        (np.zeros((0, 3)), ValueError),
+    ],
 )
 def test_encode_png16_errors(bad, exc):
     with pytest.raises(exc, match="disparity"):

@@ -1,4 +1,5 @@
 """Tests of the ``record`` sink: real recordings in tmp_path, replayed by the real ``files`` source."""
+
 from __future__ import annotations
 
 import logging
@@ -9,15 +10,15 @@ import numpy as np
 import pytest
 
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
-from vpp_service.transport import wire
 from vpp_service.settings import SettingsError
-from vpp_service.vpp import depth_to_disparity
 from vpp_service.sinks import SINKS, build_sink
 from vpp_service.sinks.base import SinkContext
 from vpp_service.sinks.folder import write_atomic
 from vpp_service.sinks.record import RecordSink
 from vpp_service.sources.base import SourceContext, build_source
 from vpp_service.sources.sim import motorcycle_frame
+from vpp_service.transport import wire
+from vpp_service.vpp import depth_to_disparity
 
 H, W = 32, 64
 
@@ -25,9 +26,17 @@ H, W = 32, 64
 # ------------------------------------------------------------------ helpers
 def sim_frames(n: int, sensor: str = "uniform") -> list[StereoFrame]:
     """``n`` frames of the real simulator (synthetic scene, sparse disparity, ground truth)."""
-    src = build_source("sim", {"scene": "synthetic", "sensor": sensor,
-                               "scene_options": {"height": H, "width": W, "max_disparity": 8},
-                               "rate_hz": 0, "count": n}, SourceContext(rig="rigA"))
+    src = build_source(
+        "sim",
+        {
+            "scene": "synthetic",
+            "sensor": sensor,
+            "scene_options": {"height": H, "width": W, "max_disparity": 8},
+            "rate_hz": 0,
+            "count": n,
+        },
+        SourceContext(rig="rigA"),
+    )
     src.open()
     return [src.frame(i) for i in range(n)]
 
@@ -43,8 +52,9 @@ def metric_frame(seq: int = 0) -> StereoFrame:
     gt = rng.uniform(1.0, 30.0, (H, W)).astype(np.float32)
     gt[5, :10] = np.nan
     calib = Calibration(f=412.5, baseline=0.12, doffs=1.5, cx=31.0, cy=15.5)
-    return StereoFrame(left, right, calib, sensor_depth=depth, gt_disparity=gt, rig="cam", seq=seq,
-                       stamp_ns=1_000 + seq)
+    return StereoFrame(
+        left, right, calib, sensor_depth=depth, gt_disparity=gt, rig="cam", seq=seq, stamp_ns=1_000 + seq
+    )
 
 
 def as_result(frame: StereoFrame) -> FusionResult:
@@ -193,7 +203,7 @@ def test_max_frames_stops_and_logs_once(tmp_path, caplog):
     assert len([r for r in caplog.records if "max_frames" in r.getMessage()]) == 1
 
 
-@pytest.mark.parametrize("budget_frames,expect", [(2.5, 2), (2.0, 2), (0.5, 0)])
+@pytest.mark.parametrize(("budget_frames", "expect"), [(2.5, 2), (2.0, 2), (0.5, 0)])
 def test_max_bytes_is_a_hard_budget(tmp_path, caplog, budget_frames, expect):
     frame = metric_frame()
     size = len(wire.encode_frame(frame, "png"))  # seq 0..4 all encode to the same size
@@ -300,21 +310,24 @@ def test_open_and_life_cycle_errors(tmp_path):
         RecordSink({"dir": str(tmp_path)})
 
 
-@pytest.mark.parametrize("opts,key", [
-    ({}, "sinks.record"),
-    ({"dir": ""}, "dir"),
-    ({"dir": "x", "enc": "jpeg"}, "sinks.record.enc"),
-    ({"dir": "x", "max_frames": -1}, "max_frames"),
-    ({"dir": "x", "max_frames": "10"}, "sinks.record.max_frames"),
-    ({"dir": "x", "max_bytes": -5}, "max_bytes"),
-    ({"dir": "x", "max_bytes": 1.5}, "sinks.record.max_bytes"),
-    ({"dir": "x", "overwrite": "yes"}, "sinks.record.overwrite"),
-    ({"dir": "x", "create_dir": 1}, "sinks.record.create_dir"),
-    ({"dir": "x", "pattern": "{bogus}"}, "pattern"),
-    ({"dir": "x", "pattern": "a/{seq}"}, "pattern"),
-    ({"dir": "x", "pattern": ".{seq}"}, "pattern"),
-    ({"dir": "x", "formats": ["png16"]}, "sinks.record.formats"),
-])
+@pytest.mark.parametrize(
+    ("opts", "key"),
+    [
+        ({}, "sinks.record"),
+        ({"dir": ""}, "dir"),
+        ({"dir": "x", "enc": "jpeg"}, "sinks.record.enc"),
+        ({"dir": "x", "max_frames": -1}, "max_frames"),
+        ({"dir": "x", "max_frames": "10"}, "sinks.record.max_frames"),
+        ({"dir": "x", "max_bytes": -5}, "max_bytes"),
+        ({"dir": "x", "max_bytes": 1.5}, "sinks.record.max_bytes"),
+        ({"dir": "x", "overwrite": "yes"}, "sinks.record.overwrite"),
+        ({"dir": "x", "create_dir": 1}, "sinks.record.create_dir"),
+        ({"dir": "x", "pattern": "{bogus}"}, "pattern"),
+        ({"dir": "x", "pattern": "a/{seq}"}, "pattern"),
+        ({"dir": "x", "pattern": ".{seq}"}, "pattern"),
+        ({"dir": "x", "formats": ["png16"]}, "sinks.record.formats"),
+    ],
+)
 def test_bad_options_name_the_key(opts, key):
     with pytest.raises(SettingsError) as exc:
         build_sink("record", opts)
@@ -326,16 +339,25 @@ def test_toml_config_validates(tmp_path):
     from vpp_service.service.config import load_config
 
     p = tmp_path / "rec.toml"
-    p.write_text(f'[service]\nout = "{tmp_path}/o"\n[zenoh]\nenabled = false\n'
-                 '[[sinks]]\ntype = "record"\ndir = "{out}/recording"\ncreate_dir = true\nenc = "raw"\n'
-                 'max_frames = 100\nmax_bytes = 1_000_000_000\noverwrite = false\n'
-                 'pattern = "{rig}_{seq:09d}"\n')
+    p.write_text(
+        f'[service]\nout = "{tmp_path}/o"\n[zenoh]\nenabled = false\n'
+        '[[sinks]]\ntype = "record"\ndir = "{out}/recording"\ncreate_dir = true\nenc = "raw"\n'
+        "max_frames = 100\nmax_bytes = 1_000_000_000\noverwrite = false\n"
+        'pattern = "{rig}_{seq:09d}"\n'
+    )
     cfg = load_config(p)
     (spec,) = cfg.sinks
     assert spec.name == "record"
     o = spec.options
     assert (o.dir, o.create_dir, o.enc, o.max_frames, o.max_bytes, o.overwrite, o.pattern) == (
-        f"{tmp_path}/o/recording", True, "raw", 100, 1_000_000_000, False, "{rig}_{seq:09d}")
+        f"{tmp_path}/o/recording",
+        True,
+        "raw",
+        100,
+        1_000_000_000,
+        False,
+        "{rig}_{seq:09d}",
+    )
     p.write_text('[zenoh]\nenabled = false\n[[sinks]]\ntype = "record"\ndir = "x"\nenc = "jpeg"\n')
     with pytest.raises(SettingsError, match=r"^sinks\[0\]\.enc"):
         load_config(p)
@@ -344,23 +366,30 @@ def test_toml_config_validates(tmp_path):
 def _service_config(tmp_path, source: dict, rec: str):
     from vpp_service.service.config import validate_config
 
-    return validate_config({
-        "service": {"out": str(tmp_path / "out"), "summary": False, "max_frames": 3},
-        "zenoh": {"enabled": False},
-        "source": source,
-        "vpp": {"enabled": False},
-        "matcher": {"name": "bm", "max_disparity": 16},
-        "queues": {"input_policy": "block", "output_policy": "block"},
-        "sinks": [{"type": "record", "dir": rec, "create_dir": True}],
-    })
+    return validate_config(
+        {
+            "service": {"out": str(tmp_path / "out"), "summary": False, "max_frames": 3},
+            "zenoh": {"enabled": False},
+            "source": source,
+            "vpp": {"enabled": False},
+            "matcher": {"name": "bm", "max_disparity": 16},
+            "queues": {"input_policy": "block", "output_policy": "block"},
+            "sinks": [{"type": "record", "dir": rec, "create_dir": True}],
+        }
+    )
 
 
 def test_service_records_and_a_second_service_replays(tmp_path):
     """Record a running service's input, replay the recording into a second service, record again."""
     from vpp_service.service.app import run_service
 
-    sim = {"type": "sim", "scene": "synthetic", "rate_hz": 0, "count": 3,
-           "scene_options": {"height": H, "width": W, "max_disparity": 8}}
+    sim = {
+        "type": "sim",
+        "scene": "synthetic",
+        "rate_hz": 0,
+        "count": 3,
+        "scene_options": {"height": H, "width": W, "max_disparity": 8},
+    }
     first, second = tmp_path / "rec1", tmp_path / "rec2"
     status = run_service(_service_config(tmp_path, sim, str(first)), threading.Event(), None)
     assert status["counters"]["processed"] == 3
@@ -382,7 +411,8 @@ def test_service_records_and_a_second_service_replays(tmp_path):
 @pytest.mark.parametrize("how", [["--dataset", "auto", "--root"], ["--recording"]])
 def test_vpp_service_publish_replays_a_recording(tmp_path, zenoh_endpoint, zenoh_config, how):
     """``vpp-service publish --recording REC`` (or ``--dataset auto --root REC``) sends the
-    recorded frames onto Zenoh unchanged."""
+    recorded frames onto Zenoh unchanged.
+    """
     import zenoh
 
     from vpp_service.cli import main
@@ -393,12 +423,28 @@ def test_vpp_service_publish_replays_a_recording(tmp_path, zenoh_endpoint, zenoh
             sink.write(as_result(f))
     got: list[StereoFrame] = []
     with zenoh.open(zenoh_config(listen=[zenoh_endpoint])) as session:
-        sub = session.declare_subscriber("vpp/front/in/frame",
-                                         lambda s: got.append(wire.decode_frame(s.payload.to_bytes())))
+        sub = session.declare_subscriber(
+            "vpp/front/in/frame", lambda s: got.append(wire.decode_frame(s.payload.to_bytes()))
+        )
         handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
         try:  # publish installs its own SIGINT/SIGTERM handlers
-            rc = main(["publish", *how, str(tmp_path), "--rate", "0", "--rig", "front",
-                       "--enc", "png", "--connect", zenoh_endpoint, "--wait-subscriber", "5"])
+            rc = main(
+                [
+                    "publish",
+                    *how,
+                    str(tmp_path),
+                    "--rate",
+                    "0",
+                    "--rig",
+                    "front",
+                    "--enc",
+                    "png",
+                    "--connect",
+                    zenoh_endpoint,
+                    "--wait-subscriber",
+                    "5",
+                ]
+            )
         finally:
             for s, h in handlers.items():
                 signal.signal(s, h)
@@ -426,10 +472,10 @@ def test_example_config_documents_the_record_sink():
 
     text = (Path(__file__).resolve().parents[1] / "deploy" / "config.example.toml").read_text()
     start = text.index('# type = "record"')
-    block = text[text.rindex("# [[sinks]]", 0, start):]
-    block = block[:block.index("\n\n")] if "\n\n" in block else block
+    block = text[text.rindex("# [[sinks]]", 0, start) :]
+    block = block[: block.index("\n\n")] if "\n\n" in block else block
     for f in dataclasses.fields(RecordSinkOptions):
-        assert re.search(rf"^# {f.name} = ", block, re.M), f"record option {f.name} undocumented"
+        assert re.search(rf"^# {f.name} = ", block, re.MULTILINE), f"record option {f.name} undocumented"
     uncommented = "\n".join(line[2:] for line in block.splitlines())
     data = tomllib.loads(uncommented)
     assert data["sinks"][0]["type"] == "record"

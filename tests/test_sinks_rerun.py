@@ -1,4 +1,5 @@
 """Tests of the ``rerun`` sink (real .rrd files read back with rerun.chunk) and the colouriser."""
+
 from __future__ import annotations
 
 import math
@@ -32,18 +33,25 @@ def make_result(seq: int, *, painted: bool = True, calib: bool = True) -> Fusion
     disp = rng.uniform(2.0, 30.0, (H, W)).astype(np.float32)
     disp[0, :4] = np.nan
     frame = StereoFrame(
-        left, right, Calibration(f=80.0, baseline=0.2, cx=19.0, cy=14.0) if calib else None,
-        sparse_disparity=sparse, rig=RIG, seq=seq, stamp_ns=1_700_000_000_000_000_000 + seq * 10**8,
+        left,
+        right,
+        Calibration(f=80.0, baseline=0.2, cx=19.0, cy=14.0) if calib else None,
+        sparse_disparity=sparse,
+        rig=RIG,
+        seq=seq,
+        stamp_ns=1_700_000_000_000_000_000 + seq * 10**8,
     )
     return FusionResult(
-        frame, disp,
-        left_vpp=(255 - left) if painted else None, right_vpp=(255 - right) if painted else None,
+        frame,
+        disp,
+        left_vpp=(255 - left) if painted else None,
+        right_vpp=(255 - right) if painted else None,
         timing_ms={"vpp": 1.5, "total": 9.0},
     )
 
 
 def read_rrd(path) -> dict[str, dict[str, list]]:
-    """entity path -> column name -> values (rows of all chunks, sorted by seq)."""
+    """Entity path -> column name -> values (rows of all chunks, sorted by seq)."""
     rows: dict[str, list[dict]] = defaultdict(list)
     for chunk in RrdReader(path).stream().to_chunks():
         if chunk.is_static:
@@ -99,8 +107,10 @@ def test_save_contains_expected_entities(tmp_path):
     reader = RrdReader(tmp_path / "out.rrd")
     assert len(reader.recordings()) == 1 and len(reader.blueprints()) == 1
     data = read_rrd(tmp_path / "out.rrd")
-    expected = {f"/{RIG}/{e}" for e in ("left", "right", "left/sparse", "disparity", "camera", "camera/depth",
-                                         "timing/vpp", "timing/total")}
+    expected = {
+        f"/{RIG}/{e}"
+        for e in ("left", "right", "left/sparse", "disparity", "camera", "camera/depth", "timing/vpp", "timing/total")
+    }
     assert set(data) == expected
     for ent in expected:
         assert data[ent]["seq"] == [0, 1, 2, 3], ent
@@ -139,7 +149,7 @@ def test_depth_image_matches_disparity(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "opts, painted, calib, raw, has_camera",
+    ("opts", "painted", "calib", "raw", "has_camera"),
     [
         ({"log_painted": False}, True, True, True, True),
         ({}, False, True, True, True),  # VPP disabled -> raw pair
@@ -240,7 +250,7 @@ def test_bad_rig_name():
 
 
 @pytest.mark.parametrize(
-    "opts, key",
+    ("opts", "key"),
     [
         ({"mode": "tcp"}, "mode"),
         ({"max_hz": -1}, "max_hz"),
@@ -264,7 +274,7 @@ def test_bad_options(opts, key):
 # -- depth_stride ---------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("h, w, m", [(30, 40, 400), (30, 40, 1200), (30, 40, 1), (480, 640, 200_000), (7, 3, 5)])
+@pytest.mark.parametrize(("h", "w", "m"), [(30, 40, 400), (30, 40, 1200), (30, 40, 1), (480, 640, 200_000), (7, 3, 5)])
 def test_depth_stride_reference(h, w, m):
     ref = next(s for s in range(1, h * w + 1) if math.ceil(h / s) * math.ceil(w / s) <= m)
     assert depth_stride(h, w, m) == ref
@@ -308,7 +318,7 @@ def test_disparity_range():
 
 
 @pytest.mark.parametrize(
-    "args, exc, key",
+    ("args", "exc", "key"),
     [
         (("x",), TypeError, "disparity"),
         ((np.zeros(3, bool),), TypeError, "disparity"),

@@ -1,4 +1,5 @@
 """zenoh sink over real sessions: lazy outputs, wire decoding by a subscriber, bounded close."""
+
 from __future__ import annotations
 
 import time
@@ -7,26 +8,28 @@ import numpy as np
 import pytest
 import zenoh
 
-from helpers.zenoh_loopback import zenoh_test_config
 from helpers.frames import make_frame
-from helpers.zenoh_loopback import collect
+from helpers.zenoh_loopback import collect, zenoh_test_config
 from vpp_service.frame import FusionResult
-from vpp_service.transport import wire
 from vpp_service.sinks.base import SinkContext, build_sink
+from vpp_service.transport import wire
 
 
 @pytest.fixture
 def sessions(zenoh_endpoint):
-    with zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as svc, \
-            zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as client:
+    with (
+        zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as svc,
+        zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as client,
+    ):
         yield svc, client
 
 
 def result(seq):
     fr = make_frame().with_(seq=seq)
     disp = np.full(fr.shape, 2.0 + seq, np.float32)
-    return FusionResult(frame=fr, disparity=disp, depth=disp + 1, left_vpp=fr.left, right_vpp=fr.right,
-                        timing_ms={"match": 1.0})
+    return FusionResult(
+        frame=fr, disparity=disp, depth=disp + 1, left_vpp=fr.left, right_vpp=fr.right, timing_ms={"match": 1.0}
+    )
 
 
 @pytest.mark.parametrize("outputs", [["disparity"], ["disparity", "depth", "left_vpp", "right_vpp"]])
@@ -46,7 +49,7 @@ def test_publishes_selected_outputs(sessions, outputs):
     for d in disp:
         np.testing.assert_array_equal(d.data, np.full((6, 8), 2.0 + d.seq, np.float32))
     if "left_vpp" in outputs:
-        img = [s for s in got if str(s.key_expr).endswith("left_vpp")][0]
+        img = next(s for s in got if str(s.key_expr).endswith("left_vpp"))
         np.testing.assert_array_equal(wire.decode_output_image(img.payload.to_bytes())[1], make_frame().left)
     assert sink.stats()["written"] == 3
 
@@ -56,15 +59,13 @@ def test_large_outputs_identical_with_and_without_shared_memory(sessions, pool_m
     """A 3 MB disparity map comes through the same whether it left from the pool or not."""
     svc, client = sessions
     sub = client.declare_subscriber("vpp/m/out/disparity", zenoh.handlers.FifoChannel(8))
-    sink = build_sink("zenoh", {"outputs": ["disparity"], "shm_pool_mb": pool_mb},
-                      SinkContext(rig="m", session=svc))
+    sink = build_sink("zenoh", {"outputs": ["disparity"], "shm_pool_mb": pool_mb}, SinkContext(rig="m", session=svc))
     sink.open()
     time.sleep(0.3)
     fr = make_frame().with_(seq=7)
     disp = np.random.default_rng(3).random((750, 1000), dtype=np.float32)
     big = fr.with_(left=np.zeros((750, 1000, 3), np.uint8), right=np.zeros((750, 1000, 3), np.uint8))
-    sink.write(FusionResult(frame=big, disparity=disp, depth=None, left_vpp=None, right_vpp=None,
-                            timing_ms={}))
+    sink.write(FusionResult(frame=big, disparity=disp, depth=None, left_vpp=None, right_vpp=None, timing_ms={}))
     sink.close(3.0)
     got = collect(sub, 1)
     assert len(got) == 1
@@ -106,9 +107,19 @@ def test_close_is_bounded_without_peers(sessions):
     assert time.monotonic() - t0 < 3.0
 
 
-@pytest.mark.parametrize("opts", [{"outputs": []}, {"outputs": ["normals"]}, {"outputs": ["depth", "depth"]},
-                                  {"queue_size": 0}, {"image_enc": "gif"}, {"shm_pool_mb": -1},
-                                  {"shm_pool_mb": 5000}, {"shm_pool_mb": "64"}])
+@pytest.mark.parametrize(
+    "opts",
+    [
+        {"outputs": []},
+        {"outputs": ["normals"]},
+        {"outputs": ["depth", "depth"]},
+        {"queue_size": 0},
+        {"image_enc": "gif"},
+        {"shm_pool_mb": -1},
+        {"shm_pool_mb": 5000},
+        {"shm_pool_mb": "64"},
+    ],
+)
 def test_bad_options(opts):
     with pytest.raises(ValueError, match="sinks.zenoh"):
         build_sink("zenoh", opts)
@@ -122,7 +133,7 @@ def test_needs_session():
 def test_results_left_unpublished_at_close_are_counted_as_dropped(sessions):
     svc, _ = sessions
     sink = build_sink("zenoh", {"queue_size": 4}, SinkContext(session=svc))
-    for seq in range(3):          # never opened: nothing publishes them
+    for seq in range(3):  # never opened: nothing publishes them
         sink.write(result(seq))
     assert sink.stats()["dropped"] == 0
     sink.close(1.0)

@@ -1,4 +1,5 @@
 """Sparse depth-sensor simulators: density, beam structure, noise statistics, seeds, ranges."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,8 +18,13 @@ def frame():
     gt = (10 + 30 * ys / h + 5 * xs / w).astype(np.float32)
     gt[50:80, 200:260] = np.nan
     img = np.zeros((h, w, 3), np.uint8)
-    return StereoFrame(left=img, right=img, gt_disparity=gt,
-                       calib=Calibration(f=400.0, baseline=0.2, doffs=2.0, cx=150.0, cy=100.0), name="plane")
+    return StereoFrame(
+        left=img,
+        right=img,
+        gt_disparity=gt,
+        calib=Calibration(f=400.0, baseline=0.2, doffs=2.0, cx=150.0, cy=100.0),
+        name="plane",
+    )
 
 
 def depth_of(frame, d):
@@ -43,8 +49,11 @@ def test_smoke_points_are_ground_truth(frame, name):
 
 @pytest.mark.parametrize("name", ["uniform", "lidar", "tof"])
 def test_seeds_reproducible(frame, name):
-    opts = {"uniform": {"noise_px": 0.5}, "lidar": {"noise_m": 0.05, "dropout": 0.3},
-            "tof": {"noise_k": 0.01, "dropout": 0.3}}[name]
+    opts = {
+        "uniform": {"noise_px": 0.5},
+        "lidar": {"noise_m": 0.05, "dropout": 0.3},
+        "tof": {"noise_k": 0.01, "dropout": 0.3},
+    }[name]
     s = build_sensor(name, opts)
     a, b, c = (s.simulate(frame, seed=k).sparse_disparity for k in (7, 7, 8))
     np.testing.assert_array_equal(a, b)
@@ -80,7 +89,7 @@ def test_lidar_beams_make_row_bands(frame):
     assert np.min(np.abs(rows[:, None] - expected[None, :]), axis=1).max() <= 12
     # azimuth step 0.2 deg at f = 400 px: about one sample per 1.4 px along a beam
     mid = int(expected[np.argmin(np.abs(expected - 100))])
-    assert np.isfinite(sp[mid - 1:mid + 2]).sum() > 150
+    assert np.isfinite(sp[mid - 1 : mid + 2]).sum() > 150
 
 
 def test_lidar_range_limits_and_noise(frame):
@@ -88,16 +97,19 @@ def test_lidar_range_limits_and_noise(frame):
     ref = base.simulate(frame, 0)
     have = ref.sensor_depth > 0
     zmin, zmax = ref.sensor_depth[have].min(), ref.sensor_depth[have].max()
-    limited = build_sensor("lidar", {"beams": 128, "fov_up": 15.0, "fov_down": -15.0, "azimuth_step": 0.1,
-                                     "max_range": float((zmin + zmax) / 2)}).simulate(frame, 0)
+    limited = build_sensor(
+        "lidar",
+        {"beams": 128, "fov_up": 15.0, "fov_down": -15.0, "azimuth_step": 0.1, "max_range": float((zmin + zmax) / 2)},
+    ).simulate(frame, 0)
     h, w = frame.shape
     ys, xs = np.mgrid[0:h, 0:w]
     ray = np.sqrt(1 + ((xs - 150) / 400.0) ** 2 + ((ys - 100) / 400.0) ** 2)
     lim = limited.sensor_depth > 0
     assert 0 < lim.sum() < have.sum()
     assert (limited.sensor_depth[lim] * ray[lim]).max() <= (zmin + zmax) / 2 + 1e-4
-    noisy = build_sensor("lidar", {"beams": 128, "fov_up": 15.0, "fov_down": -15.0, "azimuth_step": 0.1,
-                                   "noise_m": 0.05}).simulate(frame, 3)
+    noisy = build_sensor(
+        "lidar", {"beams": 128, "fov_up": 15.0, "fov_down": -15.0, "azimuth_step": 0.1, "noise_m": 0.05}
+    ).simulate(frame, 3)
     m = noisy.sensor_depth > 0
     true_z = depth_of(frame, frame.gt_disparity[m])
     range_err = (noisy.sensor_depth[m] - true_z) * ray[m]

@@ -1,4 +1,5 @@
 """sim and files sources: frames, seq/seed per frame, pacing, count/loop, bad files rejected."""
+
 from __future__ import annotations
 
 import time
@@ -6,10 +7,10 @@ import time
 import numpy as np
 import pytest
 
-from vpp_service.transport import wire
+from vpp_service.settings import SettingsError
 from vpp_service.sources.base import Pacer, SourceContext, build_source
 from vpp_service.sources.sim import MOTORCYCLE_CALIB, motorcycle_frame, scale_frame
-from vpp_service.settings import SettingsError
+from vpp_service.transport import wire
 
 
 def drain(src, timeout=20.0):
@@ -53,9 +54,16 @@ def test_sim_default_motorcycle_uniform_5_percent():
 
 
 def test_sim_rate_is_paced():
-    src = build_source("sim", {"scene": "synthetic", "scene_options": {"height": 32, "width": 64,
-                                                                        "max_disparity": 8},
-                               "rate_hz": 50, "count": 6}, SourceContext())
+    src = build_source(
+        "sim",
+        {
+            "scene": "synthetic",
+            "scene_options": {"height": 32, "width": 64, "max_disparity": 8},
+            "rate_hz": 50,
+            "count": 6,
+        },
+        SourceContext(),
+    )
     t0 = time.monotonic()
     frames, _ = drain(src)
     assert len(frames) == 6
@@ -69,9 +77,16 @@ def test_pacer_zero_rate_and_errors():
         Pacer(-1)
 
 
-@pytest.mark.parametrize("opts,key", [({"scale": 0}, "source.sim"), ({"rate_hz": -1}, "source.sim"),
-                                      ({"scene": "moon"}, "source.sim.scene"), ({"scene": "dataset"}, "source.sim"),
-                                      ({"count": "3"}, "source.sim.count")])
+@pytest.mark.parametrize(
+    ("opts", "key"),
+    [
+        ({"scale": 0}, "source.sim"),
+        ({"rate_hz": -1}, "source.sim"),
+        ({"scene": "moon"}, "source.sim.scene"),
+        ({"scene": "dataset"}, "source.sim"),
+        ({"count": "3"}, "source.sim.count"),
+    ],
+)
 def test_sim_bad_options(opts, key):
     with pytest.raises(SettingsError) as exc:
         build_source("sim", opts)
@@ -80,9 +95,16 @@ def test_sim_bad_options(opts, key):
 
 @pytest.fixture
 def msgpack_folder(tmp_path):
-    src = build_source("sim", {"scene": "synthetic", "scene_options": {"height": 32, "width": 64,
-                                                                        "max_disparity": 8},
-                               "rate_hz": 0, "count": 3}, SourceContext())
+    src = build_source(
+        "sim",
+        {
+            "scene": "synthetic",
+            "scene_options": {"height": 32, "width": 64, "max_disparity": 8},
+            "rate_hz": 0,
+            "count": 3,
+        },
+        SourceContext(),
+    )
     src.open()
     frames = [src.frame(i) for i in range(3)]
     for i, fr in enumerate(frames):
@@ -101,8 +123,7 @@ def test_files_msgpack_replay(msgpack_folder):
 
 def test_files_loop_and_count(msgpack_folder):
     folder, _ = msgpack_folder
-    frames, _ = drain(build_source("files", {"root": str(folder), "format": "msgpack", "loop": True,
-                                             "count": 7}))
+    frames, _ = drain(build_source("files", {"root": str(folder), "format": "msgpack", "loop": True, "count": 7}))
     assert [f.seq for f in frames] == list(range(7))
 
 

@@ -1,4 +1,5 @@
 """Synthetic scenes: exact, view-consistent ground truth and occlusions."""
+
 from __future__ import annotations
 
 import cv2
@@ -23,12 +24,12 @@ def test_scene_smoke(kind, texture):
     assert f.left.shape == f.right.shape == (120, 160, 3) and f.left.dtype == np.uint8
     assert f.gt_disparity.dtype == np.float32 and f.gt_disparity.shape == (120, 160)
     assert np.isfinite(f.gt_disparity).all()
-    assert 0 < f.gt_disparity.min() and f.gt_disparity.max() <= 24 + 1e-4
+    assert f.gt_disparity.min() > 0 and f.gt_disparity.max() <= 24 + 1e-4
     assert f.nocc_mask.dtype == bool and 0.6 < f.nocc_mask.mean() < 1.0
     assert f.calib is not None and f.name == f"synthetic-{kind}-3" and f.meta["dataset"] == "synthetic"
 
 
-@pytest.mark.parametrize("kind,seed", [("planes", 0), ("planes", 5), ("boxes", 1)])
+@pytest.mark.parametrize(("kind", "seed"), [("planes", 0), ("planes", 5), ("boxes", 1)])
 def test_gt_consistent_with_right_view(kind, seed):
     """Warping right to left by the GT matches at non-occluded pixels, and not by a shifted GT."""
     f = make_scene(seed=seed, kind=kind)
@@ -73,11 +74,19 @@ def test_seed_determinism_and_noise():
     assert diff.std() == pytest.approx(4.0, rel=0.1)
 
 
-@pytest.mark.parametrize("kwargs,match", [
-    ({"height": 8}, "height"), ({"width": 20.5}, "width"), ({"kind": "spheres"}, "kind"),
-    ({"texture": "none"}, "texture"), ({"max_disparity": 200}, "max_disparity"),
-    ({"seed": -1}, "seed"), ({"noise": -1.0}, "noise"), ({"n_objects": -2}, "n_objects"),
-])
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"height": 8}, "height"),
+        ({"width": 20.5}, "width"),
+        ({"kind": "spheres"}, "kind"),
+        ({"texture": "none"}, "texture"),
+        ({"max_disparity": 200}, "max_disparity"),
+        ({"seed": -1}, "seed"),
+        ({"noise": -1.0}, "noise"),
+        ({"n_objects": -2}, "n_objects"),
+    ],
+)
 def test_errors(kwargs, match):
     with pytest.raises(ValueError, match=match):
         make_scene(**kwargs)

@@ -1,4 +1,5 @@
 """zenoh source over real sessions on 127.0.0.1: decode, reject malformed, separate-topics sync."""
+
 from __future__ import annotations
 
 import math
@@ -9,16 +10,18 @@ import numpy as np
 import pytest
 import zenoh
 
-from helpers.zenoh_loopback import zenoh_test_config
 from helpers.frames import make_frame
-from vpp_service.transport import wire
+from helpers.zenoh_loopback import zenoh_test_config
 from vpp_service.sources.base import SourceContext, build_source
+from vpp_service.transport import wire
 
 
 @pytest.fixture
 def sessions(zenoh_endpoint):
-    with zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as svc, \
-            zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as cam:
+    with (
+        zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as svc,
+        zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as cam,
+    ):
         yield svc, cam
 
 
@@ -44,8 +47,13 @@ def bad_payloads():
     huge = {**good, "left": {**good["left"], "h": 1 << 40, "w": 1 << 40}}
     short = {**good, "right": {**good["right"], "data": b"\0" * 5}}
     wrong_type = {**good, "seq": "seven"}
-    return [wire.encode_frame(make_frame())[:-7], msgpack.packb(nan_calib), msgpack.packb(huge),
-            msgpack.packb(short), msgpack.packb(wrong_type)]
+    return [
+        wire.encode_frame(make_frame())[:-7],
+        msgpack.packb(nan_calib),
+        msgpack.packb(huge),
+        msgpack.packb(short),
+        msgpack.packb(wrong_type),
+    ]
 
 
 def test_frames_decoded_and_malformed_rejected(sessions):
@@ -56,8 +64,9 @@ def test_frames_decoded_and_malformed_rejected(sessions):
         cam.put(key, wire.encode_frame(make_frame(seed=1)), congestion_control=zenoh.CongestionControl.BLOCK)
         for p in bad_payloads():
             cam.put(key, p, congestion_control=zenoh.CongestionControl.BLOCK)
-        cam.put(key, wire.encode_frame(make_frame(seed=2).with_(seq=8)),
-                congestion_control=zenoh.CongestionControl.BLOCK)
+        cam.put(
+            key, wire.encode_frame(make_frame(seed=2).with_(seq=8)), congestion_control=zenoh.CongestionControl.BLOCK
+        )
         assert wait_for(lambda: len(frames) + len(rejects) == 7)
         assert [f.seq for f in frames] == [7, 8]
         np.testing.assert_array_equal(frames[0].left, make_frame(seed=1).left)
@@ -78,8 +87,9 @@ def test_separate_topics_sync_and_drops(sessions, sync):
         for seq in range(3):
             fr = base.with_(seq=seq, stamp_ns=1_000_000_000 + seq * 100_000_000)
             for part in ("left", "right") if seq != 1 else ("left", "right", "depth"):
-                cam.put(f"vpp/z/in/{part}", wire.encode_part(fr, part),
-                        congestion_control=zenoh.CongestionControl.BLOCK)
+                cam.put(
+                    f"vpp/z/in/{part}", wire.encode_part(fr, part), congestion_control=zenoh.CongestionControl.BLOCK
+                )
                 time.sleep(0.02)  # keep arrival order across topics
         assert wait_for(lambda: len(frames) == 1)
         time.sleep(0.2)
@@ -99,11 +109,18 @@ def test_needs_session():
         src.open()
 
 
-@pytest.mark.parametrize("opts", [{"ring_size": 0}, {"topics": "both"}, {"sync_threshold_ms": -1.0},
-                                  {"topics": "separate", "ring_sizes": {"center": 2}},
-                                  {"topics": "separate", "ring_sizes": {"left": 0}},
-                                  {"topics": "separate", "ring_sizes": {"depth": True}},
-                                  {"ring_sizes": {"depth": 8}}])
+@pytest.mark.parametrize(
+    "opts",
+    [
+        {"ring_size": 0},
+        {"topics": "both"},
+        {"sync_threshold_ms": -1.0},
+        {"topics": "separate", "ring_sizes": {"center": 2}},
+        {"topics": "separate", "ring_sizes": {"left": 0}},
+        {"topics": "separate", "ring_sizes": {"depth": True}},
+        {"ring_sizes": {"depth": 8}},
+    ],
+)
 def test_bad_options(opts):
     with pytest.raises(ValueError, match="source.zenoh"):
         build_source("zenoh", opts)
@@ -111,7 +128,8 @@ def test_bad_options(opts):
 
 def test_ring_keeps_newest_and_counts_drops(sessions):
     """A burst while the receive thread is not draining: only the newest ring_size
-    frames survive, the rest are counted as ring_dropped (no silent loss)."""
+    frames survive, the rest are counted as ring_dropped (no silent loss).
+    """
     svc, cam = sessions
     src = build_source("zenoh", {"ring_size": 3}, SourceContext(rig="z", session=svc))
     src.open()
@@ -119,8 +137,11 @@ def test_ring_keeps_newest_and_counts_drops(sessions):
         time.sleep(0.3)  # let the subscription propagate
         base = make_frame()
         for seq in range(10):
-            cam.put("vpp/z/in/frame", wire.encode_frame(base.with_(seq=seq)),
-                    congestion_control=zenoh.CongestionControl.BLOCK)
+            cam.put(
+                "vpp/z/in/frame",
+                wire.encode_frame(base.with_(seq=seq)),
+                congestion_control=zenoh.CongestionControl.BLOCK,
+            )
         assert wait_for(lambda: src.stats()["ring_dropped"] == 7)
         frames = []
         src.start(lambda f: frames.append(f) or True, lambda r: None)
@@ -144,11 +165,14 @@ def test_stop_is_prompt_when_idle(sessions):
 
 def test_per_topic_ring_sizes(sessions):
     """Separate topics with a deeper depth ring: each topic keeps its own newest
-    samples and counts its own drops; exact sync then joins the seqs all kept."""
+    samples and counts its own drops; exact sync then joins the seqs all kept.
+    """
     svc, cam = sessions
-    src = build_source("zenoh", {"topics": "separate", "ring_size": 2, "ring_sizes": {"depth": 5},
-                                 "sync_queue_size": 8},
-                       SourceContext(rig="z", session=svc))
+    src = build_source(
+        "zenoh",
+        {"topics": "separate", "ring_size": 2, "ring_sizes": {"depth": 5}, "sync_queue_size": 8},
+        SourceContext(rig="z", session=svc),
+    )
     src.open()
     try:
         time.sleep(0.3)  # let the subscriptions propagate
@@ -156,8 +180,9 @@ def test_per_topic_ring_sizes(sessions):
         for seq in range(6):
             fr = base.with_(seq=seq, stamp_ns=1_000_000_000 + seq * 100_000_000)
             for part in ("depth", "left", "right"):
-                cam.put(f"vpp/z/in/{part}", wire.encode_part(fr, part),
-                        congestion_control=zenoh.CongestionControl.BLOCK)
+                cam.put(
+                    f"vpp/z/in/{part}", wire.encode_part(fr, part), congestion_control=zenoh.CongestionControl.BLOCK
+                )
         assert wait_for(lambda: src.stats()["ring_dropped"] == 4 + 4 + 1)
         frames = []
         src.start(lambda f: frames.append(f) or True, lambda r: None)

@@ -1,4 +1,5 @@
 """One thread-count policy for every kernel, and the OpenMP wait policy set by the command, not by an import."""
+
 from __future__ import annotations
 
 import os
@@ -21,14 +22,15 @@ def test_resolve_threads_explicit_and_default(monkeypatch):
     assert resolve_threads(None) == default_threads() == 3
 
 
-@pytest.mark.parametrize("value, exc", [(True, TypeError), (1.0, TypeError), ("2", TypeError),
-                                        (0, ValueError), (-1, ValueError)])
+@pytest.mark.parametrize(
+    ("value", "exc"), [(True, TypeError), (1.0, TypeError), ("2", TypeError), (0, ValueError), (-1, ValueError)]
+)
 def test_resolve_threads_rejects(value, exc):
     with pytest.raises(exc, match="num_threads"):
         resolve_threads(value, "num_threads")
 
 
-@pytest.mark.parametrize("env, expected", [("4,2", 4), (" 5 ", 5), ("0", None), ("many", None), (None, None)])
+@pytest.mark.parametrize(("env", "expected"), [("4,2", 4), (" 5 ", 5), ("0", None), ("many", None), (None, None)])
 def test_default_threads_honours_omp_num_threads_else_affinity(monkeypatch, env, expected):
     if env is None:
         monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
@@ -43,12 +45,12 @@ def test_vpp_and_matchers_share_the_policy(monkeypatch):
     from vpp_service.vpp._validate import as_threads
 
     monkeypatch.setenv("OMP_NUM_THREADS", "3")
-    assert as_threads(None) == 3                       # was os.cpu_count(), blind to OMP_NUM_THREADS
+    assert as_threads(None) == 3  # was os.cpu_count(), blind to OMP_NUM_THREADS
     with pytest.raises(ValueError, match="num_threads"):
         as_threads(0)
     gray = np.zeros((8, 12), np.uint8)
     with pytest.raises(ValueError, match="threads"):
-        census_sgm.census_transform(gray, 0)          # 0 is not a count (None is the default)
+        census_sgm.census_transform(gray, 0)  # 0 is not a count (None is the default)
     seen = []
     monkeypatch.setattr(census_sgm, "resolve_threads", lambda n: seen.append(n) or 1)
     census_sgm.census_transform(gray)
@@ -56,11 +58,14 @@ def test_vpp_and_matchers_share_the_policy(monkeypatch):
     assert seen == [None, 2]
 
 
-@pytest.mark.parametrize("env, expected, changed", [
-    ({}, {"OMP_WAIT_POLICY": "PASSIVE"}, True),
-    ({"OMP_WAIT_POLICY": "ACTIVE"}, {"OMP_WAIT_POLICY": "ACTIVE"}, False),
-    ({"GOMP_SPINCOUNT": "1000"}, {"GOMP_SPINCOUNT": "1000"}, False),
-])
+@pytest.mark.parametrize(
+    ("env", "expected", "changed"),
+    [
+        ({}, {"OMP_WAIT_POLICY": "PASSIVE"}, True),
+        ({"OMP_WAIT_POLICY": "ACTIVE"}, {"OMP_WAIT_POLICY": "ACTIVE"}, False),
+        ({"GOMP_SPINCOUNT": "1000"}, {"GOMP_SPINCOUNT": "1000"}, False),
+    ],
+)
 def test_configure_openmp_keeps_the_users_choice(env, expected, changed):
     env = dict(env)
     assert configure_openmp(env) is changed
@@ -75,24 +80,26 @@ def _clean_env(**extra: str) -> dict[str, str]:
 
 
 def _python(code: str, **extra: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-c", code], cwd=REPO, env=_clean_env(**extra), capture_output=True,
-                          text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-c", code], cwd=REPO, env=_clean_env(**extra), capture_output=True, text=True, timeout=120
+    )
 
 
 def test_importing_the_package_leaves_the_environment_alone():
     # cv2's own loader edits LD_LIBRARY_PATH when first imported: import it before the snapshot
-    code = ("import os, cv2; before = dict(os.environ)\n"
-            "import vpp_service, vpp_service.vpp, vpp_service.matchers, vpp_service.fusion, vpp_service.cli\n"
-            "assert dict(os.environ) == before, set(os.environ.items()) ^ set(before.items())\n"
-            "print('unchanged')")
+    code = (
+        "import os, cv2; before = dict(os.environ)\n"
+        "import vpp_service, vpp_service.vpp, vpp_service.matchers, vpp_service.fusion, vpp_service.cli\n"
+        "assert dict(os.environ) == before, set(os.environ.items()) ^ set(before.items())\n"
+        "print('unchanged')"
+    )
     proc = _python(code)
     assert proc.returncode == 0 and "unchanged" in proc.stdout, proc.stderr
 
 
 def test_the_command_sets_the_policy_before_openmp_loads():
     # the command's module loads no OpenMP runtime, so main() can still set the policy
-    proc = _python("import vpp_service.cli\n"
-                   "print(any('gomp' in line for line in open('/proc/self/maps')))")
+    proc = _python("import vpp_service.cli\nprint(any('gomp' in line for line in open('/proc/self/maps')))")
     assert proc.returncode == 0 and proc.stdout.strip() == "False", proc.stderr
     proc = _python("import os; from vpp_service.cli import main; main([]); print(os.environ['OMP_WAIT_POLICY'])")
     assert proc.stdout.strip().splitlines()[-1] == "PASSIVE", proc.stderr
@@ -100,8 +107,14 @@ def test_the_command_sets_the_policy_before_openmp_loads():
 
 def _libgomp_spincount(args: list[str], **extra: str) -> str:
     """GOMP_SPINCOUNT as libgomp itself read it at load (OMP_DISPLAY_ENV=verbose), in a fresh process."""
-    proc = subprocess.run([sys.executable, *args], cwd=REPO, env=_clean_env(OMP_DISPLAY_ENV="verbose", **extra),
-                          capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, *args],
+        cwd=REPO,
+        env=_clean_env(OMP_DISPLAY_ENV="verbose", **extra),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode == 0, proc.stderr
     lines = [ln for ln in proc.stderr.splitlines() if "GOMP_SPINCOUNT" in ln]
     if not lines:
@@ -110,6 +123,6 @@ def _libgomp_spincount(args: list[str], **extra: str) -> str:
 
 
 def test_libgomp_sees_the_passive_policy_only_through_the_command():
-    assert _libgomp_spincount(["-m", "vpp_service", "run", "--check"]) == "0"     # PASSIVE: never spin
-    assert _libgomp_spincount(["-c", "import vpp_service.vpp"]) != "0"            # plain import: libgomp's default
+    assert _libgomp_spincount(["-m", "vpp_service", "run", "--check"]) == "0"  # PASSIVE: never spin
+    assert _libgomp_spincount(["-c", "import vpp_service.vpp"]) != "0"  # plain import: libgomp's default
     assert _libgomp_spincount(["-m", "vpp_service", "run", "--check"], GOMP_SPINCOUNT="1234") == "1234"

@@ -1,10 +1,12 @@
 """Zero-copy msgpack decoding (vpp_service.transport.msgview) against msgpack itself."""
+
 from __future__ import annotations
 
 import msgpack
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings, strategies as st
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from vpp_service.transport.msgview import Limits, MsgViewError, loads
 
@@ -12,7 +14,7 @@ BIG = Limits(max_bin_len=1 << 30, max_str_len=1 << 30, max_array_len=1 << 30, ma
 
 
 def _plain(v):
-    """memoryview -> bytes, recursively (what msgpack.unpackb returns)."""
+    """Memoryview -> bytes, recursively (what msgpack.unpackb returns)."""
     if isinstance(v, memoryview):
         return v.tobytes()
     if isinstance(v, list):
@@ -22,11 +24,19 @@ def _plain(v):
     return v
 
 
-scalars = (st.none() | st.booleans() | st.integers(-(2**63), 2**64 - 1)
-           | st.floats(allow_nan=False) | st.text(max_size=300) | st.binary(max_size=300))
-objects = st.recursive(scalars, lambda c: st.lists(c, max_size=20)
-                       | st.dictionaries(st.text(max_size=20) | st.binary(max_size=8), c, max_size=20),
-                       max_leaves=60)
+scalars = (
+    st.none()
+    | st.booleans()
+    | st.integers(-(2**63), 2**64 - 1)
+    | st.floats(allow_nan=False)
+    | st.text(max_size=300)
+    | st.binary(max_size=300)
+)
+objects = st.recursive(
+    scalars,
+    lambda c: st.lists(c, max_size=20) | st.dictionaries(st.text(max_size=20) | st.binary(max_size=8), c, max_size=20),
+    max_leaves=60,
+)
 
 
 @settings(max_examples=300, deadline=None)
@@ -34,19 +44,56 @@ objects = st.recursive(scalars, lambda c: st.lists(c, max_size=20)
 def test_reference_equality_with_msgpack(obj, single_float):
     try:
         payload = msgpack.packb(obj, use_bin_type=True, use_single_float=single_float)
-    except OverflowError:          # a float64 beyond float32's range, with single floats
+    except OverflowError:  # a float64 beyond float32's range, with single floats
         assume(False)
     ref = msgpack.unpackb(payload, raw=False, strict_map_key=False)
     assert _plain(loads(payload, BIG)) == ref
 
 
-@pytest.mark.parametrize("obj", [
-    0, 127, 128, 255, 256, 65535, 65536, 2**32 - 1, 2**32, 2**64 - 1,
-    -1, -32, -33, -128, -129, -32768, -32769, -(2**31), -(2**31) - 1, -(2**63),
-    "", "a" * 31, "a" * 32, "é" * 200, "x" * 70000, b"", b"\0" * 255, b"\0" * 256, b"\1" * 70000,
-    [], [1] * 15, [1] * 16, [1] * 70000, {}, {str(i): i for i in range(15)}, {str(i): i for i in range(16)},
-    1.5, -0.0, float("inf"),
-])
+@pytest.mark.parametrize(
+    "obj",
+    [
+        0,
+        127,
+        128,
+        255,
+        256,
+        65535,
+        65536,
+        2**32 - 1,
+        2**32,
+        2**64 - 1,
+        -1,
+        -32,
+        -33,
+        -128,
+        -129,
+        -32768,
+        -32769,
+        -(2**31),
+        -(2**31) - 1,
+        -(2**63),
+        "",
+        "a" * 31,
+        "a" * 32,
+        "é" * 200,
+        "x" * 70000,
+        b"",
+        b"\0" * 255,
+        b"\0" * 256,
+        b"\1" * 70000,
+        [],
+        [1] * 15,
+        [1] * 16,
+        [1] * 70000,
+        {},
+        {str(i): i for i in range(15)},
+        {str(i): i for i in range(16)},
+        1.5,
+        -0.0,
+        float("inf"),
+    ],
+)
 def test_every_length_and_width_class(obj):
     payload = msgpack.packb(obj, use_bin_type=True)
     assert _plain(loads(payload, BIG)) == msgpack.unpackb(payload, raw=False)
@@ -59,7 +106,7 @@ def test_bin_is_a_readonly_view_of_the_payload():
     assert isinstance(v, memoryview) and v.readonly
     arr = np.frombuffer(v, dtype=np.float32)
     np.testing.assert_array_equal(arr, data)
-    assert np.shares_memory(arr, np.frombuffer(payload, np.uint8))      # no copy
+    assert np.shares_memory(arr, np.frombuffer(payload, np.uint8))  # no copy
 
 
 @pytest.mark.parametrize("buf_type", [bytes, bytearray, memoryview])
@@ -69,39 +116,48 @@ def test_payload_types(buf_type):
 
 
 def test_every_truncation_is_an_error():
-    payload = msgpack.packb({"v": 1, "s": "abc", "b": b"\1" * 300, "l": [1.5, -7, None, True],
-                             "m": {"x": 2**40}}, use_bin_type=True)
+    payload = msgpack.packb(
+        {"v": 1, "s": "abc", "b": b"\1" * 300, "l": [1.5, -7, None, True], "m": {"x": 2**40}}, use_bin_type=True
+    )
     for n in range(len(payload)):
         with pytest.raises(MsgViewError, match="truncated"):
             loads(payload[:n], BIG)
 
 
-@pytest.mark.parametrize("payload,match", [
-    (msgpack.packb(1) + b"\x00", "trailing"),
-    (b"\xc1", "never used"),
-    (b"\xd4\x01\x00", "extension"),
-    (b"\xc7\x01\x05\x00", "extension"),
-    (msgpack.packb({1: 2}), "map key"),
-    (b"\x81\x91\x01\x02", "map key"),                   # {[1]: 2}
-    (b"\xa2\xff\xfe", "not UTF-8"),
-    (b"\x91" * 40 + b"\x00", "nesting"),
-])
+@pytest.mark.parametrize(
+    ("payload", "match"),
+    [
+        (msgpack.packb(1) + b"\x00", "trailing"),
+        (b"\xc1", "never used"),
+        (b"\xd4\x01\x00", "extension"),
+        (b"\xc7\x01\x05\x00", "extension"),
+        (msgpack.packb({1: 2}), "map key"),
+        (b"\x81\x91\x01\x02", "map key"),  # {[1]: 2}
+        (b"\xa2\xff\xfe", "not UTF-8"),
+        (b"\x91" * 40 + b"\x00", "nesting"),
+    ],
+)
 def test_malformed(payload, match):
     with pytest.raises(MsgViewError, match=match):
         loads(payload, BIG)
 
 
-@pytest.mark.parametrize("obj,field", [
-    (b"x" * 11, "bin length"), ("x" * 11, "string length"), ([0] * 11, "array length"),
-    ({str(i): 0 for i in range(11)}, "map length"),
-])
+@pytest.mark.parametrize(
+    ("obj", "field"),
+    [
+        (b"x" * 11, "bin length"),
+        ("x" * 11, "string length"),
+        ([0] * 11, "array length"),
+        ({str(i): 0 for i in range(11)}, "map length"),
+    ],
+)
 def test_limits(obj, field):
     lim = Limits(max_bin_len=10, max_str_len=10, max_array_len=10, max_map_len=10)
     payload = msgpack.packb(obj, use_bin_type=True)
     with pytest.raises(MsgViewError, match=field):
         loads(payload, lim)
     small = msgpack.packb(obj[:10] if not isinstance(obj, dict) else dict(list(obj.items())[:10]), use_bin_type=True)
-    loads(small, lim)                                    # at the limit: accepted
+    loads(small, lim)  # at the limit: accepted
 
 
 def test_huge_declared_length_fails_fast():
@@ -109,7 +165,7 @@ def test_huge_declared_length_fails_fast():
     with pytest.raises(MsgViewError, match="bin length"):
         loads(b"\xc6\xff\xff\xff\xff" + b"\0" * 5, Limits(10, 10, 10, 10))
     with pytest.raises(MsgViewError, match="truncated"):
-        loads(b"\xdd\x00\x00\x00\x05\x01", BIG)          # array of 5 with 1 element
+        loads(b"\xdd\x00\x00\x00\x05\x01", BIG)  # array of 5 with 1 element
 
 
 def test_non_contiguous_buffer_is_rejected():

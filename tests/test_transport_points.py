@@ -1,4 +1,5 @@
 """wire.points_to_maps (Cython scatter) against a literal NumPy reference; validation order; edge cases."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -11,15 +12,20 @@ from vpp_service.vpp import depth_to_disparity
 
 def reference_maps(uv, vals, h, w, keep, calib=None):
     """Literal version: check all coordinates, then bounds, then values; round with
-    numpy.rint; write the points sorted so that the winner of each pixel comes last."""
+    numpy.rint; write the points sorted so that the winner of each pixel comes last.
+    """
     uv = np.asarray(uv, np.float32).reshape(-1, 2)
     vals = np.asarray(vals, np.float32)
     if len(vals):
         if not np.isfinite(uv).all():
             raise wire.WireError("depth.uv: coordinates must be finite")
         x, y = uv[:, 0], uv[:, 1]
-        if (x < np.float32(-0.5)).any() or (x >= np.float32(w - 0.5)).any() \
-                or (y < np.float32(-0.5)).any() or (y >= np.float32(h - 0.5)).any():
+        if (
+            (x < np.float32(-0.5)).any()
+            or (x >= np.float32(w - 0.5)).any()
+            or (y < np.float32(-0.5)).any()
+            or (y >= np.float32(h - 0.5)).any()
+        ):
             raise wire.WireError(f"depth.uv: points must lie inside the {w}x{h} left image")
         if not (np.isfinite(vals).all() and (vals > 0).all()):
             raise wire.WireError("depth.z: values must be finite and > 0")
@@ -38,19 +44,22 @@ CALIB = Calibration(f=700.0, baseline=0.54, doffs=3.0)
 
 def random_points(seed, h, w, n, collide):
     rng = np.random.default_rng(seed)
-    if collide:   # few distinct pixels, many points each, exact .5 positions included
+    if collide:  # few distinct pixels, many points each, exact .5 positions included
         xs = rng.integers(0, w, n) + rng.choice([-0.5, -0.25, 0.0, 0.25, 0.5], n)
         ys = rng.integers(0, h, n) + rng.choice([-0.5, 0.0, 0.49], n)
         xs, ys = np.clip(xs, -0.5, w - 0.51), np.clip(ys, -0.5, h - 0.51)
     else:
         xs, ys = rng.uniform(-0.5, w - 0.5, n), rng.uniform(-0.5, h - 0.5, n)
     uv = np.stack([xs, ys], 1).astype(np.float32)
-    vals = rng.choice(np.float32([0.5, 1.0, 2.0, 7.5, 300.0]), n) if collide else \
-        rng.uniform(0.1, 400.0, n).astype(np.float32)
+    vals = (
+        rng.choice(np.float32([0.5, 1.0, 2.0, 7.5, 300.0]), n)
+        if collide
+        else rng.uniform(0.1, 400.0, n).astype(np.float32)
+    )
     return uv, vals
 
 
-@pytest.mark.parametrize("keep, calib", [("min", None), ("min", CALIB), ("max", None)])
+@pytest.mark.parametrize(("keep", "calib"), [("min", None), ("min", CALIB), ("max", None)])
 @pytest.mark.parametrize("collide", [False, True])
 @pytest.mark.parametrize("seed", range(6))
 def test_equals_reference(seed, collide, keep, calib):
@@ -58,7 +67,7 @@ def test_equals_reference(seed, collide, keep, calib):
     uv, vals = random_points(seed, h, w, 60 if collide else 400, collide)
     got = wire.points_to_maps(uv, vals, h, w, keep, calib)
     want = reference_maps(uv, vals, h, w, keep, calib)
-    np.testing.assert_array_equal(got[0], want[0])      # NaN positions equal too
+    np.testing.assert_array_equal(got[0], want[0])  # NaN positions equal too
     if want[1] is None:
         assert got[1] is None
     else:
@@ -66,9 +75,9 @@ def test_equals_reference(seed, collide, keep, calib):
 
 
 def test_disparity_left_out_where_not_positive():
-    """d = f b / z - doffs <= 0 for far points: NaN, like depth_to_disparity."""
+    """D = f b / z - doffs <= 0 for far points: NaN, like depth_to_disparity."""
     uv = np.float32([[0, 0], [1, 0], [2, 0]])
-    z = np.float32([1.0, 700 * 0.54 / 3.0, 1000.0])      # d = 375, exactly 0, < 0
+    z = np.float32([1.0, 700 * 0.54 / 3.0, 1000.0])  # d = 375, exactly 0, < 0
     depth, disp = wire.points_to_maps(uv, z, 1, 3, "min", CALIB)
     np.testing.assert_array_equal(depth, z[None])
     assert disp[0, 0] == np.float32(700 * 0.54 / 1.0 - 3.0) and np.isnan(disp[0, 1:]).all()
@@ -89,20 +98,23 @@ def test_empty():
     assert np.isnan(depth).all() and np.isnan(disp).all() and depth.shape == (3, 4)
 
 
-@pytest.mark.parametrize("uv, vals, match", [
-    ([[np.nan, 0]], [1.0], "finite"),
-    ([[0, np.inf]], [1.0], "finite"),
-    ([[-0.51, 0]], [1.0], "inside"),
-    ([[3.5, 0]], [1.0], "inside"),          # w = 4: x must be < 3.5
-    ([[0, 2.5]], [1.0], "inside"),          # h = 3
-    ([[0, 0]], [0.0], "> 0"),
-    ([[0, 0]], [-1.0], "> 0"),
-    ([[0, 0]], [np.nan], "> 0"),
-    ([[0, 0]], [np.inf], "> 0"),
-    # order of the checks over all points: coordinates, then bounds, then values
-    ([[0, 0], [9, 0], [np.nan, 0]], [-1.0, 1.0, 1.0], "finite"),
-    ([[0, 0], [9, 0]], [-1.0, 1.0], "inside"),
-])
+@pytest.mark.parametrize(
+    ("uv", "vals", "match"),
+    [
+        ([[np.nan, 0]], [1.0], "finite"),
+        ([[0, np.inf]], [1.0], "finite"),
+        ([[-0.51, 0]], [1.0], "inside"),
+        ([[3.5, 0]], [1.0], "inside"),  # w = 4: x must be < 3.5
+        ([[0, 2.5]], [1.0], "inside"),  # h = 3
+        ([[0, 0]], [0.0], "> 0"),
+        ([[0, 0]], [-1.0], "> 0"),
+        ([[0, 0]], [np.nan], "> 0"),
+        ([[0, 0]], [np.inf], "> 0"),
+        # order of the checks over all points: coordinates, then bounds, then values
+        ([[0, 0], [9, 0], [np.nan, 0]], [-1.0, 1.0, 1.0], "finite"),
+        ([[0, 0], [9, 0]], [-1.0, 1.0], "inside"),
+    ],
+)
 def test_bad_points(uv, vals, match):
     uv, vals = np.float32(uv), np.float32(vals)
     with pytest.raises(wire.WireError, match=match):

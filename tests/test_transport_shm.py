@@ -1,4 +1,5 @@
 """Shared-memory publishing over real Zenoh sessions: bytes intact, counters, fallbacks, validation."""
+
 from __future__ import annotations
 
 import time
@@ -7,15 +8,17 @@ import numpy as np
 import pytest
 import zenoh
 
+from helpers.zenoh_loopback import collect as receive  # keeps the samples (and the pool buffers they pin)
 from helpers.zenoh_loopback import zenoh_test_config
-from helpers.zenoh_loopback import collect as receive   # keeps the samples (and the pool buffers they pin)
 from vpp_service.transport.shm import MIN_SHM_BYTES, ShmPutter
 
 
 @pytest.fixture
 def pair(zenoh_endpoint):
-    with zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as a, \
-            zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as b:
+    with (
+        zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as a,
+        zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as b,
+    ):
         sub = b.declare_subscriber("shm/test", zenoh.handlers.FifoChannel(256))
         pub = a.declare_publisher("shm/test", congestion_control=zenoh.CongestionControl.BLOCK)
         deadline = time.monotonic() + 5.0
@@ -39,11 +42,14 @@ def test_large_payload_from_pool_arrives_intact(pair, kind, size):
     got = receive(sub, 1)
     assert len(got) == 1 and got[0].payload.to_bytes() == data
     # the pool serves it unless this platform has no shared memory at all
-    assert putter.stats() == ({"shm_puts": 1, "plain_puts": 0, "fallbacks": 0} if putter.active
-                              else {"shm_puts": 0, "plain_puts": 1, "fallbacks": 0})
+    assert putter.stats() == (
+        {"shm_puts": 1, "plain_puts": 0, "fallbacks": 0}
+        if putter.active
+        else {"shm_puts": 0, "plain_puts": 1, "fallbacks": 0}
+    )
 
 
-@pytest.mark.parametrize("pool_mb, size", [(16, MIN_SHM_BYTES - 1), (16, 10), (0, 1_000_000), (1, (1 << 20) + 1)])
+@pytest.mark.parametrize(("pool_mb", "size"), [(16, MIN_SHM_BYTES - 1), (16, 10), (0, 1_000_000), (1, (1 << 20) + 1)])
 def test_plain_put_when_small_disabled_or_larger_than_pool(pair, pool_mb, size):
     pub, sub = pair
     putter = ShmPutter(pool_mb)
@@ -57,14 +63,15 @@ def test_plain_put_when_small_disabled_or_larger_than_pool(pair, pool_mb, size):
 
 def test_exhausted_pool_falls_back_without_losing_messages(pair):
     """Payloads held by the subscriber pin pool buffers: a 1 MiB pool cannot serve
-    eight 300 kB messages at once; the rest go out plainly, all arrive intact."""
+    eight 300 kB messages at once; the rest go out plainly, all arrive intact.
+    """
     pub, sub = pair
     putter = ShmPutter(1)
     data = payloads([300_000] * 8, seed=1)
     held = []
     for i, d in enumerate(data):
         putter.put(pub, d)
-        held += receive(sub, 1)            # keep every sample (and its buffer) alive
+        held += receive(sub, 1)  # keep every sample (and its buffer) alive
     assert [s.payload.to_bytes() for s in held] == data
     st = putter.stats()
     assert st["shm_puts"] + st["fallbacks"] == len(data) and st["plain_puts"] == st["fallbacks"]

@@ -1,4 +1,5 @@
 """Separate-topics synchronizer: exact (seq) and approximate (stamp) matching, drops, bounds."""
+
 from __future__ import annotations
 
 import pytest
@@ -10,7 +11,7 @@ MS = 1_000_000
 
 def reference_exact(streams):
     """Plain reference: a seq is matched iff every topic has it."""
-    sets = [set(s for s, _ in v) for v in streams.values()]
+    sets = [{s for s, _ in v} for v in streams.values()]
     return sorted(set.intersection(*sets))
 
 
@@ -75,10 +76,16 @@ def test_approximate_picks_closest_candidate():
     assert sync.dropped == 1
 
 
-@pytest.mark.parametrize("kwargs,match", [
-    ({"topics": ("a",)}, "topics"), ({"topics": ("a", "a")}, "topics"), ({"mode": "fuzzy"}, "mode"),
-    ({"queue_size": 0}, "queue_size"), ({"threshold_ns": -1}, "threshold_ns"),
-])
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"topics": ("a",)}, "topics"),
+        ({"topics": ("a", "a")}, "topics"),
+        ({"mode": "fuzzy"}, "mode"),
+        ({"queue_size": 0}, "queue_size"),
+        ({"threshold_ns": -1}, "threshold_ns"),
+    ],
+)
 def test_bad_arguments(kwargs, match):
     args = {"topics": ("a", "b"), **kwargs}
     with pytest.raises(ValueError, match=match):

@@ -1,4 +1,5 @@
 """Wire format v1: round trips, the documented example, and rejection of malformed messages."""
+
 from __future__ import annotations
 
 import math
@@ -36,8 +37,9 @@ def test_frame_roundtrip_metric(c, enc):
     np.testing.assert_array_equal(out.sensor_depth, fr.sensor_depth)  # NaN positions equal too
     # metric points also give their disparity, computed at the points: the reference is the dense conversion
     c_ = fr.calib
-    np.testing.assert_array_equal(out.sparse_disparity,
-                                  depth_to_disparity(out.sensor_depth, c_.f, c_.baseline, c_.doffs))
+    np.testing.assert_array_equal(
+        out.sparse_disparity, depth_to_disparity(out.sensor_depth, c_.f, c_.baseline, c_.doffs)
+    )
     np.testing.assert_array_equal(out.gt_disparity, fr.gt_disparity)
 
 
@@ -46,7 +48,7 @@ def test_points_disparity_equals_dense_conversion(doffs):
     """Colliding points (nearest wins), points whose disparity is <= 0 (large doffs)."""
     rng = np.random.default_rng(3)
     h, w = 12, 20
-    n = 150                                    # more points than pixels: many collisions
+    n = 150  # more points than pixels: many collisions
     uv = np.stack([rng.uniform(-0.49, w - 0.51, n), rng.uniform(-0.49, h - 0.51, n)], 1).astype("<f4")
     z = rng.uniform(0.5, 30.0, n).astype("<f4")
     m = {"kind": "points", "n": n, "uv": uv.tobytes(), "z": z.tobytes()}
@@ -55,7 +57,7 @@ def test_points_disparity_equals_dense_conversion(doffs):
     ref = depth_to_disparity(sensor, calib.f, calib.baseline, calib.doffs)
     np.testing.assert_array_equal(disp, ref)
     assert np.isnan(disp).any() and np.isfinite(disp).any()
-    assert wire.decode_depth(m, h, w)[1] is None          # no calibration: metric only
+    assert wire.decode_depth(m, h, w)[1] is None  # no calibration: metric only
 
 
 @pytest.mark.parametrize("kind", ["auto", "disparity_points", "map"])
@@ -104,8 +106,15 @@ def test_documented_example_bytes():
     left = np.arange(6, dtype=np.uint8).reshape(2, 3)
     z = np.full((2, 3), np.nan, np.float32)
     z[0, 1] = 4.0
-    fr = StereoFrame(left=left, right=left[:, ::-1].copy(), calib=Calibration(f=2.0, baseline=0.5),
-                     sensor_depth=z, rig="r", seq=1, stamp_ns=2)
+    fr = StereoFrame(
+        left=left,
+        right=left[:, ::-1].copy(),
+        calib=Calibration(f=2.0, baseline=0.5),
+        sensor_depth=z,
+        rig="r",
+        seq=1,
+        stamp_ns=2,
+    )
     assert wire.encode_frame(fr).hex() == DOC_EXAMPLE_HEX
     out = wire.decode_frame(bytes.fromhex(DOC_EXAMPLE_HEX))
     np.testing.assert_array_equal(out.left, left)
@@ -118,8 +127,16 @@ def test_output_roundtrip():
     fr = make_frame()
     disp = np.full(fr.shape, 3.5, np.float32)
     disp[0, 0] = np.nan
-    res = FusionResult(frame=fr, disparity=disp, depth=disp * 2, left_vpp=fr.left, right_vpp=fr.right,
-                       timing_ms={"match": 1.5}, metrics={"bad2": 4.0}, vpp_stats={"projected": 2})
+    res = FusionResult(
+        frame=fr,
+        disparity=disp,
+        depth=disp * 2,
+        left_vpp=fr.left,
+        right_vpp=fr.right,
+        timing_ms={"match": 1.5},
+        metrics={"bad2": 4.0},
+        vpp_stats={"projected": 2},
+    )
     out = wire.decode_output(wire.encode_output(res, "disparity"))
     np.testing.assert_array_equal(out.data, disp)
     assert out.seq == 7 and out.timing_ms == {"match": 1.5} and out.metrics == {"bad2": 4.0}
@@ -132,31 +149,45 @@ def test_output_roundtrip():
         wire.encode_output(res, "bogus")
 
 
-@pytest.mark.parametrize("shape", [(1, 1), (100, 100), (200, 200)])   # bin8, bin16, bin32 data
+@pytest.mark.parametrize("shape", [(1, 1), (100, 100), (200, 200)])  # bin8, bin16, bin32 data
 def test_output_parts_are_the_packb_message(shape):
     """The parts joined are byte for byte what msgpack.packb writes for the same map."""
     fr = make_frame()
     disp = np.random.default_rng(0).random(shape, dtype=np.float32)
-    res = FusionResult(frame=fr, disparity=disp, depth=disp * 2, timing_ms={"match": 1.5, "vpp": 0.25},
-                       metrics={"bad2": 4.0}, vpp_stats={"projected": 2, "occluded": 1})
+    res = FusionResult(
+        frame=fr,
+        disparity=disp,
+        depth=disp * 2,
+        timing_ms={"match": 1.5, "vpp": 0.25},
+        metrics={"bad2": 4.0},
+        vpp_stats={"projected": 2, "occluded": 1},
+    )
     for name, arr in (("disparity", disp), ("depth", disp * 2)):
         parts = wire.encode_output_parts(res, name)
         assert len(parts) == 2 and parts[1] == arr.astype("<f4").tobytes()
-        fields = {"v": 1, "rig": fr.rig, "seq": fr.seq, "stamp_ns": fr.stamp_ns, "h": shape[0], "w": shape[1],
-                  "dtype": "f32", "calib": fr.calib.to_dict(), "timing_ms": {"match": 1.5, "vpp": 0.25}}
+        fields = {
+            "v": 1,
+            "rig": fr.rig,
+            "seq": fr.seq,
+            "stamp_ns": fr.stamp_ns,
+            "h": shape[0],
+            "w": shape[1],
+            "dtype": "f32",
+            "calib": fr.calib.to_dict(),
+            "timing_ms": {"match": 1.5, "vpp": 0.25},
+        }
         if name == "disparity":
             fields.update(metrics={"bad2": 4.0}, vpp={"projected": 2, "occluded": 1})
         want = msgpack.packb({**fields, "data": arr.astype("<f4").tobytes()}, use_bin_type=True)
         assert b"".join(parts) == wire.encode_output(res, name) == want
 
 
-@pytest.mark.parametrize("nfields, nblob", [(0, 0), (14, 255), (15, 256), (20, 65535), (70000, 65536)])
+@pytest.mark.parametrize(("nfields", "nblob"), [(0, 0), (14, 255), (15, 256), (20, 65535), (70000, 65536)])
 def test_map_parts_headers(nfields, nblob):
-    """fixmap / map16 / map32 and bin8 / bin16 / bin32 headers, as packb writes them."""
+    """Fixmap / map16 / map32 and bin8 / bin16 / bin32 headers, as packb writes them."""
     fields = {f"k{i}": i for i in range(nfields)}
     blob = bytes(range(256)) * (nblob // 256) + bytes(nblob % 256)
-    assert b"".join(wire._map_parts(fields, "data", blob)) == \
-        msgpack.packb({**fields, "data": blob}, use_bin_type=True)
+    assert b"".join(wire._map_parts(fields, "data", blob)) == msgpack.packb({**fields, "data": blob}, use_bin_type=True)
 
 
 @pytest.mark.parametrize("part", ["left", "right", "depth"])
@@ -181,52 +212,110 @@ def test_assemble_parts():
 BIG = 1 << 40
 
 
-@pytest.mark.parametrize("payload,field", [
-    (b"", "message"),
-    (raw_msg()[:-10], "message"),                                  # truncated
-    (msgpack.packb([1, 2, 3]), "message"),                          # not a map
-    (b"\xc1\x00", "message"),                                       # invalid msgpack byte
-    (raw_msg(v=2), "v"),
-    (raw_msg(v="1"), "v"),
-    (raw_msg(seq=-1), "seq"),
-    (raw_msg(seq="7"), "seq"),
-    (raw_msg(rig=5), "rig"),
-    (raw_msg(left=KeyError), "left"),
-    (raw_msg(calib={"f": math.nan, "baseline": 0.1}), "calib.f"),
-    (raw_msg(calib={"f": 100.0, "baseline": math.inf}), "calib.baseline"),
-    (raw_msg(calib={"f": -1.0, "baseline": 0.1}), "calib.f"),
-    (raw_msg(calib={"f": 100.0}), "calib.baseline"),
-    (raw_msg(calib=[1, 2]), "calib"),
-    (raw_msg(left={"h": BIG, "w": BIG, "c": 3, "dtype": "u8", "enc": "raw", "data": b""}), "left.h"),
-    (raw_msg(left={"h": 16000, "w": 16000, "c": 3, "dtype": "u8", "enc": "raw", "data": b"x"}), "left.h"),
-    (raw_msg(left={"h": 6, "w": 8, "c": 3, "dtype": "u8", "enc": "raw", "data": b"x" * 10}), "left.data"),
-    (raw_msg(left={"h": 6, "w": 8, "c": 2, "dtype": "u8", "enc": "raw", "data": b"x" * 96}), "left.c"),
-    (raw_msg(left={"h": 6, "w": 8, "c": 3, "dtype": "f32", "enc": "raw", "data": b"x" * 144}), "left.dtype"),
-    (raw_msg(left={"h": 6, "w": 8, "c": 3, "dtype": "u8", "enc": "bmp", "data": b"x" * 144}), "left.enc"),
-    (raw_msg(left={"h": 6, "w": 8, "c": 3, "dtype": "u8", "enc": "raw", "data": "text"}), "left.data"),
-    (raw_msg(left={"h": 6, "w": 8, "c": 3, "dtype": "u8", "enc": "png", "data": b"notpng" * 10}), "left."),
-    (raw_msg(left=wire.encode_image(np.zeros((4, 8, 3), np.uint8))), "right"),
-    (raw_msg(depth={"kind": "points", "n": BIG, "uv": b"", "z": b""}), "depth.n"),
-    (raw_msg(depth={"kind": "points", "n": 2, "uv": b"\0" * 8, "z": b"\0" * 8}), "depth.uv"),
-    (raw_msg(depth={"kind": "points", "n": 1, "uv": np.array([8.0, 1.0], "<f4").tobytes(),
-                    "z": np.array([1.0], "<f4").tobytes()}), "depth.uv"),
-    (raw_msg(depth={"kind": "points", "n": 1, "uv": np.array([1.0, -3.0], "<f4").tobytes(),
-                    "z": np.array([1.0], "<f4").tobytes()}), "depth.uv"),
-    (raw_msg(depth={"kind": "points", "n": 1, "uv": np.array([1.0, 1.0], "<f4").tobytes(),
-                    "z": np.array([np.nan], "<f4").tobytes()}), "depth.z"),
-    *[(raw_msg(depth={"kind": "points", "n": 3, "uv": np.array(uv, "<f4").tobytes(),
-                      "z": np.array([1.0, 2.0, 3.0], "<f4").tobytes()}), "depth.uv")
-      for uv in ([1, 1, 2, np.nan, 3, 3], [1, 1, np.inf, 2, 3, 3], [1, 1, 2, 2, -0.6, 3],
-                 [1, 1, 2, 5.5, 3, 3], [7.5, 1, 2, 2, 3, 3], [1, -np.inf, 2, 2, 3, 3])],
-    *[(raw_msg(depth={"kind": "disparity_points", "n": 3, "uv": np.array([1, 1, 2, 2, 3, 3], "<f4").tobytes(),
-                      "d": np.array(d, "<f4").tobytes()}), "depth.d")
-      for d in ([1.0, np.inf, 2.0], [1.0, 0.0, 2.0], [1.0, 2.0, -1.0], [np.nan, 1.0, 1.0])],
-    (raw_msg(depth={"kind": "map", "h": 6, "w": 8, "unit": "m", "data": b"\0" * 4}), "depth.data"),
-    (raw_msg(depth={"kind": "map", "h": 5, "w": 8, "unit": "m", "data": b"\0" * 160}), "depth.h"),
-    (raw_msg(depth={"kind": "map", "h": 6, "w": 8, "unit": "ft", "data": b"\0" * 192}), "depth.unit"),
-    (raw_msg(depth={"kind": "mesh"}), "depth.kind"),
-    (raw_msg(gt={"h": 6, "w": 8, "data": b"\0" * 3}), "gt.data"),
-])
+@pytest.mark.parametrize(
+    ("payload", "field"),
+    [
+        (b"", "message"),
+        (raw_msg()[:-10], "message"),  # truncated
+        (msgpack.packb([1, 2, 3]), "message"),  # not a map
+        (b"\xc1\x00", "message"),  # invalid msgpack byte
+        (raw_msg(v=2), "v"),
+        (raw_msg(v="1"), "v"),
+        (raw_msg(seq=-1), "seq"),
+        (raw_msg(seq="7"), "seq"),
+        (raw_msg(rig=5), "rig"),
+        (raw_msg(left=KeyError), "left"),
+        (raw_msg(calib={"f": math.nan, "baseline": 0.1}), "calib.f"),
+        (raw_msg(calib={"f": 100.0, "baseline": math.inf}), "calib.baseline"),
+        (raw_msg(calib={"f": -1.0, "baseline": 0.1}), "calib.f"),
+        (raw_msg(calib={"f": 100.0}), "calib.baseline"),
+        (raw_msg(calib=[1, 2]), "calib"),
+        (raw_msg(left={"h": BIG, "w": BIG, "c": 3, "dtype": "u8", "enc": "raw", "data": b""}), "left.h"),
+        (raw_msg(left={"h": 16000, "w": 16000, "c": 3, "dtype": "u8", "enc": "raw", "data": b"x"}), "left.h"),
+        (raw_msg(left={"h": 6, "w": 8, "c": 3, "dtype": "u8", "enc": "raw", "data": b"x" * 10}), "left.data"),
+        (raw_msg(left={"h": 6, "w": 8, "c": 2, "dtype": "u8", "enc": "raw", "data": b"x" * 96}), "left.c"),
+        (raw_msg(left={"h": 6, "w": 8, "c": 3, "dtype": "f32", "enc": "raw", "data": b"x" * 144}), "left.dtype"),
+        (raw_msg(left={"h": 6, "w": 8, "c": 3, "dtype": "u8", "enc": "bmp", "data": b"x" * 144}), "left.enc"),
+        (raw_msg(left={"h": 6, "w": 8, "c": 3, "dtype": "u8", "enc": "raw", "data": "text"}), "left.data"),
+        (raw_msg(left={"h": 6, "w": 8, "c": 3, "dtype": "u8", "enc": "png", "data": b"notpng" * 10}), "left."),
+        (raw_msg(left=wire.encode_image(np.zeros((4, 8, 3), np.uint8))), "right"),
+        (raw_msg(depth={"kind": "points", "n": BIG, "uv": b"", "z": b""}), "depth.n"),
+        (raw_msg(depth={"kind": "points", "n": 2, "uv": b"\0" * 8, "z": b"\0" * 8}), "depth.uv"),
+        (
+            raw_msg(
+                depth={
+                    "kind": "points",
+                    "n": 1,
+                    "uv": np.array([8.0, 1.0], "<f4").tobytes(),
+                    "z": np.array([1.0], "<f4").tobytes(),
+                }
+            ),
+            "depth.uv",
+        ),
+        (
+            raw_msg(
+                depth={
+                    "kind": "points",
+                    "n": 1,
+                    "uv": np.array([1.0, -3.0], "<f4").tobytes(),
+                    "z": np.array([1.0], "<f4").tobytes(),
+                }
+            ),
+            "depth.uv",
+        ),
+        (
+            raw_msg(
+                depth={
+                    "kind": "points",
+                    "n": 1,
+                    "uv": np.array([1.0, 1.0], "<f4").tobytes(),
+                    "z": np.array([np.nan], "<f4").tobytes(),
+                }
+            ),
+            "depth.z",
+        ),
+        *[
+            (
+                raw_msg(
+                    depth={
+                        "kind": "points",
+                        "n": 3,
+                        "uv": np.array(uv, "<f4").tobytes(),
+                        "z": np.array([1.0, 2.0, 3.0], "<f4").tobytes(),
+                    }
+                ),
+                "depth.uv",
+            )
+            for uv in (
+                [1, 1, 2, np.nan, 3, 3],
+                [1, 1, np.inf, 2, 3, 3],
+                [1, 1, 2, 2, -0.6, 3],
+                [1, 1, 2, 5.5, 3, 3],
+                [7.5, 1, 2, 2, 3, 3],
+                [1, -np.inf, 2, 2, 3, 3],
+            )
+        ],
+        *[
+            (
+                raw_msg(
+                    depth={
+                        "kind": "disparity_points",
+                        "n": 3,
+                        "uv": np.array([1, 1, 2, 2, 3, 3], "<f4").tobytes(),
+                        "d": np.array(d, "<f4").tobytes(),
+                    }
+                ),
+                "depth.d",
+            )
+            for d in ([1.0, np.inf, 2.0], [1.0, 0.0, 2.0], [1.0, 2.0, -1.0], [np.nan, 1.0, 1.0])
+        ],
+        (raw_msg(depth={"kind": "map", "h": 6, "w": 8, "unit": "m", "data": b"\0" * 4}), "depth.data"),
+        (raw_msg(depth={"kind": "map", "h": 5, "w": 8, "unit": "m", "data": b"\0" * 160}), "depth.h"),
+        (raw_msg(depth={"kind": "map", "h": 6, "w": 8, "unit": "ft", "data": b"\0" * 192}), "depth.unit"),
+        (raw_msg(depth={"kind": "mesh"}), "depth.kind"),
+        (raw_msg(gt={"h": 6, "w": 8, "data": b"\0" * 3}), "gt.data"),
+    ],
+)
 def test_malformed_frames_are_rejected(payload, field):
     with pytest.raises(WireError) as exc:
         wire.decode_frame(payload)
@@ -259,9 +348,15 @@ def test_unknown_keys_are_ignored():
     assert out.seq == 7
 
 
-@pytest.mark.parametrize("bad,exc", [(np.zeros((2, 2), np.float32), TypeError), ([1, 2], TypeError),
-                                     (np.zeros((2, 2, 4), np.uint8), ValueError),
-                                     (np.zeros((0, 3), np.uint8), ValueError)])
+@pytest.mark.parametrize(
+    ("bad", "exc"),
+    [
+        (np.zeros((2, 2), np.float32), TypeError),
+        ([1, 2], TypeError),
+        (np.zeros((2, 2, 4), np.uint8), ValueError),
+        (np.zeros((0, 3), np.uint8), ValueError),
+    ],
+)
 def test_encode_image_bad_input(bad, exc):
     with pytest.raises(exc, match="img"):
         wire.encode_image(bad)
@@ -276,7 +371,7 @@ def test_encode_frame_bad_input():
         wire.encode_frame(make_frame(), enc="gif")
 
 
-@pytest.mark.parametrize("prefix,rig", [("", "r"), ("vpp", ""), ("vpp/*", "r"), ("vpp", "a/b"), ("vpp", "r$")])
+@pytest.mark.parametrize(("prefix", "rig"), [("", "r"), ("vpp", ""), ("vpp/*", "r"), ("vpp", "a/b"), ("vpp", "r$")])
 def test_topic_validation(prefix, rig):
     with pytest.raises(ValueError):
         wire.topic(prefix, rig, "in/frame")

@@ -1,4 +1,5 @@
 """Tests of the depth/disparity conversions and point-cloud projection."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -22,12 +23,19 @@ def test_round_trip():
     np.testing.assert_allclose(disparity_to_depth(d, 700.0, 0.12, 2.0), z, rtol=1e-5)
 
 
-@pytest.mark.parametrize("kwargs,exc", [(dict(f=0.0), ValueError), (dict(baseline=-1.0), ValueError),
-                                        (dict(f="a"), TypeError), (dict(doffs=np.nan), ValueError)])
+@pytest.mark.parametrize(
+    ("kwargs", "exc"),
+    [
+        (dict(f=0.0), ValueError),
+        (dict(baseline=-1.0), ValueError),
+        (dict(f="a"), TypeError),
+        (dict(doffs=np.nan), ValueError),
+    ],
+)
 def test_bad_calibration(kwargs, exc):
     args = dict(f=1.0, baseline=1.0, doffs=0.0)
     args.update(kwargs)
-    with pytest.raises(exc, match=list(kwargs)[0]):
+    with pytest.raises(exc, match=next(iter(kwargs))):
         depth_to_disparity(np.ones((2, 2), np.float32), **args)
 
 
@@ -75,13 +83,16 @@ def test_nearest_point_wins():
     assert not points_to_depth_map(np.zeros((0, 3)), K, np.eye(4), (10, 10)).any()
 
 
-@pytest.mark.parametrize("args,exc", [
-    ((np.zeros((3, 2)), np.eye(3), np.eye(4), (5, 5)), ValueError),
-    ((np.zeros((3, 3)), np.eye(4), np.eye(4), (5, 5)), ValueError),
-    ((np.zeros((3, 3)), np.eye(3), np.eye(3), (5, 5)), ValueError),
-    ((np.zeros((3, 3)), np.eye(3), np.eye(4), (0, 5)), ValueError),
-    (("pts", np.eye(3), np.eye(4), (5, 5)), TypeError),
-])
+@pytest.mark.parametrize(
+    ("args", "exc"),
+    [
+        ((np.zeros((3, 2)), np.eye(3), np.eye(4), (5, 5)), ValueError),
+        ((np.zeros((3, 3)), np.eye(4), np.eye(4), (5, 5)), ValueError),
+        ((np.zeros((3, 3)), np.eye(3), np.eye(3), (5, 5)), ValueError),
+        ((np.zeros((3, 3)), np.eye(3), np.eye(4), (0, 5)), ValueError),
+        (("pts", np.eye(3), np.eye(4), (5, 5)), TypeError),
+    ],
+)
 def test_points_bad_input(args, exc):
     with pytest.raises(exc):
         points_to_depth_map(*args)

@@ -1,14 +1,15 @@
 """Tests of vpp_service.vpp.project: reference equality, hand-checkable cases, bad input, determinism."""
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
-
-from vpp_service.vpp import VPPConfig, backend, project
-from vpp_service.vpp.rng import pattern_bytes
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from vpp_reference import ref_project
+from vpp_service.vpp import VPPConfig, backend, project
+from vpp_service.vpp.rng import pattern_bytes
 
 
 def make_case(rng: np.random.Generator, H: int, W: int, C: int, density: float):
@@ -20,14 +21,14 @@ def make_case(rng: np.random.Generator, H: int, W: int, C: int, density: float):
     disp = np.zeros((H, W), np.float32)
     m = rng.random((H, W)) < density
     disp[m] = rng.uniform(0.2, W * 0.6, m.sum()).astype(np.float32)
-    k = rng.random((H, W)) < density * 0.3       # integer disparities
+    k = rng.random((H, W)) < density * 0.3  # integer disparities
     disp[k] = rng.integers(1, max(2, W // 2), k.sum()).astype(np.float32)
-    for _ in range(3):                            # colliding pairs (same warped cell)
+    for _ in range(3):  # colliding pairs (same warped cell)
         y, x1 = rng.integers(0, H), rng.integers(0, W - 8)
         d1 = float(rng.integers(2, 6))
         disp[y, x1], disp[y, x1 + 4] = d1, d1 + 4.2
     y = rng.integers(0, H)
-    disp[y, 1] = 3.7                              # left-border point
+    disp[y, 1] = 3.7  # left-border point
     bad = rng.integers(0, H * W, 4)
     disp.reshape(-1)[bad] = np.array([-2.0, np.inf, np.nan, W + 1.0], np.float32)
     if C == 1 and rng.random() < 0.5:
@@ -59,7 +60,7 @@ def sweep_cases(n: int = 44):
     return cases
 
 
-@pytest.mark.parametrize("i,cfg,shape,density", sweep_cases(), ids=lambda v: None)
+@pytest.mark.parametrize(("i", "cfg", "shape", "density"), sweep_cases(), ids=lambda v: None)
 def test_reference_equality(i, cfg, shape, density):
     rng = np.random.default_rng(i)
     left, right, disp = make_case(rng, *shape, density)
@@ -77,6 +78,7 @@ def test_reference_equality(i, cfg, shape, density):
 def table_builder(request):
     """Run with each builder of the histogram window tables this CPU can run."""
     from vpp_service.vpp import _kernel
+
     if not _kernel.tables_use_avx2(request.param) and request.param:
         _kernel.tables_use_avx2(backend.AVX2)
         pytest.skip("no AVX2 on this CPU / platform")
@@ -84,8 +86,9 @@ def table_builder(request):
     _kernel.tables_use_avx2(backend.AVX2)
 
 
-@pytest.mark.parametrize("shape,search", [((12, 97, 3), (64, 3)), ((9, 70, 1), (16, 1)),
-                                          ((7, 33, 3), (7, 3)), ((10, 131, 3), (100, 5))])
+@pytest.mark.parametrize(
+    ("shape", "search"), [((12, 97, 3), (64, 3)), ((9, 70, 1), (16, 1)), ((7, 33, 3), (7, 3)), ((10, 131, 3), (100, 5))]
+)
 def test_histogram_tables_both_builders_match_reference(table_builder, shape, search):
     """Wider than the 32-column blocks (full, partial last block), both builders."""
     rng = np.random.default_rng(shape[1])
@@ -103,8 +106,7 @@ def test_histogram_all_bins_filled_matches_reference():
     right = rng.integers(0, 256, (9, 140), dtype=np.uint8)
     disp = np.zeros((9, 140), np.float32)
     disp[4, 60:80:5] = [3.0, 10.5, 20.25, 7.0]
-    cfg = VPPConfig(pattern="histogram", patch=3, search_width=128, search_height=3,
-                    occlusion="off", alpha=1.0)
+    cfg = VPPConfig(pattern="histogram", patch=3, search_width=128, search_height=3, occlusion="off", alpha=1.0)
     res = project(left, right, disp, cfg)
     rl, rr, _ = ref_project(left, right, disp, cfg)
     np.testing.assert_array_equal(res.left, rl)
@@ -140,7 +142,7 @@ def test_splat_weights_at_d_5_25(gray_pair):
     left = np.full((9, 30, 3), 0, np.uint8)
     right = np.full((9, 30, 3), 0, np.uint8)
     disp = np.zeros((9, 30), np.float32)
-    disp[4, 20] = 5.25                      # x' = 14.75: col 14 gets 0.25, col 15 gets 0.75
+    disp[4, 20] = 5.25  # x' = 14.75: col 14 gets 0.25, col 15 gets 0.75
     res = project(left, right, disp, VPPConfig(patch=1, alpha=1.0, occlusion="off"), seed=3)
     a = pattern_bytes(3, 20, 4, 3).astype(np.float64)
     np.testing.assert_array_equal(res.left[4, 20], a.astype(np.uint8))
@@ -165,19 +167,17 @@ def test_histogram_flat_gray_picks_255(gray_pair):
     left, right = gray_pair
     disp = np.zeros(left.shape, np.float32)
     disp[4, 15] = 4.0
-    res = project(left, right, disp, VPPConfig(pattern="histogram", patch=1, alpha=1.0,
-                                               occlusion="off"))
+    res = project(left, right, disp, VPPConfig(pattern="histogram", patch=1, alpha=1.0, occlusion="off"))
     assert res.left[4, 15] == 255 and res.right[4, 11] == 255
 
 
 def test_histogram_picks_widest_gap_centre():
     left = np.zeros((3, 64), np.uint8)
-    left[:, ::2] = 255                       # bins 0 and 255 filled: centre 127
+    left[:, ::2] = 255  # bins 0 and 255 filled: centre 127
     right = left.copy()
     disp = np.zeros((3, 64), np.float32)
     disp[1, 30] = 2.0
-    res = project(left, right, disp, VPPConfig(pattern="histogram", patch=1, alpha=1.0,
-                                               occlusion="off"))
+    res = project(left, right, disp, VPPConfig(pattern="histogram", patch=1, alpha=1.0, occlusion="off"))
     assert res.left[1, 30] == 127
 
 
@@ -185,10 +185,10 @@ def test_collision_is_occluded_and_fgd_copies_right_content():
     H, W = 11, 60
     left = np.full((H, W), 50, np.uint8)
     right = np.full((H, W), 50, np.uint8)
-    right[:, 20:24] = 200                    # foreground texture in R
+    right[:, 20:24] = 200  # foreground texture in R
     disp = np.zeros((H, W), np.float32)
-    disp[5, 30] = 8.0                        # background: x' = 22
-    disp[5, 40] = 18.0                       # foreground: x' = 22, same cell, larger d
+    disp[5, 30] = 8.0  # background: x' = 22
+    disp[5, 40] = 18.0  # foreground: x' = 22, same cell, larger d
     occ_cfg = VPPConfig(patch=1, alpha=1.0, occlusion="fgd")
     res = project(left, right, disp, occ_cfg)
     assert res.occluded[5, 30] and not res.occluded[5, 40]
@@ -204,7 +204,7 @@ def test_left_border_point_still_paints_left():
     left = np.zeros((7, 30, 3), np.uint8)
     right = np.zeros((7, 30, 3), np.uint8)
     disp = np.zeros((7, 30), np.float32)
-    disp[3, 2] = 6.5                         # x' = -4.5
+    disp[3, 2] = 6.5  # x' = -4.5
     res = project(left, right, disp, VPPConfig(alpha=1.0, occlusion="fgd"), seed=9)
     assert res.stats.out_of_bounds == 1 and res.stats.projected == 1
     assert (res.left[2:5, 1:4] != 0).any()
@@ -253,28 +253,37 @@ def test_patch_larger_than_image():
 
 
 # ------------------------------------------------------------ bad input
-@pytest.mark.parametrize("kwargs,exc,word", [
-    (dict(left=np.zeros((4, 5), np.uint16)), TypeError, "left"),
-    (dict(right=np.zeros((4, 6), np.uint8)), ValueError, "shape"),
-    (dict(left=np.zeros((4, 5, 2), np.uint8), right=np.zeros((4, 5, 2), np.uint8)), ValueError, "left"),
-    (dict(left=np.zeros((0, 5), np.uint8), right=np.zeros((0, 5), np.uint8)), ValueError, "left"),
-    (dict(disparity=np.zeros((4, 5), np.int32)), TypeError, "disparity"),
-    (dict(disparity=np.zeros((4, 6), np.float32)), ValueError, "disparity"),
-    (dict(disparity=[[0.0]]), TypeError, "disparity"),
-    (dict(left="x"), TypeError, "left"),
-    (dict(config={"patch": 3}), TypeError, "config"),
-    (dict(seed=-1), ValueError, "seed"),
-    (dict(seed=1.5), TypeError, "seed"),
-    (dict(num_threads=0), ValueError, "num_threads"),
-])
+@pytest.mark.parametrize(
+    ("kwargs", "exc", "word"),
+    [
+        (dict(left=np.zeros((4, 5), np.uint16)), TypeError, "left"),
+        (dict(right=np.zeros((4, 6), np.uint8)), ValueError, "shape"),
+        (dict(left=np.zeros((4, 5, 2), np.uint8), right=np.zeros((4, 5, 2), np.uint8)), ValueError, "left"),
+        (dict(left=np.zeros((0, 5), np.uint8), right=np.zeros((0, 5), np.uint8)), ValueError, "left"),
+        (dict(disparity=np.zeros((4, 5), np.int32)), TypeError, "disparity"),
+        (dict(disparity=np.zeros((4, 6), np.float32)), ValueError, "disparity"),
+        (dict(disparity=[[0.0]]), TypeError, "disparity"),
+        (dict(left="x"), TypeError, "left"),
+        (dict(config={"patch": 3}), TypeError, "config"),
+        (dict(seed=-1), ValueError, "seed"),
+        (dict(seed=1.5), TypeError, "seed"),
+        (dict(num_threads=0), ValueError, "num_threads"),
+    ],
+)
 def test_bad_input(kwargs, exc, word):
-    args = dict(left=np.zeros((4, 5), np.uint8), right=np.zeros((4, 5), np.uint8),
-                disparity=np.zeros((4, 5), np.float32))
+    args = dict(
+        left=np.zeros((4, 5), np.uint8), right=np.zeros((4, 5), np.uint8), disparity=np.zeros((4, 5), np.float32)
+    )
     args.update(kwargs)
     extra = {k: args.pop(k) for k in ("config", "seed", "num_threads") if k in args}
     with pytest.raises(exc, match=word):
-        project(args["left"], args["right"], args["disparity"], *(
-            [extra.pop("config")] if "config" in extra else []), **extra)
+        project(
+            args["left"],
+            args["right"],
+            args["disparity"],
+            *([extra.pop("config")] if "config" in extra else []),
+            **extra,
+        )
 
 
 # ------------------------------------------------------------ determinism
@@ -287,9 +296,15 @@ def det_case():
     return left, right, disp
 
 
-@pytest.mark.parametrize("cfg", [VPPConfig(), VPPConfig(pattern="histogram"),
-                                 VPPConfig(pattern="histogram", uniform_patch=True, patch=5),
-                                 VPPConfig(adaptive_patch="distance", patch=5)])
+@pytest.mark.parametrize(
+    "cfg",
+    [
+        VPPConfig(),
+        VPPConfig(pattern="histogram"),
+        VPPConfig(pattern="histogram", uniform_patch=True, patch=5),
+        VPPConfig(adaptive_patch="distance", patch=5),
+    ],
+)
 def test_thread_count_does_not_change_bytes(det_case, cfg):
     left, right, disp = det_case
     a = project(left, right, disp, cfg, seed=3, num_threads=1)
@@ -311,23 +326,48 @@ def test_seed_controls_random_pattern(det_case):
 
 # ------------------------------------------------------------ fuzz
 @settings(max_examples=60, deadline=None)
-@given(H=st.integers(1, 12), W=st.integers(1, 40), C=st.sampled_from([0, 1, 3]),
-       patch=st.sampled_from([1, 3, 5, 7]), pattern=st.sampled_from(["random", "histogram"]),
-       occ=st.sampled_from(["fgd", "no", "bkgd", "off"]),
-       adaptive=st.sampled_from([None, "distance", "bilateral"]),
-       uniform=st.booleans(), splat=st.booleans(), seed=st.integers(0, 2 ** 64 - 1),
-       data=st.data())
+@given(
+    H=st.integers(1, 12),
+    W=st.integers(1, 40),
+    C=st.sampled_from([0, 1, 3]),
+    patch=st.sampled_from([1, 3, 5, 7]),
+    pattern=st.sampled_from(["random", "histogram"]),
+    occ=st.sampled_from(["fgd", "no", "bkgd", "off"]),
+    adaptive=st.sampled_from([None, "distance", "bilateral"]),
+    uniform=st.booleans(),
+    splat=st.booleans(),
+    seed=st.integers(0, 2**64 - 1),
+    data=st.data(),
+)
 def test_fuzz_no_crash(H, W, C, patch, pattern, occ, adaptive, uniform, splat, seed, data):
     shape = (H, W) if C == 0 else (H, W, C)
-    vals = st.sampled_from([0.0, 0.0, 0.0, -1.0, 0.5, 1.0, 2.5, 7.25, 1e30, float("nan"),
-                            float("inf"), float(W), float(W) - 0.01, 3.0, 11.9])
+    vals = st.sampled_from(
+        [
+            0.0,
+            0.0,
+            0.0,
+            -1.0,
+            0.5,
+            1.0,
+            2.5,
+            7.25,
+            1e30,
+            float("nan"),
+            float("inf"),
+            float(W),
+            float(W) - 0.01,
+            3.0,
+            11.9,
+        ]
+    )
     flat = data.draw(st.lists(vals, min_size=H * W, max_size=H * W))
     disp = np.array(flat, np.float32).reshape(H, W)
     rng = np.random.default_rng(seed % 1000)
     left = rng.integers(0, 256, shape, dtype=np.uint8)
     right = rng.integers(0, 256, shape, dtype=np.uint8)
-    cfg = VPPConfig(patch=patch, pattern=pattern, occlusion=occ, adaptive_patch=adaptive,
-                    uniform_patch=uniform, splat=splat)
+    cfg = VPPConfig(
+        patch=patch, pattern=pattern, occlusion=occ, adaptive_patch=adaptive, uniform_patch=uniform, splat=splat
+    )
     res = project(left, right, disp, cfg, seed=seed)
     assert res.left.shape == shape and res.right.shape == shape
     s = res.stats
@@ -351,7 +391,7 @@ def _occupancies(seed: int, n: int):
         else:
             occ = np.ones(256, bool)
             s = rng.integers(0, 256)
-            occ[s:s + rng.integers(0, 200)] = False
+            occ[s : s + rng.integers(0, 200)] = False
         yield occ
 
 
@@ -359,6 +399,7 @@ def _occupancies(seed: int, n: int):
 def test_hist_pick_bits_matches_reference(seed):
     from vpp_reference import hist_pick
     from vpp_service.vpp import _kernel
+
     edge = [np.zeros(256, bool), np.ones(256, bool)]
     for k in (0, 1, 63, 64, 127, 128, 191, 192, 255):
         one = np.zeros(256, bool)
@@ -372,5 +413,6 @@ def test_hist_pick_bits_matches_reference(seed):
 
 def test_hist_pick_bits_rejects_bad_length():
     from vpp_service.vpp import _kernel
+
     with pytest.raises(ValueError, match="occupancy"):
         _kernel.hist_pick_bits(np.zeros(3, np.uint64))

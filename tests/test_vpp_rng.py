@@ -1,4 +1,5 @@
 """The seeded pattern table (vpp_service.vpp.rng) and its compiled builder."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -46,7 +47,7 @@ def test_pattern_bytes_reference_equality():
     assert got.shape == (6, 3)
     for (x, y), v in zip(zip(xs, ys), got):
         i = (int(x) + int(y) * rng.ROW_STEP) % rng.TABLE_SIZE
-        np.testing.assert_array_equal(v, t[3 * i:3 * i + 3])
+        np.testing.assert_array_equal(v, t[3 * i : 3 * i + 3])
 
 
 def test_values_are_uniform_bytes():
@@ -54,13 +55,14 @@ def test_values_are_uniform_bytes():
     counts = np.bincount(t, minlength=256)
     expected = t.size / 256
     chi2 = float(((counts - expected) ** 2 / expected).sum())
-    assert chi2 < 400          # 255 degrees of freedom: p ~ 1e-8 at 400
+    assert chi2 < 400  # 255 degrees of freedom: p ~ 1e-8 at 400
     assert len(np.unique(rng.pattern_bytes(0, np.arange(2000), 0, 3), axis=0)) == 2000
 
 
 def test_no_repeat_within_rows_and_near_rows():
     """Two pixels share a table entry only if dx + dy * ROW_STEP = 0 (mod 2**16):
-    never within a row, never for |dy| <= 16 and |dx| < 1000, nowhere within 274 px."""
+    never within a row, never for |dy| <= 16 and |dx| < 1000, nowhere within 274 px.
+    """
     N, M = rng.TABLE_SIZE, rng.ROW_STEP
     assert M % 2 == 1
     for dy in range(1, 17):
@@ -74,7 +76,7 @@ def test_no_repeat_within_rows_and_near_rows():
 
 
 @pytest.mark.parametrize("build", BUILDS, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
-@pytest.mark.parametrize("channels,hmax", [(1, 0), (3, 1), (3, 4), (1, 7)])
+@pytest.mark.parametrize(("channels", "hmax"), [(1, 0), (3, 1), (3, 4), (1, 7)])
 def test_compiled_table_equals_reference(build, channels, hmax):
     seed = 987654321
     pad = build.table_padding(channels, hmax)
@@ -82,8 +84,8 @@ def test_compiled_table_equals_reference(build, channels, hmax):
     out = np.full(rng.TABLE_SIZE * channels + pad, 77, np.uint8)
     build.fill_pattern_table(seed, out, channels)
     ref = rng.pattern_table(seed, channels)
-    np.testing.assert_array_equal(out[:ref.size], ref)
-    np.testing.assert_array_equal(out[ref.size:], ref[:pad])     # padding repeats the start
+    np.testing.assert_array_equal(out[: ref.size], ref)
+    np.testing.assert_array_equal(out[ref.size :], ref[:pad])  # padding repeats the start
 
 
 @pytest.mark.parametrize("build", BUILDS, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
@@ -96,18 +98,21 @@ def test_kernel_table_cached_and_padded():
     assert a is rng.kernel_table(3, 3, 1)
     assert not a.flags.writeable
     assert a.size == rng.TABLE_SIZE * 3 + backend.sweep.table_padding(3, 1)
-    np.testing.assert_array_equal(a[:rng.TABLE_SIZE * 3], rng.pattern_table(3, 3))
+    np.testing.assert_array_equal(a[: rng.TABLE_SIZE * 3], rng.pattern_table(3, 3))
 
 
-@pytest.mark.parametrize("args,exc,match", [
-    ((-1, 3, 1), ValueError, "seed"),
-    ((2**64, 3, 1), ValueError, "seed"),
-    ((1.5, 3, 1), TypeError, "seed"),
-    ((0, 0, 1), ValueError, "channels"),
-    ((0, True, 1), ValueError, "channels"),
-    ((0, 3, -1), ValueError, "hmax"),
-    ((0, 3, 1.0), ValueError, "hmax"),
-])
+@pytest.mark.parametrize(
+    ("args", "exc", "match"),
+    [
+        ((-1, 3, 1), ValueError, "seed"),
+        ((2**64, 3, 1), ValueError, "seed"),
+        ((1.5, 3, 1), TypeError, "seed"),
+        ((0, 0, 1), ValueError, "channels"),
+        ((0, True, 1), ValueError, "channels"),
+        ((0, 3, -1), ValueError, "hmax"),
+        ((0, 3, 1.0), ValueError, "hmax"),
+    ],
+)
 def test_kernel_table_rejects_bad_arguments(args, exc, match):
     with pytest.raises(exc, match=match):
         rng.kernel_table(*args)
@@ -124,6 +129,23 @@ def test_sweep_rejects_short_table():
     d = np.zeros((4, 8), np.float32)
     img = np.zeros((4, 8, 3), np.uint8)
     with pytest.raises(ValueError, match="pattern table"):
-        backend.sweep.sweep_kernel(d, np.zeros((4, 8), np.uint8), False, 1, 1, penalty_table((1, 1), 2.0, 0.4375),
-                                   1.0, img, img, img.copy(), img.copy(), True, 1, 0.4, True, 0,
-                                   np.zeros(rng.TABLE_SIZE * 3, np.uint8), 1)
+        backend.sweep.sweep_kernel(
+            d,
+            np.zeros((4, 8), np.uint8),
+            False,
+            1,
+            1,
+            penalty_table((1, 1), 2.0, 0.4375),
+            1.0,
+            img,
+            img,
+            img.copy(),
+            img.copy(),
+            True,
+            1,
+            0.4,
+            True,
+            0,
+            np.zeros(rng.TABLE_SIZE * 3, np.uint8),
+            1,
+        )

@@ -6,15 +6,15 @@ These cases are larger than test_vpp_project's sweep so that rows split into
 several chunks per thread, spans reach the 16-byte SIMD paths and the fallbacks
 (wide patches, row ends, left-border matches), and maps use NaN as "no point".
 """
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from vpp_service.vpp import VPPConfig, backend, detect_occlusions, project
-
 from test_vpp_project import make_case
 from vpp_reference import ref_occlusions, ref_project
+from vpp_service.vpp import VPPConfig, backend, detect_occlusions, project
 
 BUILDS = {"portable": backend.portable, "avx2": backend.avx2_build()}
 
@@ -38,16 +38,16 @@ def test_builds_report_themselves():
 
 CASES = [
     # (patch, C, splat, occlusion, alpha, window (x, y), t, shape (H, W), density)
-    (3, 3, True, "fgd", 0.4, (9, 7), 1.0, (41, 97), 0.05),      # the default, several chunks
+    (3, 3, True, "fgd", 0.4, (9, 7), 1.0, (41, 97), 0.05),  # the default, several chunks
     (3, 1, True, "fgd", 0.4, (9, 7), 1.0, (37, 80), 0.10),
     (1, 3, True, "no", 0.7, (9, 7), 1.0, (30, 64), 0.20),
-    (5, 3, True, "bkgd", 0.4, (9, 7), 0.0, (33, 90), 0.08),     # (K+1)*C > 16: two-span path
+    (5, 3, True, "bkgd", 0.4, (9, 7), 0.0, (33, 90), 0.08),  # (K+1)*C > 16: two-span path
     (5, 1, False, "fgd", 1.0, (3, 3), 1.0, (29, 70), 0.10),
     (7, 3, True, "off", 0.2, (9, 7), 1.0, (26, 60), 0.05),
     (9, 1, True, "fgd", 0.5, (15, 11), 3.0, (45, 75), 0.04),
     (3, 3, False, "no", 0.4, (1, 1), 1.0, (21, 50), 0.30),
-    (3, 3, True, "fgd", 0.0, (9, 7), 1.0, (24, 48), 0.10),      # alpha 0: nothing changes
-    (3, 3, True, "fgd", 1.0, (5, 9), 0.5, (38, 66), 0.15),      # alpha 1: w = 65536
+    (3, 3, True, "fgd", 0.0, (9, 7), 1.0, (24, 48), 0.10),  # alpha 0: nothing changes
+    (3, 3, True, "fgd", 1.0, (5, 9), 0.5, (38, 66), 0.15),  # alpha 1: w = 65536
 ]
 
 
@@ -65,8 +65,9 @@ def case_arrays(i, shape, C, density, nan_background):
 @pytest.mark.parametrize("nan_background", [False, True])
 def test_sweep_matches_reference(build, i, nan_background):
     patch, C, splat, occ, alpha, window, t, shape, density = CASES[i]
-    cfg = VPPConfig(patch=patch, splat=splat, occlusion=occ, alpha=alpha,
-                    occ_window_x=window[0], occ_window_y=window[1], occ_t=t)
+    cfg = VPPConfig(
+        patch=patch, splat=splat, occlusion=occ, alpha=alpha, occ_window_x=window[0], occ_window_y=window[1], occ_t=t
+    )
     left, right, disp = case_arrays(i, shape, C, density, nan_background)
     rl, rr, rocc = ref_project(left, right, np.nan_to_num(disp, nan=0.0), cfg, seed=i)
     for nt in (1, 2, 3):
@@ -85,19 +86,24 @@ def expected_stats(disp, occluded, occ):
         valid = given & (disp > 0) & (disp < disp.shape[1])
         oob = valid & (np.arange(disp.shape[1])[None, :] - disp.astype(np.float64) < 0)
     n_valid = int(valid.sum())
-    return {"given": int(given.sum()), "invalid": int(given.sum()) - n_valid,
-            "out_of_bounds": int(oob.sum()), "occluded": occluded,
-            "projected": n_valid - occluded if occ in ("no", "fgd") else n_valid}
+    return {
+        "given": int(given.sum()),
+        "invalid": int(given.sum()) - n_valid,
+        "out_of_bounds": int(oob.sum()),
+        "occluded": occluded,
+        "projected": n_valid - occluded if occ in ("no", "fgd") else n_valid,
+    }
 
 
-@pytest.mark.parametrize("window,lam,gamma,t", [((9, 7), 2.0, 0.4375, 1.0), ((3, 5), 0.0, 1.0, 0.0),
-                                                 ((21, 1), 1.3, 0.1, 2.5), ((1, 13), 5.0, 0.9, 0.25)])
+@pytest.mark.parametrize(
+    ("window", "lam", "gamma", "t"),
+    [((9, 7), 2.0, 0.4375, 1.0), ((3, 5), 0.0, 1.0, 0.0), ((21, 1), 1.3, 0.1, 2.5), ((1, 13), 5.0, 0.9, 0.25)],
+)
 def test_detect_matches_reference_many_chunks(build, window, lam, gamma, t):
     rng = np.random.default_rng(5)
     H, W = 64, 120
-    disp = np.where(rng.random((H, W)) < 0.15,
-                    rng.uniform(0.5, 60, (H, W)), 0).astype(np.float32)
-    disp[10:20, 30:50] = np.where(disp[10:20, 30:50] > 0, 70.0, 0)   # a near block: occludes
+    disp = np.where(rng.random((H, W)) < 0.15, rng.uniform(0.5, 60, (H, W)), 0).astype(np.float32)
+    disp[10:20, 30:50] = np.where(disp[10:20, 30:50] > 0, 70.0, 0)  # a near block: occludes
     ref = ref_occlusions(disp, window, lam, gamma, t)
     for nt in (1, 2, 3):
         got = detect_occlusions(disp, window=window, lam=lam, gamma=gamma, t=t, num_threads=nt)
@@ -106,19 +112,20 @@ def test_detect_matches_reference_many_chunks(build, window, lam, gamma, t):
 
 def test_points_at_both_row_ends_and_past_the_left_border(build):
     """Patches clipped at column 0 and W-1 in L, matches left of R's column 0 and
-    splats that straddle R's last column (the SIMD fast paths must step aside)."""
+    splats that straddle R's last column (the SIMD fast paths must step aside).
+    """
     H, W = 9, 40
     rng = np.random.default_rng(2)
     left = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
     right = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
     disp = np.zeros((H, W), np.float32)
-    disp[1, 0] = 0.5          # x' = -0.5: left border, L patch clipped at column 0
+    disp[1, 0] = 0.5  # x' = -0.5: left border, L patch clipped at column 0
     disp[2, 1] = 1.25
-    disp[3, W - 1] = 0.75     # L patch clipped at W-1, R splat into columns W-2, W-1
+    disp[3, W - 1] = 0.75  # L patch clipped at W-1, R splat into columns W-2, W-1
     disp[4, W - 2] = 1.5
-    disp[5, 5] = 20.0         # x' = -15
+    disp[5, 5] = 20.0  # x' = -15
     disp[6, W - 1] = 36.3
-    disp[7, 20] = 3.0         # integer d: one column per patch pixel
+    disp[7, 20] = 3.0  # integer d: one column per patch pixel
     cfg = VPPConfig(patch=5, alpha=0.6, occlusion="off")
     for c in (3, 1):
         lc, rc = left[:, :, :c], right[:, :, :c]
@@ -134,7 +141,7 @@ def test_backend_falls_back_to_the_portable_build(monkeypatch):
 
     import vpp_service.vpp as vpp_pkg
 
-    monkeypatch.setitem(sys.modules, "vpp_service.vpp._sweep_avx2", None)   # "not built"
+    monkeypatch.setitem(sys.modules, "vpp_service.vpp._sweep_avx2", None)  # "not built"
     monkeypatch.delattr(vpp_pkg, "_sweep_avx2", raising=False)
     assert backend.avx2_build() is None
     assert backend._choose() is backend.portable
@@ -146,15 +153,23 @@ def test_backend_falls_back_to_the_portable_build(monkeypatch):
 def test_pooled_buffers_are_reset_between_calls(build):
     """Work buffers are kept between calls: a call after a wider image, a taller
     occlusion window, occlusion off, or after release_scratch() gives the bytes
-    of the reference (no state or capacity leaks from the previous call)."""
-    order = [0, 6, 5, 0, 7, 1, 6, 0]           # default, tall window, occlusion off, ...
+    of the reference (no state or capacity leaks from the previous call).
+    """
+    order = [0, 6, 5, 0, 7, 1, 6, 0]  # default, tall window, occlusion off, ...
     for k, i in enumerate(order):
         if k == 4:
             assert backend.release_scratch() >= 1
-            assert backend.release_scratch() == 0   # nothing left to free
+            assert backend.release_scratch() == 0  # nothing left to free
         patch, C, splat, occ, alpha, window, t, shape, density = CASES[i]
-        cfg = VPPConfig(patch=patch, splat=splat, occlusion=occ, alpha=alpha,
-                        occ_window_x=window[0], occ_window_y=window[1], occ_t=t)
+        cfg = VPPConfig(
+            patch=patch,
+            splat=splat,
+            occlusion=occ,
+            alpha=alpha,
+            occ_window_x=window[0],
+            occ_window_y=window[1],
+            occ_t=t,
+        )
         left, right, disp = case_arrays(i, shape, C, density, False)
         rl, rr, rocc = ref_project(left, right, disp, cfg, seed=i)
         res = project(left, right, disp, cfg, seed=i, num_threads=2)
@@ -166,17 +181,17 @@ def test_pooled_buffers_are_reset_between_calls(build):
 def _ordered_disparities(kind, rng, H, W):
     """Dense maps whose paint order exercises each path of the band sort."""
     m = rng.random((H, W)) < 0.5
-    if kind == "two_values":          # two crowded buckets: the stable sort of a bucket > 32
+    if kind == "two_values":  # two crowded buckets: the stable sort of a bucket > 32
         d = np.where(rng.random((H, W)) < 0.5, 3.0, 7.25)
-    elif kind == "constant":          # one d: gather order is already paint order
+    elif kind == "constant":  # one d: gather order is already paint order
         d = np.full((H, W), 4.5)
-    elif kind == "decreasing":        # d falls along each row: every bucket reverses
+    elif kind == "decreasing":  # d falls along each row: every bucket reverses
         d = np.broadcast_to(30.0 - 25.0 * np.arange(W) / W, (H, W))
-    elif kind == "few_ties":          # integers 1..5: ties broken by row, then column
+    elif kind == "few_ties":  # integers 1..5: ties broken by row, then column
         d = rng.integers(1, 6, (H, W)).astype(np.float64)
-    elif kind == "small_ties":        # ~2 points per value: ties inside small buckets
+    elif kind == "small_ties":  # ~2 points per value: ties inside small buckets
         d = rng.integers(8, 800, (H, W)) / 8.0
-    else:                             # sparse: bands of <= 24 points (insertion sort only)
+    else:  # sparse: bands of <= 24 points (insertion sort only)
         m = rng.random((H, W)) < 0.01
         d = rng.uniform(0.5, 20, (H, W))
     return np.where(m, d, 0).astype(np.float32)
@@ -185,7 +200,8 @@ def _ordered_disparities(kind, rng, H, W):
 @pytest.mark.parametrize("kind", ["two_values", "constant", "decreasing", "few_ties", "small_ties", "sparse"])
 def test_paint_order_with_tied_and_crowded_disparities(build, kind):
     """Overlapping patches painted far to near, ties by row then column, whatever
-    the distribution of d within a band (crowded buckets, one value, reversed)."""
+    the distribution of d within a band (crowded buckets, one value, reversed).
+    """
     rng = np.random.default_rng(7)
     H, W = 40, 150
     left = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)

@@ -1,4 +1,5 @@
 """Entry point: ``python -m vpp_service``."""
+
 import sys
 
 from vpp_service.cli import main

@@ -4,6 +4,7 @@ Dataset readers, the simulators, the streaming sources and the pipeline all
 produce or consume :class:`StereoFrame`; keeping one type means a frame read
 from disk, simulated, or decoded off Zenoh is handled by the same code.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
@@ -56,7 +57,7 @@ class Calibration:
         return d
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "Calibration":
+    def from_dict(cls, d: dict[str, Any]) -> Calibration:
         """Build from a dict with keys ``f``, ``baseline`` and optional ``doffs``, ``cx``, ``cy``."""
         if not isinstance(d, dict):
             raise ValueError(f"calibration must be a mapping, got {type(d).__name__}")
@@ -64,8 +65,11 @@ class Calibration:
         if missing:
             raise ValueError(f"calibration is missing {sorted(missing)}")
         return cls(
-            f=d["f"], baseline=d["baseline"], doffs=d.get("doffs", 0.0),
-            cx=d.get("cx"), cy=d.get("cy"),
+            f=d["f"],
+            baseline=d["baseline"],
+            doffs=d.get("doffs", 0.0),
+            cx=d.get("cx"),
+            cy=d.get("cy"),
         )
 
 
@@ -115,7 +119,7 @@ class StereoFrame:
         """(H, W) of the frame."""
         return self.left.shape[:2]
 
-    def with_(self, **changes: Any) -> "StereoFrame":
+    def with_(self, **changes: Any) -> StereoFrame:
         """A shallow copy with some fields replaced."""
         return replace(self, **changes)
 

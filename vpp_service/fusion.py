@@ -28,6 +28,7 @@
 ``FusionResult.timing_ms`` gets ``vpp`` (when VPP ran), ``match`` and
 ``process`` (the whole step) on top of the frame's own ``meta["timing_ms"]``.
 """
+
 from __future__ import annotations
 
 import time
@@ -82,8 +83,16 @@ def score(disparity: np.ndarray, frame: StereoFrame, protocol: bool = False) -> 
     return out
 
 
-def fuse(frame: StereoFrame, matcher: Matcher, vpp_config: VPPConfig | None = None, *, seed: int = 0,
-         guide: bool = False, depth: bool = True, protocol: bool = False) -> FusionResult:
+def fuse(
+    frame: StereoFrame,
+    matcher: Matcher,
+    vpp_config: VPPConfig | None = None,
+    *,
+    seed: int = 0,
+    guide: bool = False,
+    depth: bool = True,
+    protocol: bool = False,
+) -> FusionResult:
     """Process one frame: VPP (or guidance) on its sparse points, the matcher, depth and metrics.
 
     Parameters
@@ -144,8 +153,17 @@ def fuse(frame: StereoFrame, matcher: Matcher, vpp_config: VPPConfig | None = No
         depth_map = np.asarray(disparity_to_depth(disp, c.f, c.baseline, c.doffs), dtype=np.float32)
     metrics = score(disp, frame, protocol)
     timing["process"] = (time.perf_counter() - t_start) * 1e3
-    return FusionResult(frame=frame, disparity=disp, depth=depth_map, left_vpp=left_vpp, right_vpp=right_vpp,
-                        occluded=occluded, vpp_stats=stats, timing_ms=timing, metrics=metrics)
+    return FusionResult(
+        frame=frame,
+        disparity=disp,
+        depth=depth_map,
+        left_vpp=left_vpp,
+        right_vpp=right_vpp,
+        occluded=occluded,
+        vpp_stats=stats,
+        timing_ms=timing,
+        metrics=metrics,
+    )
 
 
 class Fusion:
@@ -170,11 +188,13 @@ class Fusion:
         finite point).
     """
 
-    def __init__(self, matcher: Matcher, vpp_config: VPPConfig | None = None, seed: int = 0,
-                 depth: bool = True) -> None:
+    def __init__(
+        self, matcher: Matcher, vpp_config: VPPConfig | None = None, seed: int = 0, depth: bool = True
+    ) -> None:
         if not isinstance(matcher, Matcher):
-            raise TypeError(f"matcher must be a Matcher (vpp_service.matchers.build_matcher), "
-                            f"got {type(matcher).__name__}")
+            raise TypeError(
+                f"matcher must be a Matcher (vpp_service.matchers.build_matcher), got {type(matcher).__name__}"
+            )
         if vpp_config is not None and not isinstance(vpp_config, VPPConfig):
             raise TypeError(f"vpp_config must be a VPPConfig or None, got {type(vpp_config).__name__}")
         self.matcher = matcher
@@ -197,7 +217,7 @@ class Fusion:
         from vpp_service.vpp.rng import kernel_table
 
         seed = self.seed + int(frame.seq) + 1
-        if 0 <= seed < 2 ** 64:
+        if 0 <= seed < 2**64:
             kernel_table(seed, frame.left.shape[2] if frame.left.ndim == 3 else 1, (cfg.patch - 1) // 2)
 
     def __call__(self, frame: StereoFrame) -> FusionResult:

@@ -14,11 +14,13 @@ cannot check alone (e.g. the simulator source builds its sensor). What the
 service must know about a plugin it asks the plugin (:attr:`Plugin.needs_session`,
 ``Sink.needs_depth``), so the service never reads a plugin's option names.
 """
+
 from __future__ import annotations
 
 from abc import ABC
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Mapping
+from typing import Any, ClassVar
 
 from vpp_service.registry import Registry
 from vpp_service.settings import from_mapping
@@ -144,4 +146,4 @@ def parse_plugin_options(registry: Registry, name: str, options: Mapping[str, An
     return cls.parse_options(options, section)
 
 
-__all__ = ["PluginContext", "Plugin", "parse_plugin_options"]
+__all__ = ["Plugin", "PluginContext", "parse_plugin_options"]

@@ -23,13 +23,15 @@ Ending a worker::
 An exception from ``handle`` is counted in ``errors`` and handed to ``on_error``
 (or logged); it never stops the worker.
 """
+
 from __future__ import annotations
 
 import logging
 import threading
 import time
 from collections import deque
-from typing import Callable, Generic, Literal, TypeVar
+from collections.abc import Callable
+from typing import Generic, Literal, TypeVar
 
 log = logging.getLogger(__name__)
 
@@ -172,10 +174,17 @@ class QueueWorker(Generic[T]):
     Items may be put before :meth:`start`; they wait in the queue.
     """
 
-    def __init__(self, handle: Callable[[T], None], *, size: int, policy: Policy = "latest",
-                 name: str = "worker", on_start: Callable[[], None] | None = None,
-                 on_exit: Callable[[], None] | None = None,
-                 on_error: Callable[[T, Exception], None] | None = None) -> None:
+    def __init__(
+        self,
+        handle: Callable[[T], None],
+        *,
+        size: int,
+        policy: Policy = "latest",
+        name: str = "worker",
+        on_start: Callable[[], None] | None = None,
+        on_exit: Callable[[], None] | None = None,
+        on_error: Callable[[T, Exception], None] | None = None,
+    ) -> None:
         if not callable(handle):
             raise TypeError("handle must be callable")
         self.queue: BoundedQueue[T] = BoundedQueue(size, policy)
@@ -279,8 +288,9 @@ class QueueWorker(Generic[T]):
         if self.join(max(0.0, deadline - time.monotonic())):
             return True
         n = self.abort()
-        log.warning("%s: not finished within %.1f s; abandoning the thread (%d queued items discarded)",
-                    self.name, timeout, n)
+        log.warning(
+            "%s: not finished within %.1f s; abandoning the thread (%d queued items discarded)", self.name, timeout, n
+        )
         return False
 
     # --------------------------------------------------------------- thread
@@ -311,4 +321,4 @@ class QueueWorker(Generic[T]):
         self._call("on_exit", self._on_exit)
 
 
-__all__ = ["Policy", "POLICIES", "BoundedQueue", "QueueWorker"]
+__all__ = ["POLICIES", "BoundedQueue", "Policy", "QueueWorker"]

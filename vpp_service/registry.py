@@ -1,7 +1,9 @@
 """Name -> factory registries for plugins (matchers, sources, sinks, datasets)."""
+
 from __future__ import annotations
 
-from typing import Callable, Generic, Iterator, TypeVar
+from collections.abc import Callable, Iterator
+from typing import Generic, TypeVar
 
 T = TypeVar("T")
 

@@ -6,12 +6,13 @@ its options as a frozen dataclass whose ``__post_init__`` checks value ranges.
 rejecting unknown keys and wrong types with an error naming ``section.key``, so
 a whole config can be checked before anything starts.
 """
+
 from __future__ import annotations
 
 import dataclasses
 import types
-import typing
-from typing import Any, Literal, Mapping, TypeVar, Union, get_args, get_origin, get_type_hints
+from collections.abc import Mapping
+from typing import Any, Literal, TypeVar, Union, get_args, get_origin, get_type_hints
 
 T = TypeVar("T")
 
@@ -114,8 +115,11 @@ def from_mapping(cls: type[T], mapping: Mapping[str, Any] | None, section: str =
     unknown = sorted(set(mapping) - set(fields))
     if unknown:
         raise SettingsError(f"{prefix}{unknown[0]}: unknown option; known: {', '.join(sorted(fields))}")
-    missing = [n for n, f in fields.items() if n not in mapping
-               and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+    missing = [
+        n
+        for n, f in fields.items()
+        if n not in mapping and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    ]
     if missing:
         raise SettingsError(f"{prefix}{missing[0]}: required option is missing")
     hints = get_type_hints(cls)

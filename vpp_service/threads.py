@@ -16,11 +16,12 @@ One policy for every kernel (VPP and the matchers):
   module is imported; importing :mod:`vpp_service` changes nothing in the
   environment.
 """
+
 from __future__ import annotations
 
 import numbers
 import os
-from typing import MutableMapping
+from collections.abc import MutableMapping
 
 
 def default_threads() -> int:

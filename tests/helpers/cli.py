@@ -1,4 +1,5 @@
 """The installed ``vpp-service`` console script, as the end-to-end tests start it."""
+
 from __future__ import annotations
 
 import shutil

@@ -1,4 +1,5 @@
 """Small deterministic stereo frames for wire-format, source and sink tests."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -22,6 +23,14 @@ def make_frame(h: int = 6, w: int = 8, c: int = 3, seed: int = 0, depth: str = "
     sparse[1, 2], sparse[3, 5] = 2.5, 4.0
     z = np.full((h, w), np.nan, np.float32)
     z[1, 2], z[3, 5] = 1.5, 3.25
-    return StereoFrame(left=left, right=right, calib=calib, gt_disparity=gt,
-                       sparse_disparity=None if depth == "metric" else sparse,
-                       sensor_depth=z if depth == "metric" else None, rig="r1", seq=7, stamp_ns=123456789)
+    return StereoFrame(
+        left=left,
+        right=right,
+        calib=calib,
+        gt_disparity=gt,
+        sparse_disparity=None if depth == "metric" else sparse,
+        sensor_depth=z if depth == "metric" else None,
+        rig="r1",
+        seq=7,
+        stamp_ns=123456789,
+    )

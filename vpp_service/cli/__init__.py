@@ -7,6 +7,7 @@ dispatches. :func:`main` first sets the OpenMP wait policy
 module is imported, so neither this module nor the sub-command modules import
 kernels at module level.
 """
+
 from __future__ import annotations
 
 import argparse

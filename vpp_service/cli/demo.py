@@ -5,6 +5,7 @@ depth (5 % of ground-truth pixels, the paper's protocol), runs OpenCV SGBM with
 and without VPP, prints both errors against ground truth and saves the painted
 pair and both disparity maps as PNG.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -18,10 +19,19 @@ import numpy as np
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register the ``demo`` sub-command."""
-    p = sub.add_parser("demo", help="VPP + SGBM on the built-in Middlebury scene (no data needed)",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "demo",
+        help="VPP + SGBM on the built-in Middlebury scene (no data needed)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--out", default="vpp-demo", help="output folder for PNGs and summary.json (default: %(default)s)")
-    p.add_argument("--density", type=float, default=0.05, help="fraction of GT pixels sampled as sparse depth (default: %(default)s)")
+    p.add_argument(
+        "--density",
+        type=float,
+        default=0.05,
+        help="fraction of GT pixels sampled as sparse depth (default: %(default)s)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed for sampling and the pattern (default: %(default)s)")
     p.add_argument("--matcher", default="sgbm", help="matcher name (default: %(default)s)")
     p.set_defaults(func=run)
@@ -62,13 +72,19 @@ def run(args: argparse.Namespace) -> int:
     t_base, t_vpp, t_fused = base.timing_ms["match"], fused.timing_ms.get("vpp", 0.0), fused.timing_ms["match"]
     m_base, m_vpp = base.metrics, fused.metrics
     n_points = int(np.count_nonzero(np.isfinite(sparse) & (sparse > 0)))
-    print(f"scene: {frame.name} {left.shape[1]}x{left.shape[0]}, {n_points} sparse points "
-          f"({args.density:.1%}), matcher {args.matcher}, max disparity {max_disp}")
+    print(
+        f"scene: {frame.name} {left.shape[1]}x{left.shape[0]}, {n_points} sparse points "
+        f"({args.density:.1%}), matcher {args.matcher}, max disparity {max_disp}"
+    )
     print(f"{'method':<10}{'bad-1 %':>9}{'bad-2 %':>9}{'bad-4 %':>9}{'avg px':>8}{'ms':>8}")
-    print(f"{'baseline':<10}{m_base['bad1']:>9.2f}{m_base['bad2']:>9.2f}{m_base['bad4']:>9.2f}{m_base['avg']:>8.2f}"
-          f"{t_base:>8.1f}")
-    print(f"{'vpp':<10}{m_vpp['bad1']:>9.2f}{m_vpp['bad2']:>9.2f}{m_vpp['bad4']:>9.2f}{m_vpp['avg']:>8.2f}"
-          f"{t_vpp + t_fused:>8.1f}  (VPP {t_vpp:.1f} ms)")
+    print(
+        f"{'baseline':<10}{m_base['bad1']:>9.2f}{m_base['bad2']:>9.2f}{m_base['bad4']:>9.2f}{m_base['avg']:>8.2f}"
+        f"{t_base:>8.1f}"
+    )
+    print(
+        f"{'vpp':<10}{m_vpp['bad1']:>9.2f}{m_vpp['bad2']:>9.2f}{m_vpp['bad4']:>9.2f}{m_vpp['avg']:>8.2f}"
+        f"{t_vpp + t_fused:>8.1f}  (VPP {t_vpp:.1f} ms)"
+    )
 
     vmax = float(np.nanmax(gt))
     # without a usable point VPP paints nothing: the matcher saw the raw pair
@@ -80,9 +96,15 @@ def run(args: argparse.Namespace) -> int:
     cv2.imwrite(str(out / "disparity_vpp.png"), _colorize(fused.disparity, vmax))
     cv2.imwrite(str(out / "disparity_gt.png"), _colorize(gt, vmax))
     summary = {
-        "scene": frame.name, "density": args.density, "seed": args.seed, "matcher": args.matcher,
-        "n_points": n_points, "vpp_stats": fused.vpp_stats,
-        "baseline": m_base, "vpp": m_vpp, "ms": {"baseline": t_base, "vpp": t_vpp, "vpp_match": t_fused},
+        "scene": frame.name,
+        "density": args.density,
+        "seed": args.seed,
+        "matcher": args.matcher,
+        "n_points": n_points,
+        "vpp_stats": fused.vpp_stats,
+        "baseline": m_base,
+        "vpp": m_vpp,
+        "ms": {"baseline": t_base, "vpp": t_vpp, "vpp_match": t_fused},
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
     print(f"wrote {out}/left_vpp.png, right_vpp.png, disparity_{{baseline,vpp,gt}}.png, summary.json", file=sys.stderr)

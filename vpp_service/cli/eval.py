@@ -14,6 +14,7 @@ A comma list in ``--density`` runs a sweep and writes a bad-2 vs density plot
 largest ground-truth disparity (at least 16). Progress goes to stderr, the
 Markdown summary to stdout.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -50,27 +51,48 @@ def _densities(text: str) -> list[float]:
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register the ``eval`` sub-command."""
-    p = subparsers.add_parser("eval", help="evaluate matcher / guided / VPP against ground truth",
-                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = subparsers.add_parser(
+        "eval",
+        help="evaluate matcher / guided / VPP against ground truth",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     g = p.add_argument_group("data")
     g.add_argument("--dataset", default="auto", help="reader name, 'auto' (detect) or 'synthetic' (default auto)")
     g.add_argument("--root", type=Path, help="dataset folder (required unless --dataset synthetic)")
     g.add_argument("--scenes", help="comma list of scene names to keep")
     g.add_argument("--limit", type=int, help="evaluate only the first N scenes")
-    g.add_argument("--dataset-opt", action="append", type=_kv, default=[], metavar="KEY=VALUE",
-                   help="reader option, e.g. scale=2 (repeatable; VALUE parsed as JSON when possible)")
+    g.add_argument(
+        "--dataset-opt",
+        action="append",
+        type=_kv,
+        default=[],
+        metavar="KEY=VALUE",
+        help="reader option, e.g. scale=2 (repeatable; VALUE parsed as JSON when possible)",
+    )
     g = p.add_argument_group("methods")
     g.add_argument("--matcher", default="census-sgm", help="registered matcher (default census-sgm)")
-    g.add_argument("--matcher-opt", action="append", type=_kv, default=[], metavar="KEY=VALUE",
-                   help="matcher option (repeatable)")
+    g.add_argument(
+        "--matcher-opt", action="append", type=_kv, default=[], metavar="KEY=VALUE", help="matcher option (repeatable)"
+    )
     g.add_argument("--methods", default="baseline,guided,vpp", help="comma list of baseline, guided, vpp")
     g.add_argument("--max-disparity", type=int, help="matcher disparity range (default: per scene from GT)")
     g = p.add_argument_group("sparse points")
     g.add_argument("--sensor", default="uniform", help="uniform | lidar | tof | frame (the dataset's own scan)")
-    g.add_argument("--sensor-opt", action="append", type=_kv, default=[], metavar="KEY=VALUE",
-                   help="sensor option (repeatable), e.g. noise_m=0.02")
-    g.add_argument("--density", type=_densities, default=[0.05],
-                   help="fraction of valid GT pixels (uniform sensor); a comma list runs a sweep")
+    g.add_argument(
+        "--sensor-opt",
+        action="append",
+        type=_kv,
+        default=[],
+        metavar="KEY=VALUE",
+        help="sensor option (repeatable), e.g. noise_m=0.02",
+    )
+    g.add_argument(
+        "--density",
+        type=_densities,
+        default=[0.05],
+        help="fraction of valid GT pixels (uniform sensor); a comma list runs a sweep",
+    )
     g.add_argument("--seed", type=int, default=0, help="seed of the points and of the VPP pattern")
     g = p.add_argument_group("VPP")
     g.add_argument("--pattern", choices=("random", "histogram"))
@@ -93,8 +115,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 def _vpp_config(args: argparse.Namespace) -> VPPConfig:
     from vpp_service.vpp import VPPConfig
 
-    opts = {k: getattr(args, k) for k in ("pattern", "patch", "uniform_patch", "alpha", "splat", "occlusion",
-                                          "adaptive_patch") if getattr(args, k) is not None}
+    opts = {
+        k: getattr(args, k)
+        for k in ("pattern", "patch", "uniform_patch", "alpha", "splat", "occlusion", "adaptive_patch")
+        if getattr(args, k) is not None
+    }
     return VPPConfig(**opts)
 
 
@@ -135,15 +160,29 @@ def run(args: argparse.Namespace) -> int:
     if args.sensor != "uniform" and len(args.density) > 1:
         raise ValueError(f"--density: a sweep needs --sensor uniform, got {args.sensor!r}")
     rows = run_evaluation(
-        frames, args.matcher, methods, densities, args.sensor, vpp_config, args.seed,
+        frames,
+        args.matcher,
+        methods,
+        densities,
+        args.sensor,
+        vpp_config,
+        args.seed,
         progress=None if args.quiet else ProgressBar(sys.stderr),
-        matcher_options=dict(args.matcher_opt), sensor_options=dict(args.sensor_opt),
-        max_disparity=args.max_disparity, dataset_name=dataset_name,
+        matcher_options=dict(args.matcher_opt),
+        sensor_options=dict(args.sensor_opt),
+        max_disparity=args.max_disparity,
+        dataset_name=dataset_name,
     )
     config = {
-        "dataset": dataset_name, "root": str(args.root) if args.root else None, "matcher": args.matcher,
-        "matcher_options": dict(args.matcher_opt), "methods": methods, "sensor": args.sensor,
-        "sensor_options": dict(args.sensor_opt), "densities": densities, "seed": args.seed,
+        "dataset": dataset_name,
+        "root": str(args.root) if args.root else None,
+        "matcher": args.matcher,
+        "matcher_options": dict(args.matcher_opt),
+        "methods": methods,
+        "sensor": args.sensor,
+        "sensor_options": dict(args.sensor_opt),
+        "densities": densities,
+        "seed": args.seed,
         "max_disparity": args.max_disparity,
         "vpp": None if vpp_config is None else {k: getattr(vpp_config, k) for k in vpp_config.__dataclass_fields__},
     }

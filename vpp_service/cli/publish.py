@@ -5,6 +5,7 @@ format v1 on ``<prefix>/<rig>/in/frame`` or, with ``--separate-topics``, on
 ``in/left``, ``in/right`` and ``in/depth``. Publishing uses
 ``CongestionControl.BLOCK`` so large frames are never silently dropped.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -18,12 +19,17 @@ from typing import Any
 
 def add_parser(subparsers: Any) -> None:
     """Register the ``publish`` sub-command."""
-    p = subparsers.add_parser("publish", help="publish frames onto Zenoh as a camera rig would",
-                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = subparsers.add_parser(
+        "publish",
+        help="publish frames onto Zenoh as a camera rig would",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--dataset", help="dataset name or 'auto' (default: the simulator)")
     p.add_argument("--root", help="dataset folder (with --dataset)")
-    p.add_argument("--recording", metavar="DIR",
-                   help="replay a folder of .msgpack frames (the record sink's output) instead")
+    p.add_argument(
+        "--recording", metavar="DIR", help="replay a folder of .msgpack frames (the record sink's output) instead"
+    )
     p.add_argument("--scene", default="motorcycle", choices=["motorcycle", "synthetic"], help="simulator scene")
     p.add_argument("--scale", type=float, default=1.0, help="resize factor in (0, 1]")
     p.add_argument("--sensor", default="uniform", help="sensor simulator (uniform, lidar, tof, none)")
@@ -41,11 +47,21 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--no-depth", action="store_true", help="send frames without sparse depth")
     p.add_argument("--no-gt", action="store_true", help="do not attach ground truth")
     p.add_argument("--separate-topics", action="store_true", help="publish in/left, in/right, in/depth")
-    p.add_argument("--wait-subscriber", type=float, default=5.0, metavar="S",
-                   help="wait up to S seconds for a matching subscriber before sending (0 = don't)")
+    p.add_argument(
+        "--wait-subscriber",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="wait up to S seconds for a matching subscriber before sending (0 = don't)",
+    )
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--shm-pool-mb", type=int, default=64, metavar="MB",
-                   help="publish large messages from a shared-memory pool of this size (0 = plain puts)")
+    p.add_argument(
+        "--shm-pool-mb",
+        type=int,
+        default=64,
+        metavar="MB",
+        help="publish large messages from a shared-memory pool of this size (0 = plain puts)",
+    )
     p.set_defaults(func=main)
 
 
@@ -57,17 +73,35 @@ def _source(args: argparse.Namespace) -> Any:
     if args.recording:
         if args.dataset:
             raise ValueError("--recording and --dataset: give one of them")
-        return build_source("files", {"root": args.recording, "format": "msgpack", "rate_hz": 0.0,
-                                      "loop": args.loop, "count": args.count}, ctx)
+        return build_source(
+            "files",
+            {"root": args.recording, "format": "msgpack", "rate_hz": 0.0, "loop": args.loop, "count": args.count},
+            ctx,
+        )
     if args.dataset:
         if not args.root:
             raise ValueError("--root: required with --dataset")
-        opts = {"root": args.root, "dataset": args.dataset, "rate_hz": 0.0, "loop": args.loop,
-                "count": args.count, "scale": args.scale, "sensor": args.sensor,
-                "sensor_options": sensor_opts, "seed": args.seed}
+        opts = {
+            "root": args.root,
+            "dataset": args.dataset,
+            "rate_hz": 0.0,
+            "loop": args.loop,
+            "count": args.count,
+            "scale": args.scale,
+            "sensor": args.sensor,
+            "sensor_options": sensor_opts,
+            "seed": args.seed,
+        }
         return build_source("files", opts, ctx)
-    opts = {"scene": args.scene, "scale": args.scale, "sensor": args.sensor, "sensor_options": sensor_opts,
-            "rate_hz": 0.0, "count": args.count, "seed": args.seed}
+    opts = {
+        "scene": args.scene,
+        "scale": args.scale,
+        "sensor": args.sensor,
+        "sensor_options": sensor_opts,
+        "rate_hz": 0.0,
+        "count": args.count,
+        "seed": args.seed,
+    }
     return build_source("sim", opts, ctx)
 
 
@@ -77,19 +111,20 @@ def main(args: argparse.Namespace) -> int:
 
     import zenoh
 
-    from vpp_service.transport import wire
     from vpp_service.service.app import open_session
     from vpp_service.service.config import ZenohSection
-    from vpp_service.transport.shm import ShmPutter
     from vpp_service.sources.base import Pacer
+    from vpp_service.transport import wire
+    from vpp_service.transport.shm import ShmPutter
 
     if not 0 < args.scale <= 1:
         raise ValueError(f"--scale: must be in (0, 1], got {args.scale}")
     if args.rate < 0 or args.count < 0:
         raise ValueError("--rate and --count must be >= 0")
-    putter = ShmPutter(args.shm_pool_mb)   # validates the pool size before anything starts
-    zsec = ZenohSection(mode="peer", listen=list(args.listen), connect=list(args.connect),
-                        multicast_scouting=args.multicast_scouting)
+    putter = ShmPutter(args.shm_pool_mb)  # validates the pool size before anything starts
+    zsec = ZenohSection(
+        mode="peer", listen=list(args.listen), connect=list(args.connect), multicast_scouting=args.multicast_scouting
+    )
     src = _source(args)
     src.open()
     frames: _queue.Queue = _queue.Queue(maxsize=2)
@@ -109,9 +144,12 @@ def main(args: argparse.Namespace) -> int:
     parts = ["left", "right", "depth"] if args.separate_topics else ["frame"]
     sent = 0
     with open_session(zsec) as session:
-        pubs = {p: session.declare_publisher(wire.topic(args.prefix, args.rig, f"in/{p}"),
-                                             congestion_control=zenoh.CongestionControl.BLOCK)
-                for p in parts}
+        pubs = {
+            p: session.declare_publisher(
+                wire.topic(args.prefix, args.rig, f"in/{p}"), congestion_control=zenoh.CongestionControl.BLOCK
+            )
+            for p in parts
+        }
         if args.wait_subscriber > 0:
             deadline = time.monotonic() + args.wait_subscriber
             while time.monotonic() < deadline and not stop.is_set():

@@ -7,6 +7,7 @@ a local Zenoh peer (``tcp/127.0.0.1:7447``, multicast scouting off; set
 ``vpp-run/vpp.rrd``. Stops on SIGINT/SIGTERM (clean, bounded shutdown, exit 0)
 or after ``--max-frames``; leaves ``<out>/summary.json``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -20,8 +21,12 @@ from typing import Any
 
 def add_parser(subparsers: Any) -> None:
     """Register the ``run`` sub-command."""
-    p = subparsers.add_parser("run", help="run the streaming fusion service",
-                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = subparsers.add_parser(
+        "run",
+        help="run the streaming fusion service",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--config", help="TOML config file (default: the embedded default)")
     p.add_argument("--rig", help="rig name (service.rig)")
     p.add_argument("--source", help="source type: sim, files, zenoh (its options come from the config)")
@@ -101,6 +106,9 @@ def main(args: argparse.Namespace) -> int:
     finally:
         for s, h in old.items():
             signal.signal(s, h)
-    print(json.dumps({"counters": status["counters"], "out": cfg.service.out,
-                      "shutdown_s": round(status["shutdown_s"], 3)}))
+    print(
+        json.dumps(
+            {"counters": status["counters"], "out": cfg.service.out, "shutdown_s": round(status["shutdown_s"], 3)}
+        )
+    )
     return 0

@@ -1,4 +1,5 @@
 """``vpp-service status``: query a running service's ``@status`` and print the JSON reply."""
+
 from __future__ import annotations
 
 import argparse
@@ -11,15 +12,21 @@ def add_parser(subparsers: Any) -> None:
     p = subparsers.add_parser("status", help="query a running service's @status (JSON)", description=__doc__)
     p.add_argument("--rig", default="*", help="rig name ('*' = every rig)")
     p.add_argument("--prefix", default="vpp")
-    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
-                   help="endpoint of the service (default tcp/127.0.0.1:7447)")
+    p.add_argument(
+        "--connect",
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
+        help="endpoint of the service (default tcp/127.0.0.1:7447)",
+    )
     p.add_argument("--multicast-scouting", action="store_true", help="enable multicast discovery")
     p.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for replies")
     p.set_defaults(func=main)
 
 
-def query_status(connect: list[str], prefix: str = "vpp", rig: str = "*", timeout: float = 3.0,
-                 multicast_scouting: bool = False) -> dict[str, Any]:
+def query_status(
+    connect: list[str], prefix: str = "vpp", rig: str = "*", timeout: float = 3.0, multicast_scouting: bool = False
+) -> dict[str, Any]:
     """Query ``<prefix>/<rig>/@status``; returns ``{key: reply JSON}``.
 
     Raises
@@ -46,7 +53,8 @@ def query_status(connect: list[str], prefix: str = "vpp", rig: str = "*", timeou
 
 def main(args: argparse.Namespace) -> int:
     """Print the replies as JSON; exit 1 when no service answered."""
-    replies = query_status(args.connect or ["tcp/127.0.0.1:7447"], args.prefix, args.rig, args.timeout,
-                           args.multicast_scouting)
+    replies = query_status(
+        args.connect or ["tcp/127.0.0.1:7447"], args.prefix, args.rig, args.timeout, args.multicast_scouting
+    )
     print(json.dumps(replies, indent=2))
     return 0 if replies else 1

@@ -11,6 +11,7 @@ doffs = 124.343 / 4 px). Depths derived from it are plausible, not measured.
 The ``demo`` command and the simulator source (``sim``, scene ``motorcycle``)
 both load the scene here.
 """
+
 from __future__ import annotations
 
 import functools

@@ -14,9 +14,10 @@ function, it counts as *bad for every τ* and is *left out of* ``avg`` and
 percentage of scored pixels without a prediction. With no scored pixel,
 every value is NaN and ``n`` is 0.
 """
+
 from __future__ import annotations
 
-from typing import Iterable
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -26,8 +27,9 @@ def metric_key(tau: float) -> str:
     return f"bad{tau:g}"
 
 
-def compute_metrics(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray | None = None,
-                    taus: Iterable[float] = (1, 2, 3, 4)) -> dict[str, float]:
+def compute_metrics(
+    pred: np.ndarray, gt: np.ndarray, mask: np.ndarray | None = None, taus: Iterable[float] = (1, 2, 3, 4)
+) -> dict[str, float]:
     """Score a disparity map against ground truth.
 
     Parameters
@@ -72,7 +74,12 @@ def compute_metrics(pred: np.ndarray, gt: np.ndarray, mask: np.ndarray | None = 
     if not taus:
         raise ValueError("taus: must not be empty")
     for t in taus:
-        if isinstance(t, bool) or not isinstance(t, (int, float, np.integer, np.floating)) or not np.isfinite(t) or t <= 0:
+        if (
+            isinstance(t, bool)
+            or not isinstance(t, (int, float, np.integer, np.floating))
+            or not np.isfinite(t)
+            or t <= 0
+        ):
             raise ValueError(f"taus: every threshold must be a finite number > 0, got {t!r}")
     pred64 = pred.astype(np.float64, copy=False)
     if np.isinf(pred64).any():

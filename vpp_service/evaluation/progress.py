@@ -1,4 +1,5 @@
 """A small text progress bar for long evaluations (no third-party dependency)."""
+
 from __future__ import annotations
 
 import sys

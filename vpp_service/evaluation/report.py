@@ -5,13 +5,15 @@ density the summary is ``{method: {metric: mean}}``; with a density sweep
 (several densities in the results) it is ``{method: {density: {metric: mean}}}``,
 the density written as a string key (``"0.05"``, JSON keys are strings).
 """
+
 from __future__ import annotations
 
 import json
 import math
 from collections import defaultdict
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 from vpp_service.evaluation.runner import METHODS
 
@@ -124,7 +126,7 @@ def markdown_report(rows: list[dict], per_scene: bool = False, title: str = "VPP
         n_scenes = len({r["scene"] for r in grows})
         sensor = ", ".join(sorted({str(r.get("sensor", "")) for r in grows}))
         parts += [f"## {dataset or 'frames'} - {matcher} ({n_scenes} scenes, sensor {sensor})", ""]
-        header = ["method", "density"] + cols
+        header = ["method", "density", *cols]
         lines = []
         for method in _method_order(grows):
             mrows = [r for r in grows if r["method"] == method]
@@ -136,9 +138,8 @@ def markdown_report(rows: list[dict], per_scene: bool = False, title: str = "VPP
         parts += [_table(header, lines), ""]
         if per_scene:
             parts += ["### Per scene", ""]
-            header = ["scene", "method", "density"] + cols
-            lines = [[r["scene"], r["method"], f"{r['density']:.3g}"] + [_fmt(r.get(c)) for c in cols]
-                     for r in grows]
+            header = ["scene", "method", "density", *cols]
+            lines = [[r["scene"], r["method"], f"{r['density']:.3g}"] + [_fmt(r.get(c)) for c in cols] for r in grows]
             parts += [_table(header, lines), ""]
         if sweep:
             parts += ["(bad-τ in %, errors in px; means over scenes.)", ""]
@@ -189,4 +190,4 @@ def plot_sweep(path: str | Path, rows: list[dict], metric: str = "bad2", title: 
     plt.close(fig)
 
 
-__all__ = ["summarize", "write_json", "markdown_report", "write_markdown", "plot_sweep", "density_key", "is_sweep"]
+__all__ = ["density_key", "is_sweep", "markdown_report", "plot_sweep", "summarize", "write_json", "write_markdown"]

@@ -30,10 +30,12 @@ sensors (``lidar``, ``tof``) take one run with ``densities=None`` and report
 the measured fraction of valid-GT pixels that got a point as ``density``;
 ``sensor="frame"`` uses the frame's own ``sparse_disparity`` (a real scan).
 """
+
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping, Sequence, Union, cast
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Union, cast
 
 import numpy as np
 
@@ -72,7 +74,9 @@ def _frames(source: Frames) -> tuple[int, Callable[[int], StereoFrame]]:
     if isinstance(source, Iterable):
         items = list(source)
         return len(items), items.__getitem__
-    raise TypeError(f"frames_or_dataset: must be a Dataset, a StereoFrame or an iterable of them, got {type(source).__name__}")
+    raise TypeError(
+        f"frames_or_dataset: must be a Dataset, a StereoFrame or an iterable of them, got {type(source).__name__}"
+    )
 
 
 def _check_methods(methods: Sequence[str]) -> list[str]:
@@ -174,7 +178,9 @@ def run_evaluation(
     methods = _check_methods(methods)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed: must be an integer >= 0, got {seed!r}")
-    if max_disparity is not None and (isinstance(max_disparity, bool) or not isinstance(max_disparity, int) or max_disparity < 1):
+    if max_disparity is not None and (
+        isinstance(max_disparity, bool) or not isinstance(max_disparity, int) or max_disparity < 1
+    ):
         raise ValueError(f"max_disparity: must be a positive integer, got {max_disparity!r}")
     if progress is not None and not callable(progress):
         raise TypeError("progress: must be callable")
@@ -257,8 +263,13 @@ def run_evaluation(
         else:
             m = matcher
         md = int(m.options.max_disparity)
-        common = {"dataset": dataset_name or frame.meta.get("dataset", ""), "scene": scene,
-                  "matcher": matcher_name, "sensor": sensor_name, "max_disparity": md}
+        common = {
+            "dataset": dataset_name or frame.meta.get("dataset", ""),
+            "scene": scene,
+            "matcher": matcher_name,
+            "sensor": sensor_name,
+            "max_disparity": md,
+        }
 
         baseline_row: dict[str, float] = {}
         if "baseline" in methods:
@@ -298,4 +309,4 @@ def run_evaluation(
     return rows
 
 
-__all__ = ["METHODS", "run_evaluation", "default_max_disparity"]
+__all__ = ["METHODS", "default_max_disparity", "run_evaluation"]

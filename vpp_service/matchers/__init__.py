@@ -12,10 +12,11 @@
 
 See :mod:`vpp_service.matchers.base` for the conventions all matchers share.
 """
-from vpp_service.matchers.base import MATCHERS, Matcher, MatcherOptions, build_matcher
-from vpp_service.matchers.holes import fill_holes
-from vpp_service.matchers.guided import modulate_cost
-from vpp_service.matchers.speckle import remove_speckles
+
 from vpp_service.matchers import census_sgm, opencv  # noqa: F401  (register census-sgm, sgbm, bm)
+from vpp_service.matchers.base import MATCHERS, Matcher, MatcherOptions, build_matcher
+from vpp_service.matchers.guided import modulate_cost
+from vpp_service.matchers.holes import fill_holes
+from vpp_service.matchers.speckle import remove_speckles
 
 __all__ = ["MATCHERS", "Matcher", "MatcherOptions", "build_matcher", "fill_holes", "modulate_cost", "remove_speckles"]

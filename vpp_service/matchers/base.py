@@ -3,8 +3,8 @@
 A matcher turns a rectified pair into a dense disparity map of the left view:
 
 >>> from vpp_service.matchers import build_matcher
->>> m = build_matcher("sgbm", {"max_disparity": 64})      # doctest: +SKIP
->>> disp = m.compute(left, right)                          # doctest: +SKIP
+>>> m = build_matcher("sgbm", {"max_disparity": 64})  # doctest: +SKIP
+>>> disp = m.compute(left, right)  # doctest: +SKIP
 
 Conventions (all matchers)
 --------------------------
@@ -18,11 +18,13 @@ Conventions (all matchers)
 * Guided stereo: matchers with ``supports_guidance`` accept ``hints``, an
   H x W float32 sparse disparity map (NaN or <= 0 = no hint).
 """
+
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, ClassVar, Mapping
+from typing import Any, ClassVar
 
 import cv2
 import numpy as np
@@ -31,7 +33,7 @@ from vpp_service.registry import Registry
 from vpp_service.settings import from_mapping
 
 #: Registered matcher classes by name ("sgbm", "bm", "census-sgm").
-MATCHERS: Registry["Matcher"] = Registry("matcher")
+MATCHERS: Registry[Matcher] = Registry("matcher")
 
 
 @dataclass(frozen=True)
@@ -63,8 +65,9 @@ class MatcherOptions:
             raise ValueError(f"fill must be a bool, got {self.fill!r}")
 
 
-def check_array(a: Any, name: str, dtypes: tuple[type, ...], ndim: int | tuple[int, ...], layout: str,
-                contiguous: bool = True) -> np.ndarray:
+def check_array(
+    a: Any, name: str, dtypes: tuple[type, ...], ndim: int | tuple[int, ...], layout: str, contiguous: bool = True
+) -> np.ndarray:
     """Validate a kernel input array: one of ``dtypes``, ``ndim`` dimensions, non-empty, C-contiguous.
 
     The one family every matcher input check builds on (:func:`check_image`,

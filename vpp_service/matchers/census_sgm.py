@@ -34,6 +34,7 @@ Speed: ``benchmarks/bench_matchers.py`` times the matcher and each of its
 stages (aggregation is the largest); the latest numbers are in
 ``benchmarks/results/bench_matchers.json``.
 """
+
 from __future__ import annotations
 
 import math
@@ -259,8 +260,15 @@ def left_right_check(
     check_disparity(disp_left, "disp_left")
     check_disparity(disp_right, "disp_right")
     if disp_left.shape != disp_right.shape:
-        raise ValueError(f"disp_left and disp_right must have the same shape, got {disp_left.shape} and {disp_right.shape}")
-    if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not tolerance >= 0 or math.isinf(tolerance):
+        raise ValueError(
+            f"disp_left and disp_right must have the same shape, got {disp_left.shape} and {disp_right.shape}"
+        )
+    if (
+        isinstance(tolerance, bool)
+        or not isinstance(tolerance, (int, float))
+        or not tolerance >= 0
+        or math.isinf(tolerance)
+    ):
         raise ValueError(f"tolerance must be a finite number >= 0, got {tolerance!r}")
     out = np.empty_like(disp_left)
     _k.left_right_check(disp_left, disp_right, out, float(tolerance), resolve_threads(threads))
@@ -373,9 +381,7 @@ class CensusSGM(Matcher):
             census_transform(to_gray(left), t), census_transform(to_gray(right), t), self.options.max_disparity, t
         )
 
-    def compute_from_cost(
-        self, cost: np.ndarray, left_gray: np.ndarray, hints: np.ndarray | None = None
-    ) -> np.ndarray:
+    def compute_from_cost(self, cost: np.ndarray, left_gray: np.ndarray, hints: np.ndarray | None = None) -> np.ndarray:
         """Disparity from a cost volume (steps 3-7; ``fill`` is not applied here).
 
         Parameters

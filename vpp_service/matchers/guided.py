@@ -14,6 +14,7 @@ costs) is rounded to nearest (half up) and saturated at the dtype maximum,
 so it can feed the integer SGM aggregation directly. Census costs are <= 24,
 so with ``k = 10`` the modulated values (<= 240) lose at most 0.5 per entry.
 """
+
 from __future__ import annotations
 
 from typing import Any

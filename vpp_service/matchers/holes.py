@@ -8,6 +8,7 @@ any valid pixel has nothing to interpolate from and is set to ``empty``
 (NaN by default, so "no data" stays visible; pass ``empty=0.0`` for a map
 with no NaN at all).
 """
+
 from __future__ import annotations
 
 from typing import Any

@@ -14,6 +14,7 @@ per-channel costs, and the default penalties scale with the channel count
 ``cn``), which keeps the colour information VPP paints; ``bm`` only takes gray,
 so RGB is converted with the usual luminance weights.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -218,4 +219,4 @@ class BM(Matcher):
         return _to_float(bm.compute(gl, gr), o.min_disparity)
 
 
-__all__ = ["BM", "BMOptions", "SGBM", "SGBMOptions", "opencv_num_disparities"]
+__all__ = ["BM", "SGBM", "BMOptions", "SGBMOptions", "opencv_num_disparities"]

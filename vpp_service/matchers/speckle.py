@@ -6,6 +6,7 @@ matches in occluded and textureless areas form small islands whose disparity
 differs from their surroundings; removing them lets hole filling put the
 background there instead.
 """
+
 from __future__ import annotations
 
 import cv2
@@ -64,4 +65,4 @@ def remove_speckles(disparity: np.ndarray, max_size: int = 200, max_diff: float 
     return out
 
 
-__all__ = ["remove_speckles", "SUBPIXEL_SCALE"]
+__all__ = ["SUBPIXEL_SCALE", "remove_speckles"]

@@ -11,6 +11,7 @@ flight) instead of going up and down every frame.
 
 Only glibc has ``mallopt``; elsewhere this is a no-op that says so.
 """
+
 from __future__ import annotations
 
 import ctypes
@@ -42,8 +43,11 @@ def reuse_freed_memory(mmap_threshold_mb: int = 512) -> bool:
     ValueError
         If ``mmap_threshold_mb`` is out of range.
     """
-    if isinstance(mmap_threshold_mb, bool) or not isinstance(mmap_threshold_mb, int) \
-            or not 1 <= mmap_threshold_mb <= 1024:
+    if (
+        isinstance(mmap_threshold_mb, bool)
+        or not isinstance(mmap_threshold_mb, int)
+        or not 1 <= mmap_threshold_mb <= 1024
+    ):
         raise ValueError(f"mmap_threshold_mb must be an int in [1, 1024], got {mmap_threshold_mb!r}")
     name = ctypes.util.find_library("c")
     try:

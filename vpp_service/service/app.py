@@ -6,6 +6,7 @@ the source, matcher, VPP step and sinks, runs the :class:`Pipeline` until
 it on SIGINT/SIGTERM), prints a live one-line summary on stderr, and writes
 ``<out>/summary.json``. Shutdown is bounded by ``service.shutdown_timeout_s``.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -14,12 +15,13 @@ import logging
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator, TextIO
+from typing import Any, TextIO
 
+from vpp_service.fusion import Fusion
 from vpp_service.service.allocator import reuse_freed_memory
 from vpp_service.service.config import ServiceConfig, ZenohSection
-from vpp_service.fusion import Fusion
 from vpp_service.service.pipeline import Pipeline
 
 log = logging.getLogger(__name__)
@@ -57,8 +59,9 @@ def build_pipeline(cfg: ServiceConfig, session: Any = None) -> Pipeline:
     from vpp_service.sources.base import SOURCES, SourceContext
 
     s = cfg.service
-    source = SOURCES.get(cfg.source.name)(cfg.source.options, SourceContext(rig=s.rig, prefix=s.prefix,
-                                                                             session=session))
+    source = SOURCES.get(cfg.source.name)(
+        cfg.source.options, SourceContext(rig=s.rig, prefix=s.prefix, session=session)
+    )
     sink_ctx = SinkContext(rig=s.rig, prefix=s.prefix, session=session)
     sinks = [SINKS.get(sp.name)(sp.options, sink_ctx) for sp in cfg.sinks]
     matcher = build_matcher(cfg.matcher.name, cfg.matcher.raw)
@@ -66,14 +69,26 @@ def build_pipeline(cfg: ServiceConfig, session: Any = None) -> Pipeline:
     needs_depth = any(SINKS.get(sp.name).needs_depth(sp.options) for sp in cfg.sinks)
     fusion = Fusion(matcher, cfg.vpp, seed=s.seed, depth=needs_depth)
     q = cfg.queues
-    return Pipeline(source, fusion, sinks, input_size=q.input_size, input_policy=q.input_policy,
-                    output_size=q.output_size, output_policy=q.output_policy, max_frames=s.max_frames,
-                    session=session, prefix=s.prefix, rig=s.rig, timing_window=s.timing_window,
-                    reject_log_period_s=s.reject_log_period_s)
+    return Pipeline(
+        source,
+        fusion,
+        sinks,
+        input_size=q.input_size,
+        input_policy=q.input_policy,
+        output_size=q.output_size,
+        output_policy=q.output_policy,
+        max_frames=s.max_frames,
+        session=session,
+        prefix=s.prefix,
+        rig=s.rig,
+        timing_window=s.timing_window,
+        reject_log_period_s=s.reject_log_period_s,
+    )
 
 
-def run_service(cfg: ServiceConfig, stop: threading.Event | None = None,
-                stream: TextIO | None = sys.stderr) -> dict[str, Any]:
+def run_service(
+    cfg: ServiceConfig, stop: threading.Event | None = None, stream: TextIO | None = sys.stderr
+) -> dict[str, Any]:
     """Run until done or ``stop`` is set; return the final status (also in ``<out>/summary.json``).
 
     Parameters
@@ -105,8 +120,12 @@ def run_service(cfg: ServiceConfig, stop: threading.Event | None = None,
                     next_report += s.summary_period_s
                     if s.summary and stream is not None:
                         tty = getattr(stream, "isatty", lambda: False)()
-                        print(("\r" if tty else "") + pipe.summary_line(), end="" if tty else "\n",
-                              file=stream, flush=True)
+                        print(
+                            ("\r" if tty else "") + pipe.summary_line(),
+                            end="" if tty else "\n",
+                            file=stream,
+                            flush=True,
+                        )
                     _write_json(summary_path, pipe.status())
         finally:
             t0 = time.monotonic()
@@ -116,8 +135,11 @@ def run_service(cfg: ServiceConfig, stop: threading.Event | None = None,
             status["config"] = cfg.to_dict()
             _write_json(summary_path, status)
             if s.summary and stream is not None:
-                print(("\r" if getattr(stream, "isatty", lambda: False)() else "") + pipe.summary_line(),
-                      file=stream, flush=True)
+                print(
+                    ("\r" if getattr(stream, "isatty", lambda: False)() else "") + pipe.summary_line(),
+                    file=stream,
+                    flush=True,
+                )
     return status
 
 
@@ -127,4 +149,4 @@ def _write_json(path: Path, data: dict[str, Any]) -> None:
     tmp.replace(path)
 
 
-__all__ = ["zenoh_config", "open_session", "build_pipeline", "run_service"]
+__all__ = ["build_pipeline", "open_session", "run_service", "zenoh_config"]

@@ -17,13 +17,15 @@ each plugin's own ``parse_options`` (its ``Options`` plus its ``check_options``
 hook). Errors are :class:`~vpp_service.settings.SettingsError` naming the key
 (``source.rate_hz: must be a number ...``).
 """
+
 from __future__ import annotations
 
 import copy
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Mapping
+from typing import Any, Literal
 
 from vpp_service.queueing import Policy
 from vpp_service.settings import SettingsError, from_mapping
@@ -180,10 +182,13 @@ class ServiceConfig:
         from vpp_service.settings import to_mapping
 
         return {
-            "service": to_mapping(self.service), "zenoh": to_mapping(self.zenoh),
+            "service": to_mapping(self.service),
+            "zenoh": to_mapping(self.zenoh),
             "source": {"type": self.source.name, **self.source.raw},
-            "vpp": dict(self.vpp_raw), "matcher": {"name": self.matcher.name, **self.matcher.raw},
-            "queues": to_mapping(self.queues), "sinks": [{"type": s.name, **s.raw} for s in self.sinks],
+            "vpp": dict(self.vpp_raw),
+            "matcher": {"name": self.matcher.name, **self.matcher.raw},
+            "queues": to_mapping(self.queues),
+            "sinks": [{"type": s.name, **s.raw} for s in self.sinks],
         }
 
 
@@ -192,13 +197,20 @@ class ServiceConfig:
 DEFAULT_CONFIG: dict[str, Any] = {
     "service": {"rig": "rig0", "prefix": "vpp", "max_frames": 0, "out": "vpp-run"},
     "zenoh": {"mode": "peer", "listen": ["tcp/127.0.0.1:7447"], "connect": [], "multicast_scouting": False},
-    "source": {"type": "sim", "scene": "motorcycle", "sensor": "uniform", "sensor_options": {"density": 0.05},
-               "rate_hz": 10.0},
+    "source": {
+        "type": "sim",
+        "scene": "motorcycle",
+        "sensor": "uniform",
+        "sensor_options": {"density": 0.05},
+        "rate_hz": 10.0,
+    },
     "vpp": {"enabled": True},
     "matcher": {"name": "sgbm", "max_disparity": 128},
     "queues": {"input_size": 2, "input_policy": "latest", "output_size": 4, "output_policy": "latest"},
-    "sinks": [{"type": "zenoh", "outputs": ["disparity", "depth"]},
-              {"type": "rerun", "mode": "save", "path": "{out}/vpp.rrd"}],
+    "sinks": [
+        {"type": "zenoh", "outputs": ["disparity", "depth"]},
+        {"type": "rerun", "mode": "save", "path": "{out}/vpp.rrd"},
+    ],
 }
 
 
@@ -218,7 +230,9 @@ def _plugin(d: Mapping[str, Any], section: str, name_key: str, registry: Any, pa
     if not isinstance(name, str):
         raise SettingsError(f"{section}.{name_key}: must be a string, got {name!r}")
     if name not in registry:
-        raise SettingsError(f"{section}.{name_key}: unknown {registry.kind} {name!r}; known: {', '.join(registry.names())}")
+        raise SettingsError(
+            f"{section}.{name_key}: unknown {registry.kind} {name!r}; known: {', '.join(registry.names())}"
+        )
     raw = {k: v for k, v in d.items() if k != name_key}
     return PluginSpec(name=name, options=parse(name, raw, section), raw=raw)
 
@@ -264,8 +278,13 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
         raise SettingsError(f"{unknown[0]}: unknown section; known: {', '.join(SECTIONS)}")
     service = from_mapping(ServiceSection, _table(data, "service"), "service")
     zen = from_mapping(ZenohSection, _table(data, "zenoh"), "zenoh")
-    source = _plugin(data.get("source", {"type": "sim"}), "source", "type", SOURCES,
-                     lambda n, raw, sec: parse_source_options(n, raw, sec))
+    source = _plugin(
+        data.get("source", {"type": "sim"}),
+        "source",
+        "type",
+        SOURCES,
+        lambda n, raw, sec: parse_source_options(n, raw, sec),
+    )
 
     def parse_matcher(name: str, raw: Mapping[str, Any], sec: str) -> Any:
         cls = MATCHERS.get(name)
@@ -289,8 +308,16 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
         for sec, spec, registry in plugins:
             if registry.get(spec.name).needs_session:
                 raise SettingsError(f"zenoh.enabled: {sec} ({registry.kind} {spec.name!r}) needs a zenoh session")
-    return ServiceConfig(service=service, zenoh=zen, source=source, vpp=vpp, vpp_raw=vpp_raw,
-                         matcher=matcher, queues=queues, sinks=tuple(sinks))
+    return ServiceConfig(
+        service=service,
+        zenoh=zen,
+        source=source,
+        vpp=vpp,
+        vpp_raw=vpp_raw,
+        matcher=matcher,
+        queues=queues,
+        sinks=tuple(sinks),
+    )
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
@@ -336,6 +363,15 @@ def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | N
 
 
 __all__ = [
-    "SECTIONS", "ServiceSection", "ZenohSection", "QueuesSection", "PluginSpec", "ServiceConfig",
-    "DEFAULT_CONFIG", "validate_config", "read_toml", "merge", "load_config",
+    "DEFAULT_CONFIG",
+    "SECTIONS",
+    "PluginSpec",
+    "QueuesSection",
+    "ServiceConfig",
+    "ServiceSection",
+    "ZenohSection",
+    "load_config",
+    "merge",
+    "read_toml",
+    "validate_config",
 ]

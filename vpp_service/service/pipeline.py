@@ -20,6 +20,7 @@ Bad input never stops the pipeline: a rejected message is counted and logged
 (at most once per ``reject_log_period_s``); a frame the process step raises
 on is counted as rejected and dropped.
 """
+
 from __future__ import annotations
 
 import json
@@ -27,7 +28,8 @@ import logging
 import threading
 import time
 from collections import deque
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -56,9 +58,16 @@ class StageTimer:
         """``{stage: {mean, p50, p99, last, n}}``."""
         with self._lock:
             items = {k: np.array(v) for k, v in self._data.items() if v}
-        return {k: {"mean": float(a.mean()), "p50": float(np.percentile(a, 50)),
-                    "p99": float(np.percentile(a, 99)), "last": float(a[-1]), "n": int(a.size)}
-                for k, a in items.items()}
+        return {
+            k: {
+                "mean": float(a.mean()),
+                "p50": float(np.percentile(a, 50)),
+                "p99": float(np.percentile(a, 99)),
+                "last": float(a[-1]),
+                "n": int(a.size),
+            }
+            for k, a in items.items()
+        }
 
 
 class Pipeline:
@@ -88,11 +97,23 @@ class Pipeline:
         Rate limit of the rejected-input log line.
     """
 
-    def __init__(self, source: Any, process: Callable[[StereoFrame], FusionResult], sinks: Sequence[Any] = (),
-                 *, input_size: int = 2, input_policy: Policy = "latest", output_size: int = 4,
-                 output_policy: Policy = "latest", max_frames: int = 0, session: Any = None,
-                 prefix: str = "vpp", rig: str = "rig0", timing_window: int = 200,
-                 reject_log_period_s: float = 5.0) -> None:
+    def __init__(
+        self,
+        source: Any,
+        process: Callable[[StereoFrame], FusionResult],
+        sinks: Sequence[Any] = (),
+        *,
+        input_size: int = 2,
+        input_policy: Policy = "latest",
+        output_size: int = 4,
+        output_policy: Policy = "latest",
+        max_frames: int = 0,
+        session: Any = None,
+        prefix: str = "vpp",
+        rig: str = "rig0",
+        timing_window: int = 200,
+        reject_log_period_s: float = 5.0,
+    ) -> None:
         if not callable(process):
             raise TypeError("process must be callable")
         if max_frames < 0:
@@ -102,17 +123,30 @@ class Pipeline:
         self.sinks = list(sinks)
         # the process stage finishes the sink stage when it ends; the sink stage then sets `done`
         self.output: QueueWorker[FusionResult] = QueueWorker(
-            self._publish, size=output_size, policy=output_policy, name="pipeline-sinks", on_exit=self._sinks_done)
+            self._publish, size=output_size, policy=output_policy, name="pipeline-sinks", on_exit=self._sinks_done
+        )
         self.input: QueueWorker[StereoFrame] = QueueWorker(
-            self._process, size=input_size, policy=input_policy, name="pipeline-process",
-            on_exit=self.output.finish, on_error=self._process_failed)
+            self._process,
+            size=input_size,
+            policy=input_policy,
+            name="pipeline-process",
+            on_exit=self.output.finish,
+            on_error=self._process_failed,
+        )
         self.max_frames = max_frames
         self.session = session
         self.prefix, self.rig = prefix, rig
         self.timer = StageTimer(timing_window)
         self.reject_log_period_s = reject_log_period_s
-        self.counters = {"received": 0, "rejected": 0, "dropped": 0, "processed": 0, "published": 0,
-                         "no_depth": 0, "errors": 0}
+        self.counters = {
+            "received": 0,
+            "rejected": 0,
+            "dropped": 0,
+            "processed": 0,
+            "published": 0,
+            "no_depth": 0,
+            "errors": 0,
+        }
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._enough = threading.Event()
@@ -187,13 +221,13 @@ class Pipeline:
         prepare = getattr(self.process, "prepare_next", None)
         if prepare is not None:
             try:
-                prepare(result.frame)   # optional idle-time work for the next frame
+                prepare(result.frame)  # optional idle-time work for the next frame
             except Exception as exc:
                 log.debug("prepare_next(seq=%s): %r", result.frame.seq, exc)
         if self.max_frames and self.counters["processed"] >= self.max_frames:
             self._enough.set()
             self.source.request_stop()  # no more input wanted
-            self.input.abort()          # frames still queued are not processed
+            self.input.abort()  # frames still queued are not processed
 
     def _process_failed(self, frame: StereoFrame, exc: Exception) -> None:
         """A frame ``process`` raised on: a ValueError rejects it, anything else is counted as an error."""
@@ -276,7 +310,7 @@ class Pipeline:
             self._stop.set()
             for worker in (self.input, self.output):
                 worker.abort()
-            self.output.finish()   # in case the process stage never ends
+            self.output.finish()  # in case the process stage never ends
             for worker in (self.input, self.output):
                 worker.join(1.0)
         self._stop.set()
@@ -307,15 +341,31 @@ class Pipeline:
             except Exception:
                 sinks[type(s).__name__] = {}
         return {
-            "rig": self.rig, "prefix": self.prefix, "uptime_s": elapsed, "counters": counters,
+            "rig": self.rig,
+            "prefix": self.prefix,
+            "uptime_s": elapsed,
+            "counters": counters,
             "fps": counters["processed"] / elapsed if elapsed > 0 else 0.0,
-            "queues": {"input": {"len": len(self.input), "size": self.input.size, "policy": self.input.policy,
-                                 "dropped": self.input.dropped, "high_water": self.input.high_water},
-                       "output": {"len": len(self.output), "size": self.output.size, "policy": self.output.policy,
-                                  "dropped": self.output.dropped, "high_water": self.output.high_water}},
-            "timing_ms": self.timer.summary(), "source": self.source.stats(), "sinks": sinks,
-            "metrics": {"last": self._last_metrics,
-                        "bad2_mean": float(np.mean(self._bad2)) if self._bad2 else None},
+            "queues": {
+                "input": {
+                    "len": len(self.input),
+                    "size": self.input.size,
+                    "policy": self.input.policy,
+                    "dropped": self.input.dropped,
+                    "high_water": self.input.high_water,
+                },
+                "output": {
+                    "len": len(self.output),
+                    "size": self.output.size,
+                    "policy": self.output.policy,
+                    "dropped": self.output.dropped,
+                    "high_water": self.output.high_water,
+                },
+            },
+            "timing_ms": self.timer.summary(),
+            "source": self.source.stats(),
+            "sinks": sinks,
+            "metrics": {"last": self._last_metrics, "bad2_mean": float(np.mean(self._bad2)) if self._bad2 else None},
         }
 
     def summary_line(self) -> str:
@@ -330,8 +380,10 @@ class Pipeline:
             # NaN (no estimate) counts as bad in bad-2; say how much of it that is.
             invalid = (st["metrics"]["last"] or {}).get("invalid")
             bad_s = f" | bad-2 {bad2:.2f} %" + (f" (no-estimate {invalid:.1f} %)" if invalid is not None else "")
-        return (f"{st['fps']:.1f} fps | {lat_s}{bad_s} | recv {c['received']} proc {c['processed']} "
-                f"pub {c['published']} drop {c['dropped']} rej {c['rejected']} no-depth {c['no_depth']}")
+        return (
+            f"{st['fps']:.1f} fps | {lat_s}{bad_s} | recv {c['received']} proc {c['processed']} "
+            f"pub {c['published']} drop {c['dropped']} rej {c['rejected']} no-depth {c['no_depth']}"
+        )
 
 
-__all__ = ["StageTimer", "Pipeline"]
+__all__ = ["Pipeline", "StageTimer"]

@@ -18,17 +18,19 @@ produces. The pipeline calls, in order:
 ``sink.stats()`` returns counters (``written``, ``dropped``, ``errors``) that
 the service reports in its ``@status`` reply.
 """
+
 from __future__ import annotations
 
 from abc import abstractmethod
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from vpp_service.frame import FusionResult
 from vpp_service.plugin import Plugin, PluginContext, parse_plugin_options
 from vpp_service.registry import Registry
 
 #: Registered sink classes by name ("zenoh", "rerun", "files").
-SINKS: Registry["Sink"] = Registry("sink")
+SINKS: Registry[Sink] = Registry("sink")
 
 
 class SinkContext(PluginContext):
@@ -66,10 +68,10 @@ class Sink(Plugin):
     def write(self, result: FusionResult) -> None:
         """Consume one result; never blocks indefinitely."""
 
-    def close(self, timeout: float = 5.0) -> None:  # noqa: B027 - optional hook
+    def close(self, timeout: float = 5.0) -> None:
         """Flush and release resources within ``timeout`` seconds."""
 
-    def __enter__(self) -> "Sink":
+    def __enter__(self) -> Sink:
         self.open()
         return self
 

@@ -5,6 +5,7 @@ large disparity = red, far = blue); invalid pixels (NaN, +/-inf, <= 0) are
 black. The same range is used for dense maps and sparse points so both read
 off one colour scale.
 """
+
 from __future__ import annotations
 
 import cv2
@@ -63,9 +64,7 @@ def _lut() -> np.ndarray:
 _TURBO = _lut()
 
 
-def colorize_disparity(
-    disparity: np.ndarray, vmin: float | None = None, vmax: float | None = None
-) -> np.ndarray:
+def colorize_disparity(disparity: np.ndarray, vmin: float | None = None, vmax: float | None = None) -> np.ndarray:
     """Colourise disparities with the turbo colour map.
 
     Parameters

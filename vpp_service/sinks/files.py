@@ -24,6 +24,7 @@ into place, so readers never see a partial file. After :meth:`FilesSink.open`
 succeeded, write failures (disk full, existing file with ``overwrite = false``,
 bad arrays) are logged and counted in ``stats()["errors"]``, never raised.
 """
+
 from __future__ import annotations
 
 import io
@@ -37,8 +38,8 @@ import numpy as np
 
 from vpp_service.datasets.pfm import write_pfm
 from vpp_service.frame import FusionResult
+from vpp_service.sinks.base import SINKS, SinkContext
 from vpp_service.sinks.folder import FolderSink, check_pattern, write_atomic
-from vpp_service.sinks.base import SINKS, Sink, SinkContext
 
 log = logging.getLogger(__name__)
 

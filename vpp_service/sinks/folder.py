@@ -5,12 +5,14 @@ come from a ``str.format`` pattern (:func:`check_pattern`, :func:`frame_stem`);
 :func:`write_atomic` writes a file to a temporary name in its destination
 folder and renames it into place, so readers never see a partial file.
 """
+
 from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import Sink, SinkContext
@@ -170,4 +172,4 @@ class FolderSink(Sink):
         )
 
 
-__all__ = ["FolderSink", "PATTERN_FIELDS", "check_pattern", "prepare_dir", "write_atomic"]
+__all__ = ["PATTERN_FIELDS", "FolderSink", "check_pattern", "prepare_dir", "write_atomic"]

@@ -42,6 +42,7 @@ file. After :meth:`RecordSink.open` succeeded, write failures (disk full, an
 existing file with ``overwrite = false``, a frame without calibration) are
 logged and counted in ``stats()["errors"]``, never raised.
 """
+
 from __future__ import annotations
 
 import logging
@@ -50,9 +51,9 @@ from pathlib import Path
 from typing import Literal
 
 from vpp_service.frame import FusionResult
-from vpp_service.transport import wire
+from vpp_service.sinks.base import SINKS, SinkContext
 from vpp_service.sinks.folder import FolderSink, check_pattern, write_atomic
-from vpp_service.sinks.base import SINKS, Sink, SinkContext
+from vpp_service.transport import wire
 
 log = logging.getLogger(__name__)
 
@@ -200,8 +201,10 @@ class RecordSink(FolderSink):
             return
         if o.max_bytes and self._counters["bytes"] + len(data) > o.max_bytes:
             self._counters["skipped"] += 1
-            self._stop("max_bytes", f"{self._counters['bytes']} bytes recorded, next frame needs {len(data)}, "
-                                    f"budget {o.max_bytes}")
+            self._stop(
+                "max_bytes",
+                f"{self._counters['bytes']} bytes recorded, next frame needs {len(data)}, budget {o.max_bytes}",
+            )
             return
         try:
             write_atomic(path, data, o.overwrite)

@@ -52,11 +52,11 @@ Closing
 disconnects, all bounded by ``timeout``: if the viewer is gone (``connect`` to a
 dead URL) the logging thread is abandoned (daemon) rather than hanging.
 """
+
 from __future__ import annotations
 
 import logging
 import math
-import os
 import re
 import shutil
 import subprocess
@@ -199,8 +199,11 @@ def _disable_viewer_analytics() -> None:
     cmd = [exe] if exe else [sys.executable, "-m", "rerun_cli"]
     try:
         subprocess.run(
-            cmd + ["analytics", "disable"], check=True, timeout=10,
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            [*cmd, "analytics", "disable"],
+            check=True,
+            timeout=10,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
         )
     except (OSError, subprocess.SubprocessError) as exc:
         log.warning("rerun sink: could not disable viewer analytics: %s", exc)
@@ -229,8 +232,14 @@ class RerunSink(Sink):
         super().__init__(options, context)
         self._counters.update({"throttled": 0, "queue_dropped": 0})
         self._worker: QueueWorker[FusionResult] = QueueWorker(
-            self._log_one, size=options.queue_size, policy="latest", name=f"rerun-sink-{context.rig}",
-            on_start=self._attach_once, on_exit=self._flush, on_error=self._failed)
+            self._log_one,
+            size=options.queue_size,
+            policy="latest",
+            name=f"rerun-sink-{context.rig}",
+            on_start=self._attach_once,
+            on_exit=self._flush,
+            on_error=self._failed,
+        )
         self._rec = None
         self._last_accept = -math.inf
         self._ready = threading.Event()
@@ -442,8 +451,11 @@ class RerunSink(Sink):
             rec.log(
                 f"{root}/camera",
                 rr.Pinhole(
-                    focal_length=float(c.f) / s, principal_point=[cx / s + 0.5, cy / s + 0.5],
-                    width=dd.shape[1], height=dd.shape[0], camera_xyz=rr.ViewCoordinates.RDF,
+                    focal_length=float(c.f) / s,
+                    principal_point=[cx / s + 0.5, cy / s + 0.5],
+                    width=dd.shape[1],
+                    height=dd.shape[0],
+                    camera_xyz=rr.ViewCoordinates.RDF,
                 ),
             )
             rec.log(f"{root}/camera/depth", rr.DepthImage(dd, meter=1.0))

@@ -14,6 +14,7 @@ counted) to this sink's own thread, which serializes and publishes.
 queued then are dropped and counted), then undeclares the publishers (the
 session belongs to the service).
 """
+
 from __future__ import annotations
 
 import logging
@@ -24,9 +25,9 @@ from typing import Any, Literal
 
 from vpp_service.frame import FusionResult
 from vpp_service.queueing import QueueWorker
+from vpp_service.sinks.base import SINKS, Sink, SinkContext
 from vpp_service.transport import wire
 from vpp_service.transport.shm import ShmPutter
-from vpp_service.sinks.base import SINKS, Sink, SinkContext
 
 log = logging.getLogger(__name__)
 
@@ -61,8 +62,11 @@ class ZenohSinkOptions:
                 raise ValueError(f"outputs: unknown output {name!r}; known: {', '.join(wire.OUTPUTS)}")
         if len(set(self.outputs)) != len(self.outputs):
             raise ValueError("outputs: duplicates")
-        if isinstance(self.shm_pool_mb, bool) or not isinstance(self.shm_pool_mb, int) \
-                or not 0 <= self.shm_pool_mb <= 4096:
+        if (
+            isinstance(self.shm_pool_mb, bool)
+            or not isinstance(self.shm_pool_mb, int)
+            or not 0 <= self.shm_pool_mb <= 4096
+        ):
             raise ValueError(f"shm_pool_mb: must be an int in [0, 4096], got {self.shm_pool_mb!r}")
         if self.queue_size < 1:
             raise ValueError(f"queue_size must be >= 1, got {self.queue_size}")
@@ -84,7 +88,8 @@ class ZenohSink(Sink):
         super().__init__(options, context)
         self._pubs: dict[str, Any] = {}
         self._worker: QueueWorker[FusionResult] = QueueWorker(
-            self._publish, size=options.queue_size, policy="latest", name="sink-zenoh", on_error=self._failed)
+            self._publish, size=options.queue_size, policy="latest", name="sink-zenoh", on_error=self._failed
+        )
         # per-result serialization / put durations (ms), reported by stats()
         self._encode_ms: deque[float] = deque(maxlen=200)
         self._put_ms: deque[float] = deque(maxlen=200)

@@ -16,18 +16,20 @@ pipeline. Life cycle, mirroring :mod:`vpp_service.sinks.base`:
 
 ``src.stats()`` returns counters (``emitted``, ``rejected`` and extras) for ``@status``.
 """
+
 from __future__ import annotations
 
 import threading
 from abc import abstractmethod
-from typing import Any, Callable, Mapping
+from collections.abc import Callable, Mapping
+from typing import Any
 
 from vpp_service.frame import StereoFrame
 from vpp_service.plugin import Plugin, PluginContext, parse_plugin_options
 from vpp_service.registry import Registry
 
 #: Registered source classes by name ("zenoh", "files", "sim").
-SOURCES: Registry["Source"] = Registry("source")
+SOURCES: Registry[Source] = Registry("source")
 
 #: ``emit(frame)`` callback type; returns False when the frame was dropped.
 Emit = Callable[[StereoFrame], bool]
@@ -59,8 +61,7 @@ class Source(Plugin):
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
-    def start(self, emit: Emit, reject: Reject | None = None,
-              on_finished: Callable[[], None] | None = None) -> None:
+    def start(self, emit: Emit, reject: Reject | None = None, on_finished: Callable[[], None] | None = None) -> None:
         """Start producing frames from a daemon thread running :meth:`run`.
 
         Parameters
@@ -112,7 +113,7 @@ class Source(Plugin):
             self._thread.join(timeout)
         self.close()
 
-    def close(self) -> None:  # noqa: B027 - optional hook
+    def close(self) -> None:
         """Release resources (called by :meth:`stop`)."""
 
 
@@ -121,14 +122,13 @@ def parse_source_options(name: str, options: Mapping[str, Any] | None, section: 
     return parse_plugin_options(SOURCES, name, options, section or f"source.{name}")
 
 
-def build_source(name: str, options: Mapping[str, Any] | None = None,
-                 context: SourceContext | None = None) -> Source:
+def build_source(name: str, options: Mapping[str, Any] | None = None, context: SourceContext | None = None) -> Source:
     """Build (not open) the source registered as ``name`` from a plain options mapping."""
     cls = SOURCES.get(name)
     return cls(parse_source_options(name, options), context or SourceContext())
 
 
-__all__ = ["SOURCES", "Source", "SourceContext", "Emit", "Reject", "build_source", "parse_source_options"]
+__all__ = ["SOURCES", "Emit", "Reject", "Source", "SourceContext", "build_source", "parse_source_options"]
 
 
 class Pacer:

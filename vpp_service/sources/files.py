@@ -18,6 +18,7 @@ Two layouts:
 end, ``count`` caps the number of frames (0 = no cap). Frames are renumbered
 ``seq`` = 0, 1, ... in replay order and stamped with the wall clock.
 """
+
 from __future__ import annotations
 
 import time
@@ -26,9 +27,9 @@ from pathlib import Path
 from typing import Any, Literal
 
 from vpp_service.frame import StereoFrame
-from vpp_service.transport import wire
 from vpp_service.sources.base import SOURCES, Emit, Pacer, Reject, Source, SourceContext
 from vpp_service.sources.sim import build_sensor_or_none, scale_frame
+from vpp_service.transport import wire
 
 
 @dataclass(frozen=True)

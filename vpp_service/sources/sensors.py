@@ -27,10 +27,12 @@ Sensors (``SENSORS.names()``):
 All randomness comes from ``numpy.random.default_rng(seed)``: the same frame and
 seed give the same points.
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -39,7 +41,7 @@ from vpp_service.registry import Registry
 from vpp_service.settings import from_mapping
 
 #: Sensor classes by name.
-SENSORS: Registry["Sensor"] = Registry("sensor")
+SENSORS: Registry[Sensor] = Registry("sensor")
 
 
 def _positive(name: str, v: float) -> None:
@@ -127,21 +129,22 @@ class Sensor:
         return gt, np.random.default_rng(seed)
 
     @staticmethod
-    def _true_depth(gt: np.ndarray, rows: np.ndarray, cols: np.ndarray, f: float, b: float,
-                    doffs: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _true_depth(
+        gt: np.ndarray, rows: np.ndarray, cols: np.ndarray, f: float, b: float, doffs: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Sample ``gt`` at (rows, cols); keep the valid hits, return them with their depth."""
         d = gt[rows, cols].astype(np.float64)
         hit = np.isfinite(d)
         return rows[hit], cols[hit], f * b / (d[hit] + doffs)
 
     @staticmethod
-    def _measured_disparity(z_meas: np.ndarray, keep: np.ndarray, f: float, b: float,
-                            doffs: float) -> np.ndarray:
+    def _measured_disparity(z_meas: np.ndarray, keep: np.ndarray, f: float, b: float, doffs: float) -> np.ndarray:
         """Disparity of measured depths (rows not kept get a placeholder, never read)."""
         return f * b / np.where(keep, z_meas, 1.0) - doffs
 
-    def _output(self, frame: StereoFrame, rows: np.ndarray, cols: np.ndarray, disp: np.ndarray,
-                depth: np.ndarray | None) -> StereoFrame:
+    def _output(
+        self, frame: StereoFrame, rows: np.ndarray, cols: np.ndarray, disp: np.ndarray, depth: np.ndarray | None
+    ) -> StereoFrame:
         """Assemble the sparse maps; drops non-positive disparities/depths."""
         h, w = frame.shape
         keep = np.isfinite(disp) & (disp > 0)
@@ -259,7 +262,9 @@ class LidarSensor(Sensor):
             if self.beams < 1:
                 raise ValueError(f"beams: must be >= 1, got {self.beams}")
             if not (-90 < self.fov_down < self.fov_up < 90):
-                raise ValueError(f"fov_up/fov_down: need -90 < fov_down < fov_up < 90, got {self.fov_down}, {self.fov_up}")
+                raise ValueError(
+                    f"fov_up/fov_down: need -90 < fov_down < fov_up < 90, got {self.fov_down}, {self.fov_up}"
+                )
             if not np.isfinite(self.azimuth_step) or not 0 < self.azimuth_step <= 10:
                 raise ValueError(f"azimuth_step: must be in (0, 10] degrees, got {self.azimuth_step!r}")
             _non_negative("min_range", self.min_range)
@@ -369,7 +374,9 @@ class ToFSensor(Sensor):
         z_meas = z + noise
         keep &= z_meas > 0
         d_meas = self._measured_disparity(z_meas, keep, f, b, doffs)
-        return self._output(frame, rows[keep], cols[keep], d_meas[keep].astype(np.float32), z_meas[keep].astype(np.float32))
+        return self._output(
+            frame, rows[keep], cols[keep], d_meas[keep].astype(np.float32), z_meas[keep].astype(np.float32)
+        )
 
 
 def build_sensor(name: str, options: Mapping[str, Any] | None = None) -> Sensor:
@@ -392,4 +399,4 @@ def build_sensor(name: str, options: Mapping[str, Any] | None = None) -> Sensor:
     return cls(from_mapping(cls.Options, options, f"sensor.{name}"))
 
 
-__all__ = ["SENSORS", "Sensor", "NominalGeometry", "UniformSensor", "LidarSensor", "ToFSensor", "build_sensor"]
+__all__ = ["SENSORS", "LidarSensor", "NominalGeometry", "Sensor", "ToFSensor", "UniformSensor", "build_sensor"]

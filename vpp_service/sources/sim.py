@@ -18,6 +18,7 @@ simulated sensor draw (seed = ``seed + seq``) from
 :func:`vpp_service.sources.sensors.build_sensor` (``uniform`` 5 % by default).
 Frames are paced at ``rate_hz`` (0 = as fast as possible); ``count = 0`` runs forever.
 """
+
 from __future__ import annotations
 
 import time
@@ -58,14 +59,19 @@ def scale_frame(frame: StereoFrame, scale: float) -> StereoFrame:
         gt = cv2.resize(frame.gt_disparity, size, interpolation=cv2.INTER_NEAREST) * np.float32(sx)
     calib = frame.calib
     if calib is not None:
-        calib = Calibration(f=calib.f * sx, baseline=calib.baseline, doffs=calib.doffs * sx,
-                            cx=None if calib.cx is None else calib.cx * sx,
-                            cy=None if calib.cy is None else calib.cy * sx)
+        calib = Calibration(
+            f=calib.f * sx,
+            baseline=calib.baseline,
+            doffs=calib.doffs * sx,
+            cx=None if calib.cx is None else calib.cx * sx,
+            cy=None if calib.cy is None else calib.cy * sx,
+        )
     nocc = None
     if frame.nocc_mask is not None:
         nocc = cv2.resize(frame.nocc_mask.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST).astype(bool)
-    return frame.with_(left=left, right=right, gt_disparity=gt, calib=calib, nocc_mask=nocc,
-                       sparse_disparity=None, sensor_depth=None)
+    return frame.with_(
+        left=left, right=right, gt_disparity=gt, calib=calib, nocc_mask=nocc, sparse_disparity=None, sensor_depth=None
+    )
 
 
 def motorcycle_frame(scale: float = 1.0) -> StereoFrame:
@@ -206,4 +212,4 @@ class SimSource(Source):
             seq += 1
 
 
-__all__ = ["SimSource", "SimSourceOptions", "MOTORCYCLE_CALIB", "motorcycle_frame", "scale_frame"]
+__all__ = ["MOTORCYCLE_CALIB", "SimSource", "SimSourceOptions", "motorcycle_frame", "scale_frame"]

@@ -26,6 +26,7 @@ ones (constant disparity). ``texture="weak"`` gives every surface a
 low-contrast texture (std of about ``weak_contrast`` grey levels), the regime
 where stereo matching fails and sparse depth helps most.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -63,10 +64,19 @@ def _check_int(name: str, v: int, lo: int) -> None:
         raise ValueError(f"{name}: must be an integer >= {lo}, got {v!r}")
 
 
-def make_scene(height: int = 240, width: int = 320, seed: int = 0, kind: str = "planes",
-               max_disparity: float = 48, texture: str = "random", n_objects: int = 4,
-               f: float = 500.0, baseline: float = 0.1, noise: float = 0.0,
-               weak_contrast: float = 2.0) -> StereoFrame:
+def make_scene(
+    height: int = 240,
+    width: int = 320,
+    seed: int = 0,
+    kind: str = "planes",
+    max_disparity: float = 48,
+    texture: str = "random",
+    n_objects: int = 4,
+    f: float = 500.0,
+    baseline: float = 0.1,
+    noise: float = 0.0,
+    weak_contrast: float = 2.0,
+) -> StereoFrame:
     """Render a synthetic rectified stereo pair with exact ground truth.
 
     Parameters
@@ -105,8 +115,12 @@ def make_scene(height: int = 240, width: int = 320, seed: int = 0, kind: str = "
         raise ValueError(f"kind: must be 'planes' or 'boxes', got {kind!r}")
     if texture not in ("random", "weak"):
         raise ValueError(f"texture: must be 'random' or 'weak', got {texture!r}")
-    if isinstance(max_disparity, bool) or not isinstance(max_disparity, (int, float)) or not np.isfinite(max_disparity) \
-            or not 4 <= max_disparity < width / 2:
+    if (
+        isinstance(max_disparity, bool)
+        or not isinstance(max_disparity, (int, float))
+        or not np.isfinite(max_disparity)
+        or not 4 <= max_disparity < width / 2
+    ):
         raise ValueError(f"max_disparity: must be in [4, width/2), got {max_disparity!r}")
     for name, v, lo in (("noise", noise, 0.0), ("weak_contrast", weak_contrast, 0.0)):
         if not np.isfinite(v) or v < lo:
@@ -161,8 +175,9 @@ def make_scene(height: int = 240, width: int = 320, seed: int = 0, kind: str = "
             sel = owner == i
             if not sel.any():
                 continue
-            sampled = cv2.remap(s.texture, (coords[i] + pad).astype(np.float32), ys, cv2.INTER_LINEAR,
-                                borderMode=cv2.BORDER_REFLECT)
+            sampled = cv2.remap(
+                s.texture, (coords[i] + pad).astype(np.float32), ys, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT
+            )
             img[sel] = sampled[sel]
         return img, best, owner
 
@@ -184,10 +199,13 @@ def make_scene(height: int = 240, width: int = 320, seed: int = 0, kind: str = "
     left = np.clip(np.rint(left_f), 0, 255).astype(np.uint8)
     right = np.clip(np.rint(right_f), 0, 255).astype(np.uint8)
     return StereoFrame(
-        left=left, right=right, calib=calib, gt_disparity=gt.astype(np.float32), nocc_mask=nocc,
+        left=left,
+        right=right,
+        calib=calib,
+        gt_disparity=gt.astype(np.float32),
+        nocc_mask=nocc,
         name=f"synthetic-{kind}-{seed}",
-        meta={"dataset": "synthetic", "kind": kind, "texture": texture, "seed": seed,
-              "max_disparity": dmax},
+        meta={"dataset": "synthetic", "kind": kind, "texture": texture, "seed": seed, "max_disparity": dmax},
     )
 
 

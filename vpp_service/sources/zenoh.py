@@ -13,6 +13,7 @@ Topics: ``<prefix>/<rig>/in/frame`` (default), or with ``topics = "separate"``
 :class:`vpp_service.transport.sync.Synchronizer` (``sync = "exact"`` by seq or
 ``"approximate"`` by stamp within ``sync_threshold_ms``).
 """
+
 from __future__ import annotations
 
 import threading
@@ -21,9 +22,9 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from vpp_service.sources.base import SOURCES, Emit, Reject, Source, SourceContext
 from vpp_service.transport import wire
 from vpp_service.transport.sync import Synchronizer
-from vpp_service.sources.base import SOURCES, Emit, Reject, Source, SourceContext
 
 
 @dataclass(frozen=True)
@@ -111,12 +112,15 @@ class ZenohSource(Source):
         if session is None:
             raise ValueError("source.zenoh: needs an open zenoh session (service.zenoh section)")
         o = self.options
-        parts = ["frame"] if o.topics == "frame" else (["left", "right", "depth"] if o.with_depth else ["left", "right"])
+        parts = (
+            ["frame"] if o.topics == "frame" else (["left", "right", "depth"] if o.with_depth else ["left", "right"])
+        )
         for part in parts:
             key = wire.topic(self.context.prefix, self.context.rig, f"in/{part}")
             self._rings[part] = deque(maxlen=o.ring_sizes.get(part, o.ring_size))
             self._subs[part] = session.declare_subscriber(
-                key, zenoh.handlers.Callback(lambda sample, part=part: self._on_sample(part, sample)))
+                key, zenoh.handlers.Callback(lambda sample, part=part: self._on_sample(part, sample))
+            )
         if o.topics == "separate":
             self.sync = Synchronizer(parts, o.sync, o.sync_queue_size, int(o.sync_threshold_ms * 1e6))
 
@@ -137,7 +141,7 @@ class ZenohSource(Source):
     def run(self, emit: Emit, reject: Reject) -> None:
         """Drain the rings, decode, validate, synchronize and emit until stopped."""
         while not self.stopping():
-            self._arrived.clear()       # before draining: a later sample sets it again
+            self._arrived.clear()  # before draining: a later sample sets it again
             got = False
             for part in list(self._rings):
                 sample = self._next(part)

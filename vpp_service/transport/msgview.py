@@ -14,6 +14,7 @@ or strings longer than the given limits and nesting deeper than ``max_depth``.
 Every error is a :class:`MsgViewError` (a ``ValueError``) saying what and
 where.
 """
+
 from __future__ import annotations
 
 import struct
@@ -48,7 +49,7 @@ class Limits:
 
 
 class _Reader:
-    __slots__ = ("mv", "pos", "lim")
+    __slots__ = ("lim", "mv", "pos")
 
     def __init__(self, buf: bytes | bytearray | memoryview, lim: Limits) -> None:
         self.mv = memoryview(buf).cast("B") if not isinstance(buf, bytes) else memoryview(buf)
@@ -74,14 +75,14 @@ class _Reader:
         self._check(n, self.lim.max_str_len, "string length")
         p = self._need(n, "string")
         try:
-            return str(self.mv[p:p + n], "utf-8")
+            return str(self.mv[p : p + n], "utf-8")
         except UnicodeDecodeError as exc:
             raise MsgViewError(f"string at byte {p} is not UTF-8 ({exc.reason})") from None
 
     def _bin(self, n: int) -> memoryview:
         self._check(n, self.lim.max_bin_len, "bin length")
         p = self._need(n, "bin")
-        return self.mv[p:p + n].toreadonly()
+        return self.mv[p : p + n].toreadonly()
 
     def _array(self, n: int, depth: int) -> list:
         self._check(n, self.lim.max_array_len, "array length")
@@ -131,8 +132,7 @@ class _Reader:
         if b == 0xCB:
             return _F64(self.mv, self._need(8, "float64"))[0]
         if 0xCC <= b <= 0xD3:
-            fmt, size = ((_U8, 1), (_U16, 2), (_U32, 4), (_U64, 8),
-                         (_I8, 1), (_I16, 2), (_I32, 4), (_I64, 8))[b - 0xCC]
+            fmt, size = ((_U8, 1), (_U16, 2), (_U32, 4), (_U64, 8), (_I8, 1), (_I16, 2), (_I32, 4), (_I64, 8))[b - 0xCC]
             return fmt(self.mv, self._need(size, "integer"))[0]
         if b == 0xD9:
             return self._str(self._len(_U8, 1, "string"))
@@ -170,7 +170,7 @@ def loads(payload: bytes | bytearray | memoryview, limits: Limits) -> Any:
     """
     try:
         r = _Reader(payload, limits)
-    except (TypeError, ValueError) as exc:      # e.g. a non-contiguous memoryview
+    except (TypeError, ValueError) as exc:  # e.g. a non-contiguous memoryview
         raise MsgViewError(f"payload is not a contiguous byte buffer ({exc})") from None
     out = r.value()
     if r.pos != len(r.mv):

@@ -13,10 +13,12 @@ Nothing here ever blocks or loses a message: when shared memory is unavailable
 still hold earlier buffers) the message goes out with a plain ``put`` and the
 fallback is counted.
 """
+
 from __future__ import annotations
 
 import logging
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 log = logging.getLogger(__name__)
 
@@ -88,7 +90,7 @@ class ShmPutter:
                 else:
                     off = 0
                     for p in parts:
-                        buf[off:off + len(p)] = p
+                        buf[off : off + len(p)] = p
                         off += len(p)
                     publisher.put(buf)
                     self.shm_puts += 1

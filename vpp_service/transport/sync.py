@@ -13,12 +13,14 @@ On a match, older messages still queued on any topic can never be matched in an
 in-order stream: they are dropped and counted, as are messages evicted from a
 full queue. Thread-safe.
 """
+
 from __future__ import annotations
 
 import threading
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Generic, Sequence, TypeVar
+from typing import Any, Generic, TypeVar
 
 T = TypeVar("T")
 
@@ -45,8 +47,9 @@ class Synchronizer(Generic[T]):
         Largest stamp difference inside an approximate set (>= 0).
     """
 
-    def __init__(self, topics: Sequence[str], mode: str = "exact", queue_size: int = 10,
-                 threshold_ns: int = 20_000_000) -> None:
+    def __init__(
+        self, topics: Sequence[str], mode: str = "exact", queue_size: int = 10, threshold_ns: int = 20_000_000
+    ) -> None:
         topics = tuple(topics)
         if len(topics) < 2 or len(set(topics)) != len(topics) or not all(isinstance(t, str) and t for t in topics):
             raise ValueError(f"topics must be at least 2 unique non-empty names, got {topics!r}")

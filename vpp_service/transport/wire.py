@@ -21,12 +21,14 @@ Topics (``prefix`` defaults to ``"vpp"``)::
     <prefix>/<rig>/@status           queryable, JSON
     <prefix>/<rig>/@alive            liveliness token
 """
+
 from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any
 
 import cv2
 import msgpack
@@ -167,9 +169,12 @@ def unpack(payload: bytes | bytearray | memoryview, limits: WireLimits = DEFAULT
     if n > limits.max_message_bytes:
         raise WireError(f"message: {n} bytes exceeds the limit of {limits.max_message_bytes}")
     try:
-        msg = msgview.loads(payload, msgview.Limits(
-            max_bin_len=n, max_str_len=min(n, 1 << 20), max_array_len=min(n, 1 << 16),
-            max_map_len=min(n, 1 << 12)))
+        msg = msgview.loads(
+            payload,
+            msgview.Limits(
+                max_bin_len=n, max_str_len=min(n, 1 << 20), max_array_len=min(n, 1 << 16), max_map_len=min(n, 1 << 12)
+            ),
+        )
     except msgview.MsgViewError as exc:
         raise WireError(f"message: not valid msgpack ({exc})") from None
     if not isinstance(msg, dict):
@@ -205,11 +210,11 @@ def _jpeg_size(data: bytes) -> tuple[int, int]:
         if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
             i += 2
             continue
-        seg = struct.unpack(">H", data[i + 2:i + 4])[0]
+        seg = struct.unpack(">H", data[i + 2 : i + 4])[0]
         if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
             if i + 9 > len(data):
                 break
-            h, w = struct.unpack(">HH", data[i + 5:i + 9])
+            h, w = struct.unpack(">HH", data[i + 5 : i + 9])
             return h, w
         i += 2 + seg
     raise WireError("data: JPEG without a frame header")
@@ -315,26 +320,31 @@ def encode_depth(frame: StereoFrame, kind: str = "auto") -> dict[str, Any] | Non
     disp = frame.sparse_disparity
     if kind == "auto":
         kind = "points" if metric is not None else "disparity_points"
-    if kind in ("points",) and metric is None:
+    if kind == "points" and metric is None:
         raise ValueError("kind='points' needs frame.sensor_depth")
     src = metric if kind == "points" or (kind == "map" and metric is not None) else disp
     if src is None:
         return None
     src = np.asarray(src, dtype=np.float32)
     if kind == "map":
-        return {"kind": "map", "h": int(src.shape[0]), "w": int(src.shape[1]),
-                "unit": "m" if src is metric else "px",
-                "data": np.ascontiguousarray(src, dtype="<f4").tobytes()}
+        return {
+            "kind": "map",
+            "h": int(src.shape[0]),
+            "w": int(src.shape[1]),
+            "unit": "m" if src is metric else "px",
+            "data": np.ascontiguousarray(src, dtype="<f4").tobytes(),
+        }
     ys, xs = np.nonzero(np.isfinite(src) & (src > 0))
     uv = np.stack([xs, ys], axis=1).astype("<f4")
     vals = src[ys, xs].astype("<f4")
-    out = {"kind": kind, "n": int(len(vals)), "uv": uv.tobytes()}
+    out = {"kind": kind, "n": len(vals), "uv": uv.tobytes()}
     out["z" if kind == "points" else "d"] = vals.tobytes()
     return out
 
 
-def points_to_maps(uv: np.ndarray, vals: np.ndarray, h: int, w: int, keep: str,
-                   calib: Calibration | None = None, path: str = "depth.") -> tuple[np.ndarray, np.ndarray | None]:
+def points_to_maps(
+    uv: np.ndarray, vals: np.ndarray, h: int, w: int, keep: str, calib: Calibration | None = None, path: str = "depth."
+) -> tuple[np.ndarray, np.ndarray | None]:
     """Validate sparse points and scatter them into H x W float32 maps (NaN = none).
 
     Parameters
@@ -380,9 +390,15 @@ def points_to_maps(uv: np.ndarray, vals: np.ndarray, h: int, w: int, keep: str,
     with_d = calib is not None and keep == "min"
     out_d = np.full((h, w), np.nan, dtype=np.float32) if with_d else _NO_MAP
     fb, doffs = (calib.f * calib.baseline, calib.doffs) if with_d else (0.0, 0.0)
-    bad = _points.scatter_points(np.ascontiguousarray(uv, dtype=np.float32).reshape(-1),
-                                 np.ascontiguousarray(vals, dtype=np.float32),
-                                 keep == "min", out, out_d, float(fb), float(doffs))
+    bad = _points.scatter_points(
+        np.ascontiguousarray(uv, dtype=np.float32).reshape(-1),
+        np.ascontiguousarray(vals, dtype=np.float32),
+        keep == "min",
+        out,
+        out_d,
+        float(fb),
+        float(doffs),
+    )
     if bad & _points.BAD_UV:
         raise WireError(f"{path}uv: coordinates must be finite")
     if bad & _points.OUTSIDE:
@@ -395,9 +411,9 @@ def points_to_maps(uv: np.ndarray, vals: np.ndarray, h: int, w: int, keep: str,
 _NO_MAP = np.empty((0, 0), np.float32)
 
 
-def decode_depth(m: Any, h: int, w: int, path: str = "depth",
-                 limits: WireLimits = DEFAULT_LIMITS,
-                 calib: Calibration | None = None) -> tuple[np.ndarray | None, np.ndarray | None]:
+def decode_depth(
+    m: Any, h: int, w: int, path: str = "depth", limits: WireLimits = DEFAULT_LIMITS, calib: Calibration | None = None
+) -> tuple[np.ndarray | None, np.ndarray | None]:
     """Validate a ``SparseDepth`` map; return ``(sensor_depth_m, sparse_disparity_px)``.
 
     Exactly one of the two is not None, except for metric ``points`` with a
@@ -479,8 +495,7 @@ def _header(msg: Mapping[str, Any]) -> tuple[str, int, int]:
 
 
 # ------------------------------------------------------------------- frames
-def encode_frame(frame: StereoFrame, enc: str = "raw", depth_kind: str = "auto",
-                 include_gt: bool = True) -> bytes:
+def encode_frame(frame: StereoFrame, enc: str = "raw", depth_kind: str = "auto", include_gt: bool = True) -> bytes:
     """Serialize a :class:`StereoFrame` as a v1 ``in/frame`` message.
 
     Parameters
@@ -506,8 +521,12 @@ def encode_frame(frame: StereoFrame, enc: str = "raw", depth_kind: str = "auto",
     if frame.left.shape != frame.right.shape:
         raise ValueError(f"frame.left {frame.left.shape} and frame.right {frame.right.shape} differ")
     msg: dict[str, Any] = {
-        "v": VERSION, "rig": frame.rig, "seq": int(frame.seq), "stamp_ns": int(frame.stamp_ns),
-        "left": encode_image(frame.left, enc), "right": encode_image(frame.right, enc),
+        "v": VERSION,
+        "rig": frame.rig,
+        "seq": int(frame.seq),
+        "stamp_ns": int(frame.stamp_ns),
+        "left": encode_image(frame.left, enc),
+        "right": encode_image(frame.right, enc),
         "calib": frame.calib.to_dict(),
     }
     depth = encode_depth(frame, depth_kind)
@@ -543,8 +562,17 @@ def decode_frame(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> StereoF
         sensor, disp = decode_depth(msg["depth"], h, w, "depth", limits, calib)
     if msg.get("gt") is not None:
         gt = _decode_gt(msg["gt"], h, w)
-    return StereoFrame(left=left, right=right, calib=calib, sparse_disparity=disp, sensor_depth=sensor,
-                       gt_disparity=gt, rig=rig, seq=seq, stamp_ns=stamp)
+    return StereoFrame(
+        left=left,
+        right=right,
+        calib=calib,
+        sparse_disparity=disp,
+        sensor_depth=sensor,
+        gt_disparity=gt,
+        rig=rig,
+        seq=seq,
+        stamp_ns=stamp,
+    )
 
 
 # -------------------------------------------- separate-topics part messages
@@ -631,14 +659,22 @@ def assemble(left: Part, right: Part, depth: Part | None) -> StereoFrame:
         if dm.shape != left.image.shape[:2]:
             raise WireError(f"depth.h: depth is {dm.shape}, image is {left.image.shape[:2]}")
         sensor, disp = depth.sensor_depth, depth.sparse_disparity
-    return StereoFrame(left=left.image, right=right.image, calib=left.calib, sparse_disparity=disp,
-                       sensor_depth=sensor, gt_disparity=left.gt, rig=left.rig, seq=left.seq,
-                       stamp_ns=left.stamp_ns)
+    return StereoFrame(
+        left=left.image,
+        right=right.image,
+        calib=left.calib,
+        sparse_disparity=disp,
+        sensor_depth=sensor,
+        gt_disparity=left.gt,
+        rig=left.rig,
+        seq=left.seq,
+        stamp_ns=left.stamp_ns,
+    )
 
 
 # ------------------------------------------------------------------ outputs
 def _bin_header(n: int) -> bytes:
-    """msgpack ``bin`` header of an ``n``-byte payload (the smallest form, as ``packb`` writes it)."""
+    """Msgpack ``bin`` header of an ``n``-byte payload (the smallest form, as ``packb`` writes it)."""
     if n < 1 << 8:
         return bytes((0xC4, n))
     if n < 1 << 16:
@@ -660,8 +696,13 @@ def _map_parts(fields: Mapping[str, Any], blob_key: str, blob: bytes) -> list[by
 def _map_message(result: FusionResult, arr: np.ndarray, extra: Mapping[str, Any]) -> list[bytes]:
     fr = result.frame
     msg = {
-        "v": VERSION, "rig": fr.rig, "seq": int(fr.seq), "stamp_ns": int(fr.stamp_ns),
-        "h": int(arr.shape[0]), "w": int(arr.shape[1]), "dtype": "f32",
+        "v": VERSION,
+        "rig": fr.rig,
+        "seq": int(fr.seq),
+        "stamp_ns": int(fr.stamp_ns),
+        "h": int(arr.shape[0]),
+        "w": int(arr.shape[1]),
+        "dtype": "f32",
         "calib": fr.calib.to_dict() if fr.calib is not None else None,
         "timing_ms": {str(k): float(v) for k, v in result.timing_ms.items()},
     }
@@ -673,7 +714,8 @@ def _map_message(result: FusionResult, arr: np.ndarray, extra: Mapping[str, Any]
 
 def encode_output_parts(result: FusionResult, name: str, enc: str = "raw") -> list[bytes] | None:
     """:func:`encode_output` as a list of byte strings whose concatenation is the
-    message (the float maps' data is its own part: no copy to join it)."""
+    message (the float maps' data is its own part: no copy to join it).
+    """
     if name not in OUTPUTS:
         raise ValueError(f"name must be one of {OUTPUTS}, got {name!r}")
     fr = result.frame
@@ -682,16 +724,24 @@ def encode_output_parts(result: FusionResult, name: str, enc: str = "raw") -> li
         if result.metrics:
             extra["metrics"] = {k: float(v) for k, v in result.metrics.items()}
         if result.vpp_stats:
-            extra["vpp"] = {k: (int(v) if isinstance(v, (int, np.integer)) else float(v))
-                            for k, v in result.vpp_stats.items() if isinstance(v, (int, float, np.number))}
+            extra["vpp"] = {
+                k: (int(v) if isinstance(v, (int, np.integer)) else float(v))
+                for k, v in result.vpp_stats.items()
+                if isinstance(v, (int, float, np.number))
+            }
         return _map_message(result, result.disparity, extra)
     if name == "depth":
         return None if result.depth is None else _map_message(result, result.depth, {})
     img = result.left_vpp if name == "left_vpp" else result.right_vpp
     if img is None:
         return None
-    msg = {"v": VERSION, "rig": fr.rig, "seq": int(fr.seq), "stamp_ns": int(fr.stamp_ns),
-           "image": encode_image(img, enc)}
+    msg = {
+        "v": VERSION,
+        "rig": fr.rig,
+        "seq": int(fr.seq),
+        "stamp_ns": int(fr.stamp_ns),
+        "image": encode_image(img, enc),
+    }
     return [msgpack.packb(msg, use_bin_type=True)]
 
 
@@ -741,11 +791,21 @@ def decode_output(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> Output
     for k, v in list(timing.items()) + list(metrics.items()):
         if not isinstance(k, str) or isinstance(v, bool) or not isinstance(v, (int, float)):
             raise WireError(f"timing_ms/metrics.{k}: must map names to numbers")
-    extra = {k: v for k, v in msg.items() if k not in
-             ("v", "rig", "seq", "stamp_ns", "h", "w", "dtype", "data", "calib", "timing_ms", "metrics")}
-    return OutputMap(rig=rig, seq=seq, stamp_ns=stamp, data=data, calib=calib,
-                     timing_ms={k: float(v) for k, v in timing.items()},
-                     metrics={k: float(v) for k, v in metrics.items()}, extra=extra)
+    extra = {
+        k: v
+        for k, v in msg.items()
+        if k not in ("v", "rig", "seq", "stamp_ns", "h", "w", "dtype", "data", "calib", "timing_ms", "metrics")
+    }
+    return OutputMap(
+        rig=rig,
+        seq=seq,
+        stamp_ns=stamp,
+        data=data,
+        calib=calib,
+        timing_ms={k: float(v) for k, v in timing.items()},
+        metrics={k: float(v) for k, v in metrics.items()},
+        extra=extra,
+    )
 
 
 def decode_output_image(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> tuple[int, np.ndarray]:
@@ -756,8 +816,28 @@ def decode_output_image(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> 
 
 
 __all__ = [
-    "VERSION", "DEFAULT_PREFIX", "OUTPUTS", "WireError", "WireLimits", "DEFAULT_LIMITS", "topic", "unpack",
-    "encode_image", "decode_image", "encode_depth", "decode_depth", "encode_frame", "decode_frame",
-    "encode_part", "decode_part", "Part", "assemble", "encode_output", "encode_output_parts",
-    "decode_output", "OutputMap", "decode_output_image", "points_to_maps",
+    "DEFAULT_LIMITS",
+    "DEFAULT_PREFIX",
+    "OUTPUTS",
+    "VERSION",
+    "OutputMap",
+    "Part",
+    "WireError",
+    "WireLimits",
+    "assemble",
+    "decode_depth",
+    "decode_frame",
+    "decode_image",
+    "decode_output",
+    "decode_output_image",
+    "decode_part",
+    "encode_depth",
+    "encode_frame",
+    "encode_image",
+    "encode_output",
+    "encode_output_parts",
+    "encode_part",
+    "points_to_maps",
+    "topic",
+    "unpack",
 ]
