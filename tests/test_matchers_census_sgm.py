@@ -170,7 +170,7 @@ def test_aggregate_custom_penalties_and_threads(rng):
     g = rng.integers(0, 256, (5, 9)).astype(np.uint8)
     ref = ref_aggregate(C, g, 8, 3, 9, 1.25, 60.0)
     for t in (1, 2):
-        np.testing.assert_array_equal(cs.aggregate_costs(C, g, 8, 3, 9, 1.25, 60.0, threads=t), ref)
+        np.testing.assert_array_equal(cs.aggregate_costs(C, g, 8, p1=3, p2_min=9, alpha=1.25, gamma=60.0, threads=t), ref)
 
 
 @pytest.mark.parametrize("uniqueness", [0.95, 0.7, 1.0])

@@ -24,7 +24,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import cv2
 import numpy as np
@@ -66,7 +66,7 @@ class MatcherOptions:
 
 
 def check_array(
-    a: Any, name: str, dtypes: tuple[type, ...], ndim: int | tuple[int, ...], layout: str, contiguous: bool = True
+    a: object, name: str, dtypes: tuple[type, ...], ndim: int | tuple[int, ...], layout: str, *, contiguous: bool = True
 ) -> np.ndarray:
     """Validate a kernel input array: one of ``dtypes``, ``ndim`` dimensions, non-empty, C-contiguous.
 
@@ -75,7 +75,7 @@ def check_array(
 
     Parameters
     ----------
-    a : Any
+    a : object
         The value to check.
     name : str
         Argument name used in the messages.
@@ -120,24 +120,24 @@ FLOAT_DTYPES: tuple[type, ...] = (np.float16, np.float32, np.float64, np.longdou
 _IMAGE_LAYOUT = "H x W or H x W x C with C in (1, 3)"
 
 
-def check_image(img: Any, name: str) -> np.ndarray:
+def check_image(img: object, name: str) -> np.ndarray:
     """Validate one image: C-contiguous uint8, H x W or H x W x C (C = 1 | 3), non-empty.
 
     Returns the array unchanged. Raises TypeError (not an array / wrong dtype)
     or ValueError (shape, emptiness, contiguity) naming ``name``.
     """
-    check_array(img, name, (np.uint8,), (2, 3), _IMAGE_LAYOUT)
+    img = check_array(img, name, (np.uint8,), (2, 3), _IMAGE_LAYOUT)
     if img.ndim == 3 and img.shape[2] not in (1, 3):
         raise ValueError(f"{name} must be {_IMAGE_LAYOUT}, got shape {img.shape}")
     return img
 
 
-def check_disparity(a: Any, name: str, shape: tuple[int, ...] | None = None, *, convert: bool = False) -> np.ndarray:
+def check_disparity(a: object, name: str, shape: tuple[int, ...] | None = None, *, convert: bool = False) -> np.ndarray:
     """Validate an H x W disparity map: float, non-empty, NaN = invalid, no +-inf.
 
     Parameters
     ----------
-    a : Any
+    a : object
         The value to check.
     name : str
         Argument name used in the messages.
@@ -160,7 +160,7 @@ def check_disparity(a: Any, name: str, shape: tuple[int, ...] | None = None, *, 
     ValueError
         Not 2-D, empty, not C-contiguous (``convert`` False), wrong shape, or +-inf.
     """
-    check_array(a, name, FLOAT_DTYPES if convert else (np.float32,), 2, "a 2-D (H x W) map", contiguous=not convert)
+    a = check_array(a, name, FLOAT_DTYPES if convert else (np.float32,), 2, "a 2-D (H x W) map", contiguous=not convert)
     if shape is not None and a.shape != tuple(shape):
         raise ValueError(f"{name} must have shape {tuple(shape)}, got {a.shape}")
     if np.isinf(a).any():
@@ -168,10 +168,10 @@ def check_disparity(a: Any, name: str, shape: tuple[int, ...] | None = None, *, 
     return np.ascontiguousarray(a, dtype=np.float32) if convert else a
 
 
-def check_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
+def check_pair(left: object, right: object) -> tuple[np.ndarray, np.ndarray]:
     """Validate a stereo pair: both pass :func:`check_image` and have the same shape."""
-    check_image(left, "left")
-    check_image(right, "right")
+    left = check_image(left, "left")
+    right = check_image(right, "right")
     if left.shape != right.shape:
         raise ValueError(f"left and right must have the same shape, got {left.shape} and {right.shape}")
     return left, right
@@ -185,7 +185,7 @@ def check_max_disparity(max_disparity: int, width: int, name: str = "max_dispari
         raise ValueError(f"{name} must be > 0 and < the image width {width}, got {max_disparity}")
 
 
-def check_hints(hints: Any, shape: tuple[int, int]) -> np.ndarray:
+def check_hints(hints: object, shape: tuple[int, int]) -> np.ndarray:
     """Validate a sparse-disparity hint map; return it as C-contiguous float32.
 
     NaN or values <= 0 mean "no hint"; +-inf is rejected (:func:`check_disparity`).
@@ -219,11 +219,14 @@ class Matcher(ABC):
     #: Registered name.
     name: ClassVar[str] = ""
     #: Frozen dataclass of options.
-    Options: ClassVar[type] = MatcherOptions
+    Options: ClassVar[type[MatcherOptions]] = MatcherOptions
     #: True when :meth:`compute` accepts ``hints`` (guided stereo).
     supports_guidance: ClassVar[bool] = False
 
-    def __init__(self, options: Any = None) -> None:
+    #: The validated options (an instance of ``Options``).
+    options: MatcherOptions
+
+    def __init__(self, options: MatcherOptions | Mapping[str, object] | None = None) -> None:
         if options is None or isinstance(options, Mapping):
             options = from_mapping(self.Options, options, f"matcher.{self.name}")
         elif not isinstance(options, self.Options):
@@ -276,7 +279,7 @@ class Matcher(ABC):
         return f"{type(self).__name__}({self.options!r})"
 
 
-def build_matcher(name: str, options: Mapping[str, Any] | None = None) -> Matcher:
+def build_matcher(name: str, options: Mapping[str, object] | None = None) -> Matcher:
     """Build the matcher registered as ``name`` from a plain options mapping.
 
     Raises

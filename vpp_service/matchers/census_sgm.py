@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -70,14 +69,14 @@ COST_CAP = 4095
 PENALTY_CAP = 4095
 
 
-def _check_gray(img: Any, name: str) -> np.ndarray:
-    check_image(img, name)
+def _check_gray(img: object, name: str) -> np.ndarray:
+    img = check_image(img, name)
     if img.ndim != 2:
         raise ValueError(f"{name} must be a 2-D (H x W) gray image, got shape {img.shape}")
     return img
 
 
-def _check_volume(vol: Any, name: str) -> np.ndarray:
+def _check_volume(vol: object, name: str) -> np.ndarray:
     return check_array(vol, name, (np.uint16,), 3, "H x W x D")
 
 
@@ -149,9 +148,9 @@ def _check_penalties(p1: int, p2_min: int, alpha: float, gamma: float) -> None:
     for name, v in (("p1", p1), ("p2_min", p2_min)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 <= v <= PENALTY_CAP:
             raise ValueError(f"{name} must be an integer in [0, {PENALTY_CAP}], got {v!r}")
-    for name, v in (("alpha", alpha), ("gamma", gamma)):
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise ValueError(f"{name} must be a finite number, got {v!r}")
+    for name, x in (("alpha", alpha), ("gamma", gamma)):
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+            raise ValueError(f"{name} must be a finite number, got {x!r}")
     if alpha < 0:
         raise ValueError(f"alpha must be >= 0, got {alpha}")
 
@@ -160,6 +159,7 @@ def aggregate_costs(
     cost: np.ndarray,
     gray: np.ndarray,
     paths: int = 8,
+    *,
     p1: int = 11,
     p2_min: int = 17,
     alpha: float = 0.5,
@@ -182,6 +182,8 @@ def aggregate_costs(
         8 (horizontal, vertical and diagonals; rSGM default) or 4 (horizontal, vertical).
     p1, p2_min, alpha, gamma
         Penalties, see :func:`p2_table`.
+    threads : int or None
+        OpenMP threads (None = :func:`~vpp_service.threads.default_threads`).
 
     Returns
     -------
@@ -370,6 +372,7 @@ class CensusSGM(Matcher):
 
     name = "census-sgm"
     Options = CensusSGMOptions
+    options: CensusSGMOptions
     supports_guidance = True
 
     def cost_volume(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
@@ -408,7 +411,9 @@ class CensusSGM(Matcher):
         if hints is not None:
             hints = check_hints(hints, cost.shape[:2])
             cost = modulate_cost(cost, hints, o.guided_k, o.guided_c, threads=t)
-        agg = aggregate_costs(cost, gray, o.paths, o.p1, o.p2_min, o.p2_alpha, o.p2_gamma, t)
+        agg = aggregate_costs(
+            cost, gray, o.paths, p1=o.p1, p2_min=o.p2_min, alpha=o.p2_alpha, gamma=o.p2_gamma, threads=t
+        )
         disp = select_disparity(agg, o.uniqueness, o.subpixel, t)
         if o.lr_check:
             disp = left_right_check(disp, right_disparity(agg, t), o.lr_tolerance, t)

@@ -17,8 +17,6 @@ so with ``k = 10`` the modulated values (<= 240) lose at most 0.5 per entry.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from vpp_service.matchers._guided import modulate
@@ -29,10 +27,11 @@ _DTYPES = (np.uint8, np.uint16, np.float32)
 
 
 def modulate_cost(
-    cost: Any,
-    hints: Any,
+    cost: np.ndarray,
+    hints: np.ndarray,
     k: float = 10.0,
     c: float = 1.0,
+    *,
     inplace: bool = False,
     threads: int | None = None,
 ) -> np.ndarray:
@@ -66,7 +65,7 @@ def modulate_cost(
         Bad shapes, non-contiguous ``cost``, empty volume, NaN/inf in a float
         ``cost``, or ``k``/``c`` not finite and > 0.
     """
-    check_array(cost, "cost", _DTYPES, 3, "H x W x D")
+    cost = check_array(cost, "cost", _DTYPES, 3, "H x W x D")
     if cost.dtype == np.float32 and not np.isfinite(cost).all():
         raise ValueError("cost contains NaN or inf")
     for name, v in (("k", k), ("c", c)):

@@ -11,8 +11,6 @@ with no NaN at all).
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from vpp_service.matchers._holes import fill_rows
@@ -20,7 +18,7 @@ from vpp_service.matchers.base import check_disparity
 from vpp_service.threads import resolve_threads
 
 
-def fill_holes(disparity: Any, empty: float = float("nan"), threads: int | None = None) -> np.ndarray:
+def fill_holes(disparity: np.ndarray, empty: float = float("nan"), threads: int | None = None) -> np.ndarray:
     """Fill NaN holes of a disparity map with background interpolation along rows.
 
     Parameters

@@ -123,6 +123,7 @@ class SGBM(Matcher):
 
     name = "sgbm"
     Options = SGBMOptions
+    options: SGBMOptions
 
     def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
         o = self.options
@@ -133,7 +134,7 @@ class SGBM(Matcher):
         bs = o.block_size
         p1 = o.p1 or 8 * cn * bs * bs
         p2 = o.p2 or 32 * cn * bs * bs
-        sgbm = cv2.StereoSGBM_create(
+        sgbm = cv2.StereoSGBM.create(
             minDisparity=o.min_disparity,
             numDisparities=nd,
             blockSize=bs,
@@ -198,11 +199,12 @@ class BM(Matcher):
 
     name = "bm"
     Options = BMOptions
+    options: BMOptions
 
     def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
         o = self.options
         nd = _check_width(o.max_disparity, o.min_disparity, left.shape[1])
-        bm = cv2.StereoBM_create(numDisparities=nd, blockSize=o.block_size)
+        bm = cv2.StereoBM.create(numDisparities=nd, blockSize=o.block_size)
         bm.setPreFilterType(
             cv2.STEREO_BM_PREFILTER_XSOBEL if o.pre_filter == "xsobel" else cv2.STEREO_BM_PREFILTER_NORMALIZED_RESPONSE
         )

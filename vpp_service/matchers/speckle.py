@@ -60,7 +60,7 @@ def remove_speckles(disparity: np.ndarray, max_size: int = 200, max_diff: float 
         raise ValueError("disparity values must be below 2047 px for the speckle filter")
     fixed = np.full(disparity.shape, -SUBPIXEL_SCALE, np.int16)
     fixed[valid] = np.rint(disparity[valid] * SUBPIXEL_SCALE).astype(np.int16)
-    cv2.filterSpeckles(fixed, -SUBPIXEL_SCALE, int(max_size), int(round(max_diff * SUBPIXEL_SCALE)))
+    cv2.filterSpeckles(fixed, -SUBPIXEL_SCALE, int(max_size), round(max_diff * SUBPIXEL_SCALE))
     out[(fixed == -SUBPIXEL_SCALE) & valid] = np.nan
     return out
 
