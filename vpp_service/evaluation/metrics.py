@@ -27,6 +27,38 @@ def metric_key(tau: float) -> str:
     return f"bad{tau:g}"
 
 
+def _check_inputs(
+    pred: np.ndarray, gt: np.ndarray, mask: np.ndarray | None, taus: Iterable[float]
+) -> tuple[float, ...]:
+    """Check the arguments of :func:`compute_metrics` (raising as documented there); return ``taus`` as a tuple."""
+    for name, a in (("pred", pred), ("gt", gt)):
+        if not isinstance(a, np.ndarray):
+            raise TypeError(f"{name}: must be a numpy array, got {type(a).__name__}")
+        if a.dtype.kind not in "fiu":
+            raise TypeError(f"{name}: must be numeric, got dtype {a.dtype}")
+        if a.ndim != 2:
+            raise ValueError(f"{name}: must be 2-D (H x W), got shape {a.shape}")
+    if pred.shape != gt.shape:
+        raise ValueError(f"pred: shape {pred.shape} differs from gt {gt.shape}")
+    if mask is not None:
+        if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_:
+            raise TypeError("mask: must be a bool numpy array")
+        if mask.shape != gt.shape:
+            raise ValueError(f"mask: shape {mask.shape} differs from gt {gt.shape}")
+    checked = tuple(taus)
+    if not checked:
+        raise ValueError("taus: must not be empty")
+    for t in checked:
+        if (
+            isinstance(t, bool)
+            or not isinstance(t, (int, float, np.integer, np.floating))
+            or not np.isfinite(t)
+            or t <= 0
+        ):
+            raise ValueError(f"taus: every threshold must be a finite number > 0, got {t!r}")
+    return checked
+
+
 def compute_metrics(
     pred: np.ndarray, gt: np.ndarray, mask: np.ndarray | None = None, taus: Iterable[float] = (1, 2, 3, 4)
 ) -> dict[str, float]:
@@ -56,31 +88,7 @@ def compute_metrics(
     ValueError
         Shape mismatch, non-2-D input, ``inf`` in ``pred``, bad ``taus``.
     """
-    for name, a in (("pred", pred), ("gt", gt)):
-        if not isinstance(a, np.ndarray):
-            raise TypeError(f"{name}: must be a numpy array, got {type(a).__name__}")
-        if a.dtype.kind not in "fiu":
-            raise TypeError(f"{name}: must be numeric, got dtype {a.dtype}")
-        if a.ndim != 2:
-            raise ValueError(f"{name}: must be 2-D (H x W), got shape {a.shape}")
-    if pred.shape != gt.shape:
-        raise ValueError(f"pred: shape {pred.shape} differs from gt {gt.shape}")
-    if mask is not None:
-        if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_:
-            raise TypeError("mask: must be a bool numpy array")
-        if mask.shape != gt.shape:
-            raise ValueError(f"mask: shape {mask.shape} differs from gt {gt.shape}")
-    taus = tuple(taus)
-    if not taus:
-        raise ValueError("taus: must not be empty")
-    for t in taus:
-        if (
-            isinstance(t, bool)
-            or not isinstance(t, (int, float, np.integer, np.floating))
-            or not np.isfinite(t)
-            or t <= 0
-        ):
-            raise ValueError(f"taus: every threshold must be a finite number > 0, got {t!r}")
+    taus = _check_inputs(pred, gt, mask, taus)
     pred64 = pred.astype(np.float64, copy=False)
     if np.isinf(pred64).any():
         raise ValueError("pred: contains +-inf; use NaN for 'no prediction'")

@@ -8,9 +8,9 @@ from typing import TextIO
 
 
 class ProgressBar:
-    """Callable ``progress(done, total, label)`` printing ``[ 3/26] Art census-sgm vpp 0.05 ...``.
+    r"""Callable ``progress(done, total, label)`` printing ``[ 3/26] Art census-sgm vpp 0.05 ...``.
 
-    On a terminal the line is rewritten in place (``\\r``); otherwise one line
+    On a terminal the line is rewritten in place (``\r``); otherwise one line
     per step is written. Elapsed time and a simple ETA are appended.
 
     Parameters
@@ -26,6 +26,17 @@ class ProgressBar:
         self._width = 0
 
     def __call__(self, done: int, total: int, label: str) -> None:
+        """Report that ``done`` of ``total`` steps are finished and ``label`` runs next (``done >= total``: the end).
+
+        Parameters
+        ----------
+        done : int
+            Steps finished.
+        total : int
+            Number of steps.
+        label : str
+            What runs next (not shown at the end).
+        """
         elapsed = time.perf_counter() - self.t0
         n = len(str(total))
         if done >= total:

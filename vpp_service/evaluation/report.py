@@ -11,11 +11,19 @@ from __future__ import annotations
 import json
 import math
 from collections import defaultdict
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
 
-from vpp_service.evaluation.runner import METHODS
+import numpy as np
+
+from vpp_service.evaluation.runner import METHODS, ResultRow, RowValue
+
+#: A JSON value (what :func:`write_json` writes).
+JSON = dict[str, "JSON"] | list["JSON"] | str | int | float | bool | None
+#: Means of a group of rows: metric -> mean over scenes, plus ``scenes`` (their number).
+Means = dict[str, float]
+#: :func:`summarize`'s result: ``{method: Means}``, or ``{method: {density key: Means}}`` for a sweep.
+Summary = dict[str, Means] | dict[str, dict[str, Means]]
 
 #: Row fields that are not averaged into a summary.
 _NOT_AVERAGED = {"density", "max_disparity", "n", "n_nocc"}
@@ -23,17 +31,17 @@ _NOT_AVERAGED = {"density", "max_disparity", "n", "n_nocc"}
 TABLE_METRICS = ("bad1", "bad2", "bad3", "bad4", "avg", "rms", "bad2_nocc", "avg_nocc", "n_points", "ms")
 
 
-def _method_order(rows: Iterable[dict]) -> list[str]:
-    seen = {r["method"] for r in rows}
+def _method_order(rows: Iterable[ResultRow]) -> list[str]:
+    seen = {str(r["method"]) for r in rows}
     return [m for m in METHODS if m in seen] + sorted(seen - set(METHODS))
 
 
-def _mean(values: list[float]) -> float:
+def _mean(values: Iterable[RowValue]) -> float:
     vals = [v for v in values if isinstance(v, (int, float)) and not (isinstance(v, float) and math.isnan(v))]
     return float(sum(vals) / len(vals)) if vals else float("nan")
 
 
-def _average(rows: list[dict]) -> dict[str, float]:
+def _average(rows: list[ResultRow]) -> Means:
     keys: list[str] = []
     for r in rows:
         for k, v in r.items():
@@ -49,50 +57,73 @@ def density_key(d: float | None) -> str:
     return "measured" if d is None else f"{d:g}"
 
 
-def is_sweep(rows: list[dict]) -> bool:
+def _density(row: ResultRow) -> float | None:
+    """The row's density (None for a sensor reported without one)."""
+    d = row["density"]
+    if d is not None and not isinstance(d, (int, float)):
+        raise TypeError(f"rows: density must be a number or None, got {d!r}")
+    return d
+
+
+def _none_last(d: float | None) -> tuple[bool, float]:
+    """Sort key of densities: ascending, None (measured) last."""
+    return d is None, d or 0.0
+
+
+def is_sweep(rows: list[ResultRow]) -> bool:
     """True when the results hold more than one (uniform) density."""
     return len({r.get("density") for r in rows if r.get("sensor") == "uniform"}) > 1
 
 
-def summarize(rows: list[dict]) -> dict[str, Any]:
+def summarize(rows: list[ResultRow]) -> Summary:
     """Mean of each metric per method (and per density in a sweep); see module docs."""
     if not isinstance(rows, list):
         raise TypeError(f"rows: must be a list of result dicts, got {type(rows).__name__}")
-    sweep = is_sweep(rows)
-    out: dict[str, Any] = {}
-    for method in _method_order(rows):
-        mrows = [r for r in rows if r["method"] == method]
-        if not sweep:
-            out[method] = _average(mrows)
-            continue
-        groups: dict[float, list[dict]] = defaultdict(list)
+    by_method = {method: [r for r in rows if r["method"] == method] for method in _method_order(rows)}
+    if not is_sweep(rows):
+        return {method: _average(mrows) for method, mrows in by_method.items()}
+    out: dict[str, dict[str, Means]] = {}
+    for method, mrows in by_method.items():
+        groups: dict[float | None, list[ResultRow]] = defaultdict(list)
         for r in mrows:
-            groups[r["density"]].append(r)
-        out[method] = {density_key(d): _average(g) for d, g in sorted(groups.items())}
+            groups[_density(r)].append(r)
+        out[method] = {density_key(d): _average(groups[d]) for d in sorted(groups, key=_none_last)}
     return out
 
 
-def _json_safe(obj: Any) -> Any:
+def json_safe(obj: object) -> JSON:
+    """``obj`` as JSON values: non-finite floats -> None, numpy scalars -> Python, tuples -> lists, keys -> str.
+
+    Raises
+    ------
+    TypeError
+        A value JSON cannot hold (e.g. an arbitrary object).
+    """
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
+    if obj is None or isinstance(obj, (str, int, float)):  # bool is an int
+        return obj
     if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
+        return {str(k): json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    if hasattr(obj, "item") and callable(obj.item):  # numpy scalars
-        return _json_safe(obj.item())
-    return obj
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, (np.generic, np.ndarray)):  # numpy scalars (and 1-element arrays)
+        return json_safe(obj.item())
+    raise TypeError(f"{type(obj).__name__} is not JSON serializable")
 
 
-def write_json(path: str | Path, rows: list[dict], config: dict | None = None) -> dict[str, Any]:
+def write_json(path: str | Path, rows: list[ResultRow], config: Mapping[str, object] | None = None) -> dict[str, JSON]:
     """Write ``{"config", "results", "summary"}`` to ``path`` (NaN -> null); return the document."""
-    doc = {"config": config or {}, "results": rows, "summary": summarize(rows)}
-    doc = _json_safe(doc)
+    doc: dict[str, JSON] = {
+        "config": json_safe(dict(config or {})),
+        "results": json_safe(rows),
+        "summary": json_safe(summarize(rows)),
+    }
     Path(path).write_text(json.dumps(doc, indent=2) + "\n")
     return doc
 
 
-def _fmt(v: Any) -> str:
+def _fmt(v: RowValue) -> str:
     if isinstance(v, bool) or v is None:
         return "-"
     if isinstance(v, int):
@@ -110,16 +141,16 @@ def _table(header: list[str], lines: list[list[str]]) -> str:
     return "\n".join(out)
 
 
-def markdown_report(rows: list[dict], per_scene: bool = False, title: str = "VPP evaluation") -> str:
+def markdown_report(rows: list[ResultRow], per_scene: bool = False, title: str = "VPP evaluation") -> str:
     """Markdown text: one table of means per (dataset, matcher), optionally per-scene tables.
 
     Columns: bad-1..4 (%), avg and rms error (px), non-occluded bad-2 / avg when
     a mask exists, points and run time (ms); rows: method (x density in a sweep).
     """
     parts = [f"# {title}", ""]
-    groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    groups: dict[tuple[str, str], list[ResultRow]] = defaultdict(list)
     for r in rows:
-        groups[(r.get("dataset", ""), r.get("matcher", ""))].append(r)
+        groups[(str(r.get("dataset", "")), str(r.get("matcher", "")))].append(r)
     for (dataset, matcher), grows in groups.items():
         cols = [c for c in TABLE_METRICS if any(c in r for r in grows)]
         sweep = is_sweep(grows)
@@ -130,7 +161,7 @@ def markdown_report(rows: list[dict], per_scene: bool = False, title: str = "VPP
         lines = []
         for method in _method_order(grows):
             mrows = [r for r in grows if r["method"] == method]
-            densities = sorted({r["density"] for r in mrows}, key=lambda d: (d is None, d or 0))
+            densities = sorted({_density(r) for r in mrows}, key=_none_last)
             for d in densities:
                 avg = _average([r for r in mrows if r["density"] == d])
                 dtxt = f"{d:.3g}" if isinstance(d, float) else _fmt(d)
@@ -139,7 +170,10 @@ def markdown_report(rows: list[dict], per_scene: bool = False, title: str = "VPP
         if per_scene:
             parts += ["### Per scene", ""]
             header = ["scene", "method", "density", *cols]
-            lines = [[r["scene"], r["method"], f"{r['density']:.3g}"] + [_fmt(r.get(c)) for c in cols] for r in grows]
+            lines = [
+                [str(r["scene"]), str(r["method"]), f"{r['density']:.3g}"] + [_fmt(r.get(c)) for c in cols]
+                for r in grows
+            ]
             parts += [_table(header, lines), ""]
         if sweep:
             parts += ["(bad-τ in %, errors in px; means over scenes.)", ""]
@@ -148,21 +182,23 @@ def markdown_report(rows: list[dict], per_scene: bool = False, title: str = "VPP
     return "\n".join(parts).rstrip() + "\n"
 
 
-def write_markdown(path: str | Path, rows: list[dict], per_scene: bool = False, title: str = "VPP evaluation") -> str:
+def write_markdown(
+    path: str | Path, rows: list[ResultRow], per_scene: bool = False, title: str = "VPP evaluation"
+) -> str:
     """Write :func:`markdown_report` to ``path``; return the text."""
     text = markdown_report(rows, per_scene=per_scene, title=title)
     Path(path).write_text(text)
     return text
 
 
-def plot_sweep(path: str | Path, rows: list[dict], metric: str = "bad2", title: str | None = None) -> None:
+def plot_sweep(path: str | Path, rows: list[ResultRow], metric: str = "bad2", title: str | None = None) -> None:
     """Plot ``metric`` (mean over scenes) against density, one line per method; save to ``path`` (PNG).
 
     Uses matplotlib's Agg backend (no display needed).
     """
-    import matplotlib
+    import matplotlib as mpl
 
-    matplotlib.use("Agg", force=True)
+    mpl.use("Agg", force=True)
     import matplotlib.pyplot as plt
 
     uniform = [r for r in rows if r.get("density") is not None]
@@ -172,10 +208,11 @@ def plot_sweep(path: str | Path, rows: list[dict], metric: str = "bad2", title: 
         raise ValueError(f"metric: {metric!r} is not in the results")
     fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
     for method in _method_order(uniform):
-        groups: dict[float, list[dict]] = defaultdict(list)
+        groups: dict[float, list[ResultRow]] = defaultdict(list)
         for r in uniform:
-            if r["method"] == method:
-                groups[r["density"]].append(r)
+            d = _density(r)
+            if r["method"] == method and d is not None:
+                groups[d].append(r)
         xs = sorted(groups)
         ys = [_mean([r.get(metric) for r in groups[x]]) for x in xs]
         ax.plot([100 * x for x in xs], ys, marker="o", label=method)
@@ -190,4 +227,16 @@ def plot_sweep(path: str | Path, rows: list[dict], metric: str = "bad2", title: 
     plt.close(fig)
 
 
-__all__ = ["density_key", "is_sweep", "markdown_report", "plot_sweep", "summarize", "write_json", "write_markdown"]
+__all__ = [
+    "JSON",
+    "Means",
+    "Summary",
+    "density_key",
+    "is_sweep",
+    "json_safe",
+    "markdown_report",
+    "plot_sweep",
+    "summarize",
+    "write_json",
+    "write_markdown",
+]

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any, Union, cast
+from typing import TYPE_CHECKING, Union, cast
 
 import numpy as np
 
@@ -55,6 +55,12 @@ METHODS = ("baseline", "guided", "vpp")
 
 #: ``progress(done, total, label)`` - called before each step.
 Progress = Callable[[int, int, str], None]
+
+#: One value of a result row: a name (``scene``, ``method``, ...), a count or a
+#: metric, or None (``density`` of a sensor without one in a report).
+RowValue = str | float | None
+#: One result row of :func:`run_evaluation` (fields listed there).
+ResultRow = dict[str, RowValue]
 
 
 def default_max_disparity(gt: np.ndarray, width: int) -> int:
@@ -113,21 +119,118 @@ def _check_densities(densities: float | Sequence[float] | None, sensor_name: str
     return [float(d) for d in densities]
 
 
+def _resolve_matcher(
+    matcher: str | Matcher, matcher_options: Mapping[str, object] | None
+) -> tuple[str, Matcher | None, dict[str, object], bool]:
+    """Check the matcher argument: ``(name, ready matcher or None, options to build it by name, guidance)``.
+
+    A matcher given by name is built once here with ``matcher_options`` (less
+    ``max_disparity``) so that a bad name or option fails before any frame.
+    """
+    from vpp_service.matchers import Matcher, build_matcher
+
+    if isinstance(matcher, str):
+        base_opts = dict(matcher_options or {})
+        probe = build_matcher(matcher, {k: v for k, v in base_opts.items() if k != "max_disparity"})
+        return matcher, None, base_opts, probe.supports_guidance
+    if isinstance(matcher, Matcher):
+        if matcher_options:
+            raise ValueError("matcher_options: only used when the matcher is given by name")
+        return matcher.name, matcher, {}, matcher.supports_guidance
+    raise TypeError(f"matcher: must be a matcher name or a Matcher, got {type(matcher).__name__}")
+
+
+def _resolve_sensors(
+    sensor: str | Sensor,
+    sensor_options: Mapping[str, object] | None,
+    densities: float | Sequence[float] | None,
+) -> tuple[str, list[tuple[float | None, Sensor | None]]]:
+    """Check the sensor and densities: ``(sensor name, [(density, sensor or None for the frame's own points)])``."""
+    from vpp_service.sources.sensors import Sensor, build_sensor
+
+    if isinstance(sensor, str):
+        sensor_name = sensor
+        if sensor != "frame":
+            from vpp_service.sources.sensors import SENSORS
+
+            SENSORS.get(sensor)
+    elif isinstance(sensor, Sensor):
+        sensor_name = sensor.name
+        if sensor_options:
+            raise ValueError("sensor_options: only used when the sensor is given by name")
+    else:
+        raise TypeError(f"sensor: must be a sensor name or a Sensor, got {type(sensor).__name__}")
+    sensors: list[tuple[float | None, Sensor | None]] = []
+    for d in _check_densities(densities, sensor_name if isinstance(sensor, str) else None):
+        if isinstance(sensor, Sensor):
+            sensors.append((d, sensor))
+        elif sensor == "frame":
+            sensors.append((d, None))
+        else:
+            opts = dict(sensor_options or {})
+            if d is not None:
+                opts["density"] = d
+            sensors.append((d, build_sensor(sensor, opts)))
+    return sensor_name, sensors
+
+
+def _check_run_args(seed: int, max_disparity: int | None, progress: Progress | None) -> None:
+    """Check the scalar arguments of :func:`run_evaluation` (raise ValueError / TypeError naming them)."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed: must be an integer >= 0, got {seed!r}")
+    if max_disparity is not None and (
+        isinstance(max_disparity, bool) or not isinstance(max_disparity, int) or max_disparity < 1
+    ):
+        raise ValueError(f"max_disparity: must be a positive integer, got {max_disparity!r}")
+    if progress is not None and not callable(progress):
+        raise TypeError("progress: must be callable")
+
+
+def _check_vpp_config(vpp_config: VPPConfig | None) -> VPPConfig:
+    """The VPP configuration to run (the defaults for None)."""
+    from vpp_service.vpp import VPPConfig
+
+    if vpp_config is None:
+        return VPPConfig()
+    if not isinstance(vpp_config, VPPConfig):
+        raise TypeError(f"vpp_config: must be a VPPConfig or None, got {type(vpp_config).__name__}")
+    return vpp_config
+
+
+def _frame_with_gt(get: Callable[[int], StereoFrame], i: int) -> tuple[StereoFrame, np.ndarray]:
+    """Frame ``i`` and its ground truth (raise when the item is not a frame or has none)."""
+    frame = get(i)
+    if not isinstance(frame, StereoFrame):
+        raise TypeError(f"frames_or_dataset: item {i} is a {type(frame).__name__}, not a StereoFrame")
+    if frame.gt_disparity is None:
+        raise ValueError(f"frames_or_dataset: frame {frame.name or i!r} has no gt_disparity to score against")
+    return frame, frame.gt_disparity
+
+
+def _draw_points(frame: StereoFrame, sensor: Sensor | None, seed: int, scene: str) -> np.ndarray:
+    """The sparse points of one run: H x W float32, NaN where no point (or not ``0 < d``)."""
+    drawn = frame.sparse_disparity if sensor is None else sensor.simulate(frame, seed=seed).sparse_disparity
+    if drawn is None:
+        raise ValueError(f"sensor: 'frame' needs sparse_disparity, frame {scene!r} has none")
+    sparse = drawn.astype(np.float32)
+    return np.where(np.isfinite(sparse) & (sparse > 0), sparse, np.nan).astype(np.float32)
+
+
 def run_evaluation(
     frames_or_dataset: Frames,
     matcher: str | Matcher = "census-sgm",
     methods: Sequence[str] = METHODS,
     densities: float | Sequence[float] | None = (0.05,),
     sensor: str | Sensor = "uniform",
+    *,
     vpp_config: VPPConfig | None = None,
     seed: int = 0,
     progress: Progress | None = None,
-    *,
-    matcher_options: Mapping[str, Any] | None = None,
-    sensor_options: Mapping[str, Any] | None = None,
+    matcher_options: Mapping[str, object] | None = None,
+    sensor_options: Mapping[str, object] | None = None,
     max_disparity: int | None = None,
     dataset_name: str | None = None,
-) -> list[dict[str, Any]]:
+) -> list[ResultRow]:
     """Evaluate methods on frames with ground truth.
 
     Parameters
@@ -172,123 +275,58 @@ def run_evaluation(
         guidance (names the matcher), frames without ground truth, ...
     """
     from vpp_service.fusion import fuse
-    from vpp_service.matchers import Matcher, build_matcher
-    from vpp_service.sources.sensors import Sensor, build_sensor
+    from vpp_service.matchers import build_matcher
 
     methods = _check_methods(methods)
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed: must be an integer >= 0, got {seed!r}")
-    if max_disparity is not None and (
-        isinstance(max_disparity, bool) or not isinstance(max_disparity, int) or max_disparity < 1
-    ):
-        raise ValueError(f"max_disparity: must be a positive integer, got {max_disparity!r}")
-    if progress is not None and not callable(progress):
-        raise TypeError("progress: must be callable")
-
-    # matcher
-    if isinstance(matcher, str):
-        from vpp_service.matchers import MATCHERS
-
-        matcher_cls = MATCHERS.get(matcher)
-        matcher_name = matcher
-        base_opts = dict(matcher_options or {})
-        build_matcher(matcher_name, {k: v for k, v in base_opts.items() if k != "max_disparity"})  # validate early
-    elif isinstance(matcher, Matcher):
-        if matcher_options:
-            raise ValueError("matcher_options: only used when the matcher is given by name")
-        matcher_cls, matcher_name, base_opts = type(matcher), matcher.name, {}
-    else:
-        raise TypeError(f"matcher: must be a matcher name or a Matcher, got {type(matcher).__name__}")
-    if "guided" in methods and not matcher_cls.supports_guidance:
+    _check_run_args(seed, max_disparity, progress)
+    matcher_name, ready, base_opts, guidance = _resolve_matcher(matcher, matcher_options)
+    if "guided" in methods and not guidance:
         raise ValueError(f"methods: 'guided' needs a matcher with guidance support; {matcher_name!r} has none")
-
-    # sensor
-    if isinstance(sensor, str):
-        sensor_name = sensor
-        if sensor != "frame":
-            from vpp_service.sources.sensors import SENSORS
-
-            SENSORS.get(sensor)
-    elif isinstance(sensor, Sensor):
-        sensor_name = sensor.name
-        if sensor_options:
-            raise ValueError("sensor_options: only used when the sensor is given by name")
-    else:
-        raise TypeError(f"sensor: must be a sensor name or a Sensor, got {type(sensor).__name__}")
-    dens = _check_densities(densities, sensor_name if isinstance(sensor, str) else None)
-    sensors: dict[float | None, Sensor | None] = {}
-    for d in dens:
-        if isinstance(sensor, Sensor):
-            sensors[d] = sensor
-        elif sensor == "frame":
-            sensors[d] = None
-        else:
-            opts = dict(sensor_options or {})
-            if d is not None:
-                opts["density"] = d
-            sensors[d] = build_sensor(sensor, opts)
-
+    sensor_name, sensors = _resolve_sensors(sensor, sensor_options, densities)
     if "vpp" in methods:
-        from vpp_service.vpp import VPPConfig
-
-        if vpp_config is None:
-            vpp_config = VPPConfig()
-        elif not isinstance(vpp_config, VPPConfig):
-            raise TypeError(f"vpp_config: must be a VPPConfig or None, got {type(vpp_config).__name__}")
+        vpp_config = _check_vpp_config(vpp_config)
 
     n_frames, get = _frames(frames_or_dataset)
     if n_frames == 0:
         raise ValueError("frames_or_dataset: no frames to evaluate")
     per_density = [m for m in methods if m != "baseline"]
-    total = n_frames * (("baseline" in methods) + len(dens) * len(per_density))
+    total = n_frames * (("baseline" in methods) + len(sensors) * len(per_density))
     done = 0
-    rows: list[dict[str, Any]] = []
+    rows: list[ResultRow] = []
 
     def tick(label: str) -> None:
         if progress is not None:
             progress(done, total, label)
 
     for i in range(n_frames):
-        frame = get(i)
-        if not isinstance(frame, StereoFrame):
-            raise TypeError(f"frames_or_dataset: item {i} is a {type(frame).__name__}, not a StereoFrame")
-        if frame.gt_disparity is None:
-            raise ValueError(f"frames_or_dataset: frame {frame.name or i!r} has no gt_disparity to score against")
-        gt = frame.gt_disparity
-        h, w = frame.shape
+        frame, gt = _frame_with_gt(get, i)
         scene = frame.name or f"frame{i}"
-        if isinstance(matcher, str):
-            md = max_disparity if max_disparity is not None else default_max_disparity(gt, w)
+        if ready is None:
+            md = max_disparity if max_disparity is not None else default_max_disparity(gt, frame.shape[1])
             m = build_matcher(matcher_name, {**base_opts, "max_disparity": int(md), "fill": False})
         else:
-            m = matcher
-        md = int(m.options.max_disparity)
-        common = {
+            m = ready
+        common: ResultRow = {
             "dataset": dataset_name or frame.meta.get("dataset", ""),
             "scene": scene,
             "matcher": matcher_name,
             "sensor": sensor_name,
-            "max_disparity": md,
+            "max_disparity": int(m.options.max_disparity),
         }
 
-        baseline_row: dict[str, float] = {}
+        baseline_row: ResultRow = {}
         if "baseline" in methods:
             tick(f"{scene} {matcher_name} baseline")
             res = fuse(frame, m, None, depth=False, protocol=True)
             baseline_row = {**res.metrics, "ms": res.timing_ms["match"]}
             done += 1
 
-        for d in dens:
-            s = sensors[d]
-            drawn = frame.sparse_disparity if s is None else s.simulate(frame, seed=int(seed)).sparse_disparity
-            if drawn is None:
-                raise ValueError(f"sensor: 'frame' needs sparse_disparity, frame {scene!r} has none")
-            sparse = drawn.astype(np.float32)
-            sparse = np.where(np.isfinite(sparse) & (sparse > 0), sparse, np.nan).astype(np.float32)
+        for d, s in sensors:
+            sparse = _draw_points(frame, s, int(seed), scene)
             n_points = int(np.isfinite(sparse).sum())
             n_valid = int((np.isfinite(gt) & (gt > 0)).sum())
             density = d if d is not None else (n_points / n_valid if n_valid else 0.0)
-            base = {**common, "density": density, "n_points": n_points}
+            base: ResultRow = {**common, "density": density, "n_points": n_points}
             dlabel = f"{d:g}" if d is not None else sensor_name
             with_points = frame.with_(sparse_disparity=sparse, sensor_depth=None)
             for method in methods:
@@ -309,4 +347,4 @@ def run_evaluation(
     return rows
 
 
-__all__ = ["METHODS", "default_max_disparity", "run_evaluation"]
+__all__ = ["METHODS", "ResultRow", "RowValue", "default_max_disparity", "run_evaluation"]
