@@ -20,7 +20,7 @@ def test_motorcycle_nan_rule_and_calibration():
     usable = np.isfinite(raw) & (raw > 0)
     assert np.isnan(gt[~usable]).all() and (~usable).any()  # +inf (and <= 0) -> NaN
     np.testing.assert_array_equal(gt[usable], raw[usable])
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="read-only"):
         gt[0, 0] = 1.0  # the cached arrays are read-only
 
 

@@ -48,7 +48,7 @@ def test_rows_and_reference_equality(scenes):
         ("synthetic-planes-1", "baseline"),
         ("synthetic-planes-1", "vpp"),
     ]
-    for r, f in zip(rows, [scenes[0], scenes[0], scenes[1], scenes[1]]):
+    for r, f in zip(rows, [scenes[0], scenes[0], scenes[1], scenes[1]], strict=True):
         for k in ("bad1", "bad2", "bad3", "bad4", "avg", "rms", "n", "bad2_nocc", "n_points", "ms", "density"):
             assert k in r
         assert r["matcher"] == "sgbm" and r["sensor"] == "uniform" and r["dataset"] == "synthetic"

@@ -46,8 +46,8 @@ def make_scene(h=96, w=192, seed=0, contrast=45.0, noise=0.0, d_fg=24.0, slant=6
     nocc = (xm >= 0) & ~hidden
     out = []
     for img in (left, right):
-        img = img + rng.normal(0.0, noise, img.shape) if noise else img
-        g = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+        noisy = img + rng.normal(0.0, noise, img.shape) if noise else img
+        g = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
         out.append(np.ascontiguousarray(np.repeat(g[:, :, None], 3, axis=2)))
     return out[0], out[1], gt, nocc
 
@@ -62,7 +62,7 @@ def sample_hints(gt, valid, fraction, seed):
     rng = np.random.default_rng(seed)
     hints = np.full(gt.shape, np.nan, np.float32)
     ys, xs = np.nonzero(valid)
-    pick = rng.choice(ys.size, int(round(fraction * ys.size)), replace=False)
+    pick = rng.choice(ys.size, round(fraction * ys.size), replace=False)
     hints[ys[pick], xs[pick]] = gt[ys[pick], xs[pick]]
     return hints
 

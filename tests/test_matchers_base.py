@@ -105,14 +105,18 @@ def test_bad_options(name, opts, match):
 @pytest.mark.parametrize(
     ("make", "exc", "match"),
     [
-        (lambda l, r: (l, r[:-1]), ValueError, "same shape"),
-        (lambda l, r: (l.astype(np.float32), r), TypeError, "left must be uint8"),
-        (lambda l, r: (l, r.astype(np.uint16)), TypeError, "right must be uint8"),
-        (lambda l, r: (l[:, ::2], r[:, ::2]), ValueError, "contiguous"),
-        (lambda l, r: (np.zeros((4, 5, 4), np.uint8), np.zeros((4, 5, 4), np.uint8)), ValueError, "C in"),
-        (lambda l, r: (np.zeros((0, 5), np.uint8), np.zeros((0, 5), np.uint8)), ValueError, "empty"),
-        (lambda l, r: (l.tolist(), r), TypeError, "numpy array"),
-        (lambda l, r: (np.ascontiguousarray(l[:, :12]), np.ascontiguousarray(r[:, :12])), ValueError, "width"),
+        (lambda left, right: (left, right[:-1]), ValueError, "same shape"),
+        (lambda left, right: (left.astype(np.float32), right), TypeError, "left must be uint8"),
+        (lambda left, right: (left, right.astype(np.uint16)), TypeError, "right must be uint8"),
+        (lambda left, right: (left[:, ::2], right[:, ::2]), ValueError, "contiguous"),
+        (lambda left, right: (np.zeros((4, 5, 4), np.uint8), np.zeros((4, 5, 4), np.uint8)), ValueError, "C in"),
+        (lambda left, right: (np.zeros((0, 5), np.uint8), np.zeros((0, 5), np.uint8)), ValueError, "empty"),
+        (lambda left, right: (left.tolist(), right), TypeError, "numpy array"),
+        (
+            lambda left, right: (np.ascontiguousarray(left[:, :12]), np.ascontiguousarray(right[:, :12])),
+            ValueError,
+            "width",
+        ),
     ],
 )
 def test_bad_images(pair, name, make, exc, match):

@@ -27,7 +27,7 @@ def ref_hamming(cl: np.ndarray, cr: np.ndarray, D: int) -> np.ndarray:
     out = np.full((h, w, D), cs.INVALID_COST, np.uint16)
     for d in range(D):
         x = np.bitwise_xor(cl[:, d:], cr[:, : w - d])
-        out[:, d:, d] = np.array([bin(int(v)).count("1") for v in x.ravel()]).reshape(x.shape)
+        out[:, d:, d] = np.array([int(v).bit_count() for v in x.ravel()]).reshape(x.shape)
     return out
 
 
@@ -170,7 +170,9 @@ def test_aggregate_custom_penalties_and_threads(rng):
     g = rng.integers(0, 256, (5, 9)).astype(np.uint8)
     ref = ref_aggregate(C, g, 8, 3, 9, 1.25, 60.0)
     for t in (1, 2):
-        np.testing.assert_array_equal(cs.aggregate_costs(C, g, 8, p1=3, p2_min=9, alpha=1.25, gamma=60.0, threads=t), ref)
+        np.testing.assert_array_equal(
+            cs.aggregate_costs(C, g, 8, p1=3, p2_min=9, alpha=1.25, gamma=60.0, threads=t), ref
+        )
 
 
 @pytest.mark.parametrize("uniqueness", [0.95, 0.7, 1.0])

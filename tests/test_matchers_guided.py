@@ -11,7 +11,7 @@ from vpp_service.matchers import modulate_cost
 def ref_modulate(cost, hints, k, c):
     out = cost.astype(np.float64).copy()
     d = np.arange(cost.shape[2], dtype=np.float64)
-    for y, x in zip(*np.nonzero(np.nan_to_num(hints, nan=0.0) > 0)):
+    for y, x in zip(*np.nonzero(np.nan_to_num(hints, nan=0.0) > 0), strict=True):
         out[y, x] *= k * (1.0 - np.exp(-((d - float(hints[y, x])) ** 2) / (2 * c * c)))
     return out
 

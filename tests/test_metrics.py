@@ -48,7 +48,7 @@ def test_matches_reference_on_random_maps():
     m = compute_metrics(pred, gt)
     bad = dict.fromkeys((1, 2, 3, 4), 0)
     errs, n = [], 0
-    for p, g in zip(pred.ravel(), gt.ravel()):
+    for p, g in zip(pred.ravel(), gt.ravel(), strict=True):
         if not np.isfinite(g) or g <= 0:
             continue
         n += 1
