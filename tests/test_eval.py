@@ -21,6 +21,7 @@ from vpp_service.evaluation import (
     summarize,
     write_json,
 )
+from vpp_service.evaluation.report import json_safe
 from vpp_service.matchers import build_matcher, fill_holes
 from vpp_service.sources.sensors import build_sensor
 from vpp_service.sources.synthetic import make_scene
@@ -157,6 +158,25 @@ def test_reports(tmp_path, scenes):
     md = markdown_report(rows, per_scene=True)
     assert "## synthetic - sgbm (1 scenes, sensor uniform)" in md
     assert md.count("\n| baseline |") == 1 and "### Per scene" in md
+
+
+def test_json_safe():
+    doc = json_safe({"a": (np.float32(1.5), float("nan")), 2: np.int64(3), "b": [None, True, "x"]})
+    assert doc == {"a": [1.5, None], "2": 3, "b": [None, True, "x"]}
+    assert type(doc["2"]) is int
+    with pytest.raises(TypeError, match="object is not JSON serializable"):
+        json_safe({"x": object()})
+
+
+def test_summarize_sweep_puts_rows_without_density_last():
+    rows = [
+        {"scene": "a", "method": "vpp", "sensor": "uniform", "density": 0.1, "bad2": 4.0},
+        {"scene": "a", "method": "vpp", "sensor": "uniform", "density": 0.05, "bad2": 6.0},
+        {"scene": "a", "method": "vpp", "sensor": "lidar", "density": None, "bad2": 8.0},
+    ]
+    s = summarize(rows)
+    assert list(s["vpp"]) == ["0.05", "0.1", "measured"]
+    assert s["vpp"]["measured"]["bad2"] == 8.0 and s["vpp"]["0.05"]["bad2"] == 6.0
 
 
 def test_cli_end_to_end_real_scenes(tmp_path, capsys):
