@@ -56,11 +56,11 @@ def matcher_rows(size: str, reps: int, all_threads: int) -> list[Row]:
         ("sgbm", {}, None, None),
         ("bm", {}, None, None),
     ]
-    for t in sorted({1, all_threads}):
+    for n in sorted({1, all_threads}):
         cases += [
-            ("census-sgm", {"threads": t}, None, t),
-            ("census-sgm", {"threads": t, "paths": 4}, None, t),
-            ("census-sgm", {"threads": t}, hints, t),
+            ("census-sgm", {"threads": n}, None, n),
+            ("census-sgm", {"threads": n, "paths": 4}, None, n),
+            ("census-sgm", {"threads": n}, hints, n),
         ]
     rows: list[Row] = []
     for name, opts, h, t in cases:
