@@ -26,7 +26,8 @@ Progress goes to stderr.
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
+import datetime as dt
+import itertools
 import json
 import math
 import os
@@ -96,10 +97,7 @@ class _Progress:
 
     def __call__(self, done: int, total: int, label: str) -> None:
         now = time.perf_counter()
-        if done >= total:
-            msg = f"done in {now - self.tj:.1f} s"
-        else:
-            msg = f"[{done + 1}/{total}] {label}"
+        msg = f"done in {now - self.tj:.1f} s" if done >= total else f"[{done + 1}/{total}] {label}"
         print(f"{self.prefix} {msg}  (total {now - self.t0:.0f} s)", file=sys.stderr, flush=True)
 
 
@@ -236,7 +234,7 @@ def run_all(data: Path, limit: int | None) -> dict[str, Any]:
         if line.strip()
     ]
     meta = {
-        "date_utc": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "date_utc": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
         "git_commit": commit,
         "git_dirty_library": dirty,
         "seconds": round(total, 1),
@@ -328,9 +326,9 @@ def _dataset_table(block: dict[str, Any]) -> str:
 
 def plot(path: Path, sweep: dict[str, Any], n_scenes: int) -> None:
     """bad-2 and avg error vs density, one line per method."""
-    import matplotlib
+    import matplotlib as mpl
 
-    matplotlib.use("Agg", force=True)
+    mpl.use("Agg", force=True)
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), dpi=90)
@@ -396,6 +394,8 @@ def render(doc: dict[str, Any], out: Path) -> str:
     sweep = doc["sweep"]
     meta, cfg = doc["meta"], doc["config"]
     names = {k: n for _, k, n in DATASETS}
+    dirty = meta.get("git_dirty_library")
+    dirty_txt = " + uncommitted changes in " + ", ".join(f"`{p}`" for p in dirty) if dirty else ""
     P: list[str] = []
     P += [
         "# Results: matcher alone vs guided stereo vs VPP on the real datasets",
@@ -407,7 +407,7 @@ def render(doc: dict[str, Any], out: Path) -> str:
         "```",
         "",
         f"Last run: {meta['date_utc']}, commit `{meta['git_commit'][:12]}`"
-        f"{' + uncommitted changes in ' + ', '.join(f'`{p}`' for p in meta['git_dirty_library']) if meta.get('git_dirty_library') else ''}, "
+        f"{dirty_txt}, "
         f"{meta['seconds']:.0f} s on {meta['cpu']} ({meta['threads_used']} thread, "
         f"{meta['usable_cores']} usable cores), Python {meta['python']}, NumPy {meta['numpy']}, "
         f"OpenCV {meta['opencv']}. Everything (config, machine, every per-scene row) is in "
@@ -588,7 +588,7 @@ def _comment(summ: dict[str, Any], rows: list[dict], sweep: dict[str, Any]) -> l
                 seq = [block[m] for m in METHODS if m in block]
                 for metric in ("bad2", "avg"):
                     vals = [x[metric] for x in seq]
-                    ordered &= all(a > b for a, b in zip(vals, vals[1:]))
+                    ordered &= all(a > b for a, b in itertools.pairwise(vals))
     trend = (
         "**The trend is the paper's**: on every dataset and with both matchers VPP has the lowest bad-2 and "
         "avg error, and guided stereo sits between the matcher alone and VPP."
@@ -599,7 +599,7 @@ def _comment(summ: dict[str, Any], rows: list[dict], sweep: dict[str, Any]) -> l
     s1 = sweep.get("vpp", {}).get("0.01", {}).get("bad2", float("nan")) if sweep else float("nan")
     s5 = sweep.get("vpp", {}).get("0.05", {}).get("bad2", float("nan")) if sweep else float("nan")
     g1 = sweep.get("guided", {}).get("0.01", {}).get("bad2", float("nan")) if sweep else float("nan")
-    L = [
+    return [
         "### How our setting differs, and which way it pushes",
         "",
         f"- {trend} On Middlebury 2005/2006 VPP / baseline bad-2 is "
@@ -643,7 +643,6 @@ def _comment(summ: dict[str, Any], rows: list[dict], sweep: dict[str, Any]) -> l
         "- The paper's deep networks (RAFT-Stereo, PSMNet) are not evaluated here (no weights, CPU only).",
         "",
     ]
-    return L
 
 
 def _json_safe(obj: Any) -> Any:
@@ -681,6 +680,7 @@ def write_outputs(doc: dict[str, Any], out: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Evaluate (or, with ``--render-only``, reuse ``results.json``) and write the results page."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument(
         "--data",
