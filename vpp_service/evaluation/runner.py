@@ -44,7 +44,7 @@ from vpp_service.frame import StereoFrame
 if TYPE_CHECKING:
     from vpp_service.datasets.base import Dataset
     from vpp_service.matchers.base import Matcher
-    from vpp_service.sources.sensors import Sensor
+    from vpp_service.sources.sensors import NominalGeometry, Sensor
     from vpp_service.vpp import VPPConfig
 
 #: What :func:`run_evaluation` reads frames from.
@@ -118,7 +118,7 @@ def run_evaluation(
     matcher: str | Matcher = "census-sgm",
     methods: Sequence[str] = METHODS,
     densities: float | Sequence[float] | None = (0.05,),
-    sensor: str | Sensor = "uniform",
+    sensor: str | Sensor[NominalGeometry] = "uniform",
     vpp_config: VPPConfig | None = None,
     seed: int = 0,
     progress: Progress | None = None,
@@ -216,7 +216,7 @@ def run_evaluation(
     else:
         raise TypeError(f"sensor: must be a sensor name or a Sensor, got {type(sensor).__name__}")
     dens = _check_densities(densities, sensor_name if isinstance(sensor, str) else None)
-    sensors: dict[float | None, Sensor | None] = {}
+    sensors: dict[float | None, Sensor[NominalGeometry] | None] = {}
     for d in dens:
         if isinstance(sensor, Sensor):
             sensors[d] = sensor
