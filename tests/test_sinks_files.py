@@ -100,7 +100,7 @@ def test_missing_optional_data_is_skipped(tmp_path, result):
     result.left_vpp = result.right_vpp = result.depth = None
     sink = make_sink(tmp_path, formats=["npy"], painted=True, depth=True)
     sink.write(result)
-    assert sorted(os.listdir(tmp_path)) == ["rigA_000042_disparity.npy"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rigA_000042_disparity.npy"]
     assert sink.stats()["errors"] == 0
 
 
@@ -110,7 +110,7 @@ def test_all_formats_no_temp_leftovers(tmp_path, result):
         result.frame.seq = seq
         sink.write(result)
     sink.close()
-    names = sorted(os.listdir(tmp_path))
+    names = sorted(p.name for p in tmp_path.iterdir())
     assert len(names) == 3 * 6
     assert not [n for n in names if n.startswith(".")]
     assert sink.stats()["written"] == 3 and sink.stats()["files"] == 18
@@ -138,7 +138,7 @@ def test_overwrite(tmp_path, result, overwrite):
     assert np.array_equal(d[valid], expected[valid]) and np.all(np.isnan(d[~valid]))
     assert sink.stats()["errors"] == (0 if overwrite else 1)
     assert sink.stats()["written"] == (2 if overwrite else 1)
-    assert not [n for n in os.listdir(tmp_path) if n.startswith(".")]
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
 def test_bad_result_arrays_are_counted(tmp_path, result):
@@ -146,7 +146,7 @@ def test_bad_result_arrays_are_counted(tmp_path, result):
     sink = make_sink(tmp_path, formats=["png16", "pfm", "npy"])
     sink.write(result)
     assert sink.stats()["errors"] == 3 and sink.stats()["written"] == 0
-    assert os.listdir(tmp_path) == []
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_write_type_and_state_errors(tmp_path, result):
@@ -160,7 +160,7 @@ def test_write_type_and_state_errors(tmp_path, result):
 
 def test_open_missing_dir(tmp_path):
     sink = build_sink("files", {"dir": str(tmp_path / "nope")})
-    with pytest.raises(FileNotFoundError, match="sinks.files.dir.*does not exist"):
+    with pytest.raises(FileNotFoundError, match=r"sinks\.files\.dir.*does not exist"):
         sink.open()
 
 
@@ -173,7 +173,7 @@ def test_open_create_dir(tmp_path, result):
 def test_open_not_a_dir(tmp_path):
     f = tmp_path / "file"
     f.write_text("x")
-    with pytest.raises(NotADirectoryError, match="sinks.files.dir"):
+    with pytest.raises(NotADirectoryError, match=r"sinks\.files\.dir"):
         build_sink("files", {"dir": str(f)}).open()
 
 

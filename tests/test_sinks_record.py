@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import re
 import signal
 import threading
 
@@ -122,7 +123,7 @@ def test_sim_frames_round_trip_through_files_source(tmp_path, enc):
     assert st["bytes"] == sum(p.stat().st_size for p in tmp_path.iterdir())
     frames, rejects = replay(tmp_path)
     assert not rejects and [f.seq for f in frames] == [0, 1, 2]
-    for got, r in zip(frames, ref):
+    for got, r in zip(frames, ref, strict=True):
         assert_same_frame(got, r)
     # the stored message is exactly the wire encoding of the input frame
     assert (tmp_path / "rigA_000000001.msgpack").read_bytes() == wire.encode_frame(ref[1], enc, "disparity_points")
@@ -135,7 +136,7 @@ def test_metric_depth_grayscale_round_trip(tmp_path):
             sink.write(as_result(f))
     frames, rejects = replay(tmp_path)
     assert not rejects and len(frames) == 2
-    for got, r in zip(frames, ref):
+    for got, r in zip(frames, ref, strict=True):
         assert got.left.ndim == 2 and got.sparse_disparity is not None
         assert_same_frame(got, r)
 
@@ -147,7 +148,7 @@ def test_replay_order_is_seq_order(tmp_path):
             sink.write(as_result(metric_frame(s)))
     frames, _ = replay(tmp_path)
     order = sorted(seqs)
-    for got, s in zip(frames, order):
+    for got, s in zip(frames, order, strict=True):
         np.testing.assert_array_equal(got.left, metric_frame(s).left)
 
 
@@ -159,7 +160,7 @@ def test_publish_path_auto_detects_a_recording(tmp_path):
             sink.write(as_result(f))
     frames, rejects = replay(tmp_path, format="dataset", dataset="auto", sensor="uniform")
     assert not rejects and len(frames) == 2
-    for got, r in zip(frames, ref):
+    for got, r in zip(frames, ref, strict=True):
         assert_same_frame(got, r)  # recorded sparse depth kept, not re-simulated
     empty = tmp_path / "empty"
     empty.mkdir()
@@ -191,11 +192,13 @@ def test_png_is_smaller_than_raw_on_a_natural_image(tmp_path):
 
 def test_max_frames_stops_and_logs_once(tmp_path, caplog):
     frame = metric_frame()
-    with caplog.at_level(logging.WARNING, logger="vpp_service.sinks.record"):
-        with make_sink(tmp_path, max_frames=2) as sink:
-            for s in range(5):
-                assert sink.stopped is (None if s < 2 else "max_frames")
-                sink.write(as_result(frame.with_(seq=s)))
+    with (
+        caplog.at_level(logging.WARNING, logger="vpp_service.sinks.record"),
+        make_sink(tmp_path, max_frames=2) as sink,
+    ):
+        for s in range(5):
+            assert sink.stopped is (None if s < 2 else "max_frames")
+            sink.write(as_result(frame.with_(seq=s)))
     assert len(list(tmp_path.glob("*.msgpack"))) == 2
     st = sink.stats()
     assert (st["written"], st["skipped"], st["errors"]) == (2, 3, 0)
@@ -208,10 +211,12 @@ def test_max_bytes_is_a_hard_budget(tmp_path, caplog, budget_frames, expect):
     frame = metric_frame()
     size = len(wire.encode_frame(frame, "png"))  # seq 0..4 all encode to the same size
     budget = int(size * budget_frames)
-    with caplog.at_level(logging.WARNING, logger="vpp_service.sinks.record"):
-        with make_sink(tmp_path, max_bytes=budget) as sink:
-            for s in range(5):
-                sink.write(as_result(frame.with_(seq=s)))
+    with (
+        caplog.at_level(logging.WARNING, logger="vpp_service.sinks.record"),
+        make_sink(tmp_path, max_bytes=budget) as sink,
+    ):
+        for s in range(5):
+            sink.write(as_result(frame.with_(seq=s)))
     files = list(tmp_path.glob("*.msgpack"))
     assert len(files) == expect
     total = sum(p.stat().st_size for p in files)
@@ -281,16 +286,16 @@ def test_write_atomic(tmp_path):
         write_atomic(p, b"def", overwrite=False)
     write_atomic(p, b"def", overwrite=True)
     assert p.read_bytes() == b"def" and [q.name for q in tmp_path.iterdir()] == ["x.msgpack"]
-    with pytest.raises(OSError):
+    with pytest.raises(FileNotFoundError, match=re.escape(str(tmp_path / "missing"))):
         write_atomic(tmp_path / "missing" / "y.msgpack", b"", overwrite=True)
 
 
 def test_open_and_life_cycle_errors(tmp_path):
-    with pytest.raises(FileNotFoundError, match="sinks.record.dir"):
+    with pytest.raises(FileNotFoundError, match=r"sinks\.record\.dir"):
         make_sink(tmp_path / "missing")
     not_dir = tmp_path / "file"
     not_dir.write_text("x")
-    with pytest.raises(NotADirectoryError, match="sinks.record.dir"):
+    with pytest.raises(NotADirectoryError, match=r"sinks\.record\.dir"):
         make_sink(not_dir)
     with pytest.raises(PermissionError, match="cannot create"):
         make_sink(not_dir / "sub", create_dir=True)
@@ -410,8 +415,9 @@ def test_service_records_and_a_second_service_replays(tmp_path):
 
 @pytest.mark.parametrize("how", [["--dataset", "auto", "--root"], ["--recording"]])
 def test_vpp_service_publish_replays_a_recording(tmp_path, zenoh_endpoint, zenoh_config, how):
-    """``vpp-service publish --recording REC`` (or ``--dataset auto --root REC``) sends the
-    recorded frames onto Zenoh unchanged.
+    """``vpp-service publish --recording REC`` (or ``--dataset auto --root REC``) replays a recording.
+
+    The recorded frames arrive on Zenoh unchanged.
     """
     import zenoh
 
@@ -456,7 +462,7 @@ def test_vpp_service_publish_replays_a_recording(tmp_path, zenoh_endpoint, zenoh
             deadline.wait(0.05)
         sub.undeclare()
     assert [f.seq for f in got] == [0, 1, 2] and all(f.rig == "front" for f in got)
-    for g, r in zip(got, ref):
+    for g, r in zip(got, ref, strict=True):
         assert_same_frame(g, r)
 
 

@@ -230,7 +230,7 @@ def test_serve_listens_on_grpc_port():
 
 def test_save_missing_folder(tmp_path):
     sink = build_sink("rerun", {"path": str(tmp_path / "no" / "x.rrd")})
-    with pytest.raises(FileNotFoundError, match="sinks.rerun.path"):
+    with pytest.raises(FileNotFoundError, match=r"sinks\.rerun\.path"):
         sink.open()
 
 
@@ -245,7 +245,7 @@ def test_write_errors(tmp_path):
 
 
 def test_bad_rig_name():
-    with pytest.raises(ValueError, match="context.rig"):
+    with pytest.raises(ValueError, match=r"context\.rig"):
         build_sink("rerun", {}, SinkContext(rig="a/b c"))
 
 
@@ -280,9 +280,18 @@ def test_depth_stride_reference(h, w, m):
     assert depth_stride(h, w, m) == ref
 
 
-@pytest.mark.parametrize("args", [(0, 4, 4), (4, -1, 4), (4, 4, 0), (4.0, 4, 4), (True, 4, 4)])
-def test_depth_stride_errors(args):
-    with pytest.raises(ValueError):
+@pytest.mark.parametrize(
+    ("args", "bad"),
+    [
+        ((0, 4, 4), "height"),
+        ((4, -1, 4), "width"),
+        ((4, 4, 0), "max_points"),
+        ((4.0, 4, 4), "height"),
+        ((True, 4, 4), "height"),
+    ],
+)
+def test_depth_stride_errors(args, bad):
+    with pytest.raises(ValueError, match=f"^{bad}: must be an integer >= 1"):
         depth_stride(*args)
 
 

@@ -121,7 +121,7 @@ def test_close_is_bounded_without_peers(sessions):
     ],
 )
 def test_bad_options(opts):
-    with pytest.raises(ValueError, match="sinks.zenoh"):
+    with pytest.raises(ValueError, match=r"sinks\.zenoh"):
         build_sink("zenoh", opts)
 
 

@@ -148,9 +148,9 @@ def test_errors(frame):
     assert SENSORS.names() == ["lidar", "tof", "uniform"]
     with pytest.raises(ValueError, match="unknown sensor"):
         build_sensor("radar", {})
-    with pytest.raises(SettingsError, match="sensor.uniform: density"):
+    with pytest.raises(SettingsError, match=r"sensor\.uniform: density"):
         build_sensor("uniform", {"density": 1.5})
-    with pytest.raises(SettingsError, match="sensor.lidar.beam"):
+    with pytest.raises(SettingsError, match=r"sensor\.lidar\.beam"):
         build_sensor("lidar", {"beam": 3})
     with pytest.raises(SettingsError, match="max_range"):
         build_sensor("tof", {"max_range": 0.05})

@@ -116,7 +116,7 @@ def test_files_msgpack_replay(msgpack_folder):
     folder, ref = msgpack_folder
     frames, rejects = drain(build_source("files", {"root": str(folder), "format": "msgpack"}))
     assert [f.seq for f in frames] == [0, 1, 2] and not rejects
-    for f, r in zip(frames, ref):
+    for f, r in zip(frames, ref, strict=True):
         np.testing.assert_array_equal(f.left, r.left)
         np.testing.assert_array_equal(f.gt_disparity, r.gt_disparity)
 
@@ -137,7 +137,7 @@ def test_files_bad_file_rejected_and_skipped(msgpack_folder):
 def test_files_errors(tmp_path):
     with pytest.raises(SettingsError, match="root"):
         build_source("files", {})
-    with pytest.raises(FileNotFoundError, match="source.root"):
+    with pytest.raises(FileNotFoundError, match=r"source\.root"):
         build_source("files", {"root": str(tmp_path / "nope")}).open()
     with pytest.raises(ValueError, match="msgpack"):
         build_source("files", {"root": str(tmp_path), "format": "msgpack"}).open()

@@ -33,7 +33,7 @@ def test_scene_smoke(kind, texture):
 def test_gt_consistent_with_right_view(kind, seed):
     """Warping right to left by the GT matches at non-occluded pixels, and not by a shifted GT."""
     f = make_scene(seed=seed, kind=kind)
-    h, w = f.shape
+    _, w = f.shape
     xs = np.arange(w)[None, :]
     m = f.nocc_mask & (xs - f.gt_disparity >= 1)
     err = warp_abs_diff(f, f.gt_disparity)
@@ -59,7 +59,10 @@ def test_boxes_are_fronto_parallel_and_planes_slanted():
 def test_weak_texture_has_low_contrast():
     strong = make_scene(seed=4, texture="random")
     weak = make_scene(seed=4, texture="weak")
-    lap = lambda img: np.abs(cv2.Laplacian(img.mean(-1).astype(np.float32), cv2.CV_32F)).mean()
+
+    def lap(img):
+        return np.abs(cv2.Laplacian(img.mean(-1).astype(np.float32), cv2.CV_32F)).mean()
+
     assert lap(weak.left) < 0.15 * lap(strong.left)
     np.testing.assert_array_equal(weak.gt_disparity, strong.gt_disparity)  # same layout
 

@@ -122,13 +122,14 @@ def test_needs_session():
     ],
 )
 def test_bad_options(opts):
-    with pytest.raises(ValueError, match="source.zenoh"):
+    with pytest.raises(ValueError, match=r"source\.zenoh"):
         build_source("zenoh", opts)
 
 
 def test_ring_keeps_newest_and_counts_drops(sessions):
-    """A burst while the receive thread is not draining: only the newest ring_size
-    frames survive, the rest are counted as ring_dropped (no silent loss).
+    """A burst while the receive thread is not draining keeps the newest ring_size frames.
+
+    The rest are counted as ring_dropped (no silent loss).
     """
     svc, cam = sessions
     src = build_source("zenoh", {"ring_size": 3}, SourceContext(rig="z", session=svc))
@@ -164,8 +165,10 @@ def test_stop_is_prompt_when_idle(sessions):
 
 
 def test_per_topic_ring_sizes(sessions):
-    """Separate topics with a deeper depth ring: each topic keeps its own newest
-    samples and counts its own drops; exact sync then joins the seqs all kept.
+    """Separate topics with a deeper depth ring: each topic keeps and drops on its own.
+
+    Each topic keeps its own newest samples and counts its own drops; exact sync
+    then joins the seqs all kept.
     """
     svc, cam = sessions
     src = build_source(

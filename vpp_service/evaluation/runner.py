@@ -44,7 +44,7 @@ from vpp_service.frame import StereoFrame
 if TYPE_CHECKING:
     from vpp_service.datasets.base import Dataset
     from vpp_service.matchers.base import Matcher
-    from vpp_service.sources.sensors import Sensor
+    from vpp_service.sources.sensors import NominalGeometry, Sensor
     from vpp_service.vpp import VPPConfig
 
 #: What :func:`run_evaluation` reads frames from.
@@ -141,10 +141,10 @@ def _resolve_matcher(
 
 
 def _resolve_sensors(
-    sensor: str | Sensor,
+    sensor: str | Sensor[NominalGeometry],
     sensor_options: Mapping[str, object] | None,
     densities: float | Sequence[float] | None,
-) -> tuple[str, list[tuple[float | None, Sensor | None]]]:
+) -> tuple[str, list[tuple[float | None, Sensor[NominalGeometry] | None]]]:
     """Check the sensor and densities: ``(sensor name, [(density, sensor or None for the frame's own points)])``."""
     from vpp_service.sources.sensors import Sensor, build_sensor
 
@@ -160,7 +160,7 @@ def _resolve_sensors(
             raise ValueError("sensor_options: only used when the sensor is given by name")
     else:
         raise TypeError(f"sensor: must be a sensor name or a Sensor, got {type(sensor).__name__}")
-    sensors: list[tuple[float | None, Sensor | None]] = []
+    sensors: list[tuple[float | None, Sensor[NominalGeometry] | None]] = []
     for d in _check_densities(densities, sensor_name if isinstance(sensor, str) else None):
         if isinstance(sensor, Sensor):
             sensors.append((d, sensor))
@@ -207,7 +207,7 @@ def _frame_with_gt(get: Callable[[int], StereoFrame], i: int) -> tuple[StereoFra
     return frame, frame.gt_disparity
 
 
-def _draw_points(frame: StereoFrame, sensor: Sensor | None, seed: int, scene: str) -> np.ndarray:
+def _draw_points(frame: StereoFrame, sensor: Sensor[NominalGeometry] | None, seed: int, scene: str) -> np.ndarray:
     """The sparse points of one run: H x W float32, NaN where no point (or not ``0 < d``)."""
     drawn = frame.sparse_disparity if sensor is None else sensor.simulate(frame, seed=seed).sparse_disparity
     if drawn is None:
@@ -221,7 +221,7 @@ def run_evaluation(
     matcher: str | Matcher = "census-sgm",
     methods: Sequence[str] = METHODS,
     densities: float | Sequence[float] | None = (0.05,),
-    sensor: str | Sensor = "uniform",
+    sensor: str | Sensor[NominalGeometry] = "uniform",
     *,
     vpp_config: VPPConfig | None = None,
     seed: int = 0,

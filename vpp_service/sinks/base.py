@@ -42,8 +42,8 @@ class Sink(Plugin):
 
     Parameters
     ----------
-    options : Any
-        Instance of the subclass's ``Options``.
+    options : object
+        Instance of the subclass's ``Options`` (each subclass narrows the type).
     context : SinkContext
         Service-wide facts.
     """
@@ -79,7 +79,7 @@ class Sink(Plugin):
         self.close()
 
 
-def parse_sink_options(name: str, options: Mapping[str, Any] | None, section: str | None = None) -> Any:
+def parse_sink_options(name: str, options: Mapping[str, Any] | None, section: str | None = None) -> object:
     """Validate ``options`` for sink ``name`` without building it."""
     return parse_plugin_options(SINKS, name, options, section or f"sinks.{name}")
 

@@ -43,8 +43,8 @@ def disparity_range(*arrays: np.ndarray | None) -> tuple[float, float] | None:
     for i, a in enumerate(arrays):
         if a is None:
             continue
-        a = _check_array(a, f"arrays[{i}]")
-        v = a[np.isfinite(a) & (a > 0)] if a.size else a
+        arr = _check_array(a, f"arrays[{i}]")
+        v = arr[np.isfinite(arr) & (arr > 0)] if arr.size else arr
         if v.size:
             lo, hi = min(lo, float(v.min())), max(hi, float(v.max()))
     if not np.isfinite(lo):

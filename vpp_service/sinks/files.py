@@ -29,9 +29,9 @@ from __future__ import annotations
 
 import io
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import cv2
 import numpy as np
@@ -94,7 +94,7 @@ class FilesSinkOptions:
         check_pattern(self.pattern)
 
 
-def _check_disparity(disparity: Any) -> np.ndarray:
+def _check_disparity(disparity: object) -> np.ndarray:
     if not isinstance(disparity, np.ndarray):
         raise TypeError(f"disparity: must be a numpy ndarray, got {type(disparity).__name__}")
     if not (np.issubdtype(disparity.dtype, np.floating) or np.issubdtype(disparity.dtype, np.integer)):
@@ -186,6 +186,7 @@ class FilesSink(FolderSink):
     """
 
     Options = FilesSinkOptions
+    options: FilesSinkOptions
 
     @classmethod
     def needs_depth(cls, options: FilesSinkOptions) -> bool:
@@ -249,7 +250,7 @@ class FilesSink(FolderSink):
         if failures == 0:
             self._counters["written"] += 1
 
-    def _writer(self, kind: str, result: FusionResult):
+    def _writer(self, kind: str, result: FusionResult) -> Callable[[str], object] | None:
         """A ``f(tmp_path)`` writing ``kind`` for ``result``, or None when absent."""
         if kind == "png16":
             data = encode_png16(result.disparity)
@@ -275,10 +276,10 @@ class FilesSink(FolderSink):
         if not isinstance(img, np.ndarray) or img.dtype != np.uint8 or img.ndim not in (2, 3):
             raise ValueError(f"{kind}: must be an H x W (x C) uint8 image")
         bgr = img[..., ::-1] if img.ndim == 3 and img.shape[2] == 3 else img
-        ok, buf = cv2.imencode(".png", np.ascontiguousarray(bgr))
+        ok, png = cv2.imencode(".png", np.ascontiguousarray(bgr))
         if not ok:
             raise ValueError(f"{kind}: OpenCV could not encode shape {img.shape}")
-        data = buf.tobytes()
+        data = png.tobytes()
         return lambda p: Path(p).write_bytes(data)
 
 

@@ -12,7 +12,7 @@ import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Protocol
 
 from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import Sink, SinkContext
@@ -60,16 +60,17 @@ def write_atomic(path: Path, data: bytes | Callable[[str], object], overwrite: b
         The folder is not writable, the disk is full, ...
     """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    tmp = Path(tmp_name)
     try:
         if callable(data):
             os.close(fd)
-            data(tmp)
+            data(tmp_name)
         else:
             with os.fdopen(fd, "wb") as fh:
                 fh.write(data)
         if overwrite:
-            os.replace(tmp, path)
+            tmp.replace(path)
         else:
             try:  # link() fails if the target exists: atomic no-clobber
                 os.link(tmp, path)
@@ -78,10 +79,9 @@ def write_atomic(path: Path, data: bytes | Callable[[str], object], overwrite: b
             except OSError:  # file system without hard links: check, then rename
                 if path.exists():
                     raise FileExistsError(f"{path} exists and overwrite = false") from None
-                os.replace(tmp, path)
+                tmp.replace(path)
     finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        tmp.unlink(missing_ok=True)
 
 
 def prepare_dir(d: Path, create: bool, key: str, what: str = "output folder") -> None:
@@ -115,22 +115,39 @@ def prepare_dir(d: Path, create: bool, key: str, what: str = "output folder") ->
     try:  # os.access lies for root and on read-only mounts; really try
         fd, probe = tempfile.mkstemp(prefix=".vpp-probe-", dir=d)
         os.close(fd)
-        os.unlink(probe)
+        Path(probe).unlink()
     except OSError as exc:
         raise PermissionError(f"{key}: {what} {str(d)!r} is not writable: {exc}") from None
+
+
+class FolderOptions(Protocol):
+    """The options every folder sink has (read-only: its ``Options`` is a frozen dataclass)."""
+
+    @property
+    def dir(self) -> str:
+        """Output folder (``~`` expanded)."""
+
+    @property
+    def create_dir(self) -> bool:
+        """Create the folder (with parents) when it is missing."""
+
+    @property
+    def pattern(self) -> str:
+        """File-name stem pattern over :data:`PATTERN_FIELDS`."""
 
 
 class FolderSink(Sink):
     """Base of the sinks that write files into one folder (``options.dir``).
 
     Subclasses set ``Options`` (a dataclass with ``dir``, ``create_dir`` and
-    ``pattern``) and ``DIR_KEY`` / ``DIR_WHAT`` for error messages.
+    ``pattern``, see :class:`FolderOptions`) and ``DIR_KEY`` / ``DIR_WHAT`` for error messages.
     """
 
+    options: FolderOptions
     DIR_KEY = "sinks.dir"
     DIR_WHAT = "output folder"
 
-    def __init__(self, options: Any, context: SinkContext | None = None) -> None:
+    def __init__(self, options: FolderOptions, context: SinkContext | None = None) -> None:
         if not isinstance(options, self.Options):
             raise TypeError(f"options: must be {self.Options.__name__}, got {type(options).__name__}")
         super().__init__(options, context or SinkContext())
@@ -172,4 +189,4 @@ class FolderSink(Sink):
         )
 
 
-__all__ = ["PATTERN_FIELDS", "FolderSink", "check_pattern", "prepare_dir", "write_atomic"]
+__all__ = ["PATTERN_FIELDS", "FolderOptions", "FolderSink", "check_pattern", "prepare_dir", "write_atomic"]

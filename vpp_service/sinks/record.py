@@ -134,6 +134,7 @@ class RecordSink(FolderSink):
     """
 
     Options = RecordSinkOptions
+    options: RecordSinkOptions
 
     @classmethod
     def needs_depth(cls, options: RecordSinkOptions) -> bool:

@@ -66,7 +66,7 @@ import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -74,6 +74,10 @@ from vpp_service.frame import FusionResult
 from vpp_service.queueing import QueueWorker
 from vpp_service.sinks.base import SINKS, Sink, SinkContext
 from vpp_service.sinks.colorize import colorize_disparity, disparity_range
+
+if TYPE_CHECKING:
+    import rerun as rr
+    import rerun.blueprint as rrb
 
 log = logging.getLogger(__name__)
 
@@ -187,7 +191,7 @@ def depth_stride(height: int, width: int, max_points: int) -> int:
     for name, v in (("height", height), ("width", width), ("max_points", max_points)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise ValueError(f"{name}: must be an integer >= 1, got {v!r}")
-    s = max(1, int(math.floor(math.sqrt(height * width / max_points))))
+    s = max(1, math.floor(math.sqrt(height * width / max_points)))
     while math.ceil(height / s) * math.ceil(width / s) > max_points:
         s += 1
     return s
@@ -222,6 +226,7 @@ class RerunSink(Sink):
     """
 
     Options = RerunSinkOptions
+    options: RerunSinkOptions
 
     def __init__(self, options: RerunSinkOptions, context: SinkContext | None = None) -> None:
         if not isinstance(options, RerunSinkOptions):
@@ -240,14 +245,14 @@ class RerunSink(Sink):
             on_exit=self._flush,
             on_error=self._failed,
         )
-        self._rec = None
+        self._rec: rr.RecordingStream | None = None
         self._last_accept = -math.inf
         self._ready = threading.Event()
         self._close_deadline = math.inf
         self.server_uri: str | None = None
 
     # -- life cycle -----------------------------------------------------------------
-    def blueprint(self):
+    def blueprint(self) -> rrb.Blueprint:
         """The default :class:`rerun.blueprint.Blueprint` of the sink's views."""
         import rerun.blueprint as rrb
 
@@ -286,14 +291,14 @@ class RerunSink(Sink):
             raise RuntimeError("rerun sink: already open")
         o = self.options
         rec_id = o.recording_id or f"{self.context.rig}-{uuid.uuid4()}"
-        self._rec = rr.RecordingStream(o.application_id, recording_id=rec_id, send_properties=False)
+        self._rec = rec = rr.RecordingStream(o.application_id, recording_id=rec_id, send_properties=False)
         if o.mode == "save":
             path = Path(o.path).expanduser()
             if not path.parent.is_dir():
                 raise FileNotFoundError(f"sinks.rerun.path: folder {str(path.parent)!r} does not exist")
             if path.is_dir():
                 raise IsADirectoryError(f"sinks.rerun.path: {str(path)!r} is a folder, expected a .rrd file")
-            self._rec.save(str(path), default_blueprint=self.blueprint())
+            rec.save(str(path), default_blueprint=self.blueprint())
             self._ready.set()
         self._worker.start()
 
@@ -301,7 +306,7 @@ class RerunSink(Sink):
         """Attach the network output (runs on the logging thread)."""
         import rerun as rr
 
-        o, rec, bp = self.options, self._rec, self.blueprint()
+        o, rec, bp = self.options, self._recording(), self.blueprint()
         if o.mode == "spawn":
             if not o.analytics:
                 _disable_viewer_analytics()
@@ -368,6 +373,18 @@ class RerunSink(Sink):
         return out
 
     # -- logging thread -------------------------------------------------------------
+    def _recording(self) -> rr.RecordingStream:
+        """The sink's recording stream; only the logging thread and :meth:`open` use it.
+
+        Raises
+        ------
+        RuntimeError
+            Before :meth:`open` created it.
+        """
+        if self._rec is None:
+            raise RuntimeError("rerun sink: not open")
+        return self._rec
+
     def _attach_once(self) -> None:
         if self._ready.is_set():
             return
@@ -388,7 +405,7 @@ class RerunSink(Sink):
         self._counters["errors"] += 1
 
     def _flush(self) -> None:
-        rec = self._rec
+        rec = self._recording()
         try:
             rec.flush(timeout_sec=min(5.0, max(0.05, self._close_deadline - time.monotonic())))
         except Exception as exc:  # noqa: BLE001 - e.g. "Flush timed out" with a dead viewer
@@ -403,7 +420,7 @@ class RerunSink(Sink):
         """Convert one result to Rerun archetypes and log it."""
         import rerun as rr
 
-        rec, o, fr = self._rec, self.options, result.frame
+        rec, o, fr = self._recording(), self.options, result.frame
         root = self.context.rig
         rec.set_time("seq", sequence=int(fr.seq))
         if fr.stamp_ns:

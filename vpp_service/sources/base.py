@@ -46,15 +46,15 @@ class Source(Plugin):
 
     Parameters
     ----------
-    options : Any
-        Instance of the subclass's ``Options``.
+    options : object
+        Instance of the subclass's ``Options`` (each subclass narrows the type).
     context : SourceContext
         Service-wide facts.
     """
 
     counter_names = ("emitted", "rejected")
 
-    def __init__(self, options: Any, context: SourceContext) -> None:
+    def __init__(self, options: object, context: SourceContext) -> None:
         super().__init__(options, context)
         #: Set when a finite source has produced its last frame.
         self.finished = threading.Event()
@@ -117,7 +117,7 @@ class Source(Plugin):
         """Release resources (called by :meth:`stop`)."""
 
 
-def parse_source_options(name: str, options: Mapping[str, Any] | None, section: str | None = None) -> Any:
+def parse_source_options(name: str, options: Mapping[str, Any] | None, section: str | None = None) -> object:
     """Validate ``options`` for source ``name`` without building it."""
     return parse_plugin_options(SOURCES, name, options, section or f"source.{name}")
 

@@ -24,12 +24,16 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Literal
 
 from vpp_service.frame import StereoFrame
 from vpp_service.sources.base import SOURCES, Emit, Pacer, Reject, Source, SourceContext
 from vpp_service.sources.sim import build_sensor_or_none, scale_frame
 from vpp_service.transport import wire
+
+if TYPE_CHECKING:
+    from vpp_service.datasets.base import Dataset
+    from vpp_service.sources.sensors import NominalGeometry, Sensor
 
 
 @dataclass(frozen=True)
@@ -68,7 +72,7 @@ class FilesSourceOptions:
     count: int = 0
     scale: float = 1.0
     sensor: str = "uniform"
-    sensor_options: dict = field(default_factory=lambda: {"density": 0.05})
+    sensor_options: dict[str, object] = field(default_factory=lambda: {"density": 0.05})
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -87,12 +91,13 @@ class FilesSource(Source):
     """Replay a dataset or a folder of wire-format frames (see the module docstring)."""
 
     Options = FilesSourceOptions
+    options: FilesSourceOptions
 
     def __init__(self, options: FilesSourceOptions, context: SourceContext) -> None:
         super().__init__(options, context)
-        self._dataset: Any = None
+        self._dataset: Dataset | None = None
         self._files: list[Path] = []
-        self.sensor: Any = None
+        self.sensor: Sensor[NominalGeometry] | None = None
 
     def open(self) -> None:
         """Open the dataset / list the files; raises FileNotFoundError/ValueError early."""

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import ClassVar, Generic, TypeVar
 
 import numpy as np
 
@@ -41,7 +41,7 @@ from vpp_service.registry import Registry
 from vpp_service.settings import from_mapping
 
 #: Sensor classes by name.
-SENSORS: Registry[Sensor] = Registry("sensor")
+SENSORS: Registry[Sensor[NominalGeometry]] = Registry("sensor")
 
 
 def _positive(name: str, v: float) -> None:
@@ -79,24 +79,39 @@ class NominalGeometry:
         _positive("nominal_baseline", self.nominal_baseline)
 
 
-class Sensor:
+#: The options dataclass of one sensor class (covariant: a ``Sensor[LidarSensor.Options]`` is a
+#: ``Sensor[NominalGeometry]``, since the options are read-only).
+OptionsT_co = TypeVar("OptionsT_co", bound=NominalGeometry, covariant=True)
+
+
+class Sensor(Generic[OptionsT_co]):
     """Base class: turns a frame's ground truth into sparse measurements.
+
+    Each subclass sets ``Options`` (a frozen :class:`NominalGeometry` subclass)
+    and ``name`` and implements :meth:`simulate`.
 
     Parameters
     ----------
-    options : Options dataclass of the subclass
-        Built by :func:`build_sensor` (validated).
+    options : Options of the subclass or None
+        Built by :func:`build_sensor` (validated); None means the defaults.
     """
 
-    Options: type = object
-    name = ""
+    #: Frozen dataclass of the sensor's options; set by each subclass.
+    Options: type[OptionsT_co]
+    #: Registered name, written into ``frame.meta["sensor"]``.
+    name: ClassVar[str] = ""
 
-    def __init__(self, options: Any = None) -> None:
+    def __init__(self, options: OptionsT_co | None = None) -> None:
         if options is None:
             options = self.Options()
         if not isinstance(options, self.Options):
             raise TypeError(f"options: must be a {self.Options.__name__}, got {type(options).__name__}")
-        self.options = options
+        self._options = options
+
+    @property
+    def options(self) -> OptionsT_co:
+        """The sensor's validated options."""
+        return self._options
 
     def _geometry(self, frame: StereoFrame) -> tuple[float, float, float, float, float]:
         """(f, baseline, doffs, cx, cy) of the frame, nominal values when uncalibrated."""
@@ -130,7 +145,7 @@ class Sensor:
 
     @staticmethod
     def _true_depth(
-        gt: np.ndarray, rows: np.ndarray, cols: np.ndarray, f: float, b: float, doffs: float
+        gt: np.ndarray, rows: np.ndarray, cols: np.ndarray, *, f: float, b: float, doffs: float
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Sample ``gt`` at (rows, cols); keep the valid hits, return them with their depth."""
         d = gt[rows, cols].astype(np.float64)
@@ -143,7 +158,7 @@ class Sensor:
         return f * b / np.where(keep, z_meas, 1.0) - doffs
 
     def _output(
-        self, frame: StereoFrame, rows: np.ndarray, cols: np.ndarray, disp: np.ndarray, depth: np.ndarray | None
+        self, frame: StereoFrame, rows: np.ndarray, cols: np.ndarray, disp: np.ndarray, *, depth: np.ndarray | None
     ) -> StereoFrame:
         """Assemble the sparse maps; drops non-positive disparities/depths."""
         h, w = frame.shape
@@ -181,7 +196,7 @@ class Sensor:
 
 
 @SENSORS.register("uniform")
-class UniformSensor(Sensor):
+class UniformSensor(Sensor["UniformSensor.Options"]):
     """Uniform random sampling of valid ground-truth pixels (the paper's protocol)."""
 
     name = "uniform"
@@ -210,19 +225,20 @@ class UniformSensor(Sensor):
             super().__post_init__()
 
     def simulate(self, frame: StereoFrame, seed: int = 0) -> StereoFrame:
+        """Sample ``density`` of the valid ground-truth pixels (see :meth:`Sensor.simulate`)."""
         gt, rng = self._begin(frame, seed)
         valid = np.flatnonzero(np.isfinite(gt).ravel())
-        n = int(round(self.options.density * valid.size))
+        n = round(self.options.density * valid.size)
         pick = np.sort(rng.choice(valid, size=n, replace=False)) if n else valid[:0]
         rows, cols = np.divmod(pick, frame.shape[1])
         disp = gt.ravel()[pick].astype(np.float64)
         if self.options.noise_px > 0:
             disp = disp + rng.normal(0.0, self.options.noise_px, size=disp.size)
-        return self._output(frame, rows, cols, disp.astype(np.float32), None)
+        return self._output(frame, rows, cols, disp.astype(np.float32), depth=None)
 
 
 @SENSORS.register("lidar")
-class LidarSensor(Sensor):
+class LidarSensor(Sensor["LidarSensor.Options"]):
     """Spinning multi-beam LiDAR sharing the left camera's centre (see module docs)."""
 
     name = "lidar"
@@ -281,6 +297,7 @@ class LidarSensor(Sensor):
         return np.linspace(o.fov_up, o.fov_down, o.beams) if o.beams > 1 else np.array([o.fov_up])
 
     def simulate(self, frame: StereoFrame, seed: int = 0) -> StereoFrame:
+        """Cast the beams through the image and measure their ranges (see :meth:`Sensor.simulate`)."""
         gt, rng = self._begin(frame, seed)
         o = self.options
         h, w = frame.shape
@@ -299,7 +316,7 @@ class LidarSensor(Sensor):
         # one return per pixel (the first beam/azimuth that lands there)
         _, first = np.unique(rows * w + cols, return_index=True)
         rows, cols = rows[np.sort(first)], cols[np.sort(first)]
-        rows, cols, z = self._true_depth(gt, rows, cols, f, b, doffs)
+        rows, cols, z = self._true_depth(gt, rows, cols, f=f, b=b, doffs=doffs)
         ray = np.sqrt(1.0 + ((cols - cx) / f) ** 2 + ((rows - cy) / f) ** 2)
         r = z * ray
         keep = (r >= o.min_range) & (r <= o.max_range) & np.isfinite(r) & (z > 0)
@@ -311,11 +328,11 @@ class LidarSensor(Sensor):
         z_meas = r_meas / ray
         d_meas = self._measured_disparity(z_meas, keep, f, b, doffs)
         rows, cols = rows[keep], cols[keep]
-        return self._output(frame, rows, cols, d_meas[keep].astype(np.float32), z_meas[keep].astype(np.float32))
+        return self._output(frame, rows, cols, d_meas[keep].astype(np.float32), depth=z_meas[keep].astype(np.float32))
 
 
 @SENSORS.register("tof")
-class ToFSensor(Sensor):
+class ToFSensor(Sensor["ToFSensor.Options"]):
     """Low-resolution time-of-flight camera registered to the left view (see module docs)."""
 
     name = "tof"
@@ -358,6 +375,7 @@ class ToFSensor(Sensor):
             super().__post_init__()
 
     def simulate(self, frame: StereoFrame, seed: int = 0) -> StereoFrame:
+        """Measure the depth at the centres of the ``grid_w`` x ``grid_h`` cells (see :meth:`Sensor.simulate`)."""
         gt, rng = self._begin(frame, seed)
         o = self.options
         h, w = frame.shape
@@ -367,7 +385,7 @@ class ToFSensor(Sensor):
         rows, cols = (a.ravel() for a in np.meshgrid(rs, cs, indexing="ij"))
         flat = np.unique(rows * w + cols)
         rows, cols = np.divmod(flat, w)
-        rows, cols, z = self._true_depth(gt, rows, cols, f, b, doffs)
+        rows, cols, z = self._true_depth(gt, rows, cols, f=f, b=b, doffs=doffs)
         keep = (z >= o.min_range) & (z <= o.max_range)
         keep &= ~(rng.random(z.size) < o.dropout)
         noise = rng.normal(0.0, 1.0, size=z.size) * o.noise_k * z**2 if o.noise_k > 0 else np.zeros(z.size)
@@ -375,11 +393,11 @@ class ToFSensor(Sensor):
         keep &= z_meas > 0
         d_meas = self._measured_disparity(z_meas, keep, f, b, doffs)
         return self._output(
-            frame, rows[keep], cols[keep], d_meas[keep].astype(np.float32), z_meas[keep].astype(np.float32)
+            frame, rows[keep], cols[keep], d_meas[keep].astype(np.float32), depth=z_meas[keep].astype(np.float32)
         )
 
 
-def build_sensor(name: str, options: Mapping[str, Any] | None = None) -> Sensor:
+def build_sensor(name: str, options: Mapping[str, object] | None = None) -> Sensor[NominalGeometry]:
     """Build a registered sensor from an option mapping.
 
     Parameters

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import cv2
 import numpy as np
@@ -32,6 +32,12 @@ from vpp_service.datasets.skimage_scene import MOTORCYCLE_CALIB, motorcycle
 from vpp_service.frame import Calibration, StereoFrame
 from vpp_service.settings import SettingsError
 from vpp_service.sources.base import SOURCES, Emit, Pacer, Reject, Source, SourceContext
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+    from vpp_service.datasets.base import Dataset
+    from vpp_service.sources.sensors import NominalGeometry, Sensor
 
 
 def scale_frame(frame: StereoFrame, scale: float) -> StereoFrame:
@@ -113,12 +119,12 @@ class SimSourceOptions:
     """
 
     scene: Literal["motorcycle", "synthetic", "dataset"] = "motorcycle"
-    scene_options: dict = field(default_factory=dict)
+    scene_options: dict[str, Any] = field(default_factory=dict)
     dataset: str = "auto"
     root: str = ""
     scale: float = 1.0
     sensor: str = "uniform"
-    sensor_options: dict = field(default_factory=lambda: {"density": 0.05})
+    sensor_options: dict[str, object] = field(default_factory=lambda: {"density": 0.05})
     rate_hz: float = 10.0
     count: int = 0
     seed: int = 0
@@ -134,7 +140,7 @@ class SimSourceOptions:
             raise ValueError("root: required when scene = 'dataset'")
 
 
-def build_sensor_or_none(name: str, options: dict) -> Any:
+def build_sensor_or_none(name: str, options: Mapping[str, object]) -> Sensor[NominalGeometry] | None:
     """The named sensor simulator, or None for ``"none"``."""
     if name == "none":
         return None
@@ -148,6 +154,7 @@ class SimSource(Source):
     """Simulated camera rig (see the module docstring)."""
 
     Options = SimSourceOptions
+    options: SimSourceOptions
 
     @classmethod
     def check_options(cls, options: SimSourceOptions, section: str) -> None:
@@ -166,8 +173,8 @@ class SimSource(Source):
     def __init__(self, options: SimSourceOptions, context: SourceContext) -> None:
         super().__init__(options, context)
         self._scenes: list[StereoFrame] | None = None
-        self._dataset: Any = None
-        self.sensor: Any = None
+        self._dataset: Dataset | None = None
+        self.sensor: Sensor[NominalGeometry] | None = None
 
     def open(self) -> None:
         """Load the scene and build the sensor (fails early on bad options)."""
@@ -192,8 +199,10 @@ class SimSource(Source):
         o = self.options
         if self._scenes is not None:
             base = self._scenes[seq % len(self._scenes)]
-        else:
+        elif self._dataset is not None:
             base = scale_frame(self._dataset[seq % len(self._dataset)], o.scale)
+        else:
+            raise RuntimeError("sim source: frame() before open()")
         base = base.with_(rig=self.context.rig, seq=seq, stamp_ns=time.time_ns(), meta=dict(base.meta))
         if self.sensor is not None:
             base = self.sensor.simulate(base, o.seed + seq)

@@ -52,7 +52,7 @@ class _Surface:
 def _texture(rng: np.random.Generator, h: int, w: int, contrast: float) -> np.ndarray:
     """Smooth random RGB texture, H x W x 3 float32 around a random base colour."""
     small = rng.standard_normal((max(h // 3, 2), max(w // 3, 2))).astype(np.float32)
-    tex = cv2.resize(small, (w, h), interpolation=cv2.INTER_CUBIC)
+    tex = np.asarray(cv2.resize(small, (w, h), interpolation=cv2.INTER_CUBIC), dtype=np.float32)
     tex *= contrast / max(float(tex.std()), 1e-6)
     base = rng.uniform(60, 190, size=3).astype(np.float32)
     tint = rng.uniform(0.7, 1.0, size=3).astype(np.float32)
@@ -64,9 +64,83 @@ def _check_int(name: str, v: int, lo: int) -> None:
         raise ValueError(f"{name}: must be an integer >= {lo}, got {v!r}")
 
 
+def _layout(
+    rng: np.random.Generator, kind: str, n_objects: int, *, h: int, w: int, dmax: float, pad: int, contrast: float
+) -> list[_Surface]:
+    """The slanted background plane, then ``n_objects`` random rectangles (drawn from ``rng`` in that order)."""
+
+    def tex() -> np.ndarray:
+        return _texture(rng, h, w + 2 * pad, contrast)
+
+    # background: slanted (nearer at the bottom, like a floor/wall mix)
+    lo, hi = 0.15 * dmax, 0.4 * dmax
+    bb = rng.uniform(0.3, 1.0) * (hi - lo) / h
+    ba = rng.uniform(-0.3, 0.3) * (hi - lo) / w
+    bc = lo + (hi - lo) * 0.1 - min(ba * (w - 1), 0.0)
+    surfaces = [_Surface(ba, bb, bc, -np.inf, np.inf, -np.inf, np.inf, tex())]
+    for _ in range(n_objects):
+        sw, sh = rng.uniform(0.2, 0.45) * w, rng.uniform(0.2, 0.5) * h
+        x0, y0 = rng.uniform(0, w - sw), rng.uniform(0, h - sh)
+        dc = rng.uniform(0.5, 0.95) * dmax
+        if kind == "planes":
+            room = min(dc - 0.45 * dmax, dmax - dc)
+            a = rng.uniform(-1, 1) * room / sw
+            b = rng.uniform(-1, 1) * (room - abs(a) * sw / 2) / (sh / 2) / 2
+            a = float(np.clip(a, -0.25, 0.25))
+        else:
+            a = b = 0.0
+        xc, yc = x0 + sw / 2, y0 + sh / 2
+        c = dc - a * xc - b * yc
+        surfaces.append(_Surface(a, b, c, x0, x0 + sw, y0, y0 + sh, tex()))
+    return surfaces
+
+
+def _render(
+    surfaces: list[_Surface], xs: np.ndarray, ys: np.ndarray, *, pad: int, right: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One view by z-buffer: the image (float32 RGB), the winning disparity and the winning surface index."""
+    h, w = xs.shape
+    best = np.full((h, w), -np.inf, np.float32)
+    owner = np.zeros((h, w), np.int16)
+    coords = []
+    for i, s in enumerate(surfaces):
+        xs_s = (xs + s.b * ys + s.c) / (1.0 - s.a) if right else xs
+        d = s.a * xs_s + s.b * ys + s.c
+        inside = (xs_s >= s.x0) & (xs_s < s.x1) & (ys >= s.y0) & (ys < s.y1)
+        win = inside & (d > best)
+        best[win] = d[win]
+        owner[win] = i
+        coords.append(xs_s)
+    img = np.zeros((h, w, 3), np.float32)
+    for i, s in enumerate(surfaces):
+        sel = owner == i
+        if not sel.any():
+            continue
+        sampled = cv2.remap(
+            s.texture, (coords[i] + pad).astype(np.float32), ys, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT
+        )
+        img[sel] = sampled[sel]
+    return img, best, owner
+
+
+def _visible_in_right(
+    surfaces: list[_Surface], xs: np.ndarray, ys: np.ndarray, gt: np.ndarray, owner_l: np.ndarray
+) -> np.ndarray:
+    """Non-occlusion mask of the left view: the match is inside the right image and no other surface hides it."""
+    xr = xs - gt
+    nocc = xr >= -0.5
+    for i, s in enumerate(surfaces):
+        xt = (xr + s.b * ys + s.c) / (1.0 - s.a)
+        dt = s.a * xt + s.b * ys + s.c
+        inside = (xt >= s.x0) & (xt < s.x1) & (ys >= s.y0) & (ys < s.y1)
+        nocc &= ~(inside & (owner_l != i) & (dt > gt + 1e-3))
+    return nocc
+
+
 def make_scene(
     height: int = 240,
     width: int = 320,
+    *,
     seed: int = 0,
     kind: str = "planes",
     max_disparity: float = 48,
@@ -131,67 +205,12 @@ def make_scene(
     h, w, dmax = int(height), int(width), float(max_disparity)
     pad = int(np.ceil(dmax)) + 8
     contrast = 40.0 if texture == "random" else float(weak_contrast)
-
-    def tex() -> np.ndarray:
-        return _texture(rng, h, w + 2 * pad, contrast)
-
-    # background: slanted (nearer at the bottom, like a floor/wall mix)
-    lo, hi = 0.15 * dmax, 0.4 * dmax
-    bb = rng.uniform(0.3, 1.0) * (hi - lo) / h
-    ba = rng.uniform(-0.3, 0.3) * (hi - lo) / w
-    bc = lo + (hi - lo) * 0.1 - min(ba * (w - 1), 0.0)
-    surfaces = [_Surface(ba, bb, bc, -np.inf, np.inf, -np.inf, np.inf, tex())]
-    for _ in range(n_objects):
-        sw, sh = rng.uniform(0.2, 0.45) * w, rng.uniform(0.2, 0.5) * h
-        x0, y0 = rng.uniform(0, w - sw), rng.uniform(0, h - sh)
-        dc = rng.uniform(0.5, 0.95) * dmax
-        if kind == "planes":
-            room = min(dc - 0.45 * dmax, dmax - dc)
-            a = rng.uniform(-1, 1) * room / sw
-            b = rng.uniform(-1, 1) * (room - abs(a) * sw / 2) / (sh / 2) / 2
-            a = float(np.clip(a, -0.25, 0.25))
-        else:
-            a = b = 0.0
-        xc, yc = x0 + sw / 2, y0 + sh / 2
-        c = dc - a * xc - b * yc
-        surfaces.append(_Surface(a, b, c, x0, x0 + sw, y0, y0 + sh, tex()))
+    surfaces = _layout(rng, kind, n_objects, h=h, w=w, dmax=dmax, pad=pad, contrast=contrast)
 
     ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
-
-    def render(right: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        best = np.full((h, w), -np.inf, np.float32)
-        owner = np.zeros((h, w), np.int16)
-        coords = []
-        for i, s in enumerate(surfaces):
-            xs_s = (xs + s.b * ys + s.c) / (1.0 - s.a) if right else xs
-            d = s.a * xs_s + s.b * ys + s.c
-            inside = (xs_s >= s.x0) & (xs_s < s.x1) & (ys >= s.y0) & (ys < s.y1)
-            win = inside & (d > best)
-            best[win] = d[win]
-            owner[win] = i
-            coords.append(xs_s)
-        img = np.zeros((h, w, 3), np.float32)
-        for i, s in enumerate(surfaces):
-            sel = owner == i
-            if not sel.any():
-                continue
-            sampled = cv2.remap(
-                s.texture, (coords[i] + pad).astype(np.float32), ys, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT
-            )
-            img[sel] = sampled[sel]
-        return img, best, owner
-
-    left_f, gt, owner_l = render(False)
-    right_f, _, _ = render(True)
-
-    # visibility of each left pixel in the right view
-    xr = xs - gt
-    nocc = xr >= -0.5
-    for i, s in enumerate(surfaces):
-        xt = (xr + s.b * ys + s.c) / (1.0 - s.a)
-        dt = s.a * xt + s.b * ys + s.c
-        inside = (xt >= s.x0) & (xt < s.x1) & (ys >= s.y0) & (ys < s.y1)
-        nocc &= ~(inside & (owner_l != i) & (dt > gt + 1e-3))
+    left_f, gt, owner_l = _render(surfaces, xs, ys, pad=pad, right=False)
+    right_f, _, _ = _render(surfaces, xs, ys, pad=pad, right=True)
+    nocc = _visible_in_right(surfaces, xs, ys, gt, owner_l)
 
     if noise > 0:
         left_f = left_f + rng.normal(0.0, noise, left_f.shape).astype(np.float32)

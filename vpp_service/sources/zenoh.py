@@ -16,15 +16,20 @@ Topics: ``<prefix>/<rig>/in/frame`` (default), or with ``topics = "separate"``
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from functools import partial
+from typing import TYPE_CHECKING, Any, Literal
 
 from vpp_service.sources.base import SOURCES, Emit, Reject, Source, SourceContext
 from vpp_service.transport import wire
 from vpp_service.transport.sync import Synchronizer
+
+if TYPE_CHECKING:
+    import zenoh
 
 
 @dataclass(frozen=True)
@@ -63,7 +68,7 @@ class ZenohSourceOptions:
     sync_queue_size: int = 10
     sync_threshold_ms: float = 20.0
     ring_size: int = 4
-    ring_sizes: dict = field(default_factory=dict)
+    ring_sizes: dict[str, int] = field(default_factory=dict)
     max_message_mb: float = 256.0
     poll_s: float = 0.05
 
@@ -92,23 +97,24 @@ class ZenohSource(Source):
     """Frames from Zenoh (see the module docstring). Needs ``context.session``."""
 
     Options = ZenohSourceOptions
+    options: ZenohSourceOptions
     needs_session = True
 
     def __init__(self, options: ZenohSourceOptions, context: SourceContext) -> None:
         super().__init__(options, context)
-        self._subs: dict[str, Any] = {}
+        self._subs: dict[str, zenoh.Subscriber[None]] = {}
         self._limits = wire.WireLimits(max_message_bytes=int(options.max_message_mb * 1024 * 1024))
-        self._rings: dict[str, deque] = {}
+        self._rings: dict[str, deque[zenoh.Sample]] = {}
         self._ring_lock = threading.Lock()
         self._arrived = threading.Event()
-        self.sync: Synchronizer | None = None
+        self.sync: Synchronizer[wire.Part] | None = None
         self._counters.update({"received": 0, "ring_dropped": 0, "sync_dropped": 0})
 
     def open(self) -> None:
         """Declare the subscribers on the service's session."""
         import zenoh
 
-        session = self.context.session
+        session: zenoh.Session | None = self.context.session
         if session is None:
             raise ValueError("source.zenoh: needs an open zenoh session (service.zenoh section)")
         o = self.options
@@ -118,13 +124,11 @@ class ZenohSource(Source):
         for part in parts:
             key = wire.topic(self.context.prefix, self.context.rig, f"in/{part}")
             self._rings[part] = deque(maxlen=o.ring_sizes.get(part, o.ring_size))
-            self._subs[part] = session.declare_subscriber(
-                key, zenoh.handlers.Callback(lambda sample, part=part: self._on_sample(part, sample))
-            )
+            self._subs[part] = session.declare_subscriber(key, zenoh.handlers.Callback(partial(self._on_sample, part)))
         if o.topics == "separate":
             self.sync = Synchronizer(parts, o.sync, o.sync_queue_size, int(o.sync_threshold_ms * 1e6))
 
-    def _on_sample(self, part: str, sample: Any) -> None:
+    def _on_sample(self, part: str, sample: zenoh.Sample) -> None:
         """Zenoh callback: buffer the sample and wake the receive thread (never blocks long)."""
         ring = self._rings[part]
         with self._ring_lock:
@@ -133,7 +137,7 @@ class ZenohSource(Source):
             ring.append(sample)
         self._arrived.set()
 
-    def _next(self, part: str) -> Any:
+    def _next(self, part: str) -> zenoh.Sample | None:
         with self._ring_lock:
             ring = self._rings[part]
             return ring.popleft() if ring else None
@@ -154,14 +158,16 @@ class ZenohSource(Source):
                 self._arrived.wait(self.options.poll_s)
 
     def request_stop(self) -> None:
+        """Ask the receive thread to stop and wake it (safe from any thread)."""
         super().request_stop()
         self._arrived.set()
 
     def stop(self, timeout: float = 5.0) -> None:
+        """Wake the receive thread, stop it within ``timeout`` seconds and undeclare the subscribers."""
         self._arrived.set()
         super().stop(timeout)
 
-    def _handle(self, part: str, sample: Any, emit: Emit, reject: Reject) -> None:
+    def _handle(self, part: str, sample: zenoh.Sample, emit: Emit, reject: Reject) -> None:
         recv_ns = time.time_ns()
         t0 = time.perf_counter()
         try:
@@ -188,14 +194,15 @@ class ZenohSource(Source):
 
     def close(self) -> None:
         """Undeclare the subscribers (the session belongs to the service)."""
+        import zenoh
+
         for sub in self._subs.values():
-            try:
+            with contextlib.suppress(zenoh.ZError):  # already undeclared
                 sub.undeclare()
-            except Exception:  # session already closed
-                pass
         self._subs.clear()
 
     def stats(self) -> dict[str, Any]:
+        """Counters (``received``, ``ring_dropped``, ``sync_dropped`` and the base ones), plus ``sync`` statistics."""
         out: dict[str, Any] = dict(self._counters)
         if self.sync is not None:
             out["sync"] = self.sync.stats()
