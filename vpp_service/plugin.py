@@ -20,7 +20,7 @@ from __future__ import annotations
 from abc import ABC
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 from vpp_service.registry import Registry
 from vpp_service.settings import from_mapping
@@ -48,7 +48,7 @@ class PluginContext:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
-class Plugin(ABC):
+class Plugin(ABC):  # noqa: B024 - ABC gives Sink and Source the metaclass that enforces their abstract methods
     """Base of sources and sinks: keeps ``options`` and ``context``, owns the counters.
 
     Parameters
@@ -93,7 +93,7 @@ class Plugin(ABC):
         cls.check_options(parsed, section)
         return parsed
 
-    @classmethod
+    @classmethod  # noqa: B027 - optional hook, a no-op by default
     def check_options(cls, options: Any, section: str) -> None:
         """Check what the ``Options`` dataclass cannot check alone; nothing by default.
 
@@ -121,12 +121,15 @@ class Plugin(ABC):
         return dict(self._counters)
 
 
-def parse_plugin_options(registry: Registry, name: str, options: Mapping[str, Any] | None, section: str) -> Any:
+P = TypeVar("P", bound=Plugin)
+
+
+def parse_plugin_options(registry: Registry[P], name: str, options: Mapping[str, Any] | None, section: str) -> Any:
     """Validate ``options`` for the plugin registered as ``name`` in ``registry``.
 
     Parameters
     ----------
-    registry : Registry
+    registry : Registry of Plugin subclasses
         ``SOURCES`` or ``SINKS``.
     name : str
         Registered plugin name (unknown names raise ValueError listing the known ones).
@@ -140,7 +143,8 @@ def parse_plugin_options(registry: Registry, name: str, options: Mapping[str, An
     Any
         The plugin's ``Options`` instance (see :meth:`Plugin.parse_options`).
     """
-    cls = registry.get(name)
+    # The registry's type is not enforced at run time: check what was registered before calling it.
+    cls: object = registry.get(name)
     if not (isinstance(cls, type) and issubclass(cls, Plugin)):
         raise TypeError(f"{registry.kind} {name!r} is registered as {cls!r}, not as a Plugin class")
     return cls.parse_options(options, section)
