@@ -119,7 +119,7 @@ class StereoFrame:
         """(H, W) of the frame."""
         return self.left.shape[:2]
 
-    def with_(self, **changes: object) -> StereoFrame:
+    def with_(self, **changes: Any) -> StereoFrame:
         """A shallow copy with some fields replaced."""
         return replace(self, **changes)
 

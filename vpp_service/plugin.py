@@ -20,10 +20,13 @@ from __future__ import annotations
 from abc import ABC
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 from vpp_service.registry import Registry
 from vpp_service.settings import from_mapping
+
+if TYPE_CHECKING:  # zenoh is imported where it is used
+    import zenoh
 
 
 @dataclass
@@ -36,16 +39,16 @@ class PluginContext:
         Rig name (topic names, entity paths; frames get this rig unless the wire says otherwise).
     prefix : str
         Zenoh key prefix (default ``"vpp"``).
-    session : Any
-        The service's open ``zenoh.Session`` when one exists, else None.
+    session : zenoh.Session or None
+        The service's open Zenoh session when one exists, else None.
     extra : dict
         Free-form extras.
     """
 
     rig: str = "rig0"
     prefix: str = "vpp"
-    session: Any = None
-    extra: dict[str, Any] = field(default_factory=dict)
+    session: zenoh.Session | None = None
+    extra: dict[str, object] = field(default_factory=dict)
 
 
 class Plugin(ABC):  # noqa: B024 - ABC gives Sink and Source the metaclass that enforces their abstract methods

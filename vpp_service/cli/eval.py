@@ -49,7 +49,7 @@ def _densities(text: str) -> list[float]:
     return values
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     """Register the ``eval`` sub-command."""
     p = subparsers.add_parser(
         "eval",

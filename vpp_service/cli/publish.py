@@ -14,10 +14,16 @@ import signal
 import sys
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # imported where they are used: the sub-command modules load no kernel at import time
+    import zenoh
+
+    from vpp_service.frame import StereoFrame
+    from vpp_service.sources.base import Source
 
 
-def add_parser(subparsers: Any) -> None:
+def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register the ``publish`` sub-command."""
     p = subparsers.add_parser(
         "publish",
@@ -65,7 +71,15 @@ def add_parser(subparsers: Any) -> None:
     p.set_defaults(func=main)
 
 
-def _source(args: argparse.Namespace) -> Any:
+def _has_subscriber(publisher: zenoh.Publisher) -> bool:
+    """True when a subscriber matches ``publisher``'s key."""
+    import zenoh
+
+    status: object = publisher.matching_status  # zenoh's stub says bool; at run time it is a MatchingStatus
+    return status.matching if isinstance(status, zenoh.MatchingStatus) else bool(status)
+
+
+def _source(args: argparse.Namespace) -> Source:
     from vpp_service.sources.base import SourceContext, build_source
 
     ctx = SourceContext(rig=args.rig, prefix=args.prefix)
@@ -111,7 +125,7 @@ def main(args: argparse.Namespace) -> int:
 
     import zenoh
 
-    from vpp_service.service.app import open_session
+    from vpp_service.service.app import zenoh_session
     from vpp_service.service.config import ZenohSection
     from vpp_service.sources.base import Pacer
     from vpp_service.transport import wire
@@ -127,12 +141,12 @@ def main(args: argparse.Namespace) -> int:
     )
     src = _source(args)
     src.open()
-    frames: _queue.Queue = _queue.Queue(maxsize=2)
+    frames: _queue.Queue[StereoFrame] = _queue.Queue(maxsize=2)
     stop = threading.Event()
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, lambda *_: stop.set())
 
-    def emit(frame: Any) -> bool:
+    def emit(frame: StereoFrame) -> bool:
         while not stop.is_set():
             try:
                 frames.put(frame, timeout=0.1)
@@ -143,7 +157,7 @@ def main(args: argparse.Namespace) -> int:
 
     parts = ["left", "right", "depth"] if args.separate_topics else ["frame"]
     sent = 0
-    with open_session(zsec) as session:
+    with zenoh_session(zsec) as session:
         pubs = {
             p: session.declare_publisher(
                 wire.topic(args.prefix, args.rig, f"in/{p}"), congestion_control=zenoh.CongestionControl.BLOCK
@@ -153,7 +167,7 @@ def main(args: argparse.Namespace) -> int:
         if args.wait_subscriber > 0:
             deadline = time.monotonic() + args.wait_subscriber
             while time.monotonic() < deadline and not stop.is_set():
-                if all(p.matching_status.matching for p in pubs.values()):
+                if all(_has_subscriber(pub) for pub in pubs.values()):
                     break
                 time.sleep(0.02)
         src.start(emit)
@@ -183,7 +197,7 @@ def main(args: argparse.Namespace) -> int:
             sent += 1
         src.stop(2.0)
         elapsed = time.monotonic() - t0
-        for p in pubs.values():
-            p.undeclare()
+        for pub in pubs.values():
+            pub.undeclare()
     print(json.dumps({"sent": sent, "seconds": round(elapsed, 3), "shm": putter.stats()}), file=sys.stdout)
     return 0

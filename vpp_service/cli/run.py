@@ -16,10 +16,11 @@ import json
 import signal
 import sys
 import threading
+from types import FrameType
 from typing import Any
 
 
-def add_parser(subparsers: Any) -> None:
+def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register the ``run`` sub-command."""
     p = subparsers.add_parser(
         "run",
@@ -97,7 +98,7 @@ def main(args: argparse.Namespace) -> int:
         return 0
     stop = threading.Event()
 
-    def on_signal(signum: int, _frame: Any) -> None:
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
         stop.set()
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
