@@ -1,9 +1,9 @@
-"""``vpp-service eval``: score matcher / guided stereo / VPP on a dataset with ground truth.
+r"""``vpp-service eval``: score matcher / guided stereo / VPP on a dataset with ground truth.
 
 Example::
 
-    vpp-service eval --dataset auto --root ../shared/data/middlebury2005_2006_thirdsize \\
-        --matcher census-sgm --methods baseline,guided,vpp --density 0.01,0.05 \\
+    vpp-service eval --dataset auto --root ../shared/data/middlebury2005_2006_thirdsize \
+        --matcher census-sgm --methods baseline,guided,vpp --density 0.01,0.05 \
         --json out.json --markdown out.md
 
 ``--dataset synthetic`` needs no ``--root``: it renders ``--limit`` (default 4)

@@ -14,6 +14,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # imported where they are used: the sub-command modules load no kernel at import time
@@ -21,6 +22,7 @@ if TYPE_CHECKING:  # imported where they are used: the sub-command modules load 
 
     from vpp_service.frame import StereoFrame
     from vpp_service.sources.base import Source
+    from vpp_service.transport.shm import ShmPutter
 
 
 def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -77,6 +79,33 @@ def _has_subscriber(publisher: zenoh.Publisher) -> bool:
 
     status: object = publisher.matching_status  # zenoh's stub says bool; at run time it is a MatchingStatus
     return status.matching if isinstance(status, zenoh.MatchingStatus) else bool(status)
+
+
+def _wait_for_subscribers(pubs: Iterable[zenoh.Publisher], seconds: float, stop: threading.Event) -> None:
+    """Wait up to ``seconds`` (or until ``stop``) for a subscriber on every publisher."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline and not stop.is_set():
+        if all(_has_subscriber(pub) for pub in pubs):
+            return
+        time.sleep(0.02)
+
+
+def _send(frame: StereoFrame, args: argparse.Namespace, pubs: dict[str, zenoh.Publisher], putter: ShmPutter) -> None:
+    """Stamp ``frame``, strip what the flags say, publish it on ``pubs`` (one topic per part, or ``frame``)."""
+    from vpp_service.transport import wire
+
+    frame = frame.with_(stamp_ns=time.time_ns())
+    if args.no_depth:
+        frame = frame.with_(sparse_disparity=None, sensor_depth=None)
+    if args.no_gt:
+        frame = frame.with_(gt_disparity=None)
+    if not args.separate_topics:
+        putter.put(pubs["frame"], wire.encode_frame(frame, args.enc, args.depth_kind))
+        return
+    for part, pub in pubs.items():
+        payload = wire.encode_part(frame, part, args.enc, args.depth_kind)
+        if payload is not None:
+            putter.put(pub, payload)
 
 
 def _source(args: argparse.Namespace) -> Source:
@@ -165,11 +194,7 @@ def main(args: argparse.Namespace) -> int:
             for p in parts
         }
         if args.wait_subscriber > 0:
-            deadline = time.monotonic() + args.wait_subscriber
-            while time.monotonic() < deadline and not stop.is_set():
-                if all(_has_subscriber(pub) for pub in pubs.values()):
-                    break
-                time.sleep(0.02)
+            _wait_for_subscribers(pubs.values(), args.wait_subscriber, stop)
         src.start(emit)
         pacer = Pacer(args.rate)
         t0 = time.monotonic()
@@ -182,18 +207,7 @@ def main(args: argparse.Namespace) -> int:
                 continue
             if pacer.wait(src) and stop.is_set():
                 break
-            frame = frame.with_(stamp_ns=time.time_ns())
-            if args.no_depth:
-                frame = frame.with_(sparse_disparity=None, sensor_depth=None)
-            if args.no_gt:
-                frame = frame.with_(gt_disparity=None)
-            if args.separate_topics:
-                for p in parts:
-                    payload = wire.encode_part(frame, p, args.enc, args.depth_kind)
-                    if payload is not None:
-                        putter.put(pubs[p], payload)
-            else:
-                putter.put(pubs["frame"], wire.encode_frame(frame, args.enc, args.depth_kind))
+            _send(frame, args, pubs, putter)
             sent += 1
         src.stop(2.0)
         elapsed = time.monotonic() - t0
