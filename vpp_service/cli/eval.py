@@ -21,14 +21,14 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from vpp_service.evaluation.runner import Frames
     from vpp_service.vpp import VPPConfig
 
 
-def _kv(text: str) -> tuple[str, Any]:
+def _kv(text: str) -> tuple[str, object]:
     if "=" not in text:
         raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
     key, _, value = text.partition("=")

@@ -28,7 +28,6 @@ import math
 import struct
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import cv2
 import msgpack
@@ -153,7 +152,7 @@ def _f32(data: Binary, count: int, field: str) -> np.ndarray:
     return np.frombuffer(data, dtype="<f4", count=count)
 
 
-def unpack(payload: bytes | bytearray | memoryview, limits: WireLimits = DEFAULT_LIMITS) -> dict[str, Any]:
+def unpack(payload: bytes | bytearray | memoryview, limits: WireLimits = DEFAULT_LIMITS) -> dict[str, object]:
     """Unpack one msgpack message with hard container limits.
 
     ``bin`` fields come back as read-only ``memoryview`` slices of ``payload``
@@ -223,7 +222,7 @@ def _jpeg_size(data: Binary) -> tuple[int, int]:
     raise WireError("data: JPEG without a frame header")
 
 
-def encode_image(img: np.ndarray, enc: str = "raw", quality: int = 90) -> dict[str, Any]:
+def encode_image(img: np.ndarray, enc: str = "raw", quality: int = 90) -> dict[str, object]:
     """Wire ``Image`` map of an H x W or H x W x C (C = 1 or 3, RGB) uint8 array.
 
     Parameters
@@ -303,7 +302,7 @@ def decode_image(m: object, path: str = "image", limits: WireLimits = DEFAULT_LI
 
 
 # ------------------------------------------------------------ sparse depth
-def encode_depth(frame: StereoFrame, kind: str = "auto") -> dict[str, Any] | None:
+def encode_depth(frame: StereoFrame, kind: str = "auto") -> dict[str, object] | None:
     """Wire ``SparseDepth`` map of a frame's sparse depth, or None when it has none.
 
     Parameters
@@ -467,7 +466,7 @@ def decode_depth(
     return points_to_maps(uv, vals, h, w, "min", calib=calib, path=p)
 
 
-def _encode_gt(gt: np.ndarray) -> dict[str, Any]:
+def _encode_gt(gt: np.ndarray) -> dict[str, object]:
     gt = np.asarray(gt, dtype="<f4")
     return {"h": int(gt.shape[0]), "w": int(gt.shape[1]), "data": np.ascontiguousarray(gt).tobytes()}
 
@@ -533,7 +532,7 @@ def encode_frame(frame: StereoFrame, enc: str = "raw", depth_kind: str = "auto",
         raise ValueError("frame.calib is required on the wire")
     if frame.left.shape != frame.right.shape:
         raise ValueError(f"frame.left {frame.left.shape} and frame.right {frame.right.shape} differ")
-    msg: dict[str, Any] = {
+    msg: dict[str, object] = {
         "v": VERSION,
         "rig": frame.rig,
         "seq": int(frame.seq),
@@ -595,7 +594,7 @@ def encode_part(frame: StereoFrame, part: str, enc: str = "raw", depth_kind: str
     ``left`` carries the calibration (and ground truth, as an extension);
     ``depth`` returns None when the frame has no sparse depth.
     """
-    base: dict[str, Any] = {"v": VERSION, "rig": frame.rig, "seq": int(frame.seq), "stamp_ns": int(frame.stamp_ns)}
+    base: dict[str, object] = {"v": VERSION, "rig": frame.rig, "seq": int(frame.seq), "stamp_ns": int(frame.stamp_ns)}
     if part in ("left", "right"):
         base["image"] = encode_image(frame.left if part == "left" else frame.right, enc)
         if part == "left":
@@ -699,7 +698,7 @@ def _bin_header(n: int) -> bytes:
     return b"\xc6" + n.to_bytes(4, "big")
 
 
-def _map_parts(fields: Mapping[str, Any], blob_key: str, blob: bytes) -> list[bytes]:
+def _map_parts(fields: Mapping[str, object], blob_key: str, blob: bytes) -> list[bytes]:
     """``packb({**fields, blob_key: blob})`` as two parts: everything up to the blob, and the blob."""
     pk = msgpack.Packer(use_bin_type=True, autoreset=False)
     pk.pack_map_header(len(fields) + 1)
@@ -710,7 +709,7 @@ def _map_parts(fields: Mapping[str, Any], blob_key: str, blob: bytes) -> list[by
     return [pk.bytes() + _bin_header(len(blob)), blob]
 
 
-def _map_message(result: FusionResult, arr: np.ndarray, extra: Mapping[str, Any]) -> list[bytes]:
+def _map_message(result: FusionResult, arr: np.ndarray, extra: Mapping[str, object]) -> list[bytes]:
     fr = result.frame
     msg = {
         "v": VERSION,
@@ -786,7 +785,7 @@ class OutputMap:
     calib: Calibration | None
     timing_ms: dict[str, float]
     metrics: dict[str, float]
-    extra: dict[str, Any]
+    extra: dict[str, object]
 
 
 def _numbers(m: Mapping[str, object]) -> dict[str, float]:
