@@ -27,6 +27,7 @@ from vpp_service.settings import from_mapping
 
 if TYPE_CHECKING:  # zenoh is imported where it is used
     import zenoh
+    from _typeshed import DataclassInstance
 
 
 @dataclass
@@ -51,7 +52,7 @@ class PluginContext:
     extra: dict[str, object] = field(default_factory=dict)
 
 
-class Plugin(ABC):  # noqa: B024 - ABC gives Sink and Source the metaclass that enforces their abstract methods
+class Plugin(ABC):
     """Base of sources and sinks: keeps ``options`` and ``context``, owns the counters.
 
     Parameters
@@ -62,8 +63,8 @@ class Plugin(ABC):  # noqa: B024 - ABC gives Sink and Source the metaclass that 
         Service-wide facts.
     """
 
-    #: Frozen dataclass describing the options; override in subclasses.
-    Options: ClassVar[type] = None  # type: ignore[assignment]
+    #: Frozen dataclass describing the options; every concrete plugin sets it.
+    Options: ClassVar[type[DataclassInstance]]
     #: Counters every instance starts at 0 (subclasses may add more in ``__init__``).
     counter_names: ClassVar[tuple[str, ...]] = ()
     #: True when the plugin needs the service's Zenoh session (``context.session``);
