@@ -16,6 +16,6 @@ def test_layers_only_point_down():
     pytest.importorskip("importlinter")
     exe = shutil.which("lint-imports")
     cmd = [exe] if exe else [sys.executable, "-m", "importlinter.cli"]
-    run = subprocess.run([*cmd, "--no-cache"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    run = subprocess.run([*cmd, "--no-cache"], cwd=ROOT, capture_output=True, text=True, timeout=120, check=False)
     assert run.returncode == 0, run.stdout + run.stderr
     assert "1 kept, 0 broken" in run.stdout

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import pytest
 
@@ -25,7 +26,7 @@ class RangePlugin(Plugin):
     """A plugin whose options need a cross-field check the dataclass does not make."""
 
     Options = RangeOptions
-    checked: list[str] = []
+    checked: ClassVar[list[str]] = []
 
     @classmethod
     def check_options(cls, options: RangeOptions, section: str) -> None:

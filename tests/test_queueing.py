@@ -50,9 +50,12 @@ def test_bounded_queue_close_wakes_getters():
     assert not q.put(1)
 
 
-@pytest.mark.parametrize(("size", "policy"), [(0, "latest"), (2, "newest"), (True, "latest")])
-def test_bounded_queue_bad_args(size, policy):
-    with pytest.raises(ValueError):
+@pytest.mark.parametrize(
+    ("size", "policy", "message"),
+    [(0, "latest", "size must be an integer >= 1"), (2, "newest", "policy must be one of"), (True, "latest", "size")],
+)
+def test_bounded_queue_bad_args(size, policy, message):
+    with pytest.raises(ValueError, match=message):
         BoundedQueue(size, policy)
 
 
@@ -231,11 +234,11 @@ def test_start_twice_and_bad_arguments():
     with pytest.raises(RuntimeError, match="already started"):
         w.start()
     assert w.close(1.0)
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="handle must be callable"):
         QueueWorker("not callable", size=1)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="size must be an integer >= 1"):
         QueueWorker(lambda i: None, size=0)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="policy must be one of"):
         QueueWorker(lambda i: None, size=1, policy="newest")
 
 

@@ -1,4 +1,4 @@
-"""End to end: the installed ``vpp-service`` commands (publish -> Zenoh on 127.0.0.1 -> run) and a subscriber in the test.
+"""End to end: installed ``vpp-service publish`` -> Zenoh on 127.0.0.1 -> ``vpp-service run`` -> a test subscriber.
 
 Every received disparity is checked against ground truth: bad-2 must be well
 below the no-depth baseline of the same matcher; ``@status`` counters must
@@ -152,7 +152,7 @@ def test_publisher_to_service_to_subscriber(tmp_path, baseline_bad2, mode, sig):
             ]
             if mode == "separate":
                 cmd.append("--separate-topics")
-            pub = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=60)
+            pub = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
             assert pub.returncode == 0, pub.stderr
             assert json.loads(pub.stdout.strip().splitlines()[-1])["sent"] == COUNT
             msgs = collect(sub, COUNT, timeout=30)

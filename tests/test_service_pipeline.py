@@ -74,7 +74,7 @@ def test_stage_timer_matches_numpy():
     w = np.array(vals[-5:])
     assert s["n"] == 5 and s["last"] == 8.0
     assert s["mean"] == pytest.approx(w.mean()) and s["p99"] == pytest.approx(np.percentile(w, 99))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="window must be >= 1"):
         StageTimer(0)
 
 
@@ -164,18 +164,19 @@ def test_real_fusion_counts_no_depth_and_scores_against_gt():
 
 
 def test_pipeline_bad_args():
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="process must be callable"):
         Pipeline(sim_source(1), "not callable")
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="max_frames must be >= 0"):
         Pipeline(sim_source(1), lambda f: f, max_frames=-1)
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="matcher must be a Matcher"):
         Fusion(object())
 
 
 @pytest.mark.parametrize("values", ["too_far", "negative", "nan"])
 def test_fusion_without_usable_points_is_no_depth(values):
-    """A sparse map whose points are all unusable (d >= width, d < 0, NaN) runs the
-    matcher on the raw pair and counts no_depth, like a frame without depth.
+    """A sparse map whose points are all unusable (d >= width, d < 0, NaN) counts as no depth.
+
+    The matcher runs on the raw pair and no_depth is counted, like a frame without depth.
     """
     from vpp_service.matchers import build_matcher
     from vpp_service.vpp import VPPConfig

@@ -81,7 +81,13 @@ def _clean_env(**extra: str) -> dict[str, str]:
 
 def _python(code: str, **extra: str) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-c", code], cwd=REPO, env=_clean_env(**extra), capture_output=True, text=True, timeout=120
+        [sys.executable, "-c", code],
+        cwd=REPO,
+        env=_clean_env(**extra),
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,  # the callers assert on the exit code with the output in the message
     )
 
 
@@ -114,6 +120,7 @@ def _libgomp_spincount(args: list[str], **extra: str) -> str:
         capture_output=True,
         text=True,
         timeout=120,
+        check=False,  # the exit code is asserted below, with stderr in the message
     )
     assert proc.returncode == 0, proc.stderr
     lines = [ln for ln in proc.stderr.splitlines() if "GOMP_SPINCOUNT" in ln]

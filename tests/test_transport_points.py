@@ -11,8 +11,10 @@ from vpp_service.vpp import depth_to_disparity
 
 
 def reference_maps(uv, vals, h, w, keep, calib=None):
-    """Literal version: check all coordinates, then bounds, then values; round with
-    numpy.rint; write the points sorted so that the winner of each pixel comes last.
+    """Literal version of points_to_maps.
+
+    Check all coordinates, then bounds, then values; round with numpy.rint; write the
+    points sorted so that the winner of each pixel comes last.
     """
     uv = np.asarray(uv, np.float32).reshape(-1, 2)
     vals = np.asarray(vals, np.float32)
@@ -65,7 +67,7 @@ def random_points(seed, h, w, n, collide):
 def test_equals_reference(seed, collide, keep, calib):
     h, w = (5, 7) if collide else (37, 53)
     uv, vals = random_points(seed, h, w, 60 if collide else 400, collide)
-    got = wire.points_to_maps(uv, vals, h, w, keep, calib)
+    got = wire.points_to_maps(uv, vals, h, w, keep, calib=calib)
     want = reference_maps(uv, vals, h, w, keep, calib)
     np.testing.assert_array_equal(got[0], want[0])  # NaN positions equal too
     if want[1] is None:
@@ -78,7 +80,7 @@ def test_disparity_left_out_where_not_positive():
     """D = f b / z - doffs <= 0 for far points: NaN, like depth_to_disparity."""
     uv = np.float32([[0, 0], [1, 0], [2, 0]])
     z = np.float32([1.0, 700 * 0.54 / 3.0, 1000.0])  # d = 375, exactly 0, < 0
-    depth, disp = wire.points_to_maps(uv, z, 1, 3, "min", CALIB)
+    depth, disp = wire.points_to_maps(uv, z, 1, 3, "min", calib=CALIB)
     np.testing.assert_array_equal(depth, z[None])
     assert disp[0, 0] == np.float32(700 * 0.54 / 1.0 - 3.0) and np.isnan(disp[0, 1:]).all()
 
@@ -94,7 +96,7 @@ def test_rounding_half_to_even_and_nearest_wins():
 
 
 def test_empty():
-    depth, disp = wire.points_to_maps(np.zeros((0, 2), np.float32), np.zeros(0, np.float32), 3, 4, "min", CALIB)
+    depth, disp = wire.points_to_maps(np.zeros((0, 2), np.float32), np.zeros(0, np.float32), 3, 4, "min", calib=CALIB)
     assert np.isnan(depth).all() and np.isnan(disp).all() and depth.shape == (3, 4)
 
 

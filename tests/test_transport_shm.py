@@ -62,14 +62,15 @@ def test_plain_put_when_small_disabled_or_larger_than_pool(pair, pool_mb, size):
 
 
 def test_exhausted_pool_falls_back_without_losing_messages(pair):
-    """Payloads held by the subscriber pin pool buffers: a 1 MiB pool cannot serve
-    eight 300 kB messages at once; the rest go out plainly, all arrive intact.
+    """Payloads held by the subscriber pin pool buffers.
+
+    A 1 MiB pool cannot serve eight 300 kB messages at once; the rest go out plainly, all arrive intact.
     """
     pub, sub = pair
     putter = ShmPutter(1)
     data = payloads([300_000] * 8, seed=1)
     held = []
-    for i, d in enumerate(data):
+    for d in data:
         putter.put(pub, d)
         held += receive(sub, 1)  # keep every sample (and its buffer) alive
     assert [s.payload.to_bytes() for s in held] == data

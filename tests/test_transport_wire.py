@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import msgpack
 import numpy as np
@@ -143,6 +144,7 @@ def test_output_roundtrip():
     assert out.calib == fr.calib and out.extra["vpp"] == {"projected": 2}
     np.testing.assert_array_equal(wire.decode_output(wire.encode_output(res, "depth")).data, disp * 2)
     seq, img = wire.decode_output_image(wire.encode_output(res, "left_vpp", "png"))
+    assert seq == 7
     np.testing.assert_array_equal(img, fr.left)
     assert wire.encode_output(FusionResult(frame=fr, disparity=disp), "right_vpp") is None
     with pytest.raises(ValueError, match="name"):
@@ -371,9 +373,18 @@ def test_encode_frame_bad_input():
         wire.encode_frame(make_frame(), enc="gif")
 
 
-@pytest.mark.parametrize(("prefix", "rig"), [("", "r"), ("vpp", ""), ("vpp/*", "r"), ("vpp", "a/b"), ("vpp", "r$")])
-def test_topic_validation(prefix, rig):
-    with pytest.raises(ValueError):
+@pytest.mark.parametrize(
+    ("prefix", "rig", "message"),
+    [
+        ("", "r", "prefix must be a non-empty string"),
+        ("vpp", "", "rig must be a non-empty string"),
+        ("vpp/*", "r", "prefix must be a plain key expression"),
+        ("vpp", "a/b", "rig must not contain '/'"),
+        ("vpp", "r$", "rig must be a plain key expression"),
+    ],
+)
+def test_topic_validation(prefix, rig, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
         wire.topic(prefix, rig, "in/frame")
 
 

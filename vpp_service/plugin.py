@@ -20,10 +20,14 @@ from __future__ import annotations
 from abc import ABC
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 from vpp_service.registry import Registry
 from vpp_service.settings import from_mapping
+
+if TYPE_CHECKING:  # zenoh is imported where it is used
+    import zenoh
+    from _typeshed import DataclassInstance
 
 
 @dataclass
@@ -36,16 +40,16 @@ class PluginContext:
         Rig name (topic names, entity paths; frames get this rig unless the wire says otherwise).
     prefix : str
         Zenoh key prefix (default ``"vpp"``).
-    session : Any
-        The service's open ``zenoh.Session`` when one exists, else None.
+    session : zenoh.Session or None
+        The service's open Zenoh session when one exists, else None.
     extra : dict
         Free-form extras.
     """
 
     rig: str = "rig0"
     prefix: str = "vpp"
-    session: Any = None
-    extra: dict[str, Any] = field(default_factory=dict)
+    session: zenoh.Session | None = None
+    extra: dict[str, object] = field(default_factory=dict)
 
 
 class Plugin(ABC):
@@ -59,8 +63,8 @@ class Plugin(ABC):
         Service-wide facts.
     """
 
-    #: Frozen dataclass describing the options; override in subclasses.
-    Options: ClassVar[type] = None  # type: ignore[assignment]
+    #: Frozen dataclass describing the options; every concrete plugin sets it.
+    Options: ClassVar[type[DataclassInstance]]
     #: Counters every instance starts at 0 (subclasses may add more in ``__init__``).
     counter_names: ClassVar[tuple[str, ...]] = ()
     #: True when the plugin needs the service's Zenoh session (``context.session``);
@@ -93,7 +97,7 @@ class Plugin(ABC):
         cls.check_options(parsed, section)
         return parsed
 
-    @classmethod
+    @classmethod  # noqa: B027 - optional hook, a no-op by default
     def check_options(cls, options: Any, section: str) -> None:
         """Check what the ``Options`` dataclass cannot check alone; nothing by default.
 
@@ -121,12 +125,15 @@ class Plugin(ABC):
         return dict(self._counters)
 
 
-def parse_plugin_options(registry: Registry, name: str, options: Mapping[str, Any] | None, section: str) -> Any:
+P = TypeVar("P", bound=Plugin)
+
+
+def parse_plugin_options(registry: Registry[P], name: str, options: Mapping[str, Any] | None, section: str) -> Any:
     """Validate ``options`` for the plugin registered as ``name`` in ``registry``.
 
     Parameters
     ----------
-    registry : Registry
+    registry : Registry of Plugin subclasses
         ``SOURCES`` or ``SINKS``.
     name : str
         Registered plugin name (unknown names raise ValueError listing the known ones).
@@ -140,7 +147,8 @@ def parse_plugin_options(registry: Registry, name: str, options: Mapping[str, An
     Any
         The plugin's ``Options`` instance (see :meth:`Plugin.parse_options`).
     """
-    cls = registry.get(name)
+    # The registry's type is not enforced at run time: check what was registered before calling it.
+    cls: object = registry.get(name)
     if not (isinstance(cls, type) and issubclass(cls, Plugin)):
         raise TypeError(f"{registry.kind} {name!r} is registered as {cls!r}, not as a Plugin class")
     return cls.parse_options(options, section)

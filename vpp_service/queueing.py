@@ -299,7 +299,7 @@ class QueueWorker(Generic[T]):
             return
         try:
             fn(*args)
-        except Exception as exc:  # a hook must not kill the worker
+        except Exception as exc:  # noqa: BLE001 - a hook must not kill the worker
             self.errors += 1
             log.warning("%s: %s failed: %r", self.name, what, exc)
 
@@ -312,7 +312,7 @@ class QueueWorker(Generic[T]):
             try:
                 self._handle(item)
                 self.handled += 1
-            except Exception as exc:  # one bad item must not stop the worker
+            except Exception as exc:  # noqa: BLE001 - one bad item must not stop the worker
                 self.errors += 1
                 if self._on_error is None:
                     log.warning("%s: handling an item failed: %r", self.name, exc)

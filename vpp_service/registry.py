@@ -1,4 +1,4 @@
-"""Name -> factory registries for plugins (matchers, sources, sinks, datasets)."""
+"""Name -> class registries for plugins (matchers, sources, sinks, datasets, sensors)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,11 @@ T = TypeVar("T")
 
 
 class Registry(Generic[T]):
-    """A mapping of plugin names to factories.
+    """A mapping of plugin names to the classes that implement them.
+
+    ``Registry[Matcher]`` holds subclasses of ``Matcher``: :meth:`get` returns
+    ``type[Matcher]``, so class attributes (``Options``, ``supports_guidance``,
+    ``detect``...) type-check at the call sites.
 
     Parameters
     ----------
@@ -18,30 +22,47 @@ class Registry(Generic[T]):
 
     Examples
     --------
-    >>> MATCHERS = Registry("matcher")
+    >>> class Matcher: ...
+    >>> MATCHERS: Registry[Matcher] = Registry("matcher")
     >>> @MATCHERS.register("sgbm")
-    ... class SGBM: ...
+    ... class SGBM(Matcher): ...
     >>> MATCHERS.get("sgbm") is SGBM
     True
     """
 
     def __init__(self, kind: str) -> None:
         self.kind = kind
-        self._items: dict[str, Callable[..., T]] = {}
+        self._items: dict[str, type[T]] = {}
 
-    def register(self, name: str) -> Callable[[Callable[..., T]], Callable[..., T]]:
-        """Decorator registering a factory (usually a class) under ``name``."""
+    def register(self, name: str) -> Callable[[type[T]], type[T]]:
+        """Class decorator registering the decorated class under ``name``.
 
-        def decorator(factory: Callable[..., T]) -> Callable[..., T]:
+        Parameters
+        ----------
+        name : str
+            Registered name; must not be taken yet.
+
+        Returns
+        -------
+        callable
+            The decorator; it returns the class unchanged.
+
+        Raises
+        ------
+        ValueError
+            If ``name`` is already registered (raised when the decorator is applied).
+        """
+
+        def decorator(cls: type[T]) -> type[T]:
             if name in self._items:
                 raise ValueError(f"{self.kind} {name!r} is already registered")
-            self._items[name] = factory
-            return factory
+            self._items[name] = cls
+            return cls
 
         return decorator
 
-    def get(self, name: str) -> Callable[..., T]:
-        """Return the factory registered as ``name``.
+    def get(self, name: str) -> type[T]:
+        """Return the class registered as ``name``.
 
         Raises
         ------

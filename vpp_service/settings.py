@@ -12,16 +12,26 @@ from __future__ import annotations
 import dataclasses
 import types
 from collections.abc import Mapping
-from typing import Any, Literal, TypeVar, Union, get_args, get_origin, get_type_hints
+from typing import TYPE_CHECKING, Any, Literal, TypeVar, Union, get_args, get_origin, get_type_hints
 
-T = TypeVar("T")
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+T = TypeVar("T", bound="DataclassInstance")
 
 
 class SettingsError(ValueError):
     """A configuration value is missing, unknown or invalid (names the key)."""
 
 
-def _check(value: Any, tp: Any, key: str) -> Any:
+def _as_mapping(value: object, key: str) -> Mapping[str, object]:
+    """``value`` if it is a mapping (a TOML table), else a SettingsError naming ``key``."""
+    if not isinstance(value, Mapping):
+        raise SettingsError(f"{key}: must be a table/mapping, got {type(value).__name__}")
+    return value
+
+
+def _check(value: object, tp: object, key: str) -> object:  # noqa: PLR0911, PLR0912 - one branch per annotation form
     """Validate/coerce ``value`` against annotation ``tp``; return the coerced value."""
     origin = get_origin(tp)
     if tp is Any:
@@ -35,7 +45,7 @@ def _check(value: Any, tp: Any, key: str) -> Any:
         args = get_args(tp)
         if value is None and type(None) in args:
             return None
-        errors = []
+        errors: list[str] = []
         for arg in args:
             if arg is type(None):
                 continue
@@ -51,15 +61,13 @@ def _check(value: Any, tp: Any, key: str) -> Any:
         if origin is tuple and args and args[-1] is not Ellipsis:
             if len(value) != len(args):
                 raise SettingsError(f"{key}: must have {len(args)} items, got {len(value)}")
-            items = [_check(v, a, f"{key}[{i}]") for i, (v, a) in enumerate(zip(value, args))]
+            items = [_check(v, a, f"{key}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=True))]
         else:
             item_tp = args[0] if args else Any
             items = [_check(v, item_tp, f"{key}[{i}]") for i, v in enumerate(value)]
         return tuple(items) if origin is tuple else items
     if origin is dict or tp is dict:
-        if not isinstance(value, Mapping):
-            raise SettingsError(f"{key}: must be a table/mapping, got {type(value).__name__}")
-        return dict(value)
+        return dict(_as_mapping(value, key))
     if tp is bool:
         if not isinstance(value, bool):
             raise SettingsError(f"{key}: must be true or false, got {value!r}")
@@ -76,14 +84,14 @@ def _check(value: Any, tp: Any, key: str) -> Any:
         if not isinstance(value, str):
             raise SettingsError(f"{key}: must be a string, got {value!r}")
         return value
-    if dataclasses.is_dataclass(tp):
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         if isinstance(value, tp):
             return value
-        return from_mapping(tp, value, section=key)
+        return from_mapping(tp, _as_mapping(value, key), section=key)
     return value
 
 
-def from_mapping(cls: type[T], mapping: Mapping[str, Any] | None, section: str = "") -> T:
+def from_mapping(cls: type[T], mapping: Mapping[str, object] | None, section: str = "") -> T:
     """Build the frozen dataclass ``cls`` from ``mapping``.
 
     Parameters
@@ -123,7 +131,7 @@ def from_mapping(cls: type[T], mapping: Mapping[str, Any] | None, section: str =
     if missing:
         raise SettingsError(f"{prefix}{missing[0]}: required option is missing")
     hints = get_type_hints(cls)
-    kwargs = {}
+    kwargs: dict[str, object] = {}
     for name, value in mapping.items():
         kwargs[name] = _check(value, hints.get(name, Any), prefix + name)
     try:
@@ -136,17 +144,17 @@ def from_mapping(cls: type[T], mapping: Mapping[str, Any] | None, section: str =
         raise SettingsError(f"{section + ': ' if section else ''}{exc}") from None
 
 
-def to_mapping(obj: Any) -> dict[str, Any]:
-    """Plain-dict form of a settings dataclass (tuples become lists)."""
+def to_mapping(obj: DataclassInstance) -> dict[str, object]:
+    """Plain-dict form of a settings dataclass (nested dataclasses become dicts, tuples become lists)."""
 
-    def conv(v: Any) -> Any:
-        if dataclasses.is_dataclass(v):
-            return {f.name: conv(getattr(v, f.name)) for f in dataclasses.fields(v)}
+    def conv(v: object) -> object:
+        if dataclasses.is_dataclass(v) and not isinstance(v, type):
+            return to_mapping(v)
         if isinstance(v, (tuple, list)):
             return [conv(x) for x in v]
         return v
 
-    return conv(obj)
+    return {f.name: conv(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
 
 
 __all__ = ["SettingsError", "from_mapping", "to_mapping"]

@@ -19,9 +19,10 @@ One policy for every kernel (VPP and the matchers):
 
 from __future__ import annotations
 
-import numbers
+import operator
 import os
 from collections.abc import MutableMapping
+from typing import SupportsIndex
 
 
 def default_threads() -> int:
@@ -40,12 +41,12 @@ def default_threads() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def resolve_threads(n: int | None, name: str = "threads") -> int:
+def resolve_threads(n: SupportsIndex | None, name: str = "threads") -> int:
     """The thread count for a kernel call: ``n`` itself (>= 1), or :func:`default_threads` for None.
 
     Parameters
     ----------
-    n : int or None
+    n : int, numpy integer or None
         Requested threads; None = the default policy.
     name : str
         Argument name used in error messages.
@@ -64,11 +65,15 @@ def resolve_threads(n: int | None, name: str = "threads") -> int:
     """
     if n is None:
         return default_threads()
-    if isinstance(n, bool) or not isinstance(n, numbers.Integral):
+    if isinstance(n, bool):
         raise TypeError(f"{name} must be an integer or None, got {n!r}")
-    if n < 1:
-        raise ValueError(f"{name} must be >= 1 (or None for the default), got {n}")
-    return int(n)
+    try:
+        count = operator.index(n)  # int and numpy integers; not float, str or numpy bool
+    except TypeError:
+        raise TypeError(f"{name} must be an integer or None, got {n!r}") from None
+    if count < 1:
+        raise ValueError(f"{name} must be >= 1 (or None for the default), got {count}")
+    return count
 
 
 def configure_openmp(environ: MutableMapping[str, str] | None = None) -> bool:

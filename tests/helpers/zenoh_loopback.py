@@ -1,4 +1,7 @@
-"""Zenoh on loopback for tests: free ports, configs with explicit 127.0.0.1 endpoints and multicast scouting off, receiving samples."""
+"""Zenoh on loopback for tests.
+
+Free ports, configs with explicit 127.0.0.1 endpoints and multicast scouting off, receiving samples.
+"""
 
 from __future__ import annotations
 

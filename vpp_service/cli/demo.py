@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register the ``demo`` sub-command."""
     p = sub.add_parser(
         "demo",

@@ -1,9 +1,9 @@
-"""``vpp-service eval``: score matcher / guided stereo / VPP on a dataset with ground truth.
+r"""``vpp-service eval``: score matcher / guided stereo / VPP on a dataset with ground truth.
 
 Example::
 
-    vpp-service eval --dataset auto --root ../shared/data/middlebury2005_2006_thirdsize \\
-        --matcher census-sgm --methods baseline,guided,vpp --density 0.01,0.05 \\
+    vpp-service eval --dataset auto --root ../shared/data/middlebury2005_2006_thirdsize \
+        --matcher census-sgm --methods baseline,guided,vpp --density 0.01,0.05 \
         --json out.json --markdown out.md
 
 ``--dataset synthetic`` needs no ``--root``: it renders ``--limit`` (default 4)
@@ -21,14 +21,14 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from vpp_service.evaluation.runner import Frames
     from vpp_service.vpp import VPPConfig
 
 
-def _kv(text: str) -> tuple[str, Any]:
+def _kv(text: str) -> tuple[str, object]:
     if "=" not in text:
         raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
     key, _, value = text.partition("=")
@@ -49,7 +49,7 @@ def _densities(text: str) -> list[float]:
     return values
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
     """Register the ``eval`` sub-command."""
     p = subparsers.add_parser(
         "eval",

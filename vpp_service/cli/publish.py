@@ -14,10 +14,18 @@ import signal
 import sys
 import threading
 import time
-from typing import Any
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # imported where they are used: the sub-command modules load no kernel at import time
+    import zenoh
+
+    from vpp_service.frame import StereoFrame
+    from vpp_service.sources.base import Source
+    from vpp_service.transport.shm import ShmPutter
 
 
-def add_parser(subparsers: Any) -> None:
+def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register the ``publish`` sub-command."""
     p = subparsers.add_parser(
         "publish",
@@ -65,7 +73,42 @@ def add_parser(subparsers: Any) -> None:
     p.set_defaults(func=main)
 
 
-def _source(args: argparse.Namespace) -> Any:
+def _has_subscriber(publisher: zenoh.Publisher) -> bool:
+    """True when a subscriber matches ``publisher``'s key."""
+    import zenoh
+
+    status: object = publisher.matching_status  # zenoh's stub says bool; at run time it is a MatchingStatus
+    return status.matching if isinstance(status, zenoh.MatchingStatus) else bool(status)
+
+
+def _wait_for_subscribers(pubs: Iterable[zenoh.Publisher], seconds: float, stop: threading.Event) -> None:
+    """Wait up to ``seconds`` (or until ``stop``) for a subscriber on every publisher."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline and not stop.is_set():
+        if all(_has_subscriber(pub) for pub in pubs):
+            return
+        time.sleep(0.02)
+
+
+def _send(frame: StereoFrame, args: argparse.Namespace, pubs: dict[str, zenoh.Publisher], putter: ShmPutter) -> None:
+    """Stamp ``frame``, strip what the flags say, publish it on ``pubs`` (one topic per part, or ``frame``)."""
+    from vpp_service.transport import wire
+
+    frame = frame.with_(stamp_ns=time.time_ns())
+    if args.no_depth:
+        frame = frame.with_(sparse_disparity=None, sensor_depth=None)
+    if args.no_gt:
+        frame = frame.with_(gt_disparity=None)
+    if not args.separate_topics:
+        putter.put(pubs["frame"], wire.encode_frame(frame, args.enc, args.depth_kind))
+        return
+    for part, pub in pubs.items():
+        payload = wire.encode_part(frame, part, args.enc, args.depth_kind)
+        if payload is not None:
+            putter.put(pub, payload)
+
+
+def _source(args: argparse.Namespace) -> Source:
     from vpp_service.sources.base import SourceContext, build_source
 
     ctx = SourceContext(rig=args.rig, prefix=args.prefix)
@@ -111,7 +154,7 @@ def main(args: argparse.Namespace) -> int:
 
     import zenoh
 
-    from vpp_service.service.app import open_session
+    from vpp_service.service.app import zenoh_session
     from vpp_service.service.config import ZenohSection
     from vpp_service.sources.base import Pacer
     from vpp_service.transport import wire
@@ -127,12 +170,12 @@ def main(args: argparse.Namespace) -> int:
     )
     src = _source(args)
     src.open()
-    frames: _queue.Queue = _queue.Queue(maxsize=2)
+    frames: _queue.Queue[StereoFrame] = _queue.Queue(maxsize=2)
     stop = threading.Event()
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, lambda *_: stop.set())
 
-    def emit(frame: Any) -> bool:
+    def emit(frame: StereoFrame) -> bool:
         while not stop.is_set():
             try:
                 frames.put(frame, timeout=0.1)
@@ -143,7 +186,7 @@ def main(args: argparse.Namespace) -> int:
 
     parts = ["left", "right", "depth"] if args.separate_topics else ["frame"]
     sent = 0
-    with open_session(zsec) as session:
+    with zenoh_session(zsec) as session:
         pubs = {
             p: session.declare_publisher(
                 wire.topic(args.prefix, args.rig, f"in/{p}"), congestion_control=zenoh.CongestionControl.BLOCK
@@ -151,11 +194,7 @@ def main(args: argparse.Namespace) -> int:
             for p in parts
         }
         if args.wait_subscriber > 0:
-            deadline = time.monotonic() + args.wait_subscriber
-            while time.monotonic() < deadline and not stop.is_set():
-                if all(p.matching_status.matching for p in pubs.values()):
-                    break
-                time.sleep(0.02)
+            _wait_for_subscribers(pubs.values(), args.wait_subscriber, stop)
         src.start(emit)
         pacer = Pacer(args.rate)
         t0 = time.monotonic()
@@ -168,22 +207,11 @@ def main(args: argparse.Namespace) -> int:
                 continue
             if pacer.wait(src) and stop.is_set():
                 break
-            frame = frame.with_(stamp_ns=time.time_ns())
-            if args.no_depth:
-                frame = frame.with_(sparse_disparity=None, sensor_depth=None)
-            if args.no_gt:
-                frame = frame.with_(gt_disparity=None)
-            if args.separate_topics:
-                for p in parts:
-                    payload = wire.encode_part(frame, p, args.enc, args.depth_kind)
-                    if payload is not None:
-                        putter.put(pubs[p], payload)
-            else:
-                putter.put(pubs["frame"], wire.encode_frame(frame, args.enc, args.depth_kind))
+            _send(frame, args, pubs, putter)
             sent += 1
         src.stop(2.0)
         elapsed = time.monotonic() - t0
-        for p in pubs.values():
-            p.undeclare()
+        for pub in pubs.values():
+            pub.undeclare()
     print(json.dumps({"sent": sent, "seconds": round(elapsed, 3), "shm": putter.stats()}), file=sys.stdout)
     return 0

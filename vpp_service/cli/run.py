@@ -16,10 +16,11 @@ import json
 import signal
 import sys
 import threading
+from types import FrameType
 from typing import Any
 
 
-def add_parser(subparsers: Any) -> None:
+def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register the ``run`` sub-command."""
     p = subparsers.add_parser(
         "run",
@@ -40,6 +41,20 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--no-summary", action="store_true", help="no live summary line on stderr")
     p.add_argument("--check", action="store_true", help="validate the configuration, print it as JSON, exit")
     p.set_defaults(func=main)
+
+
+#: Options of a sink named by ``--sink`` that the config does not list.
+_SINK_DEFAULTS: dict[str, dict[str, object]] = {
+    "rerun": {"mode": "save", "path": "{out}/vpp.rrd"},
+    "files": {"dir": "{out}/frames", "create_dir": True},
+    "record": {"dir": "{out}/recording", "create_dir": True},
+}
+
+
+def _sinks_from_flag(names: list[str], configured: list[object]) -> list[dict[str, Any]]:
+    """The sinks of ``--sink NAME ...``: the config's entry for a type it lists, else that type's defaults."""
+    old = {s.get("type"): s for s in configured if isinstance(s, dict)}
+    return [old[t] if t in old else {"type": t, **_SINK_DEFAULTS.get(t, {})} for t in names]
 
 
 def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
@@ -64,20 +79,7 @@ def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[
     if args.zenoh_connect:
         zen["connect"] = list(args.zenoh_connect)
     if args.sink is not None:
-        old = {s.get("type"): s for s in d.get("sinks", []) if isinstance(s, dict)}
-        sinks = []
-        for t in args.sink:
-            if t in old:
-                sinks.append(old[t])
-            elif t == "rerun":
-                sinks.append({"type": "rerun", "mode": "save", "path": "{out}/vpp.rrd"})
-            elif t == "files":
-                sinks.append({"type": "files", "dir": "{out}/frames", "create_dir": True})
-            elif t == "record":
-                sinks.append({"type": "record", "dir": "{out}/recording", "create_dir": True})
-            else:
-                sinks.append({"type": t})
-        d["sinks"] = sinks
+        d["sinks"] = _sinks_from_flag(args.sink, d.get("sinks", []))
     if args.rerun_save:
         sinks = [s for s in d.get("sinks", []) if not (isinstance(s, dict) and s.get("type") == "rerun")]
         sinks.append({"type": "rerun", "mode": "save", "path": args.rerun_save})
@@ -97,7 +99,7 @@ def main(args: argparse.Namespace) -> int:
         return 0
     stop = threading.Event()
 
-    def on_signal(signum: int, _frame: Any) -> None:
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
         stop.set()
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}

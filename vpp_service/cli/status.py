@@ -7,7 +7,7 @@ import json
 from typing import Any
 
 
-def add_parser(subparsers: Any) -> None:
+def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register the ``status`` sub-command."""
     p = subparsers.add_parser("status", help="query a running service's @status (JSON)", description=__doc__)
     p.add_argument("--rig", default="*", help="rig name ('*' = every rig)")
@@ -27,21 +27,21 @@ def add_parser(subparsers: Any) -> None:
 def query_status(
     connect: list[str], prefix: str = "vpp", rig: str = "*", timeout: float = 3.0, multicast_scouting: bool = False
 ) -> dict[str, Any]:
-    """Query ``<prefix>/<rig>/@status``; returns ``{key: reply JSON}``.
+    """Query ``<prefix>/<rig>/@status``; returns ``{key: reply JSON}`` (each reply a decoded JSON object).
 
     Raises
     ------
     ValueError
         Bad ``timeout``; a reply that is not JSON.
     """
-    from vpp_service.service.app import open_session
+    from vpp_service.service.app import zenoh_session
     from vpp_service.service.config import ZenohSection
 
     if not timeout > 0:
         raise ValueError(f"timeout must be > 0, got {timeout}")
     zsec = ZenohSection(mode="peer", listen=[], connect=list(connect), multicast_scouting=multicast_scouting)
     out: dict[str, Any] = {}
-    with open_session(zsec) as session:
+    with zenoh_session(zsec) as session:
         for reply in session.get(f"{prefix}/{rig}/@status", timeout=timeout):
             if reply.ok is not None:
                 try:

@@ -15,19 +15,29 @@ import logging
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from vpp_service.fusion import Fusion
 from vpp_service.service.allocator import reuse_freed_memory
 from vpp_service.service.config import ServiceConfig, ZenohSection
-from vpp_service.service.pipeline import Pipeline
+from vpp_service.service.pipeline import Pipeline, PipelineStatus
+
+if TYPE_CHECKING:  # zenoh is imported where it is used
+    import zenoh
 
 log = logging.getLogger(__name__)
 
 
-def zenoh_config(section: ZenohSection) -> Any:
+class ServiceSummary(PipelineStatus):
+    """The final status :func:`run_service` returns and writes to ``<out>/summary.json``."""
+
+    shutdown_s: float
+    config: dict[str, Any]
+
+
+def zenoh_config(section: ZenohSection) -> zenoh.Config:
     """A ``zenoh.Config`` from the ``[zenoh]`` section (multicast scouting off unless enabled)."""
     import zenoh
 
@@ -40,11 +50,11 @@ def zenoh_config(section: ZenohSection) -> Any:
 
 
 @contextlib.contextmanager
-def open_session(section: ZenohSection) -> Iterator[Any]:
-    """``with open_session(cfg.zenoh) as session`` (None when zenoh is disabled)."""
-    if not section.enabled:
-        yield None
-        return
+def zenoh_session(section: ZenohSection) -> Iterator[zenoh.Session]:
+    """``with zenoh_session(section) as session``: a session configured by ``section``, ``enabled`` or not.
+
+    For the tools that always talk to Zenoh (``publish``, ``status``); the service uses :func:`open_session`.
+    """
     import zenoh
 
     zenoh.init_log_from_env_or("error")
@@ -52,7 +62,17 @@ def open_session(section: ZenohSection) -> Iterator[Any]:
         yield session
 
 
-def build_pipeline(cfg: ServiceConfig, session: Any = None) -> Pipeline:
+@contextlib.contextmanager
+def open_session(section: ZenohSection) -> Iterator[zenoh.Session | None]:
+    """``with open_session(cfg.zenoh) as session`` (None when zenoh is disabled)."""
+    if not section.enabled:
+        yield None
+        return
+    with zenoh_session(section) as session:
+        yield session
+
+
+def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> Pipeline:
     """Build (not start) the pipeline described by ``cfg`` on ``session``."""
     from vpp_service.matchers import build_matcher
     from vpp_service.sinks.base import SINKS, SinkContext
@@ -88,7 +108,7 @@ def build_pipeline(cfg: ServiceConfig, session: Any = None) -> Pipeline:
 
 def run_service(
     cfg: ServiceConfig, stop: threading.Event | None = None, stream: TextIO | None = sys.stderr
-) -> dict[str, Any]:
+) -> ServiceSummary:
     """Run until done or ``stop`` is set; return the final status (also in ``<out>/summary.json``).
 
     Parameters
@@ -130,9 +150,11 @@ def run_service(
         finally:
             t0 = time.monotonic()
             pipe.stop(s.shutdown_timeout_s)
-            status = pipe.status()
-            status["shutdown_s"] = time.monotonic() - t0
-            status["config"] = cfg.to_dict()
+            status: ServiceSummary = {
+                **pipe.status(),
+                "shutdown_s": time.monotonic() - t0,
+                "config": cfg.to_dict(),
+            }
             _write_json(summary_path, status)
             if s.summary and stream is not None:
                 print(
@@ -143,10 +165,10 @@ def run_service(
     return status
 
 
-def _write_json(path: Path, data: dict[str, Any]) -> None:
+def _write_json(path: Path, data: Mapping[str, object]) -> None:
     tmp = path.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(data, indent=2, default=str))
     tmp.replace(path)
 
 
-__all__ = ["build_pipeline", "open_session", "run_service", "zenoh_config"]
+__all__ = ["ServiceSummary", "build_pipeline", "open_session", "run_service", "zenoh_config", "zenoh_session"]

@@ -22,13 +22,24 @@ from __future__ import annotations
 
 import copy
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
+from vpp_service.plugin import Plugin
 from vpp_service.queueing import Policy
+from vpp_service.registry import Registry
 from vpp_service.settings import SettingsError, from_mapping
+
+if TYPE_CHECKING:
+    from vpp_service.vpp import VPPConfig
+
+T = TypeVar("T")
+P = TypeVar("P", bound=Plugin)
+
+#: ``parse(name, raw_options, section)``: a plugin's parsed ``Options`` (raises SettingsError).
+ParseOptions = Callable[[str, Mapping[str, Any], str], object]
 
 #: Top-level tables a config may contain.
 SECTIONS = ("service", "zenoh", "source", "vpp", "matcher", "queues", "sinks")
@@ -157,10 +168,20 @@ class QueuesSection:
 
 @dataclass(frozen=True)
 class PluginSpec:
-    """A validated plugin choice: registered name plus its parsed ``Options``."""
+    """A validated plugin choice: registered name plus its parsed ``Options``.
+
+    Attributes
+    ----------
+    name : str
+        Registered plugin name.
+    options : object
+        The plugin's ``Options`` instance (its class depends on the plugin).
+    raw : dict
+        The option values as given (the form :meth:`ServiceConfig.to_dict` writes back).
+    """
 
     name: str
-    options: Any
+    options: object
     raw: dict[str, Any]
 
 
@@ -171,7 +192,7 @@ class ServiceConfig:
     service: ServiceSection
     zenoh: ZenohSection
     source: PluginSpec
-    vpp: Any  # VPPConfig or None when disabled
+    vpp: VPPConfig | None  # None when disabled
     vpp_raw: dict[str, Any]
     matcher: PluginSpec
     queues: QueuesSection
@@ -221,7 +242,7 @@ def _table(d: Mapping[str, Any], key: str) -> Mapping[str, Any]:
     return v
 
 
-def _plugin(d: Mapping[str, Any], section: str, name_key: str, registry: Any, parse: Any) -> PluginSpec:
+def _plugin(d: object, section: str, name_key: str, registry: Registry[T], parse: ParseOptions) -> PluginSpec:
     if not isinstance(d, Mapping):
         raise SettingsError(f"{section}: must be a table, got {type(d).__name__}")
     if name_key not in d:
@@ -237,7 +258,13 @@ def _plugin(d: Mapping[str, Any], section: str, name_key: str, registry: Any, pa
     return PluginSpec(name=name, options=parse(name, raw, section), raw=raw)
 
 
-def _parse_vpp(d: Mapping[str, Any]) -> Any:
+def _require_no_session(section: str, spec: PluginSpec, registry: Registry[P]) -> None:
+    """Reject a plugin that needs the Zenoh session when the config disables it."""
+    if registry.get(spec.name).needs_session:
+        raise SettingsError(f"zenoh.enabled: {section} ({registry.kind} {spec.name!r}) needs a zenoh session")
+
+
+def _parse_vpp(d: Mapping[str, Any]) -> VPPConfig | None:
     raw = dict(d)
     enabled = raw.pop("enabled", True)
     if not isinstance(enabled, bool):
@@ -268,7 +295,7 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
     """
     from vpp_service.matchers import MATCHERS
     from vpp_service.sinks import SINKS  # registers the built-in sinks
-    from vpp_service.sinks.base import parse_sink_options as _psink
+    from vpp_service.sinks.base import parse_sink_options
     from vpp_service.sources import SOURCES, parse_source_options
 
     if not isinstance(data, Mapping):
@@ -278,17 +305,10 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
         raise SettingsError(f"{unknown[0]}: unknown section; known: {', '.join(SECTIONS)}")
     service = from_mapping(ServiceSection, _table(data, "service"), "service")
     zen = from_mapping(ZenohSection, _table(data, "zenoh"), "zenoh")
-    source = _plugin(
-        data.get("source", {"type": "sim"}),
-        "source",
-        "type",
-        SOURCES,
-        lambda n, raw, sec: parse_source_options(n, raw, sec),
-    )
+    source = _plugin(data.get("source", {"type": "sim"}), "source", "type", SOURCES, parse_source_options)
 
-    def parse_matcher(name: str, raw: Mapping[str, Any], sec: str) -> Any:
-        cls = MATCHERS.get(name)
-        return from_mapping(cls.Options, raw, sec)
+    def parse_matcher(name: str, raw: Mapping[str, Any], sec: str) -> object:
+        return from_mapping(MATCHERS.get(name).Options, raw, sec)
 
     matcher = _plugin(data.get("matcher", {"name": "sgbm"}), "matcher", "name", MATCHERS, parse_matcher)
     vpp_raw = dict(_table(data, "vpp"))
@@ -297,17 +317,17 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
     sinks_raw = data.get("sinks", [])
     if not isinstance(sinks_raw, list):
         raise SettingsError(f"sinks: must be an array of tables ([[sinks]]), got {type(sinks_raw).__name__}")
-    sinks = []
+    sinks: list[PluginSpec] = []
     out_dir = out or service.out
-    for i, s in enumerate(sinks_raw):
-        if isinstance(s, Mapping):
-            s = {k: (v.replace("{out}", out_dir) if isinstance(v, str) else v) for k, v in s.items()}
-        sinks.append(_plugin(s, f"sinks[{i}]", "type", SINKS, lambda n, raw, sec: _psink(n, raw, sec)))
+    for i, raw_sink in enumerate(sinks_raw):
+        sink = raw_sink
+        if isinstance(raw_sink, Mapping):
+            sink = {k: (v.replace("{out}", out_dir) if isinstance(v, str) else v) for k, v in raw_sink.items()}
+        sinks.append(_plugin(sink, f"sinks[{i}]", "type", SINKS, parse_sink_options))
     if not zen.enabled:
-        plugins = [("source", source, SOURCES)] + [(f"sinks[{i}]", s, SINKS) for i, s in enumerate(sinks)]
-        for sec, spec, registry in plugins:
-            if registry.get(spec.name).needs_session:
-                raise SettingsError(f"zenoh.enabled: {sec} ({registry.kind} {spec.name!r}) needs a zenoh session")
+        _require_no_session("source", source, SOURCES)
+        for i, spec in enumerate(sinks):
+            _require_no_session(f"sinks[{i}]", spec, SINKS)
     return ServiceConfig(
         service=service,
         zenoh=zen,

@@ -23,20 +23,59 @@ on is counted as rejected and dropped.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.queueing import Policy, QueueWorker
 
+if TYPE_CHECKING:  # zenoh, sources and sinks are imported where they are used
+    import zenoh
+
+    from vpp_service.sinks.base import Sink
+    from vpp_service.sources.base import Source
+
 log = logging.getLogger(__name__)
+
+
+class QueueStatus(TypedDict):
+    """Fill and drops of one pipeline queue (``Pipeline.status()["queues"][name]``)."""
+
+    len: int
+    size: int
+    policy: Policy
+    dropped: int
+    high_water: int
+
+
+class MetricsStatus(TypedDict):
+    """Accuracy against ground truth: the last frame's metrics and the mean bad-2 over the timing window."""
+
+    last: dict[str, float]
+    bad2_mean: float | None
+
+
+class PipelineStatus(TypedDict):
+    """What :meth:`Pipeline.status` reports (JSON-ready; also served on ``@status``)."""
+
+    rig: str
+    prefix: str
+    uptime_s: float
+    counters: dict[str, int]
+    fps: float
+    queues: dict[str, QueueStatus]
+    timing_ms: dict[str, dict[str, float]]
+    source: Mapping[str, object]
+    sinks: dict[str, Mapping[str, object]]
+    metrics: MetricsStatus
 
 
 class StageTimer:
@@ -99,16 +138,16 @@ class Pipeline:
 
     def __init__(
         self,
-        source: Any,
+        source: Source,
         process: Callable[[StereoFrame], FusionResult],
-        sinks: Sequence[Any] = (),
+        sinks: Sequence[Sink] = (),
         *,
         input_size: int = 2,
         input_policy: Policy = "latest",
         output_size: int = 4,
         output_policy: Policy = "latest",
         max_frames: int = 0,
-        session: Any = None,
+        session: zenoh.Session | None = None,
         prefix: str = "vpp",
         rig: str = "rig0",
         timing_window: int = 200,
@@ -156,9 +195,10 @@ class Pipeline:
         self._suppressed = 0
         self._started = 0.0
         self._last_metrics: dict[str, float] = {}
-        self._bad2 = deque(maxlen=timing_window)
-        self._queryable = self._token = None
-        self._opened: list[Any] = []
+        self._bad2: deque[float] = deque(maxlen=timing_window)
+        self._queryable: zenoh.Queryable[None] | None = None
+        self._token: zenoh.LivelinessToken | None = None
+        self._opened: list[Sink] = []
 
     # ----------------------------------------------------------- counters
     def _inc(self, key: str, n: int = 1) -> None:
@@ -222,7 +262,7 @@ class Pipeline:
         if prepare is not None:
             try:
                 prepare(result.frame)  # optional idle-time work for the next frame
-            except Exception as exc:
+            except Exception as exc:  # noqa: BLE001 - optional idle-time work: a failure only costs the head start
                 log.debug("prepare_next(seq=%s): %r", result.frame.seq, exc)
         if self.max_frames and self.counters["processed"] >= self.max_frames:
             self._enough.set()
@@ -245,7 +285,7 @@ class Pipeline:
         for sink in self.sinks:
             try:
                 sink.write(result)
-            except Exception as exc:  # a broken sink must not stop the others
+            except Exception as exc:  # noqa: BLE001 - a broken sink must not stop the others
                 self._inc("errors")
                 log.warning("sink %s: %s", type(sink).__name__, exc)
         fr = result.frame
@@ -286,11 +326,11 @@ class Pipeline:
         self.input.start()
         self.source.start(self._emit, self._source_reject, on_finished=self.input.finish)
 
-    def _on_query(self, query: Any) -> None:
+    def _on_query(self, query: zenoh.Query) -> None:
         # runs on a Zenoh thread: build a small JSON reply, never block
         try:
             query.reply(query.key_expr, json.dumps(self.status()))
-        except Exception as exc:  # session closing
+        except Exception as exc:  # noqa: BLE001 - session closing; nothing may raise into Zenoh's thread
             log.debug("@status reply failed: %s", exc)
 
     def wait(self, timeout: float | None = None) -> bool:
@@ -317,28 +357,28 @@ class Pipeline:
         for sink in self._opened:
             try:
                 sink.close(timeout)
-            except Exception as exc:
+            except Exception as exc:  # noqa: BLE001 - one failing sink must not keep the others open
                 log.warning("closing sink %s: %s", type(sink).__name__, exc)
         for obj in (self._queryable, self._token):
             if obj is not None:
-                try:
+                # undeclaring fails only when the session is already closed, which undeclared it anyway
+                with contextlib.suppress(Exception):
                     obj.undeclare()
-                except Exception:  # session already closed
-                    pass
-        self._queryable = self._token = None
+        self._queryable = None
+        self._token = None
         self.done.set()
 
     # -------------------------------------------------------------- status
-    def status(self) -> dict[str, Any]:
+    def status(self) -> PipelineStatus:
         """Counters, queue fill, timings, source and sink stats (JSON-ready)."""
         with self._lock:
             counters = dict(self.counters)
         elapsed = time.monotonic() - self._started if self._started else 0.0
-        sinks = {}
+        sinks: dict[str, Mapping[str, object]] = {}
         for s in self.sinks:
             try:
                 sinks[type(s).__name__] = s.stats()
-            except Exception:
+            except Exception:  # noqa: BLE001 - a sink's broken counters must not break @status
                 sinks[type(s).__name__] = {}
         return {
             "rig": self.rig,
@@ -386,4 +426,4 @@ class Pipeline:
         )
 
 
-__all__ = ["Pipeline", "StageTimer"]
+__all__ = ["MetricsStatus", "Pipeline", "PipelineStatus", "QueueStatus", "StageTimer"]

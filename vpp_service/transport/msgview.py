@@ -18,8 +18,12 @@ where.
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
+
+#: ``struct.Struct(fmt).unpack_from``: reads one big-endian number at an offset.
+_Unpack = Callable[[memoryview, int], tuple[Any, ...]]
 
 _U8 = struct.Struct(">B").unpack_from
 _U16 = struct.Struct(">H").unpack_from
@@ -63,7 +67,7 @@ class _Reader:
         self.pos = p + n
         return p
 
-    def _len(self, fmt: Any, size: int, what: str) -> int:
+    def _len(self, fmt: _Unpack, size: int, what: str) -> int:
         return fmt(self.mv, self._need(size, what + " length"))[0]
 
     def _check(self, n: int, limit: int, what: str) -> int:
@@ -84,13 +88,13 @@ class _Reader:
         p = self._need(n, "bin")
         return self.mv[p : p + n].toreadonly()
 
-    def _array(self, n: int, depth: int) -> list:
+    def _array(self, n: int, depth: int) -> list[Any]:
         self._check(n, self.lim.max_array_len, "array length")
         return [self.value(depth + 1) for _ in range(n)]
 
-    def _map(self, n: int, depth: int) -> dict:
+    def _map(self, n: int, depth: int) -> dict[str | bytes, Any]:
         self._check(n, self.lim.max_map_len, "map length")
-        out: dict = {}
+        out: dict[str | bytes, Any] = {}
         for _ in range(n):
             at = self.pos
             key = self.value(depth + 1)
@@ -101,7 +105,7 @@ class _Reader:
             out[key] = self.value(depth + 1)
         return out
 
-    def value(self, depth: int = 0) -> Any:
+    def value(self, depth: int = 0) -> Any:  # noqa: PLR0911, PLR0912 - one branch per msgpack type byte, as in the spec
         if depth > self.lim.max_depth:
             raise MsgViewError(f"nesting deeper than {self.lim.max_depth} at byte {self.pos}")
         b = self.mv[self._need(1, "type byte")]

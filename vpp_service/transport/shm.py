@@ -18,7 +18,11 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # zenoh is imported where it is used
+    import zenoh
+    import zenoh.shm
 
 log = logging.getLogger(__name__)
 
@@ -47,28 +51,27 @@ class ShmPutter:
         if isinstance(pool_mb, bool) or not isinstance(pool_mb, int) or not 0 <= pool_mb <= 4096:
             raise ValueError(f"pool_mb must be an int in [0, 4096], got {pool_mb!r}")
         self.pool_bytes = pool_mb << 20
-        self._provider: Any = None
-        self._policy: Any = None
+        #: The pool and its allocation policy, once opened.
+        self._pool: tuple[zenoh.shm.ShmProvider, zenoh.shm.GarbageCollect] | None = None
         self._tried = pool_mb == 0
         self.shm_puts = self.plain_puts = self.fallbacks = 0
 
     @property
     def active(self) -> bool:
         """True once the pool exists (after the first large put)."""
-        return self._provider is not None
+        return self._pool is not None
 
     def _open(self) -> None:
         self._tried = True
         try:
             import zenoh.shm as zshm
 
-            self._provider = zshm.ShmProvider.default_backend(self.pool_bytes)
-            self._policy = zshm.GarbageCollect()
-        except Exception as exc:  # no SHM in this build / platform, /dev/shm too small
+            self._pool = (zshm.ShmProvider.default_backend(self.pool_bytes), zshm.GarbageCollect())
+        except Exception as exc:  # noqa: BLE001 - no SHM in this build / platform, /dev/shm too small: plain puts
             log.info("shared memory unavailable (%s); publishing with plain puts", exc)
-            self._provider = None
+            self._pool = None
 
-    def put(self, publisher: Any, payload: bytes | bytearray | Sequence[bytes | bytearray]) -> None:
+    def put(self, publisher: zenoh.Publisher, payload: bytes | bytearray | Sequence[bytes | bytearray]) -> None:
         """Publish ``payload`` on ``publisher``: from the pool if it fits, else plainly.
 
         ``payload`` may be a list of parts whose concatenation is the message
@@ -80,10 +83,11 @@ class ShmPutter:
         if n >= MIN_SHM_BYTES and n <= self.pool_bytes:
             if not self._tried:
                 self._open()
-            if self._provider is not None:
+            if self._pool is not None:
+                provider, policy = self._pool
                 try:
-                    buf = self._provider.alloc(n, self._policy)
-                except Exception as exc:  # pool exhausted (held by slow subscribers) or fragmented
+                    buf = provider.alloc(n, policy)
+                except Exception as exc:  # noqa: BLE001 - pool exhausted or fragmented: never lose the message
                     self.fallbacks += 1
                     if self.fallbacks == 1:
                         log.info("shared-memory pool could not serve %d bytes (%s); plain put", n, exc)

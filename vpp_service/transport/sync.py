@@ -20,9 +20,17 @@ import threading
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Generic, TypeVar
+from typing import Generic, TypedDict, TypeVar
 
 T = TypeVar("T")
+
+
+class SyncStats(TypedDict):
+    """Counters of a :class:`Synchronizer` (see :meth:`Synchronizer.stats`)."""
+
+    matched: int
+    dropped: int
+    pending: dict[str, int]
 
 
 @dataclass
@@ -129,9 +137,9 @@ class Synchronizer(Generic[T]):
         with self._lock:
             return {t: len(q) for t, q in self._queues.items()}
 
-    def stats(self) -> dict[str, Any]:
+    def stats(self) -> SyncStats:
         """Counters: matched sets, dropped messages, pending per topic."""
         return {"matched": self.matched, "dropped": self.dropped, "pending": self.pending()}
 
 
-__all__ = ["Synchronizer"]
+__all__ = ["SyncStats", "Synchronizer"]

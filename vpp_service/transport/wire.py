@@ -28,7 +28,6 @@ import math
 import struct
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import cv2
 import msgpack
@@ -73,6 +72,9 @@ class WireLimits:
 
 DEFAULT_LIMITS = WireLimits()
 
+#: A msgpack ``bin`` payload as the decoder hands it over (usually a read-only ``memoryview``).
+Binary = bytes | bytearray | memoryview
+
 
 # --------------------------------------------------------------------- keys
 def topic(prefix: str, rig: str, name: str) -> str:
@@ -95,13 +97,13 @@ def topic(prefix: str, rig: str, name: str) -> str:
 
 
 # ------------------------------------------------------------ small helpers
-def _req(msg: Mapping[str, Any], key: str, path: str) -> Any:
+def _req(msg: Mapping[str, object], key: str, path: str) -> object:
     if key not in msg:
         raise WireError(f"{path}{key}: missing")
     return msg[key]
 
 
-def _int(msg: Mapping[str, Any], key: str, path: str, lo: int, hi: int) -> int:
+def _int(msg: Mapping[str, object], key: str, path: str, lo: int, hi: int) -> int:
     v = _req(msg, key, path)
     if isinstance(v, bool) or not isinstance(v, int):
         raise WireError(f"{path}{key}: must be an integer, got {type(v).__name__}")
@@ -110,7 +112,7 @@ def _int(msg: Mapping[str, Any], key: str, path: str, lo: int, hi: int) -> int:
     return v
 
 
-def _float(msg: Mapping[str, Any], key: str, path: str, default: float | None = None) -> float:
+def _float(msg: Mapping[str, object], key: str, path: str, default: float | None = None) -> float:
     if key not in msg and default is not None:
         return default
     v = _req(msg, key, path)
@@ -121,7 +123,7 @@ def _float(msg: Mapping[str, Any], key: str, path: str, default: float | None = 
     return float(v)
 
 
-def _str(msg: Mapping[str, Any], key: str, path: str, choices: tuple[str, ...] | None = None) -> str:
+def _str(msg: Mapping[str, object], key: str, path: str, choices: tuple[str, ...] | None = None) -> str:
     v = _req(msg, key, path)
     if not isinstance(v, str):
         raise WireError(f"{path}{key}: must be a string, got {type(v).__name__}")
@@ -130,7 +132,7 @@ def _str(msg: Mapping[str, Any], key: str, path: str, choices: tuple[str, ...] |
     return v
 
 
-def _bytes(msg: Mapping[str, Any], key: str, path: str) -> bytes | memoryview:
+def _bytes(msg: Mapping[str, object], key: str, path: str) -> Binary:
     """A bin field: a read-only view of the payload (no copy; see :mod:`.msgview`)."""
     v = _req(msg, key, path)
     if not isinstance(v, (bytes, bytearray, memoryview)):
@@ -138,19 +140,19 @@ def _bytes(msg: Mapping[str, Any], key: str, path: str) -> bytes | memoryview:
     return v
 
 
-def _map(v: Any, path: str) -> Mapping[str, Any]:
+def _map(v: object, path: str) -> Mapping[str, object]:
     if not isinstance(v, dict):
         raise WireError(f"{path}: must be a map, got {type(v).__name__}")
     return v
 
 
-def _f32(data: bytes, count: int, field: str) -> np.ndarray:
+def _f32(data: Binary, count: int, field: str) -> np.ndarray:
     if len(data) != 4 * count:
         raise WireError(f"{field}: expected {4 * count} bytes ({count} float32), got {len(data)}")
     return np.frombuffer(data, dtype="<f4", count=count)
 
 
-def unpack(payload: bytes | bytearray | memoryview, limits: WireLimits = DEFAULT_LIMITS) -> dict[str, Any]:
+def unpack(payload: bytes | bytearray | memoryview, limits: WireLimits = DEFAULT_LIMITS) -> dict[str, object]:
     """Unpack one msgpack message with hard container limits.
 
     ``bin`` fields come back as read-only ``memoryview`` slices of ``payload``
@@ -182,21 +184,21 @@ def unpack(payload: bytes | bytearray | memoryview, limits: WireLimits = DEFAULT
     return msg
 
 
-def _check_version(msg: Mapping[str, Any]) -> None:
+def _check_version(msg: Mapping[str, object]) -> None:
     v = _int(msg, "v", "", 0, 1 << 31)
     if v != VERSION:
         raise WireError(f"v: unsupported wire version {v} (this build speaks {VERSION})")
 
 
 # ------------------------------------------------------------------- images
-def _png_size(data: bytes) -> tuple[int, int]:
+def _png_size(data: Binary) -> tuple[int, int]:
     if len(data) < 24 or data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR":
         raise WireError("data: not a PNG stream")
     w, h = struct.unpack(">II", data[16:24])
     return h, w
 
 
-def _jpeg_size(data: bytes) -> tuple[int, int]:
+def _jpeg_size(data: Binary) -> tuple[int, int]:
     if len(data) < 4 or data[:2] != b"\xff\xd8":
         raise WireError("data: not a JPEG stream")
     i = 2
@@ -220,7 +222,7 @@ def _jpeg_size(data: bytes) -> tuple[int, int]:
     raise WireError("data: JPEG without a frame header")
 
 
-def encode_image(img: np.ndarray, enc: str = "raw", quality: int = 90) -> dict[str, Any]:
+def encode_image(img: np.ndarray, enc: str = "raw", quality: int = 90) -> dict[str, object]:
     """Wire ``Image`` map of an H x W or H x W x C (C = 1 or 3, RGB) uint8 array.
 
     Parameters
@@ -261,7 +263,7 @@ def encode_image(img: np.ndarray, enc: str = "raw", quality: int = 90) -> dict[s
     return {"h": h, "w": w, "c": c, "dtype": "u8", "enc": enc, "data": data}
 
 
-def decode_image(m: Any, path: str = "image", limits: WireLimits = DEFAULT_LIMITS) -> np.ndarray:
+def decode_image(m: object, path: str = "image", limits: WireLimits = DEFAULT_LIMITS) -> np.ndarray:
     """Validate and decode a wire ``Image`` map to an H x W (c=1) or H x W x 3 uint8 array.
 
     Raises
@@ -285,8 +287,7 @@ def decode_image(m: Any, path: str = "image", limits: WireLimits = DEFAULT_LIMIT
     if enc == "raw":
         if len(data) != h * w * c:
             raise WireError(f"{p}data: expected h*w*c = {h * w * c} bytes, got {len(data)}")
-        arr = np.frombuffer(data, dtype=np.uint8).reshape((h, w) if c == 1 else (h, w, 3))
-        return arr
+        return np.frombuffer(data, dtype=np.uint8).reshape((h, w) if c == 1 else (h, w, 3))
     try:
         hh, ww = _png_size(data) if enc == "png" else _jpeg_size(data)
     except WireError as exc:
@@ -294,16 +295,14 @@ def decode_image(m: Any, path: str = "image", limits: WireLimits = DEFAULT_LIMIT
     if (hh, ww) != (h, w):
         raise WireError(f"{p}data: encoded image is {hh}x{ww}, declared {h}x{w}")
     flag = cv2.IMREAD_GRAYSCALE if c == 1 else cv2.IMREAD_COLOR
-    arr = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), flag)
-    if arr is None or arr.shape[:2] != (h, w):
+    decoded = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), flag)
+    if decoded is None or decoded.shape[:2] != (h, w):
         raise WireError(f"{p}data: could not decode the {enc} stream")
-    if c == 3:
-        arr = cv2.cvtColor(arr, cv2.COLOR_BGR2RGB)
-    return arr
+    return cv2.cvtColor(decoded, cv2.COLOR_BGR2RGB) if c == 3 else decoded
 
 
 # ------------------------------------------------------------ sparse depth
-def encode_depth(frame: StereoFrame, kind: str = "auto") -> dict[str, Any] | None:
+def encode_depth(frame: StereoFrame, kind: str = "auto") -> dict[str, object] | None:
     """Wire ``SparseDepth`` map of a frame's sparse depth, or None when it has none.
 
     Parameters
@@ -343,7 +342,14 @@ def encode_depth(frame: StereoFrame, kind: str = "auto") -> dict[str, Any] | Non
 
 
 def points_to_maps(
-    uv: np.ndarray, vals: np.ndarray, h: int, w: int, keep: str, calib: Calibration | None = None, path: str = "depth."
+    uv: np.ndarray,
+    vals: np.ndarray,
+    h: int,
+    w: int,
+    keep: str,
+    *,
+    calib: Calibration | None = None,
+    path: str = "depth.",
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Validate sparse points and scatter them into H x W float32 maps (NaN = none).
 
@@ -387,9 +393,9 @@ def points_to_maps(
     if keep not in ("min", "max"):
         raise ValueError(f"keep must be 'min' or 'max', got {keep!r}")
     out = np.full((h, w), np.nan, dtype=np.float32)
-    with_d = calib is not None and keep == "min"
-    out_d = np.full((h, w), np.nan, dtype=np.float32) if with_d else _NO_MAP
-    fb, doffs = (calib.f * calib.baseline, calib.doffs) if with_d else (0.0, 0.0)
+    d_calib = calib if keep == "min" else None  # disparities of metric points only
+    out_d = np.full((h, w), np.nan, dtype=np.float32) if d_calib is not None else _NO_MAP
+    fb, doffs = (d_calib.f * d_calib.baseline, d_calib.doffs) if d_calib is not None else (0.0, 0.0)
     bad = _points.scatter_points(
         np.ascontiguousarray(uv, dtype=np.float32).reshape(-1),
         np.ascontiguousarray(vals, dtype=np.float32),
@@ -405,14 +411,20 @@ def points_to_maps(
         raise WireError(f"{path}uv: points must lie inside the {w}x{h} left image")
     if bad:
         raise WireError(f"{path}{'z' if keep == 'min' else 'd'}: values must be finite and > 0")
-    return out, (out_d if with_d else None)
+    return out, (out_d if d_calib is not None else None)
 
 
 _NO_MAP = np.empty((0, 0), np.float32)
 
 
 def decode_depth(
-    m: Any, h: int, w: int, path: str = "depth", limits: WireLimits = DEFAULT_LIMITS, calib: Calibration | None = None
+    m: object,
+    h: int,
+    w: int,
+    path: str = "depth",
+    *,
+    limits: WireLimits = DEFAULT_LIMITS,
+    calib: Calibration | None = None,
 ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """Validate a ``SparseDepth`` map; return ``(sensor_depth_m, sparse_disparity_px)``.
 
@@ -451,15 +463,15 @@ def decode_depth(
     vals = _f32(_bytes(m, key, p), n, p + key)
     if kind != "points":
         return None, points_to_maps(uv, vals, h, w, "max", path=p)[0]
-    return points_to_maps(uv, vals, h, w, "min", calib, path=p)
+    return points_to_maps(uv, vals, h, w, "min", calib=calib, path=p)
 
 
-def _encode_gt(gt: np.ndarray) -> dict[str, Any]:
+def _encode_gt(gt: np.ndarray) -> dict[str, object]:
     gt = np.asarray(gt, dtype="<f4")
     return {"h": int(gt.shape[0]), "w": int(gt.shape[1]), "data": np.ascontiguousarray(gt).tobytes()}
 
 
-def _decode_gt(m: Any, h: int, w: int) -> np.ndarray:
+def _decode_gt(m: object, h: int, w: int) -> np.ndarray:
     m = _map(m, "gt")
     gh = _int(m, "h", "gt.", 1, 1 << 16)
     gw = _int(m, "w", "gt.", 1, 1 << 16)
@@ -470,7 +482,7 @@ def _decode_gt(m: Any, h: int, w: int) -> np.ndarray:
     return arr
 
 
-def _decode_calib(m: Any) -> Calibration:
+def _decode_calib(m: object) -> Calibration:
     m = _map(m, "calib")
     f = _float(m, "f", "calib.")
     b = _float(m, "baseline", "calib.")
@@ -484,7 +496,7 @@ def _decode_calib(m: Any) -> Calibration:
     return Calibration(f=f, baseline=b, doffs=doffs, cx=cx, cy=cy)
 
 
-def _header(msg: Mapping[str, Any]) -> tuple[str, int, int]:
+def _header(msg: Mapping[str, object]) -> tuple[str, int, int]:
     _check_version(msg)
     rig = _str(msg, "rig", "")
     if not rig or len(rig) > 256:
@@ -520,7 +532,7 @@ def encode_frame(frame: StereoFrame, enc: str = "raw", depth_kind: str = "auto",
         raise ValueError("frame.calib is required on the wire")
     if frame.left.shape != frame.right.shape:
         raise ValueError(f"frame.left {frame.left.shape} and frame.right {frame.right.shape} differ")
-    msg: dict[str, Any] = {
+    msg: dict[str, object] = {
         "v": VERSION,
         "rig": frame.rig,
         "seq": int(frame.seq),
@@ -559,7 +571,7 @@ def decode_frame(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> StereoF
     h, w = left.shape[:2]
     sensor = disp = gt = None
     if msg.get("depth") is not None:
-        sensor, disp = decode_depth(msg["depth"], h, w, "depth", limits, calib)
+        sensor, disp = decode_depth(msg["depth"], h, w, "depth", limits=limits, calib=calib)
     if msg.get("gt") is not None:
         gt = _decode_gt(msg["gt"], h, w)
     return StereoFrame(
@@ -582,7 +594,7 @@ def encode_part(frame: StereoFrame, part: str, enc: str = "raw", depth_kind: str
     ``left`` carries the calibration (and ground truth, as an extension);
     ``depth`` returns None when the frame has no sparse depth.
     """
-    base: dict[str, Any] = {"v": VERSION, "rig": frame.rig, "seq": int(frame.seq), "stamp_ns": int(frame.stamp_ns)}
+    base: dict[str, object] = {"v": VERSION, "rig": frame.rig, "seq": int(frame.seq), "stamp_ns": int(frame.stamp_ns)}
     if part in ("left", "right"):
         base["image"] = encode_image(frame.left if part == "left" else frame.right, enc)
         if part == "left":
@@ -639,7 +651,7 @@ def decode_part(payload: bytes, part: str, limits: WireLimits = DEFAULT_LIMITS) 
     else:
         h = _int(msg, "h", "", 1, limits.max_side)
         w = _int(msg, "w", "", 1, limits.max_side)
-        out.sensor_depth, out.sparse_disparity = decode_depth(_req(msg, "depth", ""), h, w, "depth", limits)
+        out.sensor_depth, out.sparse_disparity = decode_depth(_req(msg, "depth", ""), h, w, "depth", limits=limits)
     return out
 
 
@@ -651,11 +663,15 @@ def assemble(left: Part, right: Part, depth: Part | None) -> StereoFrame:
     WireError
         Image shapes differ, or the depth size differs from the images.
     """
+    if left.image is None or right.image is None:
+        raise ValueError("left and right must be image parts (decode_part of 'left' / 'right')")
     if left.image.shape != right.image.shape:
         raise WireError(f"right.image: shape {right.image.shape} differs from left {left.image.shape}")
     sensor = disp = None
     if depth is not None:
         dm = depth.sensor_depth if depth.sensor_depth is not None else depth.sparse_disparity
+        if dm is None:
+            raise ValueError("depth must be a depth part (decode_part of 'depth')")
         if dm.shape != left.image.shape[:2]:
             raise WireError(f"depth.h: depth is {dm.shape}, image is {left.image.shape[:2]}")
         sensor, disp = depth.sensor_depth, depth.sparse_disparity
@@ -682,7 +698,7 @@ def _bin_header(n: int) -> bytes:
     return b"\xc6" + n.to_bytes(4, "big")
 
 
-def _map_parts(fields: Mapping[str, Any], blob_key: str, blob: bytes) -> list[bytes]:
+def _map_parts(fields: Mapping[str, object], blob_key: str, blob: bytes) -> list[bytes]:
     """``packb({**fields, blob_key: blob})`` as two parts: everything up to the blob, and the blob."""
     pk = msgpack.Packer(use_bin_type=True, autoreset=False)
     pk.pack_map_header(len(fields) + 1)
@@ -693,7 +709,7 @@ def _map_parts(fields: Mapping[str, Any], blob_key: str, blob: bytes) -> list[by
     return [pk.bytes() + _bin_header(len(blob)), blob]
 
 
-def _map_message(result: FusionResult, arr: np.ndarray, extra: Mapping[str, Any]) -> list[bytes]:
+def _map_message(result: FusionResult, arr: np.ndarray, extra: Mapping[str, object]) -> list[bytes]:
     fr = result.frame
     msg = {
         "v": VERSION,
@@ -713,8 +729,9 @@ def _map_message(result: FusionResult, arr: np.ndarray, extra: Mapping[str, Any]
 
 
 def encode_output_parts(result: FusionResult, name: str, enc: str = "raw") -> list[bytes] | None:
-    """:func:`encode_output` as a list of byte strings whose concatenation is the
-    message (the float maps' data is its own part: no copy to join it).
+    """:func:`encode_output` as a list of byte strings whose concatenation is the message.
+
+    The float maps' data is its own part: no copy to join it.
     """
     if name not in OUTPUTS:
         raise ValueError(f"name must be one of {OUTPUTS}, got {name!r}")
@@ -768,7 +785,17 @@ class OutputMap:
     calib: Calibration | None
     timing_ms: dict[str, float]
     metrics: dict[str, float]
-    extra: dict[str, Any]
+    extra: dict[str, object]
+
+
+def _numbers(m: Mapping[str, object]) -> dict[str, float]:
+    """The ``timing_ms`` / ``metrics`` map as floats; raises WireError unless it maps names to numbers."""
+    out: dict[str, float] = {}
+    for k, v in m.items():
+        if not isinstance(k, str) or isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise WireError(f"timing_ms/metrics.{k}: must map names to numbers")
+        out[k] = float(v)
+    return out
 
 
 def decode_output(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> OutputMap:
@@ -786,11 +813,8 @@ def decode_output(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> Output
     _str(msg, "dtype", "", ("f32",))
     data = _f32(_bytes(msg, "data", ""), h * w, "data").reshape(h, w)
     calib = _decode_calib(msg["calib"]) if msg.get("calib") is not None else None
-    timing = _map(msg.get("timing_ms", {}), "timing_ms")
-    metrics = _map(msg.get("metrics", {}), "metrics")
-    for k, v in list(timing.items()) + list(metrics.items()):
-        if not isinstance(k, str) or isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise WireError(f"timing_ms/metrics.{k}: must map names to numbers")
+    timing = _numbers(_map(msg.get("timing_ms", {}), "timing_ms"))
+    metrics = _numbers(_map(msg.get("metrics", {}), "metrics"))
     extra = {
         k: v
         for k, v in msg.items()
@@ -802,8 +826,8 @@ def decode_output(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> Output
         stamp_ns=stamp,
         data=data,
         calib=calib,
-        timing_ms={k: float(v) for k, v in timing.items()},
-        metrics={k: float(v) for k, v in metrics.items()},
+        timing_ms=timing,
+        metrics=metrics,
         extra=extra,
     )
 
