@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import pytest
 
+from vpp_service.settings import from_mapping
 from vpp_service.vpp import VPPConfig
 
 
@@ -13,13 +14,14 @@ def test_defaults_are_the_paper_variant():
 
 
 def test_round_trip():
-    c = VPPConfig(pattern="histogram", patch=5, adaptive_patch="bilateral", alpha=0.2)
-    assert VPPConfig.from_dict(c.to_dict()) == c
+    c = VPPConfig(pattern="histogram", patch=5, adaptive_patch="bilateral", alpha=0.2,
+                  adaptive_max_disparity=12.5)
+    assert from_mapping(VPPConfig, c.to_dict()) == c
 
 
-def test_from_dict_rejects_unknown_keys():
+def test_from_mapping_rejects_unknown_keys():
     with pytest.raises(ValueError, match="bogus"):
-        VPPConfig.from_dict({"bogus": 1})
+        from_mapping(VPPConfig, {"bogus": 1})
 
 
 @pytest.mark.parametrize("field,value,exc", [

@@ -119,11 +119,12 @@ def test_fill_rejects_short_buffer():
 
 
 def test_sweep_rejects_short_table():
-    from vpp_service.vpp.occlusion import penalty_table
+    from vpp_service.vpp import VPPConfig
+    from vpp_service.vpp.params import kernel_params
 
     d = np.zeros((4, 8), np.float32)
     img = np.zeros((4, 8, 3), np.uint8)
-    with pytest.raises(ValueError, match="pattern table"):
-        backend.sweep.sweep_kernel(d, np.zeros((4, 8), np.uint8), False, 1, 1, penalty_table((1, 1), 2.0, 0.4375),
-                                   1.0, img, img, img.copy(), img.copy(), True, 1, 0.4, True, 0,
-                                   np.zeros(rng.TABLE_SIZE * 3, np.uint8), 1)
+    params = kernel_params(VPPConfig(occlusion="off"))
+    for table in (np.zeros(rng.TABLE_SIZE * 3, np.uint8), None):
+        with pytest.raises(ValueError, match="pattern table"):
+            backend.sweep.paint(d, np.zeros((4, 8), np.uint8), img, img, img.copy(), img.copy(), params, table, 1)

@@ -1,7 +1,5 @@
-"""The fused sweep kernel (vpp_service/vpp/_sweep.pyx) against the literal reference.
+"""The sweep kernel (vpp_service/vpp/_sweep.pyx) against the literal reference, on both builds.
 
-project() routes the per-pixel random pattern without adaptive patches (the
-default (vi), and (ii)) to the sweep kernel; detect_occlusions() always uses it.
 These cases are larger than test_vpp_project's sweep so that rows split into
 several chunks per thread, spans reach the 16-byte SIMD paths and the fallbacks
 (wide patches, row ends, left-border matches), and maps use NaN as "no point".
@@ -13,20 +11,8 @@ import pytest
 
 from vpp_service.vpp import VPPConfig, backend, detect_occlusions, project
 
-from test_vpp_project import make_case
+from helpers.vpp import BUILDS, build, make_case  # noqa: F401 (build: a fixture)
 from vpp_reference import ref_occlusions, ref_project
-
-BUILDS = {"portable": backend.portable, "avx2": backend.avx2_build()}
-
-
-@pytest.fixture(params=list(BUILDS))
-def build(request, monkeypatch):
-    """Run the test on each build of the sweep kernel this machine can execute."""
-    mod = BUILDS[request.param]
-    if mod is None:
-        pytest.skip("no AVX2 build for this CPU / platform")
-    monkeypatch.setattr(backend, "sweep", mod)
-    return mod
 
 
 def test_builds_report_themselves():

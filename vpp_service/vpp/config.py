@@ -9,8 +9,8 @@ checked in ``__post_init__``; a bad value raises :class:`ValueError` (or
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
-from typing import Any, Mapping
+from dataclasses import asdict, dataclass
+from typing import Any
 
 PATTERNS = ("random", "histogram")
 OCCLUSION_MODES = ("fgd", "no", "bkgd", "off")
@@ -135,22 +135,6 @@ class VPPConfig:
                      lo_open=True, hi_open=True)
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain-dict form (JSON/msgpack friendly)."""
+        """Plain-dict form (JSON/msgpack friendly); :func:`vpp_service.settings.from_mapping`
+        (``from_mapping(VPPConfig, d)``) builds a config back from such a mapping."""
         return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "VPPConfig":
-        """Build from a mapping; unknown keys raise :class:`ValueError`.
-
-        Parameters
-        ----------
-        d : Mapping[str, Any]
-            Any subset of the field names; missing fields take their defaults.
-        """
-        if not isinstance(d, Mapping):
-            raise TypeError(f"d must be a mapping, got {type(d).__name__}")
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown VPPConfig key(s) {unknown}; known: {sorted(known)}")
-        return cls(**dict(d))
