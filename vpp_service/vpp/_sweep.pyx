@@ -7,43 +7,14 @@
 literal reference ``tests/vpp_reference.py``; results are byte-identical to it
 for any thread count.  This source is compiled twice (``_sweep`` portable,
 ``_sweep_avx2`` for x86-64-v3; :mod:`vpp_service.vpp.backend` picks one); the
-C helpers in ``_sweep.h`` choose their SIMD code at compile time.
+C in ``_sweep.h`` chooses its SIMD code at compile time.
 
-The image is cut into chunks of rows (``prange``, dynamic schedule).  A chunk
-walks its rows top to bottom with a small ring of per-row state, so nothing
-of size H x W is built besides the outputs:
-
-ingest(y)
-    scan the disparity row into keys ``(float_bits(d) << 32) | x`` in
-    increasing x, compute each point's right-view column and splat weights,
-    and warp the points into a dense row of the right view,
-    ``warp[x - round(d)] = max d``.  The warp keeps the window's rows in a
-    ring stored column-major: one column's rows are one vector.
-classify(q = y - r_y//2)
-    a point is occluded if it lost a collision in its warp cell, or if a
-    neighbour of its window satisfies ``(W_n - d) - pen > t`` (float64).  The
-    window is first screened in float against a threshold lowered by more
-    than the float rounding, so the screen never misses a cell the exact rule
-    flags; only points with a passing cell are tested exactly.
-paint a band of 16 rows [b0, b1) once rows up to b1 - 1 + h are classified
-    copy the band's input rows to the outputs; gather the points of rows
-    b0-h .. b1-1+h in (row, x) order with their patch half-size (the
-    distance-adaptive *patch mask*); fill the band's *value source* (nothing
-    for the per-pixel random pattern, read in place from the seed's table; a
-    buffer of values per point and patch row for the histogram pattern and
-    uniform patches); sort the points stably by d -- the global order
-    (d, y, x); then each point blends its patch rows into the band: the right
-    view of every visible point first, then the left view (FGD reads the
-    final right rows).  A patch row is a span of K*C bytes (cut into runs by
-    the bilateral patch mask).  With splatting, column ``floor(x') + dx + 1``
-    receives ``alpha * beta`` of value ``dx`` before ``alpha * (1 - beta)`` of
-    value ``dx + 1``, so the ``beta`` span is blended first, then the
-    ``1 - beta`` span.
-
-A chunk first ingests (and classifies) the rows above it that its first rows
-depend on, so chunks are independent; each output row, statistic and mask row
-is written by the chunk that owns it, and the result does not depend on the
-chunking or the thread count.
+Rows are processed in chunks (``prange``); a chunk walks its rows with a small
+ring of per-row state: *ingest* a row (scan, geometry, warp), *classify* the
+row ``r_y // 2`` above (occlusion), and *paint* bands of 16 rows once the rows
+their patches reach are classified (gather the points with their patch
+half-size, fill the band's value source, sort by d, blend the right view, then
+the left view).  ``docs/algorithm.md`` ("The kernel") describes each step.
 """
 from cython.parallel cimport prange, parallel
 from libc.stdint cimport uint8_t, uint32_t, uint64_t, int64_t, int32_t, int16_t, uintptr_t
@@ -479,30 +450,21 @@ cdef inline int _half(const Job* J, float d) noexcept nogil:
     return <int>floor(pow(u, J.p.adaptive_gamma) * J.hmax + 0.5)
 
 
-cdef inline void _patch_cols(const Job* J, const BandPt* pt, int* k0, int* k1) noexcept nogil:
-    """Patch pixels [k0, k1) of a point: left position inside the image, within its half-size."""
-    cdef int h = J.hmax, x = pt.x
+cdef inline void _patch_cols(int x, int ph, int h, int W, int* k0, int* k1) noexcept nogil:
+    """Patch pixels [k0, k1) of a point at column x with half-size ph <= h (the
+    patch's largest): left position inside the image, within the half-size."""
     k0[0] = h - x if x < h else 0
-    k1[0] = 2 * h + 1 if x + h < J.W else J.W - x + h
-    if pt.h < h:
-        k0[0] = max(k0[0], h - pt.h)
-        k1[0] = min(k1[0], h + pt.h + 1)
+    k1[0] = 2 * h + 1 if x + h < W else W - x + h
+    if ph < h:
+        k0[0] = max(k0[0], h - ph)
+        k1[0] = min(k1[0], h + ph + 1)
 
 
-cdef inline const uint8_t* _values(const Job* J, const Scratch* S, const BandPt* pt, int r) noexcept nogil:
-    """The value source: the K values (C bytes each) of a point's patch row r."""
-    if J.pstride == 0:
-        return J.pat + vpp_pidx(pt.x - J.hmax, r) * J.C
-    return S.vbuf + <int64_t>pt.vi * J.pstride + (r - pt.s + J.hmax) * J.rstride
-
-
-cdef const uint8_t* _mask(const Job* J, Scratch* S, const BandPt* pt, int r, int k0, int k1) noexcept nogil:
-    """The bilateral patch mask of patch row r over [k0, k1) (NULL: no mask, every pixel)."""
+cdef const uint8_t* _bilateral(const Job* J, Scratch* S, const BandPt* pt, int r, int k0, int k1) noexcept nogil:
+    """The bilateral patch mask of patch row r over [k0, k1)."""
     cdef int C = J.C, k, c, dx, dy = r - pt.s, sumsq, diff
     cdef const uint8_t* cen = J.L + (<int64_t>pt.s * J.W + pt.x) * C
     cdef const uint8_t* px
-    if J.p.mask != MASK_BILATERAL:
-        return NULL
     for k in range(k0, k1):
         dx = k - J.hmax
         px = J.L + (<int64_t>r * J.W + pt.x + dx) * C
@@ -530,7 +492,7 @@ cdef inline void _span(const Job* J, uint8_t* row, const uint8_t* vals, int k0, 
 
 
 
-cdef void _span_mask(const Job* J, uint8_t* row, const uint8_t* vals, const uint8_t* msk, int k0, int k1,
+cdef inline void _span_mask(const Job* J, uint8_t* row, const uint8_t* vals, const uint8_t* msk, int k0, int k1,
                      int base, uint32_t w) noexcept nogil:
     """``_span`` over the runs of pixels that ``msk`` keeps (all of [k0, k1) when NULL)."""
     cdef int a
@@ -590,17 +552,23 @@ cdef void _band_values(const Job* J, Scratch* S, int m, int b0, int b1) noexcept
                         v[k * C] = val
             i = e
         return
+    i = 0
+    e = 0
     for r in range(b0, b1):         # histogram per patch pixel: one band row at a time
+        while i < m and S.bpt[i].s < r - h:     # [i, e): the points of rows r - h .. r + h
+            i += 1
+        while e < m and S.bpt[e].s <= r + h:
+            e += 1
         for c in range(C):
             built = 0
-            for j in range(m):
+            for j in range(i, e):
                 pt = &S.bpt[j]
                 if pt.occl or r - pt.s > pt.h or pt.s - r > pt.h:
                     continue
                 if not built:
                     vpp_hist_row_tables(&J.hs, c, r, S.tabs)
                     built = 1
-                _patch_cols(J, pt, &k0, &k1)
+                _patch_cols(pt.x, pt.h, h, J.W, &k0, &k1)
                 cn = <int>floor(<double>pt.x - <double>pt.d + 0.5) - h
                 v = S.vbuf + <int64_t>j * J.pstride + (r - pt.s + h) * J.rstride + c
                 for k in range(k0, k1):
@@ -616,11 +584,16 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
     cdef int s1 = b1 - 1 + h if b1 - 1 + h < H - 1 else H - 1
     cdef int occmode = J.occmode
     cdef int use_flags = occmode == OCC_NO or occmode == OCC_FGD
+    cdef int bil = J.p.mask == MASK_BILATERAL, distance = J.p.mask == MASK_DISTANCE
+    cdef int splat = J.splat, pstride = J.pstride, rstride = J.rstride
+    cdef uint32_t wa = J.wa
+    cdef const uint8_t* pat = J.pat
+    cdef const uint8_t* vpt         # a point's values in the band's value buffer (value source)
     # a patch column in one go (AVX2 build, values read from the table, no bilateral
     # mask, C in {1, 3}, the patch plus a splat column within 16 bytes)
-    cdef int rows_fast = (vpp_build_avx2() and J.pstride == 0 and J.p.mask != MASK_BILATERAL
+    cdef int rows_fast = (vpp_build_avx2() and J.pstride == 0 and not bil
                           and (C == 1 or C == 3) and (K + 1) * C <= 16)
-    cdef int s, slot, i, j, m, x, r, r0, r1, k0, k1, k, c, fl, flag, base
+    cdef int s, slot, i, j, m, x, r, r0, r1, k0, k1, k, c, fl, flag, base, ph
     cdef BandPt* pt
     cdef int64_t total = 0
     cdef uint64_t key, wpair
@@ -662,7 +635,7 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
             pt.w0 = <uint32_t>(wpair & LOW32)
             pt.w1 = <uint32_t>(wpair >> 32)
             pt.occl = flag
-            pt.h = _half(J, d)
+            pt.h = _half(J, d) if distance else h
             pt.vi = m
             pt.d = d
             S.bd[m] = d
@@ -678,25 +651,27 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
             continue
         s = pt.s
         x = pt.x
-        _patch_cols(J, pt, &k0, &k1)
+        ph = pt.h
+        _patch_cols(x, ph, h, W, &k0, &k1)
         fl = pt.fl
         w0 = pt.w0
         w1 = pt.w1
-        r0 = max(s - pt.h, b0)
-        r1 = min(s + pt.h, b1 - 1)
+        r0 = max(s - ph, b0)
+        r1 = min(s + ph, b1 - 1)
         if rows_fast and fl - h >= 0 and fl + h + 1 < W and <int64_t>(W - fl + h) * C >= 16:
-            if J.splat:
-                vpp_splat_rows_avx2(J.oR + r0 * rs + (fl - h) * C, rs, J.pat, x - h + <int64_t>r0 * VPP_ROW_STEP,
+            if splat:
+                vpp_splat_rows_avx2(J.oR + r0 * rs + (fl - h) * C, rs, pat, x - h + <int64_t>r0 * VPP_ROW_STEP,
                                     VPP_ROW_STEP, VPP_TABLE_MASK, r1 - r0 + 1, C, k0, k1, w0, w1)
             else:
-                vpp_blend_rows_avx2(J.oR + r0 * rs + (fl - h) * C, rs, J.pat, x - h + <int64_t>r0 * VPP_ROW_STEP,
+                vpp_blend_rows_avx2(J.oR + r0 * rs + (fl - h) * C, rs, pat, x - h + <int64_t>r0 * VPP_ROW_STEP,
                                     VPP_ROW_STEP, VPP_TABLE_MASK, r1 - r0 + 1, C, k0 * C, k1 * C, w0)
             continue
+        vpt = S.vbuf + <int64_t>pt.vi * pstride + (h - s) * rstride
         for r in range(r0, r1 + 1):
-            v = _values(J, S, pt, r)
-            mk = _mask(J, S, pt, r, k0, k1)
+            v = pat + vpp_pidx(x - h, r) * C if pstride == 0 else vpt + r * rstride
+            mk = _bilateral(J, S, pt, r, k0, k1) if bil else NULL
             oR = J.oR + r * rs
-            if J.splat:
+            if splat:
                 if (mk != NULL or fl - h < 0 or fl + h + 1 >= W or not vpp_splat16(
                         oR + (fl - h) * C, v, C, k0, k1, w0, w1, <int64_t>(W - fl + h) * C)):
                     if w1:
@@ -709,20 +684,22 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
         pt = &S.spt[j]
         s = pt.s
         x = pt.x
-        _patch_cols(J, pt, &k0, &k1)
-        r0 = max(s - pt.h, b0)
-        r1 = min(s + pt.h, b1 - 1)
+        ph = pt.h
+        _patch_cols(x, ph, h, W, &k0, &k1)
+        r0 = max(s - ph, b0)
+        r1 = min(s + ph, b1 - 1)
         if not pt.occl:
             if rows_fast and x - h >= 0 and <int64_t>(W - x + h) * C >= 16:
-                vpp_blend_rows_avx2(J.oL + r0 * rs + (x - h) * C, rs, J.pat, x - h + <int64_t>r0 * VPP_ROW_STEP,
-                                    VPP_ROW_STEP, VPP_TABLE_MASK, r1 - r0 + 1, C, k0 * C, k1 * C, J.wa)
+                vpp_blend_rows_avx2(J.oL + r0 * rs + (x - h) * C, rs, pat, x - h + <int64_t>r0 * VPP_ROW_STEP,
+                                    VPP_ROW_STEP, VPP_TABLE_MASK, r1 - r0 + 1, C, k0 * C, k1 * C, wa)
                 continue
+            vpt = S.vbuf + <int64_t>pt.vi * pstride + (h - s) * rstride
             for r in range(r0, r1 + 1):
-                _span_mask(J, J.oL + r * rs, _values(J, S, pt, r), _mask(J, S, pt, r, k0, k1), k0, k1,
-                           x - h, J.wa)
+                v = pat + vpp_pidx(x - h, r) * C if pstride == 0 else vpt + r * rstride
+                _span_mask(J, J.oL + r * rs, v, _bilateral(J, S, pt, r, k0, k1) if bil else NULL, k0, k1, x - h, wa)
             continue
         xp = <double>x - <double>pt.d
-        if J.splat:
+        if splat:
             fl = vpp_ifloor(xp)
             beta = xp - <double>fl
         else:
@@ -732,12 +709,12 @@ cdef void _paint_band(const Job* J, Scratch* S, int b0, int b1) noexcept nogil:
         for r in range(r0, r1 + 1):
             oL = J.oL + r * rs
             oR = J.oR + r * rs
-            mk = _mask(J, S, pt, r, k0, k1)
+            mk = _bilateral(J, S, pt, r, k0, k1) if bil else NULL
             for k in range(k0, k1):
                 c = fl + k - h
                 if (mk != NULL and not mk[k]) or c < 0 or c >= W or (beta > 0 and c + 1 >= W):
                     continue
-                vpp_fgd_pixel(oL + (x + k - h) * C, oR + c * C, C, beta > 0, wb, J.wa)
+                vpp_fgd_pixel(oL + (x + k - h) * C, oR + c * C, C, beta > 0, wb, wa)
 
 
 cdef void _run_chunk(const Job* J, Scratch* S, int c0, int c1) noexcept nogil:

@@ -56,7 +56,7 @@ def depth_to_disparity(depth: np.ndarray, f: float, baseline: float,
     baseline = _check_scalar("baseline", baseline, True)
     doffs = _check_scalar("doffs", doffs, False)
     # Sensor maps are mostly empty: convert only the valid pixels (float64
-    # arithmetic, as before) instead of round-tripping the whole map.
+    # arithmetic) instead of round-tripping the whole map.
     flat = depth.reshape(-1)
     idx = np.flatnonzero(np.isfinite(flat) & (flat > 0))
     d = f * baseline / flat[idx].astype(np.float64) - doffs
@@ -90,7 +90,7 @@ def disparity_to_depth(disparity: np.ndarray, f: float, baseline: float,
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         den = d + doffs
         ok = np.isfinite(d) & (d > 0) & (den > 0)
-        # dense divide + select: no boolean gather/scatter (several times faster)
+        # dense divide + select: no boolean gather/scatter
         out = np.where(ok, (f * baseline) / den, np.nan)
     return out.astype(np.float32)
 

@@ -42,8 +42,8 @@ def detect_occlusions(disparity: np.ndarray, *, window: tuple[int, int] = (9, 7)
     """
     if not isinstance(window, (tuple, list)) or len(window) != 2:
         raise TypeError(f"window must be a pair of ints (rx, ry), got {window!r}")
-    rx, ry, lam, gamma, t = (v.item() if isinstance(v, np.generic) else v
-                             for v in (*window, lam, gamma, t))
+    rx, ry = (v.item() if isinstance(v, np.integer) else v for v in window)
+    lam, gamma, t = (v.item() if isinstance(v, np.generic) else v for v in (lam, gamma, t))
     config = VPPConfig(occ_window_x=rx, occ_window_y=ry, occ_lambda=lam, occ_gamma=gamma, occ_t=t)
     disp = as_disparity("disparity", disparity)
     nt = as_threads(num_threads)

@@ -13,17 +13,16 @@ it, so it is a pure function of ``(seed, x, y, c)``:
   ``C * index + c``.
 
 Consecutive pixels of a row are consecutive table entries, so a patch row's
-pattern is one contiguous span of the table: the kernels read it in place
-instead of hashing every pixel (about 3 ns a pixel, the largest single cost of
-the default paint before).  The values are independent uniform bytes except
+pattern is one contiguous span of the table: the kernel reads it in place
+instead of hashing every pixel.  The values are independent uniform bytes except
 where two pixels share an index, i.e. ``dx + dy * ROW_STEP = 0 (mod 2**16)``:
 never within a row of up to 65536 pixels, never for ``1 <= |dy| <= 16`` and
 ``|dx| < 1000``, and nowhere closer than 274 pixels (``ROW_STEP`` maximises
 that distance, the shortest vector of the lattice, whose optimum is about 275).
 A stereo matcher compares windows along rows, so it never sees a repeat.
 
-The Cython kernels read the table built by :func:`vpp_service.vpp.backend`
-(``sweep.fill_pattern_table``, the same bytes, tested); this NumPy version is
+The kernel reads the table built by ``backend.sweep.fill_pattern_table``
+(the same bytes, tested); this NumPy version is
 the reference used by the tests.
 """
 from __future__ import annotations
@@ -125,7 +124,7 @@ def kernel_table(seed: int, channels: int, hmax: int) -> np.ndarray:
     """The pattern table as the Cython kernels read it (read-only, cached).
 
     The same bytes as :func:`pattern_table`, built by the compiled kernel
-    (about 0.05 ms for RGB), followed by a copy of its first bytes so that a
+    followed by a copy of its first bytes so that a
     patch row of ``2 hmax + 1`` pixels starting at any entry is one contiguous
     span (``backend.sweep.table_padding``).
 
