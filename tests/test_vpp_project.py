@@ -8,7 +8,7 @@ from hypothesis import given, settings, strategies as st
 from vpp_service.vpp import VPPConfig, backend, project
 from vpp_service.vpp.rng import pattern_bytes
 
-from helpers.vpp import build, make_case  # noqa: F401 (build: a fixture)
+from helpers.vpp import make_case
 from vpp_reference import ref_project
 
 

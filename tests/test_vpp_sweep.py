@@ -11,7 +11,7 @@ import pytest
 
 from vpp_service.vpp import VPPConfig, backend, detect_occlusions, project
 
-from helpers.vpp import BUILDS, build, make_case  # noqa: F401 (build: a fixture)
+from helpers.vpp import BUILDS, make_case
 from vpp_reference import ref_occlusions, ref_project
 
 

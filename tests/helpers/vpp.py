@@ -1,23 +1,12 @@
-"""Shared VPP test helpers: random cases and the ``build`` fixture (each kernel build)."""
+"""Shared VPP test helpers: random cases and the kernel builds (fixture ``build`` in conftest)."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from vpp_service.vpp import backend
 
 #: the builds of the sweep kernel (None: not runnable on this CPU / platform)
 BUILDS = {"portable": backend.portable, "avx2": backend.avx2_build()}
-
-
-@pytest.fixture(params=list(BUILDS))
-def build(request, monkeypatch):
-    """Run the test on each build of the sweep kernel this machine can execute."""
-    mod = BUILDS[request.param]
-    if mod is None:
-        pytest.skip("no AVX2 build for this CPU / platform")
-    monkeypatch.setattr(backend, "sweep", mod)
-    return mod
 
 
 def make_case(rng: np.random.Generator, H: int, W: int, C: int, density: float):

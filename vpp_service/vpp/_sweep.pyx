@@ -225,8 +225,7 @@ cdef struct Scratch:
     int* dyl            # wring: each slot's row offset from the classified row (ry2 + 1: not in the window)
     float* pvec         # nwin x wring: the current row's float penalty per (column, slot), +inf off the window
     uint8_t* msk        # K: one patch row's bilateral mask
-    float* warp         # ww columns x wring slots, column-major: the window's rows
-                        # of one column are one vector (see _ingest, _classify)
+    float* warp         # ww columns x wring slots, column-major (a column's window rows: one vector)
     BandPt* bpt         # band points in gather order (row, x)
     BandPt* spt         # in paint order (d, y, x)
     float* bd           # their d in gather order
@@ -490,10 +489,8 @@ cdef inline void _span(const Job* J, uint8_t* row, const uint8_t* vals, int k0, 
                        <int64_t>(W - base - k0) * C)
 
 
-
-
-cdef inline void _span_mask(const Job* J, uint8_t* row, const uint8_t* vals, const uint8_t* msk, int k0, int k1,
-                     int base, uint32_t w) noexcept nogil:
+cdef inline void _span_mask(const Job* J, uint8_t* row, const uint8_t* vals, const uint8_t* msk,
+                            int k0, int k1, int base, uint32_t w) noexcept nogil:
     """``_span`` over the runs of pixels that ``msk`` keeps (all of [k0, k1) when NULL)."""
     cdef int a
     if msk == NULL:
@@ -743,8 +740,6 @@ cdef void _run_chunk(const Job* J, Scratch* S, int c0, int c1) noexcept nogil:
         if J.paint and p >= c0 and p < c1 and (p + 1 - b0 == J.band or p == c1 - 1):
             _paint_band(J, S, b0, p + 1)
             b0 = p + 1
-
-
 
 
 cdef tuple _prepare(Job* J, const float[:, ::1] disp, uint8_t[:, ::1] occ, dict params, bint paint):
