@@ -3,6 +3,7 @@
 Import from a script run as ``python benchmarks/<script>.py`` (the script's
 folder is on ``sys.path``): ``from _harness import median_ms, write_report``.
 """
+
 from __future__ import annotations
 
 import json

@@ -18,6 +18,7 @@ sometimes not, and the copy reference swings between about 2.5 and 7 ms from
 one process to the next; with it the copy is at its fastest, the strictest
 reference.  ``--fresh-memory`` measures without it.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -26,7 +27,6 @@ import os
 from pathlib import Path
 
 import numpy as np
-
 from _harness import paired_ratio, times_ms
 
 from vpp_service.service.allocator import reuse_freed_memory
@@ -41,7 +41,7 @@ def scene(H: int, W: int, density: float, seed: int = 0):
     left = np.ascontiguousarray(np.repeat(np.repeat(small, 8, 0), 8, 1)[:H, :W])
     left = np.clip(left.astype(np.int16) + rng.integers(-8, 9, left.shape), 0, 255).astype(np.uint8)
     right = np.ascontiguousarray(np.roll(left, -20, axis=1))
-    gt = (20 + 60 * np.sin(np.arange(W) / 150.0)[None, :] + np.arange(H)[:, None] / 20.0)
+    gt = 20 + 60 * np.sin(np.arange(W) / 150.0)[None, :] + np.arange(H)[:, None] / 20.0
     disp = np.where(rng.random((H, W)) < density, gt, 0).astype(np.float32)
     return left, right, disp
 
@@ -51,8 +51,9 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default="benchmarks/results/bench_vpp.json")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--reps", type=int, default=15)
-    ap.add_argument("--fresh-memory", action="store_true",
-                    help="do not keep freed memory for reuse (outputs may be mapped afresh)")
+    ap.add_argument(
+        "--fresh-memory", action="store_true", help="do not keep freed memory for reuse (outputs may be mapped afresh)"
+    )
     a = ap.parse_args(argv)
     memory = "fresh"
     if not a.fresh_memory and reuse_freed_memory():
@@ -63,24 +64,39 @@ def main(argv=None) -> int:
     dens = [0.05] if a.quick else [0.01, 0.05]
     threads = sorted({1, allt})
     rows = []
-    print(f"{'size':10s} {'dens':>5s} {'pattern':10s} {'thr':>3s} {'ms':>8s} {'min ms':>8s} {'x copy':>7s} "
-          f"{'x (min)':>7s} {'paired':>7s} {'points':>8s}")
+    print(
+        f"{'size':10s} {'dens':>5s} {'pattern':10s} {'thr':>3s} {'ms':>8s} {'min ms':>8s} {'x copy':>7s} "
+        f"{'x (min)':>7s} {'paired':>7s} {'points':>8s}"
+    )
     for name in sizes:
         H, W = SIZES[name]
         for density in dens:
             left, right, disp = scene(H, W, density)
+
             def copy():
                 return left.copy(), right.copy()
 
             ct = times_ms(copy, a.reps)
             copy_ms, copy_min = float(np.median(ct)), float(ct.min())
-            rows.append(dict(size=name, H=H, W=W, density=density, pattern="copy", threads=1,
-                             ms=copy_ms, min_ms=copy_min, ratio=1.0, min_ratio=1.0))
-            print(f"{name:10s} {density:5.2f} {'copy':10s} {1:3d} {copy_ms:8.2f} {copy_min:8.2f} {1.0:7.2f} "
-                  f"{1.0:7.2f}")
+            rows.append(
+                dict(
+                    size=name,
+                    H=H,
+                    W=W,
+                    density=density,
+                    pattern="copy",
+                    threads=1,
+                    ms=copy_ms,
+                    min_ms=copy_min,
+                    ratio=1.0,
+                    min_ratio=1.0,
+                )
+            )
+            print(f"{name:10s} {density:5.2f} {'copy':10s} {1:3d} {copy_ms:8.2f} {copy_min:8.2f} {1.0:7.2f} {1.0:7.2f}")
             for pattern in ("random", "histogram"):
                 cfg = VPPConfig(pattern=pattern)
                 for nt in threads:
+
                     def run():
                         return project(left, right, disp, cfg, num_threads=nt)
 
@@ -88,11 +104,26 @@ def main(argv=None) -> int:
                     ms, mn = float(np.median(t)), float(t.min())
                     paired = paired_ratio(run, copy, a.reps)
                     npts = project(left, right, disp, cfg).stats.given
-                    rows.append(dict(size=name, H=H, W=W, density=density, pattern=pattern,
-                                     threads=nt, ms=ms, min_ms=mn, ratio=ms / copy_ms,
-                                     min_ratio=mn / copy_min, paired_ratio=paired, points=npts))
-                    print(f"{name:10s} {density:5.2f} {pattern:10s} {nt:3d} {ms:8.2f} {mn:8.2f} "
-                          f"{ms / copy_ms:7.2f} {mn / copy_min:7.2f} {paired:7.2f} {npts:8d}")
+                    rows.append(
+                        dict(
+                            size=name,
+                            H=H,
+                            W=W,
+                            density=density,
+                            pattern=pattern,
+                            threads=nt,
+                            ms=ms,
+                            min_ms=mn,
+                            ratio=ms / copy_ms,
+                            min_ratio=mn / copy_min,
+                            paired_ratio=paired,
+                            points=npts,
+                        )
+                    )
+                    print(
+                        f"{name:10s} {density:5.2f} {pattern:10s} {nt:3d} {ms:8.2f} {mn:8.2f} "
+                        f"{ms / copy_ms:7.2f} {mn / copy_min:7.2f} {paired:7.2f} {npts:8d}"
+                    )
     Path(a.json).parent.mkdir(parents=True, exist_ok=True)
     Path(a.json).write_text(json.dumps({"cpu_count": allt, "memory": memory, "results": rows}, indent=1))
     return 0

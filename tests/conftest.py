@@ -29,3 +29,16 @@ def zenoh_endpoint(tcp_port: int) -> str:
 def zenoh_config() -> Callable[..., zenoh.Config]:
     """Builder ``zenoh_config(listen=[...], connect=[...], mode="peer")`` -> ``zenoh.Config``."""
     return zenoh_test_config
+
+
+@pytest.fixture(params=["portable", "avx2"])
+def build(request, monkeypatch):
+    """Run the test on each build of the VPP sweep kernel this machine can execute."""
+    from helpers.vpp import BUILDS
+    from vpp_service.vpp import backend
+
+    mod = BUILDS[request.param]
+    if mod is None:
+        pytest.skip("no AVX2 build for this CPU / platform")
+    monkeypatch.setattr(backend, "sweep", mod)
+    return mod

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import os
 import subprocess
 import sys
@@ -42,20 +43,34 @@ def test_default_threads_honours_omp_num_threads_else_affinity(monkeypatch, env,
 
 def test_vpp_and_matchers_share_the_policy(monkeypatch):
     from vpp_service.matchers import census_sgm
-    from vpp_service.vpp._validate import as_threads
+    from vpp_service.vpp import VPPConfig, detect_occlusions, project
 
-    monkeypatch.setenv("OMP_NUM_THREADS", "3")
-    assert as_threads(None) == 3  # was os.cpu_count(), blind to OMP_NUM_THREADS
+    # the modules (the package's ``project`` attribute is the function)
+    project_module = importlib.import_module("vpp_service.vpp.project")
+    occlusion = importlib.import_module("vpp_service.vpp.occlusion")
+
+    img = np.zeros((8, 12), np.uint8)
+    disp = np.zeros((8, 12), np.float32)
     with pytest.raises(ValueError, match="num_threads"):
-        as_threads(0)
-    gray = np.zeros((8, 12), np.uint8)
+        project(img, img, disp, VPPConfig(), num_threads=0)
+    with pytest.raises(ValueError, match="num_threads"):
+        detect_occlusions(disp, num_threads=0)
     with pytest.raises(ValueError, match="threads"):
-        census_sgm.census_transform(gray, 0)  # 0 is not a count (None is the default)
-    seen = []
-    monkeypatch.setattr(census_sgm, "resolve_threads", lambda n: seen.append(n) or 1)
-    census_sgm.census_transform(gray)
-    census_sgm.census_transform(gray, 2)
-    assert seen == [None, 2]
+        census_sgm.census_transform(img, 0)  # 0 is not a count (None is the default)
+    seen: list[object] = []
+
+    def record(n, name="threads"):
+        seen.append(n)
+        return 1
+
+    for module in (census_sgm, project_module, occlusion):
+        monkeypatch.setattr(module, "resolve_threads", record)
+    census_sgm.census_transform(img)
+    census_sgm.census_transform(img, 2)
+    project(img, img, disp, VPPConfig())
+    project(img, img, disp, VPPConfig(), num_threads=2)
+    detect_occlusions(disp)
+    assert seen == [None, 2, None, 2, None]
 
 
 @pytest.mark.parametrize(

@@ -7,33 +7,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from helpers.vpp import make_case
 from vpp_reference import ref_project
 from vpp_service.vpp import VPPConfig, backend, project
 from vpp_service.vpp.rng import pattern_bytes
-
-
-def make_case(rng: np.random.Generator, H: int, W: int, C: int, density: float):
-    """Random smooth+noisy images and a sparse disparity with border, colliding and invalid points."""
-    base = rng.integers(0, 256, (H, W, C)).astype(np.float64)
-    base = 0.5 * base + 0.5 * np.roll(base, 1, axis=1)
-    left = np.clip(base + rng.normal(0, 10, base.shape), 0, 255).astype(np.uint8)
-    right = np.clip(np.roll(base, -3, axis=1) + rng.normal(0, 10, base.shape), 0, 255).astype(np.uint8)
-    disp = np.zeros((H, W), np.float32)
-    m = rng.random((H, W)) < density
-    disp[m] = rng.uniform(0.2, W * 0.6, m.sum()).astype(np.float32)
-    k = rng.random((H, W)) < density * 0.3  # integer disparities
-    disp[k] = rng.integers(1, max(2, W // 2), k.sum()).astype(np.float32)
-    for _ in range(3):  # colliding pairs (same warped cell)
-        y, x1 = rng.integers(0, H), rng.integers(0, W - 8)
-        d1 = float(rng.integers(2, 6))
-        disp[y, x1], disp[y, x1 + 4] = d1, d1 + 4.2
-    y = rng.integers(0, H)
-    disp[y, 1] = 3.7  # left-border point
-    bad = rng.integers(0, H * W, 4)
-    disp.reshape(-1)[bad] = np.array([-2.0, np.inf, np.nan, W + 1.0], np.float32)
-    if C == 1 and rng.random() < 0.5:
-        left, right = left[:, :, 0], right[:, :, 0]
-    return left, right, disp
 
 
 def sweep_cases(n: int = 44):
@@ -60,8 +37,8 @@ def sweep_cases(n: int = 44):
     return cases
 
 
-@pytest.mark.parametrize(("i", "cfg", "shape", "density"), sweep_cases(), ids=lambda v: None)
-def test_reference_equality(i, cfg, shape, density):
+@pytest.mark.parametrize("i,cfg,shape,density", sweep_cases(), ids=lambda v: None)
+def test_reference_equality(build, i, cfg, shape, density):
     rng = np.random.default_rng(i)
     left, right, disp = make_case(rng, *shape, density)
     l0, r0 = left.copy(), right.copy()
@@ -74,22 +51,10 @@ def test_reference_equality(i, cfg, shape, density):
     np.testing.assert_array_equal(res.left, rl)
 
 
-@pytest.fixture(params=[False, True], ids=["tables_portable", "tables_avx2"])
-def table_builder(request):
-    """Run with each builder of the histogram window tables this CPU can run."""
-    from vpp_service.vpp import _kernel
-
-    if not _kernel.tables_use_avx2(request.param) and request.param:
-        _kernel.tables_use_avx2(backend.AVX2)
-        pytest.skip("no AVX2 on this CPU / platform")
-    yield request.param
-    _kernel.tables_use_avx2(backend.AVX2)
-
-
 @pytest.mark.parametrize(
-    ("shape", "search"), [((12, 97, 3), (64, 3)), ((9, 70, 1), (16, 1)), ((7, 33, 3), (7, 3)), ((10, 131, 3), (100, 5))]
+    "shape,search", [((12, 97, 3), (64, 3)), ((9, 70, 1), (16, 1)), ((7, 33, 3), (7, 3)), ((10, 131, 3), (100, 5))]
 )
-def test_histogram_tables_both_builders_match_reference(table_builder, shape, search):
+def test_histogram_tables_both_builders_match_reference(build, shape, search):
     """Wider than the 32-column blocks (full, partial last block), both builders."""
     rng = np.random.default_rng(shape[1])
     left, right, disp = make_case(rng, *shape, 0.1)
@@ -254,7 +219,7 @@ def test_patch_larger_than_image():
 
 # ------------------------------------------------------------ bad input
 @pytest.mark.parametrize(
-    ("kwargs", "exc", "word"),
+    "kwargs,exc,word",
     [
         (dict(left=np.zeros((4, 5), np.uint16)), TypeError, "left"),
         (dict(right=np.zeros((4, 6), np.uint8)), ValueError, "shape"),
@@ -396,9 +361,8 @@ def _occupancies(seed: int, n: int):
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_hist_pick_bits_matches_reference(seed):
+def test_hist_pick_bits_matches_reference(build, seed):
     from vpp_reference import hist_pick
-    from vpp_service.vpp import _kernel
 
     edge = [np.zeros(256, bool), np.ones(256, bool)]
     for k in (0, 1, 63, 64, 127, 128, 191, 192, 255):
@@ -408,11 +372,9 @@ def test_hist_pick_bits_matches_reference(seed):
     for occ in list(_occupancies(seed, 3000)) + edge:
         bits = np.ascontiguousarray(np.packbits(occ, bitorder="little").view(np.uint64))
         ref = -1 if occ.all() else hist_pick(occ.astype(np.int64))
-        assert _kernel.hist_pick_bits(bits) == ref, np.nonzero(~occ)[0]
+        assert build.hist_pick_bits(bits) == ref, np.nonzero(~occ)[0]
 
 
 def test_hist_pick_bits_rejects_bad_length():
-    from vpp_service.vpp import _kernel
-
     with pytest.raises(ValueError, match="occupancy"):
-        _kernel.hist_pick_bits(np.zeros(3, np.uint64))
+        backend.sweep.hist_pick_bits(np.zeros(3, np.uint64))

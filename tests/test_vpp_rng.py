@@ -76,7 +76,7 @@ def test_no_repeat_within_rows_and_near_rows():
 
 
 @pytest.mark.parametrize("build", BUILDS, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
-@pytest.mark.parametrize(("channels", "hmax"), [(1, 0), (3, 1), (3, 4), (1, 7)])
+@pytest.mark.parametrize("channels,hmax", [(1, 0), (3, 1), (3, 4), (1, 7)])
 def test_compiled_table_equals_reference(build, channels, hmax):
     seed = 987654321
     pad = build.table_padding(channels, hmax)
@@ -102,7 +102,7 @@ def test_kernel_table_cached_and_padded():
 
 
 @pytest.mark.parametrize(
-    ("args", "exc", "match"),
+    "args,exc,match",
     [
         ((-1, 3, 1), ValueError, "seed"),
         ((2**64, 3, 1), ValueError, "seed"),
@@ -124,28 +124,12 @@ def test_fill_rejects_short_buffer():
 
 
 def test_sweep_rejects_short_table():
-    from vpp_service.vpp.occlusion import penalty_table
+    from vpp_service.vpp import VPPConfig
+    from vpp_service.vpp.params import kernel_params
 
     d = np.zeros((4, 8), np.float32)
     img = np.zeros((4, 8, 3), np.uint8)
-    with pytest.raises(ValueError, match="pattern table"):
-        backend.sweep.sweep_kernel(
-            d,
-            np.zeros((4, 8), np.uint8),
-            False,
-            1,
-            1,
-            penalty_table((1, 1), 2.0, 0.4375),
-            1.0,
-            img,
-            img,
-            img.copy(),
-            img.copy(),
-            True,
-            1,
-            0.4,
-            True,
-            0,
-            np.zeros(rng.TABLE_SIZE * 3, np.uint8),
-            1,
-        )
+    params = kernel_params(VPPConfig(occlusion="off"))
+    for table in (np.zeros(rng.TABLE_SIZE * 3, np.uint8), None):
+        with pytest.raises(ValueError, match="pattern table"):
+            backend.sweep.paint(d, np.zeros((4, 8), np.uint8), img, img, img.copy(), img.copy(), params, table, 1)

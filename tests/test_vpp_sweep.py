@@ -1,7 +1,5 @@
-"""The fused sweep kernel (vpp_service/vpp/_sweep.pyx) against the literal reference.
+"""The sweep kernel (vpp_service/vpp/_sweep.pyx) against the literal reference, on both builds.
 
-project() routes the per-pixel random pattern without adaptive patches (the
-default (vi), and (ii)) to the sweep kernel; detect_occlusions() always uses it.
 These cases are larger than test_vpp_project's sweep so that rows split into
 several chunks per thread, spans reach the 16-byte SIMD paths and the fallbacks
 (wide patches, row ends, left-border matches), and maps use NaN as "no point".
@@ -12,21 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from test_vpp_project import make_case
+from helpers.vpp import BUILDS, make_case
 from vpp_reference import ref_occlusions, ref_project
 from vpp_service.vpp import VPPConfig, backend, detect_occlusions, project
-
-BUILDS = {"portable": backend.portable, "avx2": backend.avx2_build()}
-
-
-@pytest.fixture(params=list(BUILDS))
-def build(request, monkeypatch):
-    """Run the test on each build of the sweep kernel this machine can execute."""
-    mod = BUILDS[request.param]
-    if mod is None:
-        pytest.skip("no AVX2 build for this CPU / platform")
-    monkeypatch.setattr(backend, "sweep", mod)
-    return mod
 
 
 def test_builds_report_themselves():
@@ -96,7 +82,7 @@ def expected_stats(disp, occluded, occ):
 
 
 @pytest.mark.parametrize(
-    ("window", "lam", "gamma", "t"),
+    "window,lam,gamma,t",
     [((9, 7), 2.0, 0.4375, 1.0), ((3, 5), 0.0, 1.0, 0.0), ((21, 1), 1.3, 0.1, 2.5), ((1, 13), 5.0, 0.9, 0.25)],
 )
 def test_detect_matches_reference_many_chunks(build, window, lam, gamma, t):

@@ -5,6 +5,7 @@ direct transcription of the pinned rules (see the module docstring of
 ``vpp_service/vpp/project.py``): a dense warped grid for occlusions, a global
 sort of the points, a loop over patch pixels, explicit histograms.
 """
+
 from __future__ import annotations
 
 import math
@@ -39,7 +40,7 @@ def ref_occlusions(disp: np.ndarray, window=(9, 7), lam=2.0, gamma=0.4375, t=1.0
     H, W = disp.shape
     rx2, ry2 = window[0] // 2, window[1] // 2
     occ = np.zeros((H, W), bool)
-    grid = {}          # (xw, y) -> (d, x) winner
+    grid = {}  # (xw, y) -> (d, x) winner
     for d, y, x in valid_points(disp):
         xw = x - int(math.floor(d + 0.5))
         cur = grid.get((xw, y))
@@ -72,7 +73,7 @@ def hist_pick(counts: np.ndarray) -> int:
         return 0
     i = np.arange(256)
     dist = np.min(np.abs(i[:, None] - filled[None, :]), axis=1)
-    return int(np.argmax(dist))          # first maximum = smallest i
+    return int(np.argmax(dist))  # first maximum = smallest i
 
 
 def hist_value(Lo, Ro, c, r, cl, cr, sw, sh):
@@ -82,7 +83,7 @@ def hist_value(Lo, Ro, c, r, cl, cr, sw, sh):
     for img, cen in ((Lo, cl), (Ro, cr)):
         a, e = max(0, cen - sw // 2), min(W - 1, cen - sw // 2 + sw - 1)
         if a <= e:
-            counts += np.bincount(img[y0:y1 + 1, a:e + 1, c].ravel(), minlength=256)
+            counts += np.bincount(img[y0 : y1 + 1, a : e + 1, c].ravel(), minlength=256)
     return hist_pick(counts)
 
 
@@ -96,11 +97,10 @@ def ref_project(left, right, disp, cfg, seed=0):
     oR = Ro.astype(np.int64).copy()
     hmax = (cfg.patch - 1) // 2
     if cfg.occlusion != "off":
-        occ = ref_occlusions(disp, (cfg.occ_window_x, cfg.occ_window_y), cfg.occ_lambda,
-                             cfg.occ_gamma, cfg.occ_t)
+        occ = ref_occlusions(disp, (cfg.occ_window_x, cfg.occ_window_y), cfg.occ_lambda, cfg.occ_gamma, cfg.occ_t)
     else:
         occ = np.zeros((H, W), bool)
-    pts = sorted(valid_points(disp))           # (d, y, x) global order
+    pts = sorted(valid_points(disp))  # (d, y, x) global order
     if not pts:
         return Lo.astype(np.uint8).reshape(left.shape), Ro.astype(np.uint8).reshape(right.shape), occ
     ds = [p[0] for p in pts]
@@ -110,8 +110,8 @@ def ref_project(left, right, disp, cfg, seed=0):
     alpha = cfg.alpha
     wa = w16(alpha)
     neglog = -math.log(cfg.bilateral_threshold)
-    two_ss = 2.0 * cfg.bilateral_sigma_space ** 2
-    two_sc = 2.0 * cfg.bilateral_sigma_color ** 2
+    two_ss = 2.0 * cfg.bilateral_sigma_space**2
+    two_sc = 2.0 * cfg.bilateral_sigma_color**2
 
     def half(d):
         if cfg.adaptive_patch != "distance":
@@ -139,10 +139,10 @@ def ref_project(left, right, disp, cfg, seed=0):
                 return pattern_bytes(seed, x, y, C)
             return pattern_bytes(seed, x + dx, y + dy, C)
         if cfg.uniform_patch:
-            return np.array([hist_value(Lo, Ro, c, y, x, cn, cfg.search_width, cfg.search_height)
-                             for c in range(C)])
-        return np.array([hist_value(Lo, Ro, c, y + dy, x + dx, cn + dx, cfg.search_width,
-                                    cfg.search_height) for c in range(C)])
+            return np.array([hist_value(Lo, Ro, c, y, x, cn, cfg.search_width, cfg.search_height) for c in range(C)])
+        return np.array(
+            [hist_value(Lo, Ro, c, y + dy, x + dx, cn + dx, cfg.search_width, cfg.search_height) for c in range(C)]
+        )
 
     def is_fgd(y, x):
         return cfg.occlusion == "fgd" and occ[y, x]
@@ -200,8 +200,7 @@ def ref_project(left, right, disp, cfg, seed=0):
                             v16 = int(oR[r, col, c]) * (65536 - wb) + int(oR[r, col + 1, c]) * wb
                         else:
                             v16 = int(oR[r, col, c]) * 65536
-                        oL[r, xl, c] = (int(oL[r, xl, c]) * (65536 - wa) * 65536 + v16 * wa
-                                        + 2 ** 31) >> 32
+                        oL[r, xl, c] = (int(oL[r, xl, c]) * (65536 - wa) * 65536 + v16 * wa + 2**31) >> 32
                 else:
                     A = value(x, y, d, dx, dy)
                     for c in range(C):

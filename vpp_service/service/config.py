@@ -271,13 +271,7 @@ def _parse_vpp(d: Mapping[str, Any]) -> VPPConfig | None:
         raise SettingsError(f"vpp.enabled: must be true or false, got {enabled!r}")
     from vpp_service.vpp import VPPConfig
 
-    try:
-        cfg = VPPConfig.from_dict(raw)
-    except SettingsError as exc:
-        msg = str(exc)
-        raise SettingsError(msg if msg.startswith("vpp") else f"vpp.{msg}") from None
-    except (TypeError, ValueError) as exc:
-        raise SettingsError(f"vpp: {exc}") from None
+    cfg = from_mapping(VPPConfig, raw, "vpp")
     return cfg if enabled else None
 
 

@@ -1,5 +1,6 @@
-/* C helpers of the sweep kernel (vpp_service/vpp/_sweep.pyx): the row scanner,
- * the key sort, the byte blends on 16-byte vectors and the float window maximum.
+/* The C of the VPP kernel (vpp_service/vpp/_sweep.pyx): the row scanner, the
+ * band sort, the occlusion screen, the byte blends on 16-byte vectors, the
+ * histogram value source, the named modes and the scratch pool.
  *
  * Every function computes exactly what its scalar definition says.  The SIMD
  * versions are chosen at compile time: AVX2 in the x86-64-v3 build
@@ -17,9 +18,8 @@
 #include <stdint.h>
 #include <string.h>
 #include <math.h>
-#ifdef __cplusplus
 #include <algorithm>
-#endif
+#include <atomic>
 
 #if defined(__AVX2__)
 #include <immintrin.h>
@@ -65,28 +65,7 @@ static inline int vpp_scan_finish(const float* d, int x, int W, uint64_t* keys, 
 static inline int vpp_scan_row(const float* d, int W, uint64_t* keys, int64_t* st) {
     int64_t given = 0, oob = 0;
     int n = 0, x = 0;
-#if defined(__AVX2__)
-    const __m256 zero = _mm256_setzero_ps(), wf = _mm256_set1_ps((float)W);
-    const __m256 iota = _mm256_setr_ps(0, 1, 2, 3, 4, 5, 6, 7);
-    for (; x + 8 <= W; x += 8) {
-        __m256 a = _mm256_loadu_ps(d + x);
-        unsigned g = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(a, zero, _CMP_NEQ_OQ));  /* not 0, not NaN */
-        unsigned m, o;
-        if (!g) continue;
-        m = (unsigned)_mm256_movemask_ps(_mm256_and_ps(_mm256_cmp_ps(a, zero, _CMP_GT_OQ),
-                                                       _mm256_cmp_ps(a, wf, _CMP_LT_OQ)));
-        /* left border: x - d < 0, i.e. x < d (exact in float for x < 2^24) */
-        o = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(_mm256_add_ps(iota, _mm256_set1_ps((float)x)), a,
-                                                       _CMP_LT_OQ)) & m;
-        given += __builtin_popcount(g);
-        oob += __builtin_popcount(o);
-        while (m) {
-            int i = x + __builtin_ctz(m);
-            m &= m - 1;
-            keys[n++] = ((uint64_t)vpp_sw_f2u(d[i]) << 32) | (uint64_t)i;
-        }
-    }
-#elif VPP_HAVE_SSE2
+#if VPP_HAVE_SSE2
     const __m128 zero = _mm_setzero_ps(), wf = _mm_set1_ps((float)W);
     for (; x + 8 <= W; x += 8) {
         __m128 a = _mm_loadu_ps(d + x), b = _mm_loadu_ps(d + x + 4);
@@ -113,9 +92,7 @@ static inline int vpp_scan_row(const float* d, int W, uint64_t* keys, int64_t* s
  * is branch-free: each block of 8 is compressed with a permutation from a
  * 256-entry table (vpp_scan_lut, built by vpp_scan_init) and its 8 keys are
  * stored whole, the count advancing by the block's number of points; a write
- * never passes x + 8 <= W because a row has at most one key per pixel.
- * (Branching on empty blocks and popping mask bits mispredicts about twice
- * per non-empty block at 5 % density: ~4 ms of a 2964 x 1988 map.) */
+ * never passes x + 8 <= W because a row has at most one key per pixel. */
 #if defined(__AVX2__)
 static int32_t vpp_scan_lut[256][8] __attribute__((aligned(32)));
 #endif
@@ -241,64 +218,6 @@ static inline void vpp_geometry(const uint64_t* keys, int n, int32_t* xw, int32_
 }
 
 
-static inline void vpp_insertion_sort(uint64_t* a, int n) {
-    int i, j;
-    for (i = 1; i < n; i++) {
-        uint64_t v = a[i];
-        for (j = i; j > 0 && a[j - 1] > v; j--) a[j] = a[j - 1];
-        a[j] = v;
-    }
-}
-
-/* Sort keys (float_bits(d) << 32) | tiebreak ascending, given in increasing
- * tiebreak order (a row's keys in x order; a band's in gather order).  A
- * counting pass puts the keys into n buckets of d (the bucket index is a
- * monotone function of d, so buckets are in d order), then each bucket is
- * sorted by the full key (insertion sort; std::sort for the rare crowded
- * bucket).  Expected linear time, against ~50 cycles per key for a comparison
- * sort on unpredictable d.  Scratch: tmp and bucket hold n entries, cnt n + 1. */
-static inline void vpp_sort_keys(uint64_t* keys, int n, uint64_t* tmp, int* bucket, int* cnt) {
-    float dmin, dmax, d;
-    double scale;
-    int i, b, s, e;
-    if (n <= 24) {
-        vpp_insertion_sort(keys, n);
-        return;
-    }
-    dmin = dmax = vpp_sw_u2f((uint32_t)(keys[0] >> 32));
-    for (i = 1; i < n; i++) {
-        d = vpp_sw_u2f((uint32_t)(keys[i] >> 32));
-        dmin = d < dmin ? d : dmin;
-        dmax = d > dmax ? d : dmax;
-    }
-    if (dmin == dmax) return;            /* one d: the input (tiebreak) order is the key order */
-    scale = (double)n / ((double)dmax - (double)dmin);
-    memset(cnt, 0, sizeof(int) * (size_t)(n + 1));
-    for (i = 0; i < n; i++) {
-        b = (int)(((double)vpp_sw_u2f((uint32_t)(keys[i] >> 32)) - (double)dmin) * scale);
-        b = b < n - 1 ? b : n - 1;
-        bucket[i] = b;
-        cnt[b + 1]++;
-    }
-    for (i = 0; i < n; i++) cnt[i + 1] += cnt[i];
-    for (i = 0; i < n; i++) tmp[cnt[bucket[i]]++] = keys[i];   /* cnt[b] ends at bucket b's end */
-    s = 0;
-    for (b = 0; b < n; b++) {
-        e = cnt[b];
-        if (e - s > 32) {
-#ifdef __cplusplus
-            std::sort(tmp + s, tmp + e);
-#else
-            vpp_insertion_sort(tmp + s, e - s);
-#endif
-        } else if (e - s > 1) {
-            vpp_insertion_sort(tmp + s, e - s);
-        }
-        s = e;
-    }
-    memcpy(keys, tmp, sizeof(uint64_t) * (size_t)n);
-}
-
 /* One point of a paint band (see _paint_band in _sweep.pyx). */
 typedef struct {
     int32_t x;
@@ -306,7 +225,9 @@ typedef struct {
     int32_t fl;         /* right-view column (see vpp_geometry) */
     uint32_t w0;
     uint32_t w1;
-    int32_t occl;       /* FGD-occluded */
+    int16_t occl;       /* occluded (flag of vpp_occ_screen) */
+    int16_t h;          /* patch half-size (adaptive) */
+    int32_t vi;         /* index in gather order (its values in the band's value buffer) */
     float d;
 } vpp_band_pt;
 
@@ -322,11 +243,9 @@ static inline void vpp_band_insertion_sort(vpp_band_pt* a, int n) {
     }
 }
 
-#ifdef __cplusplus
 struct vpp_band_pt_less {
     bool operator()(const vpp_band_pt& a, const vpp_band_pt& b) const { return a.d < b.d; }
 };
-#endif
 
 /* Stable sort of a band's points by d into out: in holds them in gather
  * order (row, then x), so a stable sort by d gives the global paint order
@@ -354,11 +273,7 @@ static inline void vpp_sort_band(const vpp_band_pt* in, const float* dv, int n, 
         if (n <= 24) {
             vpp_band_insertion_sort(out, n);
         } else {
-#ifdef __cplusplus
             std::stable_sort(out, out + n, vpp_band_pt_less());
-#else
-            vpp_band_insertion_sort(out, n);
-#endif
         }
         return;
     }
@@ -398,11 +313,7 @@ static inline void vpp_sort_band(const vpp_band_pt* in, const float* dv, int n, 
         for (b = 0; b < nb; b++) {
             e = cnt[b];
             if (e - s > 32) {
-#ifdef __cplusplus
                 std::stable_sort(out + s, out + e, vpp_band_pt_less());
-#else
-                vpp_band_insertion_sort(out + s, e - s);
-#endif
             }
             s = e;
         }
@@ -555,22 +466,6 @@ static inline void vpp_store_packed_avx2(uint8_t* dst, __m256i a) {
                                                      _mm256_extracti128_si256(a, 1)));
 }
 
-static inline void vpp_blend16_avx2(uint8_t* dst, const uint8_t* val, int n, uint32_t w) {
-    __m256i a = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i*)dst));
-    __m256i b = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i*)val));
-    vpp_store_packed_avx2(dst, vpp_blend_avx2(a, b, vpp_lanes16_avx2(0, n), w));
-}
-
-static inline void vpp_splat16_avx2(uint8_t* dst, const uint8_t* val, int C,
-                                    int k0, int k1, uint32_t w0, uint32_t w1) {
-    __m256i a = _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i*)dst));
-    __m128i v = _mm_loadu_si128((const __m128i*)val);
-    __m128i v1 = C == 3 ? _mm_slli_si128(v, 3) : _mm_slli_si128(v, 1);
-    if (w1) a = vpp_blend_avx2(a, _mm256_cvtepu8_epi16(v1), vpp_lanes16_avx2((k0 + 1) * C, (k1 + 1) * C), w1);
-    a = vpp_blend_avx2(a, _mm256_cvtepu8_epi16(v), vpp_lanes16_avx2(k0 * C, k1 * C), w0);
-    vpp_store_packed_avx2(dst, a);
-}
-
 /* The blend with w < 32768 (every weight when alpha <= 0.5): w fits a signed
  * 16-bit lane, so mulhi_epi16 gives floor(d w / 65536) directly and the sign
  * correction of vpp_blend_avx2 is not needed; same bytes. */
@@ -580,7 +475,7 @@ static inline __m256i vpp_blend_avx2_s(__m256i a, __m256i b, __m256i wv) {
                             _mm256_srli_epi16(_mm256_mullo_epi16(d, wv), 15));
 }
 
-/* vpp_splat16_avx2 for the nrows rows of one point's patch: row i's span
+/* vpp_splat16 for the nrows rows of one point's patch: row i's span
  * starts at dst + i rs, its pattern at pat + C * ((p0 + i * step) & mask).
  * Lane masks and weights are set up once. */
 static inline void vpp_splat_rows_avx2(uint8_t* dst, int64_t rs, const uint8_t* pat, int64_t p0,
@@ -671,7 +566,7 @@ static inline int vpp_splat16(uint8_t* dst, const uint8_t* val, int C, int k0, i
     __m128i a, alo, ahi, v, v1;
     if ((k1 + 1) * C > 16 || room < 16 || (C != 1 && C != 3)) return 0;
 #if VPP_BUILD_AVX2
-    vpp_splat16_avx2(dst, val, C, k0, k1, w0, w1);
+    vpp_splat_rows_avx2(dst, 0, val, 0, 0, 0, 1, C, k0, k1, w0, w1);
     return 1;
 #endif
     a = _mm_loadu_si128((const __m128i*)dst);
@@ -701,7 +596,7 @@ static inline void vpp_blend_span(uint8_t* dst, const uint8_t* val, int n, uint3
     if (room >= (int64_t)((n + 15) & ~15)) {
         uint32_t w16 = w > 65535u ? 65535u : w;
 #if VPP_BUILD_AVX2
-        for (; n > 0; n -= 16, dst += 16, val += 16) vpp_blend16_avx2(dst, val, n < 16 ? n : 16, w16);
+        for (; n > 0; n -= 16, dst += 16, val += 16) vpp_blend_rows_avx2(dst, 0, val, 0, 0, 0, 1, 1, 0, n < 16 ? n : 16, w16);
         return;
 #endif
         for (; n > 0; n -= 16, dst += 16, val += 16) vpp_blend16(dst, val, n < 16 ? n : 16, w16);
@@ -709,6 +604,304 @@ static inline void vpp_blend_span(uint8_t* dst, const uint8_t* val, int n, uint3
     }
 #endif
     for (i = 0; i < n; i++) dst[i] = vpp_blend_u8(dst[i], val[i], w);
+}
+
+
+/* ---- named modes; vpp_service.vpp.params.kernel_params maps a VPPConfig to them */
+enum vpp_pattern { VPP_PATTERN_RANDOM = 0, VPP_PATTERN_HISTOGRAM = 1 };
+enum vpp_occlusion { VPP_OCC_OFF = 0, VPP_OCC_NO = 1, VPP_OCC_BKGD = 2, VPP_OCC_FGD = 3 };
+enum vpp_patch_mask { VPP_MASK_FULL = 0, VPP_MASK_DISTANCE = 1, VPP_MASK_BILATERAL = 2 };
+
+/* ---- per-pixel rules (see vpp_service/vpp/rng.py and tests/vpp_reference.py) */
+#define VPP_ROW_STEP 23679      /* rng.ROW_STEP */
+#define VPP_TABLE_MASK 65535    /* rng.TABLE_SIZE - 1 */
+
+/* splitmix64 finaliser of seedmix + ((y << 32) | x) * KEY_MUL, seedmix = seed * SEED_MUL */
+static inline uint64_t vpp_hash(uint64_t seedmix, uint64_t x, uint64_t y) {
+    uint64_t z = seedmix + ((y << 32) | x) * 0x9E3779B97F4A7C15ULL;
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+}
+
+static inline uint64_t vpp_seedmix(uint64_t seed) { return seed * 0xD1B54A32D192ED03ULL; }
+
+/* Pattern-table index of pixel (x, y).  The kernel's table is padded past
+ * TABLE_SIZE entries with a copy of its start, so entry vpp_pidx(x0, y) + k is pixel x0 + k. */
+static inline int64_t vpp_pidx(int64_t x, int64_t y) { return (x + y * VPP_ROW_STEP) & VPP_TABLE_MASK; }
+
+static inline int vpp_ifloor(double v) { int i = (int)v; return (double)i > v ? i - 1 : i; }
+
+/* FGD: blend the right view at x' (interpolated between rp and the next pixel
+ * with weight wb when interp) into the left pixel lp with weight wa. */
+static inline void vpp_fgd_pixel(uint8_t* lp, const uint8_t* rp, int C, int interp, uint64_t wb, uint64_t wa) {
+    int c;
+    for (c = 0; c < C; c++) {
+        uint64_t v16 = interp ? (uint64_t)rp[c] * (65536 - wb) + (uint64_t)rp[C + c] * wb
+                              : (uint64_t)rp[c] * 65536;
+        lp[c] = (uint8_t)(((uint64_t)lp[c] * (65536 - wa) * 65536 + v16 * wa + 2147483648ULL) >> 32);
+    }
+}
+
+/* ---- pool of per-thread scratch buffers kept between calls (lock-free slots) */
+#define VPP_POOL 64
+static std::atomic<void*> vpp_scratch_pool[VPP_POOL];
+
+static inline void* vpp_pool_take(void) {
+    for (int i = 0; i < VPP_POOL; i++) {
+        void* s = vpp_scratch_pool[i].exchange(nullptr, std::memory_order_acq_rel);
+        if (s) return s;
+    }
+    return nullptr;
+}
+
+static inline int vpp_pool_give(void* s) {
+    for (int i = 0; i < VPP_POOL; i++) {
+        void* expected = nullptr;
+        if (vpp_scratch_pool[i].compare_exchange_strong(expected, s, std::memory_order_acq_rel)) return 1;
+    }
+    return 0;
+}
+
+/* ---- histogram value source
+ * 256-bit bin occupancy words: bit p is word p >> 6, bit p & 63. */
+static inline void vpp_shr256(const uint64_t* a, int s, uint64_t* r) {   /* r[p] = a[p + s] */
+    int q = s >> 6, b = s & 63, i;
+    if (q == 0) {                                   /* the common case, 0 < s < 64 */
+        r[0] = (a[0] >> b) | (a[1] << (64 - b));
+        r[1] = (a[1] >> b) | (a[2] << (64 - b));
+        r[2] = (a[2] >> b) | (a[3] << (64 - b));
+        r[3] = a[3] >> b;
+        return;
+    }
+    for (i = 0; i < 4; i++) {
+        uint64_t lo = i + q < 4 ? a[i + q] : 0, hi = i + q + 1 < 4 ? a[i + q + 1] : 0;
+        r[i] = b ? (lo >> b) | (hi << (64 - b)) : lo;
+    }
+}
+
+static inline int vpp_nz256(const uint64_t* a) { return (a[0] | a[1] | a[2] | a[3]) != 0; }
+
+static inline int vpp_ctz256(const uint64_t* a) {
+    for (int i = 0; i < 4; i++) if (a[i]) return (i << 6) + __builtin_ctzll(a[i]);
+    return 256;
+}
+
+static inline int vpp_top256(const uint64_t* a) {   /* highest set bit, -1 if none */
+    for (int i = 3; i >= 0; i--) if (a[i]) return (i << 6) + 63 - __builtin_clzll(a[i]);
+    return -1;
+}
+
+/* The value farthest from every filled bin of o (ties: smallest); -1 if all
+ * are filled.  Bit-parallel: P[j] marks the starts of zero runs of length
+ * >= 2^j between the first and last filled bins; binary lifting gives the
+ * longest run, then the first run whose half-length is the best. */
+static inline int vpp_hist_pick(const uint64_t* o) {
+    uint64_t Z[4], P[9][4], cur[4], t[4];
+    int f1, ls, i, j, top, k, m, rem, best_i = 0, best_d;
+    if ((o[0] & o[1] & o[2] & o[3]) == ~0ULL) return -1;
+    if (!vpp_nz256(o)) return 0;
+    f1 = vpp_ctz256(o);
+    ls = vpp_top256(o);
+    best_d = f1;                                    /* the run before the first filled bin */
+    for (i = 0; i < 4; i++) {                       /* empty bins f1 < p < ls */
+        int lo = i << 6;
+        uint64_t w = ~o[i];
+        if (f1 + 1 > lo) w &= f1 + 1 - lo >= 64 ? 0 : ~0ULL << (f1 + 1 - lo);
+        if (ls < lo + 64) w &= ls - lo <= 0 ? 0 : ~0ULL >> (64 - (ls - lo));
+        Z[i] = w;
+    }
+    if (vpp_nz256(Z)) {
+        memcpy(P[0], Z, sizeof Z);
+        for (top = 0; top < 8; top++) {
+            vpp_shr256(P[top], 1 << top, t);
+            for (i = 0; i < 4; i++) t[i] &= P[top][i];
+            if (!vpp_nz256(t)) break;
+            memcpy(P[top + 1], t, sizeof t);
+        }
+        memcpy(cur, P[top], sizeof cur);
+        k = 1 << top;
+        for (j = top - 1; j >= 0; j--) {
+            vpp_shr256(P[j], k, t);
+            for (i = 0; i < 4; i++) t[i] &= cur[i];
+            if (vpp_nz256(t)) {
+                memcpy(cur, t, sizeof t);
+                k += 1 << j;
+            }
+        }
+        m = (k + 1) >> 1;
+        if (m > best_d) {                           /* first run of length >= 2m - 1 */
+            memcpy(cur, Z, sizeof cur);
+            k = 1;
+            for (j = 0, rem = 2 * m - 2; rem; j++, rem >>= 1) {
+                if (rem & 1) {
+                    vpp_shr256(P[j], k, t);
+                    for (i = 0; i < 4; i++) cur[i] &= t[i];
+                    k += 1 << j;
+                }
+            }
+            best_d = m;
+            best_i = vpp_ctz256(cur) - 1 + m;
+        }
+    }
+    if (255 - ls > best_d) best_i = 255;            /* the run after the last filled bin */
+    return best_i;
+}
+
+static uint64_t vpp_onehot[256][4] __attribute__((aligned(32)));
+
+static inline void vpp_onehot_init(void) {
+    for (int v = 0; v < 256; v++) {
+        memset(vpp_onehot[v], 0, sizeof vpp_onehot[v]);
+        vpp_onehot[v][v >> 6] = (uint64_t)1 << (v & 63);
+    }
+}
+
+#if !defined(__AVX2__)
+typedef uint64_t vpp_v2 __attribute__((vector_size(16)));   /* half an occupancy word */
+static inline vpp_v2 vpp_ld2(const uint64_t* p) { vpp_v2 v; memcpy(&v, p, 16); return v; }
+static inline void vpp_st2(uint64_t* p, vpp_v2 v) { memcpy(p, &v, 16); }
+#endif
+
+/* Per aligned 32-column block, prefix (pre) and suffix (suf) OR of the
+ * occupancy of each column over rows r +- sh_half (clipped) of channel c:
+ * 4 words per column.  Any window is then suffix | middle blocks | prefix. */
+static inline void vpp_hist_tables(const uint8_t* img, int H, int W, int C, int c, int r, int sh_half,
+                                   uint64_t* pre, uint64_t* suf) {
+    int y0 = r - sh_half > 0 ? r - sh_half : 0, y1 = r + sh_half < H - 1 ? r + sh_half : H - 1;
+    const int64_t rs = (int64_t)W * C;
+    for (int b0 = 0; b0 < W; b0 += 32) {
+        int b1 = b0 + 32 < W ? b0 + 32 : W, x;
+#if defined(__AVX2__)
+        __m256i acc = _mm256_setzero_si256();
+        for (x = b0; x < b1; x++) {
+            const uint8_t* p = img + ((int64_t)y0 * W + x) * C + c;
+            __m256i a = _mm256_load_si256((const __m256i*)vpp_onehot[p[0]]);
+            for (int y = y0 + 1; y <= y1; y++) {
+                p += rs;
+                a = _mm256_or_si256(a, _mm256_load_si256((const __m256i*)vpp_onehot[p[0]]));
+            }
+            _mm256_storeu_si256((__m256i*)(suf + 4 * (int64_t)x), a);
+            acc = _mm256_or_si256(acc, a);
+            _mm256_storeu_si256((__m256i*)(pre + 4 * (int64_t)x), acc);
+        }
+        acc = _mm256_setzero_si256();
+        for (x = b1 - 1; x >= b0; x--) {
+            acc = _mm256_or_si256(acc, _mm256_loadu_si256((const __m256i*)(suf + 4 * (int64_t)x)));
+            _mm256_storeu_si256((__m256i*)(suf + 4 * (int64_t)x), acc);
+        }
+#else
+        const vpp_v2 zero = {0, 0};
+        vpp_v2 acc0 = zero, acc1 = zero;
+        for (x = b0; x < b1; x++) {
+            const uint8_t* p = img + ((int64_t)y0 * W + x) * C + c;
+            vpp_v2 a0 = vpp_ld2(vpp_onehot[p[0]]), a1 = vpp_ld2(vpp_onehot[p[0]] + 2);
+            for (int y = y0 + 1; y <= y1; y++) {
+                p += rs;
+                a0 |= vpp_ld2(vpp_onehot[p[0]]);
+                a1 |= vpp_ld2(vpp_onehot[p[0]] + 2);
+            }
+            vpp_st2(suf + 4 * (int64_t)x, a0);
+            vpp_st2(suf + 4 * (int64_t)x + 2, a1);
+            acc0 |= a0;
+            acc1 |= a1;
+            vpp_st2(pre + 4 * (int64_t)x, acc0);
+            vpp_st2(pre + 4 * (int64_t)x + 2, acc1);
+        }
+        acc0 = zero;
+        acc1 = zero;
+        for (x = b1 - 1; x >= b0; x--) {
+            acc0 |= vpp_ld2(suf + 4 * (int64_t)x);
+            acc1 |= vpp_ld2(suf + 4 * (int64_t)x + 2);
+            vpp_st2(suf + 4 * (int64_t)x, acc0);
+            vpp_st2(suf + 4 * (int64_t)x + 2, acc1);
+        }
+#endif
+    }
+}
+
+/* The images and window of the histogram source. */
+typedef struct {
+    const uint8_t* L;
+    const uint8_t* R;
+    int H, W, C;
+    int sw_half, sw_len, sh_half;   /* window columns [cen - sw_half, cen - sw_half + sw_len - 1], rows r +- sh_half */
+} vpp_hist_src;
+
+static inline void vpp_or4(uint64_t* o, const uint64_t* t) {
+    o[0] |= t[0]; o[1] |= t[1]; o[2] |= t[2]; o[3] |= t[3];
+}
+
+/* Clip the window of centre column cen to [a, e] (a > e: empty). */
+static inline void vpp_window_cols(const vpp_hist_src* hs, int cen, int* a, int* e) {
+    *a = cen - hs->sw_half;
+    *e = *a + hs->sw_len - 1;
+    if (*a < 0) *a = 0;
+    if (*e > hs->W - 1) *e = hs->W - 1;
+}
+
+/* OR the occupancy of the window of centre column cen (row r, channel c) into o. */
+static inline void vpp_window_or(const vpp_hist_src* hs, const uint8_t* img, int c, int r,
+                                 const uint64_t* pre, const uint64_t* suf, int cen, uint64_t* o) {
+    int a, e, ba, be, bend;
+    vpp_window_cols(hs, cen, &a, &e);
+    if (a > e) return;
+    ba = a >> 5;
+    be = e >> 5;
+    if (ba < be) {
+        vpp_or4(o, suf + 4 * a);
+        for (int b = ba + 1; b < be; b++) vpp_or4(o, suf + 4 * (b << 5));
+        vpp_or4(o, pre + 4 * e);
+        return;
+    }
+    bend = (ba << 5) + 31 < hs->W - 1 ? (ba << 5) + 31 : hs->W - 1;
+    if (a == ba << 5) {
+        vpp_or4(o, pre + 4 * e);
+    } else if (e == bend) {
+        vpp_or4(o, suf + 4 * a);
+    } else {                                        /* inside one block: read the pixels */
+        int y0 = r - hs->sh_half > 0 ? r - hs->sh_half : 0;
+        int y1 = r + hs->sh_half < hs->H - 1 ? r + hs->sh_half : hs->H - 1;
+        for (int y = y0; y <= y1; y++)
+            for (int x = a; x <= e; x++) {
+                unsigned v = img[((int64_t)y * hs->W + x) * hs->C + c];
+                o[v >> 6] |= (uint64_t)1 << (v & 63);
+            }
+    }
+}
+
+static inline void vpp_window_count(const vpp_hist_src* hs, const uint8_t* img, int c, int r, int cen,
+                                    int32_t* counts) {
+    int a, e;
+    int y0 = r - hs->sh_half > 0 ? r - hs->sh_half : 0, y1 = r + hs->sh_half < hs->H - 1 ? r + hs->sh_half : hs->H - 1;
+    vpp_window_cols(hs, cen, &a, &e);
+    for (int y = y0; y <= y1; y++)
+        for (int x = a; x <= e; x++) counts[img[((int64_t)y * hs->W + x) * hs->C + c]]++;
+}
+
+/* Histogram value of channel c for the windows centred on (cl, r) in L and
+ * (cr, r) in R; tabs: the tables of row r, channel c (pre L, suf L, pre R,
+ * suf R, 4 W words each).  All bins filled: the least frequent value. */
+static inline uint8_t vpp_hist_value(const vpp_hist_src* hs, int c, int r, const uint64_t* tabs, int cl, int cr) {
+    uint64_t o[4] = {0, 0, 0, 0};
+    int32_t counts[256];
+    const int64_t W4 = 4 * (int64_t)hs->W;
+    int v, best = 0;
+    vpp_window_or(hs, hs->L, c, r, tabs, tabs + W4, cl, o);
+    vpp_window_or(hs, hs->R, c, r, tabs + 2 * W4, tabs + 3 * W4, cr, o);
+    v = vpp_hist_pick(o);
+    if (v >= 0) return (uint8_t)v;
+    memset(counts, 0, sizeof counts);
+    vpp_window_count(hs, hs->L, c, r, cl, counts);
+    vpp_window_count(hs, hs->R, c, r, cr, counts);
+    for (v = 1; v < 256; v++) if (counts[v] < counts[best]) best = v;
+    return (uint8_t)best;
+}
+
+static inline void vpp_hist_row_tables(const vpp_hist_src* hs, int c, int r, uint64_t* tabs) {
+    const int64_t W4 = 4 * (int64_t)hs->W;
+    vpp_hist_tables(hs->L, hs->H, hs->W, hs->C, c, r, hs->sh_half, tabs, tabs + W4);
+    vpp_hist_tables(hs->R, hs->H, hs->W, hs->C, c, r, hs->sh_half, tabs + 2 * W4, tabs + 3 * W4);
 }
 
 #endif

@@ -1,9 +1,8 @@
-"""Input validation shared by the VPP wrappers (images, disparity maps, thread counts)."""
+"""Input validation shared by the VPP wrappers (images, disparity maps); thread counts: :mod:`vpp_service.threads`."""
+
 from __future__ import annotations
 
 import numpy as np
-
-from vpp_service.threads import resolve_threads
 
 
 def as_image(name: str, a: object) -> np.ndarray:
@@ -39,8 +38,3 @@ def as_disparity(name: str, a: object, shape: tuple[int, int] | None = None) -> 
     if shape is not None and a.shape != shape:
         raise ValueError(f"{name} shape {a.shape} does not match the images' {shape}")
     return np.ascontiguousarray(a, dtype=np.float32)
-
-
-def as_threads(num_threads: object) -> int:
-    """None -> the project's default (:func:`vpp_service.threads.default_threads`); else an int >= 1."""
-    return resolve_threads(num_threads, "num_threads")  # type: ignore[arg-type]  # validated there

@@ -1,28 +1,27 @@
 """Which build of the sweep kernel runs.
 
-The sweep kernel (:mod:`vpp_service.vpp._sweep`) is compiled twice: a portable
-build (SSE2 on x86-64, plain C elsewhere) and, on x86-64, ``_sweep_avx2``
-compiled for x86-64-v3 (AVX2, FMA, BMI2, ...).  Both give the same bytes.  The
-AVX2 build is imported only after the portable one has checked that the CPU
+The kernel (:mod:`vpp_service.vpp._sweep`) is compiled twice: a portable build
+(SSE2 on x86-64, plain C elsewhere) and, on x86-64, ``_sweep_avx2`` compiled
+for x86-64-v3 (AVX2, FMA, BMI2, ...).  Both give the same bytes.  The AVX2
+build is imported only after the portable one has checked that the CPU
 supports it (importing it on an older CPU would crash); ``VPP_NO_AVX2=1`` in
-the environment keeps the portable build.  The histogram table builder of
-:mod:`vpp_service.vpp._kernel` follows the same choice (its AVX2 copy is used
-exactly when ``AVX2`` is true).
+the environment keeps the portable build.  This is the only place that
+chooses: nothing else in the package tests the CPU.
 
 Attributes
 ----------
 sweep : module
-    The build in use (``project`` and ``detect_occlusions`` call ``sweep.sweep_kernel``).
+    The build in use (``project`` and ``detect_occlusions`` call it).
 AVX2 : bool
     True when ``sweep`` is the AVX2 build.
 """
+
 from __future__ import annotations
 
 import os
 from types import ModuleType
 
-from . import _kernel
-from . import _sweep as portable
+from vpp_service.vpp import _sweep as portable
 
 
 def avx2_build() -> ModuleType | None:
@@ -30,7 +29,7 @@ def avx2_build() -> ModuleType | None:
     if not portable.cpu_supports_avx2():
         return None
     try:
-        from . import _sweep_avx2
+        from vpp_service.vpp import _sweep_avx2
     except ImportError:  # not built (non-x86 platform or a compiler without -mavx2)
         return None
     return _sweep_avx2
@@ -44,8 +43,6 @@ def _choose() -> ModuleType:
 
 sweep: ModuleType = _choose()
 AVX2: bool = bool(sweep.AVX2)
-# the histogram kernel's AVX2 table builder follows the same choice
-_kernel.tables_use_avx2(AVX2)
 
 
 def release_scratch() -> int:
@@ -53,9 +50,8 @@ def release_scratch() -> int:
 
     Each thread of a call uses a few MB of buffers (for the widest image seen
     so far); they are pooled and reused by later calls instead of being
-    mapped afresh (a page fault per 4 KiB, about 9 % of the kernel's time).
-    Call this to hand that memory back, e.g. after processing an unusually
-    large image; the next call allocates again.
+    mapped afresh.  Call this to hand that memory back, e.g. after processing
+    an unusually large image; the next call allocates again.
 
     Returns
     -------

@@ -6,11 +6,12 @@ blending, the sub-pixel splatting and the occlusion strategy.  Every field is
 checked in ``__post_init__``; a bad value raises :class:`ValueError` (or
 :class:`TypeError` for a wrong type) naming the field.
 """
+
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
-from typing import Any, Mapping
+from dataclasses import asdict, dataclass
+from typing import Any
 
 PATTERNS = ("random", "histogram")
 OCCLUSION_MODES = ("fgd", "no", "bkgd", "off")
@@ -31,8 +32,9 @@ def _check_int(name: str, v: Any, lo: int, odd: bool = False) -> None:
         raise ValueError(f"VPPConfig.{name} must be odd, got {v}")
 
 
-def _check_float(name: str, v: Any, lo: float | None = None, hi: float | None = None,
-                 lo_open: bool = False, hi_open: bool = False) -> None:
+def _check_float(
+    name: str, v: Any, lo: float | None = None, hi: float | None = None, lo_open: bool = False, hi_open: bool = False
+) -> None:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise TypeError(f"VPPConfig.{name} must be a number, got {type(v).__name__}")
     if not math.isfinite(v):
@@ -110,11 +112,9 @@ class VPPConfig:
         if self.pattern not in PATTERNS:
             raise ValueError(f"VPPConfig.pattern must be one of {PATTERNS}, got {self.pattern!r}")
         if self.occlusion not in OCCLUSION_MODES:
-            raise ValueError(
-                f"VPPConfig.occlusion must be one of {OCCLUSION_MODES}, got {self.occlusion!r}")
+            raise ValueError(f"VPPConfig.occlusion must be one of {OCCLUSION_MODES}, got {self.occlusion!r}")
         if self.adaptive_patch not in ADAPTIVE_MODES:
-            raise ValueError(
-                f"VPPConfig.adaptive_patch must be one of {ADAPTIVE_MODES}, got {self.adaptive_patch!r}")
+            raise ValueError(f"VPPConfig.adaptive_patch must be one of {ADAPTIVE_MODES}, got {self.adaptive_patch!r}")
         _check_int("patch", self.patch, 1, odd=True)
         _check_bool("uniform_patch", self.uniform_patch)
         _check_bool("splat", self.splat)
@@ -131,26 +131,10 @@ class VPPConfig:
             _check_float("adaptive_max_disparity", self.adaptive_max_disparity, 0.0, lo_open=True)
         _check_float("bilateral_sigma_space", self.bilateral_sigma_space, 0.0, lo_open=True)
         _check_float("bilateral_sigma_color", self.bilateral_sigma_color, 0.0, lo_open=True)
-        _check_float("bilateral_threshold", self.bilateral_threshold, 0.0, 1.0,
-                     lo_open=True, hi_open=True)
+        _check_float("bilateral_threshold", self.bilateral_threshold, 0.0, 1.0, lo_open=True, hi_open=True)
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain-dict form (JSON/msgpack friendly)."""
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "VPPConfig":
-        """Build from a mapping; unknown keys raise :class:`ValueError`.
-
-        Parameters
-        ----------
-        d : Mapping[str, Any]
-            Any subset of the field names; missing fields take their defaults.
+        """Plain-dict form (JSON/msgpack friendly); :func:`vpp_service.settings.from_mapping`
+        (``from_mapping(VPPConfig, d)``) builds a config back from such a mapping.
         """
-        if not isinstance(d, Mapping):
-            raise TypeError(f"d must be a mapping, got {type(d).__name__}")
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown VPPConfig key(s) {unknown}; known: {sorted(known)}")
-        return cls(**dict(d))
+        return asdict(self)

@@ -6,6 +6,7 @@ Conventions: ``d = f * b / Z - doffs`` (pixels), ``Z = f * b / (d + doffs)``
 :func:`depth_to_disparity`, which maps 0 to NaN, and for
 :func:`vpp_service.vpp.project`, which treats NaN as "no point").
 """
+
 from __future__ import annotations
 
 import math
@@ -30,8 +31,7 @@ def _check_map(name: str, a: object) -> np.ndarray:
     return a
 
 
-def depth_to_disparity(depth: np.ndarray, f: float, baseline: float,
-                       doffs: float = 0.0) -> np.ndarray:
+def depth_to_disparity(depth: np.ndarray, f: float, baseline: float, doffs: float = 0.0) -> np.ndarray:
     """Disparity ``f * baseline / Z - doffs`` of a depth map.
 
     Parameters
@@ -56,7 +56,7 @@ def depth_to_disparity(depth: np.ndarray, f: float, baseline: float,
     baseline = _check_scalar("baseline", baseline, True)
     doffs = _check_scalar("doffs", doffs, False)
     # Sensor maps are mostly empty: convert only the valid pixels (float64
-    # arithmetic, as before) instead of round-tripping the whole map.
+    # arithmetic) instead of round-tripping the whole map.
     flat = depth.reshape(-1)
     idx = np.flatnonzero(np.isfinite(flat) & (flat > 0))
     d = f * baseline / flat[idx].astype(np.float64) - doffs
@@ -66,8 +66,7 @@ def depth_to_disparity(depth: np.ndarray, f: float, baseline: float,
     return out
 
 
-def disparity_to_depth(disparity: np.ndarray, f: float, baseline: float,
-                       doffs: float = 0.0) -> np.ndarray:
+def disparity_to_depth(disparity: np.ndarray, f: float, baseline: float, doffs: float = 0.0) -> np.ndarray:
     """Depth ``f * baseline / (d + doffs)`` of a disparity map.
 
     Parameters
@@ -90,13 +89,14 @@ def disparity_to_depth(disparity: np.ndarray, f: float, baseline: float,
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         den = d + doffs
         ok = np.isfinite(d) & (d > 0) & (den > 0)
-        # dense divide + select: no boolean gather/scatter (several times faster)
+        # dense divide + select: no boolean gather/scatter
         out = np.where(ok, (f * baseline) / den, np.nan)
     return out.astype(np.float32)
 
 
-def points_to_depth_map(points_xyz: np.ndarray, K: np.ndarray, T_cam_from_sensor: np.ndarray,
-                        shape: tuple[int, int]) -> np.ndarray:
+def points_to_depth_map(
+    points_xyz: np.ndarray, K: np.ndarray, T_cam_from_sensor: np.ndarray, shape: tuple[int, int]
+) -> np.ndarray:
     """Project a sensor point cloud into the left camera as a sparse depth map.
 
     Points are moved with ``T_cam_from_sensor`` (4x4), kept if finite with
@@ -134,9 +134,11 @@ def points_to_depth_map(points_xyz: np.ndarray, K: np.ndarray, T_cam_from_sensor
             raise ValueError(f"{name} must have shape {sh}, got {m.shape}")
         if not np.all(np.isfinite(m)):
             raise ValueError(f"{name} must be finite")
-    if (not isinstance(shape, (tuple, list)) or len(shape) != 2
-            or not all(isinstance(s, (int, np.integer)) and not isinstance(s, bool) and s > 0
-                       for s in shape)):
+    if (
+        not isinstance(shape, (tuple, list))
+        or len(shape) != 2
+        or not all(isinstance(s, (int, np.integer)) and not isinstance(s, bool) and s > 0 for s in shape)
+    ):
         raise ValueError(f"shape must be (H, W) with positive ints, got {shape!r}")
     H, W = int(shape[0]), int(shape[1])
     out = np.zeros((H, W), dtype=np.float32)
@@ -156,7 +158,7 @@ def points_to_depth_map(points_xyz: np.ndarray, K: np.ndarray, T_cam_from_sensor
     if z.size == 0:
         return out
     lin = v * W + u
-    order = np.lexsort((z, lin))           # by pixel, nearest first
+    order = np.lexsort((z, lin))  # by pixel, nearest first
     lin, z = lin[order], z[order]
     first = np.ones(lin.size, dtype=bool)
     first[1:] = lin[1:] != lin[:-1]

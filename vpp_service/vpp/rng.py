@@ -13,19 +13,19 @@ it, so it is a pure function of ``(seed, x, y, c)``:
   ``C * index + c``.
 
 Consecutive pixels of a row are consecutive table entries, so a patch row's
-pattern is one contiguous span of the table: the kernels read it in place
-instead of hashing every pixel (about 3 ns a pixel, the largest single cost of
-the default paint before).  The values are independent uniform bytes except
+pattern is one contiguous span of the table: the kernel reads it in place
+instead of hashing every pixel.  The values are independent uniform bytes except
 where two pixels share an index, i.e. ``dx + dy * ROW_STEP = 0 (mod 2**16)``:
 never within a row of up to 65536 pixels, never for ``1 <= |dy| <= 16`` and
 ``|dx| < 1000``, and nowhere closer than 274 pixels (``ROW_STEP`` maximises
 that distance, the shortest vector of the lattice, whose optimum is about 275).
 A stereo matcher compares windows along rows, so it never sees a repeat.
 
-The Cython kernels read the table built by :func:`vpp_service.vpp.backend`
-(``sweep.fill_pattern_table``, the same bytes, tested); this NumPy version is
+The kernel reads the table built by ``backend.sweep.fill_pattern_table``
+(the same bytes, tested); this NumPy version is
 the reference used by the tests.
 """
+
 from __future__ import annotations
 
 import functools
@@ -82,8 +82,7 @@ def pattern_hash(seed: int, x: np.ndarray | int, y: np.ndarray | int) -> np.ndar
         z = smix + ((y << np.uint64(32)) | x) * np.uint64(KEY_MUL)
         z = (z ^ (z >> np.uint64(30))) * np.uint64(M1)
         z = (z ^ (z >> np.uint64(27))) * np.uint64(M2)
-        z = z ^ (z >> np.uint64(31))
-    return z
+        return z ^ (z >> np.uint64(31))
 
 
 def pattern_table(seed: int, channels: int) -> np.ndarray:
@@ -125,7 +124,7 @@ def kernel_table(seed: int, channels: int, hmax: int) -> np.ndarray:
     """The pattern table as the Cython kernels read it (read-only, cached).
 
     The same bytes as :func:`pattern_table`, built by the compiled kernel
-    (about 0.05 ms for RGB), followed by a copy of its first bytes so that a
+    followed by a copy of its first bytes so that a
     patch row of ``2 hmax + 1`` pixels starting at any entry is one contiguous
     span (``backend.sweep.table_padding``).
 
@@ -146,7 +145,7 @@ def kernel_table(seed: int, channels: int, hmax: int) -> np.ndarray:
 
 @functools.lru_cache(maxsize=4)
 def _kernel_table(seed: int, channels: int, hmax: int) -> np.ndarray:
-    from . import backend
+    from vpp_service.vpp import backend
 
     sweep = backend.sweep
     table = np.empty(TABLE_SIZE * channels + sweep.table_padding(channels, hmax), np.uint8)
