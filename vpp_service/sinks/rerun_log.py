@@ -40,6 +40,7 @@ import numpy as np
 
 from vpp_service.frame import Calibration, FusionResult
 from vpp_service.sinks.colorize import colorize_disparity
+from vpp_service.transport.wire import sparse_to_points
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -83,14 +84,6 @@ class RerunParts:
     timing_ms: dict[str, float] = field(default_factory=dict)
 
 
-def sparse_points(sparse_disparity: np.ndarray | None) -> np.ndarray | None:
-    """Valid entries of a sparse disparity map as N x 3 float32 ``(x, y, d)`` rows (raster order)."""
-    if sparse_disparity is None:
-        return None
-    ys, xs = np.nonzero(np.isfinite(sparse_disparity) & (sparse_disparity > 0))
-    return np.stack([xs, ys, sparse_disparity[ys, xs]], axis=1).astype(np.float32)
-
-
 def parts_from_result(result: FusionResult, log_painted: bool = True) -> RerunParts:
     """The :class:`RerunParts` of one fused result (the painted pair when present and wanted)."""
     fr = result.frame
@@ -104,7 +97,7 @@ def parts_from_result(result: FusionResult, log_painted: bool = True) -> RerunPa
         disparity=np.asarray(result.disparity, dtype=np.float32),
         depth=result.depth,
         calib=fr.calib,
-        sparse=sparse_points(fr.sparse_disparity),
+        sparse=sparse_to_points(fr.sparse_disparity),
         timing_ms=dict(result.timing_ms),
     )
 
@@ -321,5 +314,4 @@ __all__ = [
     "depth_stride",
     "parts_from_result",
     "robust_range",
-    "sparse_points",
 ]
