@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+import logging
 import math
 import socket
+import subprocess
 import time
 from collections import defaultdict
 
 import cv2
 import numpy as np
+import psutil
 import pyarrow as pa
 import pytest
+import rerun as rr
 from rerun.chunk import RrdReader
 
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
@@ -18,7 +22,8 @@ from vpp_service.settings import SettingsError
 from vpp_service.sinks import SINKS, build_sink
 from vpp_service.sinks.base import SinkContext
 from vpp_service.sinks.colorize import colorize_disparity, disparity_range
-from vpp_service.sinks.rerun import RerunSink, depth_stride
+from vpp_service.sinks.rerun import RerunSink, _rerun_binary, depth_stride, reachable, rotated_paths
+from vpp_service.sinks.rerun_log import robust_range
 
 H, W = 30, 40
 RIG = "rigA"
@@ -97,7 +102,7 @@ def test_registered():
 
 
 def test_save_contains_expected_entities(tmp_path):
-    sink = save_sink(tmp_path)
+    sink = save_sink(tmp_path, jpeg_quality=0)
     results = [make_result(i) for i in range(4)]
     for r in results:
         sink.write(r)
@@ -106,6 +111,8 @@ def test_save_contains_expected_entities(tmp_path):
 
     reader = RrdReader(tmp_path / "out.rrd")
     assert len(reader.recordings()) == 1 and len(reader.blueprints()) == 1
+    assert reader.recordings()[0].application_id == f"vpp-service-{RIG}"
+    assert reader.recordings()[0].recording_id.startswith(f"{RIG}-")
     data = read_rrd(tmp_path / "out.rrd")
     expected = {
         f"/{RIG}/{e}"
@@ -118,21 +125,107 @@ def test_save_contains_expected_entities(tmp_path):
     # painted pair logged (not the raw one)
     assert np.array_equal(image_bytes(data[f"/{RIG}/left"]["Image:buffer"][2]), results[2].left_vpp.ravel())
     assert np.array_equal(image_bytes(data[f"/{RIG}/right"]["Image:buffer"][0]), results[0].right_vpp.ravel())
-    # sparse points at pixel centres (Rerun: +0.5), in raster order
+    # sparse points at pixel centres (Rerun: +0.5), in raster order, small (negative radius = UI points)
     pos = np.asarray(data[f"/{RIG}/left/sparse"]["Points2D:positions"][0])
     assert np.allclose(pos, [[3.5, 2.5], [11.5, 7.5], [30.5, 20.5]])
+    assert np.allclose(data[f"/{RIG}/left/sparse"]["Points2D:radii"][0], [-1.0])
     # pinhole from the calibration (column-major 3x3)
     k = np.asarray(data[f"/{RIG}/camera"]["Pinhole:image_from_camera"][0]).reshape(3, 3).T
     assert np.allclose(k, [[80.0, 0, 19.5], [0, 80.0, 14.5], [0, 0, 1]])
     assert np.allclose(data[f"/{RIG}/timing/total"]["Scalars:scalars"][1], [9.0])
-    # disparity image is the colourised map
-    disp_img = image_bytes(data[f"/{RIG}/disparity"]["Image:buffer"][1])
-    rng = disparity_range(results[1].disparity, results[1].frame.sparse_disparity)
-    assert np.array_equal(disp_img, colorize_disparity(results[1].disparity, *rng).ravel())
+    # disparity is data (a depth image in pixels, invalid = 0) with a colour map over one fixed range
+    disp = data[f"/{RIG}/disparity"]
+    values = np.frombuffer(bytes(image_bytes(disp["DepthImage:buffer"][1])), np.float32).reshape(H, W)
+    assert np.array_equal(values, np.nan_to_num(results[1].disparity, nan=0.0))
+    first = robust_range(results[0].disparity)
+    for i in range(4):
+        assert np.allclose(disp["DepthImage:depth_range"][i], [first]), i
+        assert disp["DepthImage:colormap"][i] == [rr.components.Colormap.Turbo.value]
+
+
+def test_pair_is_jpeg_by_default(tmp_path):
+    res = make_result(0)
+    raw = save_sink(tmp_path, jpeg_quality=0, path=str(tmp_path / "raw.rrd"))
+    jpg = save_sink(tmp_path, path=str(tmp_path / "jpg.rrd"))
+    for sink in (raw, jpg):
+        sink.write(res)
+        sink.close(timeout=10)
+    data = read_rrd(tmp_path / "jpg.rrd")
+    left = data[f"/{RIG}/left"]
+    assert "Image:buffer" not in left and left["EncodedImage:media_type"][0] == ["image/jpeg"]
+    img = cv2.imdecode(image_bytes(left["EncodedImage:blob"][0]), cv2.IMREAD_COLOR)[..., ::-1]
+    assert img.shape == res.left_vpp.shape
+    # JPEG keeps the picture: a 3x3 box blur of the random image survives within a few grey levels
+    blur = cv2.blur(img, (3, 3)).astype(float) - cv2.blur(res.left_vpp, (3, 3)).astype(float)
+    assert np.abs(blur).mean() < 40
+    big = np.random.default_rng(0).integers(0, 256, (240, 320), dtype=np.uint8)
+    smooth = cv2.GaussianBlur(big, (0, 0), 3)
+    assert len(cv2.imencode(".jpg", smooth)[1]) < smooth.size / 4  # the reason for compressing
+
+
+def test_fixed_ranges_and_sparse_options(tmp_path):
+    sink = save_sink(tmp_path, disparity_range=[1.0, 50.0], depth_range=[0.5, 4.0], max_sparse_points=2, jpeg_quality=0)
+    sink.write(make_result(0))
+    sink.close(timeout=10)
+    data = read_rrd(tmp_path / "out.rrd")
+    assert np.allclose(data[f"/{RIG}/disparity"]["DepthImage:depth_range"][0], [[1.0, 50.0]])
+    assert np.allclose(data[f"/{RIG}/camera/depth"]["DepthImage:depth_range"][0], [[0.5, 4.0]])
+    # farther than the depth range: left out of the 3-D cloud
+    depth = np.frombuffer(bytes(image_bytes(data[f"/{RIG}/camera/depth"]["DepthImage:buffer"][0])), np.float32)
+    assert depth.max() <= 4.0 and (depth == 0).sum() > 4
+    assert len(data[f"/{RIG}/left/sparse"]["Points2D:positions"][0]) == 2
+
+    sink = save_sink(tmp_path, sparse_points=False, path=str(tmp_path / "nosparse.rrd"))
+    sink.write(make_result(0))
+    sink.close(timeout=10)
+    assert f"/{RIG}/left/sparse" not in read_rrd(tmp_path / "nosparse.rrd")
+
+
+def test_blueprint_opens_3d_view_on_the_scene(tmp_path):
+    sink = build_sink("rerun", {"depth_range": [2.0, 6.0]}, SinkContext(rig=RIG))
+    view = sink.blueprint().root_container.contents[1].contents[1]
+    assert str(view.origin) == f"/{RIG}"
+    eye = view.properties["EyeControls3D"]  # looks at the middle of the depth range from behind the camera
+    assert np.allclose(eye.look_target.as_arrow_array().to_pylist()[0], [0, 0, 4.0])
+    assert eye.position.as_arrow_array().to_pylist()[0][2] < 0
+
+
+def test_rigs_have_their_own_recordings(tmp_path):
+    for rig in ("rig0", "rig1"):
+        sink = build_sink("rerun", {"path": str(tmp_path / f"{rig}.rrd"), "max_hz": 0}, SinkContext(rig=rig))
+        sink.open()
+        sink.write(make_result(0))
+        sink.close(timeout=10)
+    ids = [RrdReader(tmp_path / f"{rig}.rrd").recordings()[0] for rig in ("rig0", "rig1")]
+    assert [i.application_id for i in ids] == ["vpp-service-rig0", "vpp-service-rig1"]
+    assert ids[0].recording_id.startswith("rig0-") and ids[1].recording_id.startswith("rig1-")
+
+
+def test_save_rotates_at_the_cap(tmp_path):
+    path = tmp_path / "vpp.rrd"
+    sink = save_sink(tmp_path, path=str(path), jpeg_quality=0, max_mb=0.5, max_files=3)
+    n = 60
+    for i in range(n):
+        sink.write(make_result(i))
+        time.sleep(0.01)
+    sink.close(timeout=20)
+    st = sink.stats()
+    assert st["written"] == n and st["errors"] == 0 and 3 <= st["rotations"] < n / 3
+    files = rotated_paths(path, 3)
+    assert all(f.exists() for f in files)
+    assert not (tmp_path / "vpp.3.rrd").exists() and len(list(tmp_path.iterdir())) == 3
+    seqs = []
+    for f in files:  # newest first; each part is a complete recording
+        reader = RrdReader(f)
+        assert len(reader.recordings()) == 1 and len(reader.blueprints()) == 1
+        seqs.append(read_rrd(f)[f"/{RIG}/left"]["seq"])
+        assert f.stat().st_size < 0.5e6 + 150_000  # the cap plus about one frame
+    assert seqs[0][-1] == n - 1 and all(len(q) > 1 for q in seqs)
+    assert seqs[2][-1] < seqs[1][0] and seqs[1][-1] < seqs[0][0]
 
 
 def test_depth_image_matches_disparity(tmp_path):
-    sink = save_sink(tmp_path, max_points=400)  # 30x40 -> stride 2 -> 15x20 = 300 points
+    sink = save_sink(tmp_path, max_points=400, depth_range=[0.1, 100.0])  # 30x40 -> stride 2 -> 15x20 points
     res = make_result(0)
     sink.write(res)
     sink.close(timeout=10)
@@ -158,12 +251,12 @@ def test_depth_image_matches_disparity(tmp_path):
     ],
 )
 def test_save_variants(tmp_path, opts, painted, calib, raw, has_camera):
-    sink = save_sink(tmp_path, **opts)
+    sink = save_sink(tmp_path, jpeg_quality=0, **opts)
     res = make_result(5, painted=painted, calib=calib)
     sink.write(res)
     sink.close(timeout=10)
     data = read_rrd(tmp_path / "out.rrd")
-    left = image_bytes(data[f"/{RIG}/left"]["Image:buffer"][0])
+    left = image_bytes(data[f"/{RIG}/left"]["Image:buffer"][0])  # jpeg_quality = 0: exact
     expected = res.frame.left if raw else res.left_vpp
     assert np.array_equal(left, expected.ravel())
     assert (f"/{RIG}/camera/depth" in data) == has_camera
@@ -206,6 +299,114 @@ def test_connect_to_dead_viewer_closes_within_bound():
     assert time.monotonic() - t1 < 4.0  # Rerun itself would wait 5 s + 5 s
     with pytest.raises(RuntimeError, match="after close"):
         sink.write(make_result(0))
+
+
+def test_throttled_frames_are_said(tmp_path, caplog):
+    sink = save_sink(tmp_path, max_hz=0.001)
+    with caplog.at_level(logging.WARNING, logger="vpp_service.sinks.rerun"):
+        for i in range(3):
+            sink.write(make_result(i))
+    sink.close(timeout=10)
+    said = [r.getMessage() for r in caplog.records if "max_hz" in r.getMessage()]
+    assert len(said) == 1 and "throttled" in said[0] and sink.stats()["throttled"] == 2
+
+
+def start_viewer(port: int, path) -> subprocess.Popen:
+    """A stand-in viewer: Rerun's own gRPC server, saving what it receives to ``path``."""
+    proc = subprocess.Popen(
+        [*_rerun_binary(), "--serve-grpc", "--bind", "127.0.0.1", "--port", str(port), "--save", str(path)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    deadline = time.monotonic() + 10
+    while not reachable(f"rerun+http://127.0.0.1:{port}/proxy", 0.2):
+        assert time.monotonic() < deadline and proc.poll() is None, "viewer did not start"
+        time.sleep(0.05)
+    return proc
+
+
+def stop(proc: subprocess.Popen) -> None:
+    proc.terminate()
+    proc.wait(timeout=10)
+
+
+def test_connect_reconnects_after_viewer_restart(tmp_path):
+    port = free_port()
+    url = f"rerun+http://127.0.0.1:{port}/proxy"
+    viewer = start_viewer(port, tmp_path / "a.rrd")
+    sink = build_sink("rerun", {"mode": "connect", "url": url, "max_hz": 0, "queue_size": 64}, SinkContext(rig=RIG))
+    sink.open()
+    seq = 0
+    try:
+        for _ in range(5):
+            sink.write(make_result(seq))
+            seq += 1
+            time.sleep(0.05)
+        deadline = time.monotonic() + 10
+        while sink.stats()["written"] < 5 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert sink.stats()["written"] == 5
+        stop(viewer)
+        for _ in range(5):  # nobody listens: counted, not buffered
+            sink.write(make_result(seq))
+            seq += 1
+            time.sleep(0.1)
+        viewer = start_viewer(port, tmp_path / "b.rrd")
+        back = time.monotonic()
+        while sink.stats()["reconnects"] == 0 and time.monotonic() - back < 10:
+            sink.write(make_result(seq))
+            seq += 1
+            time.sleep(0.1)
+        reconnect_s = time.monotonic() - back
+        assert sink.stats()["reconnects"] == 1 and reconnect_s < 5.0
+        for _ in range(3):
+            sink.write(make_result(seq))
+            seq += 1
+            time.sleep(0.1)
+        sink.close(timeout=10)
+    finally:
+        stop(viewer)
+    st = sink.stats()
+    assert st["undelivered"] >= 5 and st["written"] + st["undelivered"] + st["queue_dropped"] == seq
+    assert st["dropped"] == st["undelivered"] + st["queue_dropped"]
+    after = read_rrd(tmp_path / "b.rrd")[f"/{RIG}/left"]["seq"]
+    assert after[-1] == seq - 1 and len(after) >= 3 and min(after) >= 10
+    assert read_rrd(tmp_path / "a.rrd")[f"/{RIG}/left"]["seq"] == [0, 1, 2, 3, 4]
+
+
+def test_connect_without_viewer_counts_and_buffers_nothing():
+    url = f"rerun+http://127.0.0.1:{free_port()}/proxy"
+    sink = build_sink("rerun", {"mode": "connect", "url": url, "max_hz": 0, "queue_size": 4}, SinkContext(rig=RIG))
+    sink.open()
+    n = 40
+    for i in range(n):
+        sink.write(make_result(i))
+        time.sleep(0.005)
+    sink.close(timeout=5)
+    st = sink.stats()
+    assert st["written"] == 0 and st["undelivered"] + st["queue_dropped"] == n and st["undelivered"] >= 1
+
+
+@pytest.mark.parametrize("bind", ["127.0.0.1", "127.0.0.2"])  # configurable; tests stay on loopback
+def test_serve_binds_loopback_by_default(bind):
+    port, web = free_port(), free_port()
+    opts = {"mode": "serve", "grpc_port": port, "web_port": web, "memory_limit": "64MB"}
+    if bind != "127.0.0.1":
+        opts["bind"] = bind
+    sink = build_sink("rerun", opts, SinkContext(rig=RIG))
+    sink.open()
+    try:
+        assert sink.wait_ready(15) and sink.stats()["errors"] == 0
+        listening = {
+            (c.laddr.ip, c.laddr.port)
+            for c in psutil.net_connections(kind="tcp")
+            if c.status == psutil.CONN_LISTEN and c.laddr.port in (port, web)
+        }
+        assert listening == {(bind, port), (bind, web)}
+        sink.write(make_result(0))
+    finally:
+        sink.close(timeout=5)
+    assert sink.stats()["errors"] == 0
 
 
 def test_serve_listens_on_grpc_port():

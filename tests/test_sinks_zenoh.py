@@ -36,7 +36,9 @@ def result(seq):
 def test_publishes_selected_outputs(sessions, outputs):
     svc, client = sessions
     sub = client.declare_subscriber("vpp/s/out/**", zenoh.handlers.FifoChannel(64))
-    sink = build_sink("zenoh", {"outputs": outputs, "queue_size": 8}, SinkContext(rig="s", session=svc))
+    sink = build_sink(
+        "zenoh", {"outputs": outputs, "on_request": [], "queue_size": 8}, SinkContext(rig="s", session=svc)
+    )
     sink.open()
     time.sleep(0.3)
     for seq in range(3):
@@ -74,6 +76,31 @@ def test_large_outputs_identical_with_and_without_shared_memory(sessions, pool_m
     assert shm["shm_puts"] + shm["plain_puts"] == 1 and shm["fallbacks"] == 0
     if pool_mb == 0:
         assert shm["plain_puts"] == 1
+
+
+def test_on_request_outputs_only_while_subscribed(sessions):
+    svc, client = sessions
+    disp_sub = client.declare_subscriber("vpp/s/out/disparity", zenoh.handlers.FifoChannel(64))
+    sink = build_sink("zenoh", {"outputs": ["disparity"], "queue_size": 8}, SinkContext(rig="s", session=svc))
+    sink.open()
+    time.sleep(0.3)
+    for seq in range(3):
+        sink.write(result(seq))
+    time.sleep(0.5)
+    assert sink.stats()["unrequested"] == 9  # left_vpp, right_vpp, sparse: nobody asked, never serialized
+    sub = client.declare_subscriber("vpp/s/out/sparse", zenoh.handlers.FifoChannel(64))
+    time.sleep(0.5)
+    res = result(3)
+    sparse = np.full(res.frame.shape, np.nan, np.float32)
+    sparse[3, 5], sparse[0, 1] = 7.5, 2.0
+    res.frame = res.frame.with_(sparse_disparity=sparse)
+    sink.write(res)
+    got = collect(sub, 1)
+    sink.close(3.0)
+    assert len(collect(disp_sub, 4)) == 4 and sink.stats()["unrequested"] == 11  # the pair still unrequested
+    pts = wire.decode_output_points(got[0].payload.to_bytes())
+    assert (pts.seq, pts.h, pts.w) == (3, *res.frame.shape)
+    assert pts.points.tolist() == [[1.0, 0.0, 2.0], [5.0, 3.0, 7.5]]  # (x, y, disparity), raster order
 
 
 def test_congestion_settings(sessions):

@@ -390,3 +390,23 @@ def test_topic_validation(prefix, rig, message):
 
 def test_topic():
     assert wire.topic("vpp", "rig0", "out/disparity") == "vpp/rig0/out/disparity"
+
+
+def test_sparse_output_round_trip_and_errors():
+    fr = make_frame()
+    sparse = np.full(fr.shape, np.nan, np.float32)
+    sparse[1, 2], sparse[4, 0] = 3.0, 9.5
+    res = FusionResult(frame=fr.with_(sparse_disparity=sparse), disparity=np.ones(fr.shape, np.float32))
+    out = wire.decode_output_points(wire.encode_output(res, "sparse"))
+    assert (out.rig, out.seq, out.h, out.w) == (fr.rig, fr.seq, *fr.shape)
+    assert out.points.tolist() == [[2.0, 1.0, 3.0], [0.0, 4.0, 9.5]]
+    assert wire.encode_output(FusionResult(frame=fr.with_(sparse_disparity=None), disparity=sparse), "sparse") is None
+    msg = msgpack.unpackb(wire.encode_output(res, "sparse"))
+    for key, value, field in [
+        ("data", np.float32([[99.0, 1.0, 3.0]] * 2).tobytes(), "inside"),
+        ("data", np.float32([[1.0, 1.0, -3.0]] * 2).tobytes(), "> 0"),
+        ("data", np.float32([[1.0, 1.0, np.nan]] * 2).tobytes(), "finite"),
+        ("n", 3, "data"),
+    ]:
+        with pytest.raises(wire.WireError, match=field):
+            wire.decode_output_points(msgpack.packb({**msg, key: value}, use_bin_type=True))

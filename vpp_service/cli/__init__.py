@@ -18,7 +18,7 @@ import sys
 from vpp_service.threads import configure_openmp
 
 #: Sub-command modules, in the order ``--help`` lists them.
-COMMANDS = ("run", "publish", "status", "eval", "demo")
+COMMANDS = ("run", "publish", "status", "view", "eval", "demo")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -35,7 +35,25 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--matcher", help="matcher name: sgbm, bm, census-sgm")
     p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", help="listen endpoint (repeatable)")
     p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", help="connect endpoint (repeatable)")
-    p.add_argument("--rerun-save", metavar="PATH", help="save a Rerun .rrd here (adds/replaces the rerun sink)")
+    viewer = p.add_mutually_exclusive_group()
+    viewer.add_argument("--rerun-save", metavar="PATH", help="save a Rerun .rrd here (adds/replaces the rerun sink)")
+    viewer.add_argument(
+        "--rerun-connect",
+        metavar="URL",
+        nargs="?",
+        const="rerun+http://127.0.0.1:9876/proxy",
+        help="stream to a running Rerun viewer (default URL rerun+http://127.0.0.1:9876/proxy)",
+    )
+    viewer.add_argument(
+        "--rerun-serve",
+        metavar="PORT",
+        nargs="?",
+        type=int,
+        const=9876,
+        help="host a Rerun gRPC server on 127.0.0.1:PORT (default 9876) for viewers that connect later",
+    )
+    viewer.add_argument("--rerun-spawn", action="store_true", help="spawn a local Rerun viewer and stream to it")
+    viewer.add_argument("--headless", action="store_true", help="no Rerun output at all (drops the rerun sink)")
     p.add_argument("--max-frames", type=int, help="stop after N processed frames")
     p.add_argument("--out", help="output folder (summary.json, default .rrd)")
     p.add_argument("--no-summary", action="store_true", help="no live summary line on stderr")
@@ -80,11 +98,31 @@ def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[
         zen["connect"] = list(args.zenoh_connect)
     if args.sink is not None:
         d["sinks"] = _sinks_from_flag(args.sink, d.get("sinks", []))
-    if args.rerun_save:
-        sinks = [s for s in d.get("sinks", []) if not (isinstance(s, dict) and s.get("type") == "rerun")]
-        sinks.append({"type": "rerun", "mode": "save", "path": args.rerun_save})
+    rerun = _rerun_flag(args)
+    if rerun is not None:
+        is_rerun = [isinstance(s, dict) and s.get("type") == "rerun" for s in d.get("sinks", [])]
+        old: dict[str, Any] = next((s for s, r in zip(d.get("sinks", []), is_rerun, strict=True) if r), {})
+        sinks = [s for s, r in zip(d.get("sinks", []), is_rerun, strict=True) if not r]
+        if rerun:  # keep the configured sink's other options (max_hz, ranges, ...), replace where it goes
+            kept = {k: v for k, v in old.items() if k not in ("mode", "path", "url", "grpc_port")}
+            sinks.append({**kept, "type": "rerun", **rerun})
         d["sinks"] = sinks
     return d
+
+
+def _rerun_flag(args: argparse.Namespace) -> dict[str, object] | None:
+    """The rerun sink's output asked for by ``--rerun-*`` / ``--headless`` ({} = none); None = no such flag."""
+    if getattr(args, "headless", False):
+        return {}
+    if getattr(args, "rerun_save", None):
+        return {"mode": "save", "path": args.rerun_save}
+    if getattr(args, "rerun_connect", None):
+        return {"mode": "connect", "url": args.rerun_connect}
+    if getattr(args, "rerun_serve", None) is not None:
+        return {"mode": "serve", "grpc_port": args.rerun_serve}
+    if getattr(args, "rerun_spawn", False):
+        return {"mode": "spawn"}
+    return None
 
 
 def main(args: argparse.Namespace) -> int:

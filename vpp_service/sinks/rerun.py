@@ -1,9 +1,15 @@
 """The ``rerun`` sink: stream results to a Rerun viewer, server or ``.rrd`` file.
 
+What is logged and the default layout: :mod:`vpp_service.sinks.rerun_log`.
+
 Modes
 -----
 ``save``
     Write a ``.rrd`` recording to ``path`` (open it later with ``rerun vpp.rrd``).
+    With ``max_mb > 0`` the file is rotated when it reaches that size:
+    ``vpp.rrd`` is always the newest, older parts are ``vpp.1.rrd`` (newer) ...
+    ``vpp.<max_files - 1>.rrd``; older parts are deleted. Every part is a
+    complete recording (same recording id, the blueprint and static data).
 ``spawn``
     Start a local native viewer listening on ``grpc_port`` and stream to it
     (``memory_limit`` bounds the viewer's memory; oldest data is dropped).
@@ -11,33 +17,32 @@ Modes
     Stream to a running viewer/server at ``url`` (default
     ``rerun+http://127.0.0.1:9876/proxy``).
 ``serve``
-    Host a gRPC server on ``grpc_port`` that buffers up to ``memory_limit`` for
-    late viewers (``rerun rerun+http://HOST:PORT/proxy``); with ``web_port > 0``
-    a web viewer is also served on that port.
+    Host a gRPC server on ``bind:grpc_port`` (a ``rerun --serve-grpc`` child
+    process; default ``127.0.0.1``, i.e. this machine only) that buffers up to
+    ``memory_limit`` for late viewers (``rerun rerun+http://HOST:PORT/proxy``);
+    with ``web_port > 0`` a web viewer is also served on ``bind:web_port``.
+    Neither is authenticated: bind another address only on a trusted network.
+
+Delivery (``spawn``, ``connect``, ``serve``)
+--------------------------------------------
+Each frame is flushed to the viewer before the next one is logged, so at most
+``queue_size`` frames wait in the sink and one is in flight: the memory is
+bounded even with no viewer. When the viewer is unreachable (never started,
+closed, restarting) frames are not logged and are counted as ``undelivered``;
+the sink checks the viewer's port every 0.5 s and reconnects (new connection,
+blueprint and static data re-sent) as soon as it is back.
 
 Threading and back-pressure
 ---------------------------
 :meth:`RerunSink.write` never blocks: it applies the ``max_hz`` throttle and
 hands the result to a :class:`~vpp_service.queueing.QueueWorker` (``queue_size``,
-drop-oldest) whose thread converts and logs. Throttled and overflowed frames are counted in ``stats()``
-(``throttled``, ``queue_dropped``; ``dropped`` is their sum). The sink uses its
-own :class:`rerun.RecordingStream` (never the global one) and sets the time
-per frame on the ``seq`` (sequence) and ``stamp`` (timestamp) timelines.
-
-Entities (root = ``context.rig``)
----------------------------------
-``<rig>/left``, ``<rig>/right``
-    The painted pair (raw pair when VPP was disabled or ``log_painted`` false).
-``<rig>/left/sparse``
-    Sparse input points as 2-D points over the left image, coloured by disparity.
-``<rig>/disparity``
-    Dense disparity, colourised (turbo, black = invalid), same colour scale.
-``<rig>/camera`` and ``<rig>/camera/depth``
-    ``rr.Pinhole`` from the calibration and ``rr.DepthImage(meter=1)``: the
-    viewer back-projects the depth into a 3-D point cloud, decimated so that at
-    most ``max_points`` pixels are logged (``point_cloud``).
-``<rig>/timing/<stage>``
-    Per-stage milliseconds as scalars.
+drop-oldest) whose thread converts and logs. Throttled frames are counted
+(``throttled``) and said once in the log; ``queue_dropped``, ``undelivered`` and
+``throttled`` add up to ``dropped``. The sink uses its own
+:class:`rerun.RecordingStream` (never the global one), with per-rig ids
+(application ``vpp-service-<rig>``, recording ``<rig>-<uuid>``) so that several
+rigs coexist in one viewer, and sets the time per frame on the ``seq``
+(sequence) and ``stamp`` (timestamp) timelines.
 
 Telemetry
 ---------
@@ -55,10 +60,13 @@ dead URL) the logging thread is abandoned (daemon) rather than hanging.
 
 from __future__ import annotations
 
+import contextlib
+import importlib.util
 import logging
 import math
 import re
 import shutil
+import socket
 import subprocess
 import sys
 import threading
@@ -67,13 +75,12 @@ import uuid
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
-
-import numpy as np
+from urllib.parse import urlsplit
 
 from vpp_service.frame import FusionResult
 from vpp_service.queueing import QueueWorker
 from vpp_service.sinks.base import SINKS, Sink, SinkContext
-from vpp_service.sinks.colorize import colorize_disparity, disparity_range
+from vpp_service.sinks.rerun_log import ENTITY_RE, RerunLayout, RerunParts, depth_stride, parts_from_result
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -83,7 +90,23 @@ log = logging.getLogger(__name__)
 
 _MEMORY_RE = re.compile(r"^\s*(\d+(\.\d+)?)\s*(B|KB|MB|GB|TB|KiB|MiB|GiB|TiB)\s*$|^\s*(\d+(\.\d+)?)\s*%\s*$")
 _URL_RE = re.compile(r"^rerun(\+https?)?://[^/\s]+/proxy$")
-_ENTITY_RE = re.compile(r"^[A-Za-z0-9_\-.]+$")
+_DEFAULT_URL = "rerun+http://127.0.0.1:9876/proxy"
+#: Seconds between two checks of an unreachable viewer's port.
+PROBE_INTERVAL_S = 0.5
+#: Longest wait for one frame to reach the viewer before it counts as undelivered.
+FLUSH_TIMEOUT_S = 2.0
+
+
+def _range(value: list[float] | None, key: str) -> None:
+    if value is None:
+        return
+    if (
+        not isinstance(value, (list, tuple))
+        or len(value) != 2
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+        or not value[1] > value[0]
+    ):
+        raise ValueError(f"{key}: must be [min, max] with finite min < max, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -96,6 +119,11 @@ class RerunSinkOptions:
         Where the data goes (see the module docstring). Default ``"save"``.
     path : str
         ``.rrd`` file for ``save`` (default ``"vpp.rrd"``; parent must exist).
+    max_mb : float
+        ``save``: rotate the file when it reaches this many megabytes (10^6 bytes);
+        0 = no cap. Default 1000.
+    max_files : int
+        ``save`` with a cap: files kept, the current one included (>= 1).
     url : str or None
         gRPC URL for ``connect`` (``rerun+http://HOST:PORT/proxy``); None =
         Rerun's default ``rerun+http://127.0.0.1:9876/proxy``.
@@ -104,6 +132,9 @@ class RerunSinkOptions:
         (``serve``). Default 9876.
     web_port : int
         ``serve`` only: also host the web viewer on this port; 0 = no web viewer.
+    bind : str
+        ``serve`` only: address the gRPC server and the web viewer listen on;
+        default ``127.0.0.1`` (this machine only); ``0.0.0.0`` = every interface.
     max_hz : float
         At most this many frames per second are logged (wall clock); 0 = all.
     memory_limit : str
@@ -114,13 +145,25 @@ class RerunSinkOptions:
         dropped and counted.
     log_painted : bool
         Log the painted pair (when present) instead of the raw pair.
+    jpeg_quality : int
+        JPEG quality of the logged pair, 1..100; 0 = uncompressed. Default 85.
+    disparity_range : list of float or None
+        ``[min, max]`` pixels of the disparity colour map; None = from the first frame.
+    depth_range : list of float or None
+        ``[min, max]`` metres of the depth colour map (farther points are not
+        drawn in 3-D); None = from the first frame.
+    sparse_points : bool
+        Log the sparse input points over the left image.
+    max_sparse_points : int
+        Most sparse points logged per frame (>= 1).
     point_cloud : bool
         Log pinhole + depth image for the 3-D view.
     max_points : int
         Upper bound of logged depth pixels (the depth image is decimated by an
-        integer stride) and of sparse 2-D points.
-    application_id : str
-        Rerun application id (groups recordings in the viewer).
+        integer stride).
+    application_id : str or None
+        Rerun application id (the viewer groups recordings and keeps one
+        blueprint per id); None = ``vpp-service-<rig>``.
     recording_id : str or None
         Rerun recording id; None = ``<rig>-<random uuid>``.
     analytics : bool
@@ -130,22 +173,55 @@ class RerunSinkOptions:
 
     mode: Literal["save", "spawn", "connect", "serve"] = "save"
     path: str = "vpp.rrd"
+    max_mb: float = 1000.0
+    max_files: int = 3
     url: str | None = None
     grpc_port: int = 9876
     web_port: int = 0
+    bind: str = "127.0.0.1"
     max_hz: float = 10.0
     memory_limit: str = "512MB"
     queue_size: int = 2
     log_painted: bool = True
+    jpeg_quality: int = 85
+    disparity_range: list[float] | None = None
+    depth_range: list[float] | None = None
+    sparse_points: bool = True
+    max_sparse_points: int = 5000
     point_cloud: bool = True
     max_points: int = 200_000
-    application_id: str = "vpp-service"
+    application_id: str | None = None
     recording_id: str | None = None
     analytics: bool = False
 
     def __post_init__(self) -> None:
         if not self.path.strip():
             raise ValueError("path: must not be empty")
+        if not math.isfinite(self.max_mb) or self.max_mb < 0:
+            raise ValueError(f"max_mb: must be a finite number >= 0 (0 = no cap), got {self.max_mb}")
+        if self.max_files < 1:
+            raise ValueError(f"max_files: must be >= 1, got {self.max_files}")
+        self._check_network()
+        if not math.isfinite(self.max_hz) or self.max_hz < 0:
+            raise ValueError(f"max_hz: must be a finite number >= 0 (0 = every frame), got {self.max_hz}")
+        if not _MEMORY_RE.match(self.memory_limit):
+            raise ValueError(f"memory_limit: must look like '512MB', '2GiB' or '25%', got {self.memory_limit!r}")
+        if self.queue_size < 1:
+            raise ValueError(f"queue_size: must be >= 1, got {self.queue_size}")
+        if not 0 <= self.jpeg_quality <= 100:
+            raise ValueError(f"jpeg_quality: must be in 0..100 (0 = uncompressed), got {self.jpeg_quality}")
+        _range(self.disparity_range, "disparity_range")
+        _range(self.depth_range, "depth_range")
+        if self.max_sparse_points < 1:
+            raise ValueError(f"max_sparse_points: must be >= 1, got {self.max_sparse_points}")
+        if self.max_points < 1:
+            raise ValueError(f"max_points: must be >= 1, got {self.max_points}")
+        if self.application_id is not None and not self.application_id.strip():
+            raise ValueError("application_id: must not be empty when given")
+        if self.recording_id is not None and not self.recording_id.strip():
+            raise ValueError("recording_id: must not be empty when given")
+
+    def _check_network(self) -> None:
         if self.url is not None and not _URL_RE.match(self.url):
             raise ValueError(f"url: must look like rerun+http://HOST:PORT/proxy, got {self.url!r}")
         if not 1 <= self.grpc_port <= 65535:
@@ -154,56 +230,26 @@ class RerunSinkOptions:
             raise ValueError(f"web_port: must be in 0..65535 (0 = off), got {self.web_port}")
         if self.web_port and self.web_port == self.grpc_port:
             raise ValueError(f"web_port: must differ from grpc_port ({self.grpc_port})")
-        if not math.isfinite(self.max_hz) or self.max_hz < 0:
-            raise ValueError(f"max_hz: must be a finite number >= 0 (0 = every frame), got {self.max_hz}")
-        if not _MEMORY_RE.match(self.memory_limit):
-            raise ValueError(f"memory_limit: must look like '512MB', '2GiB' or '25%', got {self.memory_limit!r}")
-        if self.queue_size < 1:
-            raise ValueError(f"queue_size: must be >= 1, got {self.queue_size}")
-        if self.max_points < 1:
-            raise ValueError(f"max_points: must be >= 1, got {self.max_points}")
-        if not self.application_id.strip():
-            raise ValueError("application_id: must not be empty")
-        if self.recording_id is not None and not self.recording_id.strip():
-            raise ValueError("recording_id: must not be empty when given")
+        if not self.bind.strip() or any(c.isspace() for c in self.bind):
+            raise ValueError(f"bind: must be an IP address such as 127.0.0.1, got {self.bind!r}")
 
 
-def depth_stride(height: int, width: int, max_points: int) -> int:
-    """Smallest integer stride ``s`` with ``ceil(H/s) * ceil(W/s) <= max_points``.
-
-    Parameters
-    ----------
-    height, width : int
-        Image size (> 0).
-    max_points : int
-        Pixel budget (>= 1).
-
-    Returns
-    -------
-    int
-        Stride >= 1.
-
-    Raises
-    ------
-    ValueError
-        On non-positive arguments.
-    """
-    for name, v in (("height", height), ("width", width), ("max_points", max_points)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-            raise ValueError(f"{name}: must be an integer >= 1, got {v!r}")
-    s = max(1, math.floor(math.sqrt(height * width / max_points)))
-    while math.ceil(height / s) * math.ceil(width / s) > max_points:
-        s += 1
-    return s
+def _rerun_binary() -> list[str]:
+    """Command that runs the Rerun CLI binary itself (not a wrapper that would outlive a kill)."""
+    spec = importlib.util.find_spec("rerun_cli")
+    if spec is not None and spec.origin:
+        exe = Path(spec.origin).parent / "rerun"
+        if exe.is_file():
+            return [str(exe)]
+    exe_path = shutil.which("rerun")
+    return [exe_path] if exe_path else [sys.executable, "-m", "rerun_cli"]
 
 
 def _disable_viewer_analytics() -> None:
     """Run ``rerun analytics disable`` (the viewer's own opt-out); log failures."""
-    exe = shutil.which("rerun")
-    cmd = [exe] if exe else [sys.executable, "-m", "rerun_cli"]
     try:
         subprocess.run(
-            [*cmd, "analytics", "disable"],
+            [*_rerun_binary(), "analytics", "disable"],
             check=True,
             timeout=10,
             stdout=subprocess.DEVNULL,
@@ -211,6 +257,21 @@ def _disable_viewer_analytics() -> None:
         )
     except (OSError, subprocess.SubprocessError) as exc:
         log.warning("rerun sink: could not disable viewer analytics: %s", exc)
+
+
+def reachable(url: str, timeout: float = 0.5) -> bool:
+    """Whether a TCP connection to the host and port of a ``rerun+http://HOST:PORT/proxy`` URL succeeds."""
+    parts = urlsplit(url.replace("rerun+", "", 1))
+    try:
+        socket.create_connection((parts.hostname or "127.0.0.1", parts.port or 9876), timeout=timeout).close()
+    except OSError:
+        return False
+    return True
+
+
+def rotated_paths(path: Path, max_files: int) -> list[Path]:
+    """The files of a rotated recording, newest first: ``vpp.rrd``, ``vpp.1.rrd``, ... ``vpp.<max_files-1>.rrd``."""
+    return [path] + [path.with_name(f"{path.stem}.{i}{path.suffix}") for i in range(1, max_files)]
 
 
 @SINKS.register("rerun")
@@ -232,11 +293,11 @@ class RerunSink(Sink):
         if not isinstance(options, RerunSinkOptions):
             raise TypeError(f"options: must be RerunSinkOptions, got {type(options).__name__}")
         context = context or SinkContext()
-        if not _ENTITY_RE.match(context.rig):
+        if not ENTITY_RE.match(context.rig):
             raise ValueError(f"context.rig: must be letters, digits, '_', '-', '.', got {context.rig!r}")
         super().__init__(options, context)
-        self._counters.update({"throttled": 0, "queue_dropped": 0})
-        self._worker: QueueWorker[FusionResult] = QueueWorker(
+        self._counters.update({"throttled": 0, "queue_dropped": 0, "undelivered": 0, "reconnects": 0, "rotations": 0})
+        self._worker: QueueWorker[FusionResult | RerunParts] = QueueWorker(
             self._log_one,
             size=options.queue_size,
             policy="latest",
@@ -245,31 +306,39 @@ class RerunSink(Sink):
             on_exit=self._flush,
             on_error=self._failed,
         )
+        o = options
+        self.layout = RerunLayout(
+            jpeg_quality=o.jpeg_quality,
+            disparity_range=None if o.disparity_range is None else (o.disparity_range[0], o.disparity_range[1]),
+            depth_range=None if o.depth_range is None else (o.depth_range[0], o.depth_range[1]),
+            max_points=o.max_points,
+            max_sparse_points=o.max_sparse_points if o.sparse_points else 0,
+            point_cloud=o.point_cloud,
+        )
+        self.application_id = o.application_id or f"vpp-service-{context.rig}"
         self._rec: rr.RecordingStream | None = None
         self._last_accept = -math.inf
         self._ready = threading.Event()
         self._close_deadline = math.inf
+        self._url: str | None = None  # the viewer / server the network modes stream to
+        self._connected = False
+        self._last_probe = -math.inf
+        self._server: subprocess.Popen[bytes] | None = None
+        self._said_throttle = False
+        self._blueprint_sent = False
         self.server_uri: str | None = None
 
     # -- life cycle -----------------------------------------------------------------
     def blueprint(self) -> rrb.Blueprint:
         """The default :class:`rerun.blueprint.Blueprint` of the sink's views."""
-        import rerun.blueprint as rrb
+        return self.layout.blueprint(self.context.rig)
 
-        r = f"/{self.context.rig}"
-        views = [
-            rrb.Horizontal(
-                rrb.Spatial2DView(origin=f"{r}/left", name="left (painted) + sparse points"),
-                rrb.Spatial2DView(origin=f"{r}/right", name="right (painted)"),
-            ),
-            rrb.Horizontal(
-                rrb.Spatial2DView(origin=f"{r}/disparity", name="disparity"),
-                rrb.Spatial3DView(origin=r, contents=[f"{r}/camera/**"], name="3-D"),
-                rrb.TimeSeriesView(origin=f"{r}/timing", name="timing [ms]"),
-                column_shares=[2, 2, 1],
-            ),
-        ]
-        return rrb.Blueprint(rrb.Vertical(*views), collapse_panels=True)
+    def _first_blueprint(self) -> rrb.Blueprint | None:
+        """The blueprint when the 3-D view's framing is known (else it is sent with the first frame)."""
+        if self.layout.depth_range is None and self.layout.point_cloud:
+            return None
+        self._blueprint_sent = True
+        return self.blueprint()
 
     def open(self) -> None:
         """Create the recording stream, attach the output and start the logging thread.
@@ -291,34 +360,81 @@ class RerunSink(Sink):
             raise RuntimeError("rerun sink: already open")
         o = self.options
         rec_id = o.recording_id or f"{self.context.rig}-{uuid.uuid4()}"
-        self._rec = rec = rr.RecordingStream(o.application_id, recording_id=rec_id, send_properties=False)
+        self._rec = rec = rr.RecordingStream(self.application_id, recording_id=rec_id, send_properties=False)
         if o.mode == "save":
             path = Path(o.path).expanduser()
             if not path.parent.is_dir():
                 raise FileNotFoundError(f"sinks.rerun.path: folder {str(path.parent)!r} does not exist")
             if path.is_dir():
                 raise IsADirectoryError(f"sinks.rerun.path: {str(path)!r} is a folder, expected a .rrd file")
-            rec.save(str(path), default_blueprint=self.blueprint())
+            rec.save(str(path), default_blueprint=self._first_blueprint())
+            self.layout.log_static(rec, self.context.rig)
             self._ready.set()
         self._worker.start()
 
     def _attach(self) -> None:
         """Attach the network output (runs on the logging thread)."""
-        import rerun as rr
-
-        o, rec, bp = self.options, self._recording(), self.blueprint()
+        o, rec, bp = self.options, self._recording(), self._first_blueprint()
         if o.mode == "spawn":
             if not o.analytics:
                 _disable_viewer_analytics()
             rec.spawn(port=o.grpc_port, memory_limit=o.memory_limit, default_blueprint=bp)
+            self._url = f"rerun+http://127.0.0.1:{o.grpc_port}/proxy"
+            self._connected = True
+            self.layout.log_static(rec, self.context.rig)
         elif o.mode == "connect":
-            rec.connect_grpc(o.url, default_blueprint=bp)
+            self._url = o.url or _DEFAULT_URL
+            if not self._reconnect():
+                log.warning("rerun sink: no viewer at %s yet; frames count as undelivered until it is", self._url)
         elif o.mode == "serve":
-            self.server_uri = rec.serve_grpc(
-                grpc_port=o.grpc_port, default_blueprint=bp, server_memory_limit=o.memory_limit
-            )
-            if o.web_port:
-                rr.serve_web_viewer(web_port=o.web_port, open_browser=False, connect_to=self.server_uri)
+            self._start_server()
+            if not self._reconnect():
+                raise RuntimeError(f"the Rerun server at {self._url} does not accept connections")
+
+    def _start_server(self) -> None:
+        """Start ``rerun --serve-grpc`` bound to ``bind`` (and the web viewer) and wait until it listens."""
+        o = self.options
+        host = f"[{o.bind}]" if ":" in o.bind else o.bind
+        cmd = [
+            *_rerun_binary(),
+            "--serve-web" if o.web_port else "--serve-grpc",
+            "--bind",
+            o.bind,
+            "--port",
+            str(o.grpc_port),
+            "--server-memory-limit",
+            o.memory_limit,
+        ]
+        if o.web_port:
+            cmd += ["--web-viewer-port", str(o.web_port)]
+        self._server = subprocess.Popen(
+            cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+        )
+        local = "127.0.0.1" if o.bind in ("0.0.0.0", "::") else host
+        self._url = f"rerun+http://{local}:{o.grpc_port}/proxy"
+        self.server_uri = f"rerun+http://{host}:{o.grpc_port}/proxy"
+        deadline = time.monotonic() + 10.0
+        while not reachable(self._url, 0.2):
+            if self._server.poll() is not None:
+                err = (self._server.stderr.read() if self._server.stderr else b"").decode(errors="replace")
+                raise RuntimeError(f"rerun server exited ({self._server.returncode}): {err.strip()[-300:]}")
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"rerun server did not listen on {o.bind}:{o.grpc_port} within 10 s")
+            time.sleep(0.05)
+        log.info(
+            "rerun sink: serving %s%s", self.server_uri, f" (web viewer on {host}:{o.web_port})" * bool(o.web_port)
+        )
+
+    def _reconnect(self) -> bool:
+        """(Re)connect to the viewer when its port accepts connections; True when connected."""
+        self._last_probe = time.monotonic()
+        if self._url is None or not reachable(self._url):
+            return False
+        rec = self._recording()
+        rec.connect_grpc(self._url, default_blueprint=self._first_blueprint())
+        self.layout.log_static(rec, self.context.rig)
+        self._connected = True
+        return True
 
     def wait_ready(self, timeout: float = 5.0) -> bool:
         """Wait until the output is attached (the server runs, the viewer is spawned).
@@ -343,14 +459,39 @@ class RerunSink(Sink):
         """
         if not isinstance(result, FusionResult):
             raise TypeError(f"result: must be a FusionResult, got {type(result).__name__}")
-        if not self._worker.started or self._worker.closed:
-            raise RuntimeError("rerun sink: write() before open() or after close()")
+        self._check_open()
         now = time.monotonic()
         if self.options.max_hz > 0 and now - self._last_accept < 1.0 / self.options.max_hz:
             self._counters["throttled"] += 1
+            if not self._said_throttle:
+                self._said_throttle = True
+                log.warning(
+                    "rerun sink: logging at most %g frames/s (max_hz); the others are skipped and counted "
+                    "as 'throttled' (max_hz = 0 logs every frame)",
+                    self.options.max_hz,
+                )
             return
         self._last_accept = now
         self._worker.put(result)
+
+    def submit(self, parts: RerunParts) -> None:
+        """Enqueue already split pieces (``vpp-service view``); no ``max_hz`` throttle, drop-oldest.
+
+        Raises
+        ------
+        TypeError
+            If ``parts`` is not a RerunParts.
+        RuntimeError
+            If the sink is not open.
+        """
+        if not isinstance(parts, RerunParts):
+            raise TypeError(f"parts: must be RerunParts, got {type(parts).__name__}")
+        self._check_open()
+        self._worker.put(parts)
+
+    def _check_open(self) -> None:
+        if not self._worker.started or self._worker.closed:
+            raise RuntimeError("rerun sink: write() before open() or after close()")
 
     def close(self, timeout: float = 5.0) -> None:
         """Drain, flush and disconnect within ``timeout`` seconds (never hangs).
@@ -364,12 +505,31 @@ class RerunSink(Sink):
         if not self._worker.close(timeout):
             log.warning("rerun sink: close() timed out after %.1f s; abandoning the logging thread", timeout)
             self._counters["errors"] += 1
+        if self._server is not None:
+            self._server.terminate()
+            try:
+                self._server.wait(timeout=2.0)
+            except subprocess.TimeoutExpired:
+                self._server.kill()
+            self._server = None
+        st = self.stats()
+        if st["dropped"]:
+            log.info(
+                "rerun sink: logged %d frames; not logged: %d over max_hz, %d queue overflow, %d undelivered",
+                st["written"],
+                st["throttled"],
+                st["queue_dropped"],
+                st["undelivered"],
+            )
 
     def stats(self) -> dict[str, int]:
-        """Counters: ``written``, ``errors``, ``throttled``, ``queue_dropped`` and ``dropped`` (their sum)."""
+        """Counters: ``written``, ``errors``, ``throttled``, ``queue_dropped``, ``undelivered``, ``dropped`` (sum).
+
+        Also ``reconnects`` (network modes) and ``rotations`` (``save`` with ``max_mb``).
+        """
         out = dict(self._counters)
         out["queue_dropped"] = self._worker.dropped + self._worker.discarded
-        out["dropped"] = out["throttled"] + out["queue_dropped"]
+        out["dropped"] = out["throttled"] + out["queue_dropped"] + out["undelivered"]
         return out
 
     # -- logging thread -------------------------------------------------------------
@@ -395,91 +555,82 @@ class RerunSink(Sink):
             self._counters["errors"] += 1
         self._ready.set()
 
-    def _log_one(self, result: FusionResult) -> None:
-        self._log(result)
+    def _log_one(self, item: FusionResult | RerunParts) -> None:
+        parts = parts_from_result(item, self.options.log_painted) if isinstance(item, FusionResult) else item
+        if self.options.mode == "save":
+            self._maybe_rotate()  # before logging: the newest file always holds the newest frame
+            self._log(parts)
+            if self.options.max_mb:
+                self._recording().flush(timeout_sec=FLUSH_TIMEOUT_S)  # the file sink batches; the size must be current
+            self._counters["written"] += 1
+            return
+        if not self._connected:
+            if time.monotonic() - self._last_probe >= PROBE_INTERVAL_S and self._reconnect():
+                self._counters["reconnects"] += 1
+                log.warning("rerun sink: reconnected to %s", self._url)
+            else:
+                self._counters["undelivered"] += 1
+                return
+        self._log(parts)
+        try:
+            self._recording().flush(timeout_sec=FLUSH_TIMEOUT_S)
+        except Exception as exc:  # noqa: BLE001 - "gRPC connection severed", "Flush timed out"
+            self._connected = False
+            self._last_probe = -math.inf
+            self._counters["undelivered"] += 1
+            log.warning("rerun sink: viewer at %s lost (%s); reconnecting when it is back", self._url, exc)
+            return
         self._counters["written"] += 1
 
-    def _failed(self, result: FusionResult, exc: Exception) -> None:
+    def _log(self, parts: RerunParts) -> None:
+        """Log one frame's pieces; send the blueprint again once the colour ranges are known."""
+        self.layout.log(self._recording(), parts)
+        if not self._blueprint_sent:
+            self._blueprint_sent = True
+            self._recording().send_blueprint(self.blueprint(), make_active=True, make_default=True)
+
+    def _maybe_rotate(self) -> None:
+        """``save`` with ``max_mb``: start a new file once the current one reached the cap."""
+        o = self.options
+        if not o.max_mb:
+            return
+        path = Path(o.path).expanduser()
+        try:
+            size = path.stat().st_size
+        except OSError:
+            return
+        if size < o.max_mb * 1e6:
+            return
+        rec = self._recording()
+        files = rotated_paths(path, o.max_files)
+        # the file sink keeps writing to the renamed inode until save() below replaces it
+        with contextlib.suppress(FileNotFoundError):
+            files[-1].unlink()
+        for older, newer in zip(reversed(files[1:]), reversed(files[:-1]), strict=True):
+            if newer.exists():
+                newer.replace(older)
+        rec.save(str(path), default_blueprint=self._first_blueprint())
+        self.layout.log_static(rec, self.context.rig)
+        self._counters["rotations"] += 1
+
+    def _failed(self, item: FusionResult | RerunParts, exc: Exception) -> None:
         # a bad frame must not kill the sink
-        log.warning("rerun sink: cannot log frame %s: %s", result.frame.seq, exc)
+        seq = item.frame.seq if isinstance(item, FusionResult) else item.seq
+        log.warning("rerun sink: cannot log frame %s: %s", seq, exc)
         self._counters["errors"] += 1
 
     def _flush(self) -> None:
         rec = self._recording()
-        try:
-            rec.flush(timeout_sec=min(5.0, max(0.05, self._close_deadline - time.monotonic())))
-        except Exception as exc:  # noqa: BLE001 - e.g. "Flush timed out" with a dead viewer
-            log.warning("rerun sink: flush failed: %s", exc)
-            self._counters["errors"] += 1
+        if self.options.mode == "save" or self._connected:
+            try:
+                rec.flush(timeout_sec=min(5.0, max(0.05, self._close_deadline - time.monotonic())))
+            except Exception as exc:  # noqa: BLE001 - e.g. "Flush timed out" with a dead viewer
+                log.warning("rerun sink: flush failed: %s", exc)
+                self._counters["errors"] += 1
         try:
             rec.disconnect()
         except Exception as exc:  # noqa: BLE001
             log.warning("rerun sink: disconnect failed: %s", exc)
 
-    def _log(self, result: FusionResult) -> None:
-        """Convert one result to Rerun archetypes and log it."""
-        import rerun as rr
 
-        rec, o, fr = self._recording(), self.options, result.frame
-        root = self.context.rig
-        rec.set_time("seq", sequence=int(fr.seq))
-        if fr.stamp_ns:
-            rec.set_time("stamp", timestamp=np.datetime64(int(fr.stamp_ns), "ns"))
-
-        painted = o.log_painted and result.left_vpp is not None and result.right_vpp is not None
-        left = result.left_vpp if painted else fr.left
-        right = result.right_vpp if painted else fr.right
-        rec.log(f"{root}/left", rr.Image(left))
-        rec.log(f"{root}/right", rr.Image(right))
-
-        disp = np.asarray(result.disparity, dtype=np.float32)
-        sparse = fr.sparse_disparity
-        rng = disparity_range(disp, sparse) or (0.0, 1.0)
-        rec.log(f"{root}/disparity", rr.Image(colorize_disparity(disp, *rng)))
-
-        if sparse is not None:
-            ys, xs = np.nonzero(np.isfinite(sparse) & (sparse > 0))
-            if ys.size > o.max_points:
-                keep = np.linspace(0, ys.size - 1, o.max_points).astype(np.int64)
-                ys, xs = ys[keep], xs[keep]
-            vals = sparse[ys, xs]
-            pos = np.stack([xs + 0.5, ys + 0.5], axis=1).astype(np.float32)
-            rec.log(
-                f"{root}/left/sparse",
-                rr.Points2D(pos, colors=colorize_disparity(vals, *rng), radii=1.5),
-            )
-
-        if o.point_cloud and fr.calib is not None:
-            depth = result.depth
-            if depth is None:
-                c = fr.calib
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    depth = np.float32(c.f * c.baseline) / (disp + np.float32(c.doffs))
-            depth = np.asarray(depth, dtype=np.float32)
-            h, w = depth.shape
-            s = depth_stride(h, w, o.max_points)
-            dd = np.ascontiguousarray(depth[::s, ::s])
-            dd[~(np.isfinite(dd) & (dd > 0))] = 0.0
-            c = fr.calib
-            # OpenCV convention (pixel centres at integers) for cx, cy; Rerun puts
-            # pixel centres at +0.5, and decimated pixel i is original pixel s*i.
-            cx = (w - 1) / 2.0 if c.cx is None else float(c.cx)
-            cy = (h - 1) / 2.0 if c.cy is None else float(c.cy)
-            rec.log(
-                f"{root}/camera",
-                rr.Pinhole(
-                    focal_length=float(c.f) / s,
-                    principal_point=[cx / s + 0.5, cy / s + 0.5],
-                    width=dd.shape[1],
-                    height=dd.shape[0],
-                    camera_xyz=rr.ViewCoordinates.RDF,
-                ),
-            )
-            rec.log(f"{root}/camera/depth", rr.DepthImage(dd, meter=1.0))
-
-        for stage, ms in result.timing_ms.items():
-            if isinstance(ms, (int, float)) and math.isfinite(ms) and _ENTITY_RE.match(str(stage)):
-                rec.log(f"{root}/timing/{stage}", rr.Scalars(float(ms)))
-
-
-__all__ = ["RerunSink", "RerunSinkOptions", "depth_stride"]
+__all__ = ["RerunSink", "RerunSinkOptions", "depth_stride", "reachable", "rotated_paths"]

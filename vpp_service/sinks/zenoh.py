@@ -1,7 +1,11 @@
 """Zenoh sink: publish results on ``<prefix>/<rig>/out/<name>`` (wire format v1).
 
 Outputs (``outputs`` option, lazy: only the listed ones are serialized):
-``disparity`` and ``depth`` (float32 maps) are published with
+``on_request`` lists outputs that are published only while someone subscribes
+to them (Zenoh's matching status; default: the painted pair and the sparse
+points, which ``vpp-service view`` shows), so they cost nothing otherwise.
+``sparse`` carries the sparse input points. ``disparity`` and ``depth``
+(float32 maps) are published with
 ``CongestionControl.BLOCK`` at ``Priority.DATA`` on purpose: Zenoh's default
 ``DROP`` can silently lose large fragmented messages, and these are the
 product. ``left_vpp`` / ``right_vpp`` (visualization images) go at
@@ -43,7 +47,9 @@ class ZenohSinkOptions:
     Attributes
     ----------
     outputs : list of str
-        Which of ``disparity``, ``depth``, ``left_vpp``, ``right_vpp`` to publish.
+        Which of ``disparity``, ``depth``, ``left_vpp``, ``right_vpp``, ``sparse`` to publish.
+    on_request : list of str
+        Outputs (not in ``outputs``) published only while a subscriber matches.
     image_enc : {"raw", "png", "jpeg"}
         Encoding of the ``left_vpp`` / ``right_vpp`` images.
     queue_size : int
@@ -54,6 +60,7 @@ class ZenohSinkOptions:
     """
 
     outputs: list[str] = field(default_factory=lambda: ["disparity", "depth"])
+    on_request: list[str] = field(default_factory=lambda: ["left_vpp", "right_vpp", "sparse"])
     image_enc: Literal["raw", "png", "jpeg"] = "png"
     queue_size: int = 4
     shm_pool_mb: int = 64
@@ -66,6 +73,11 @@ class ZenohSinkOptions:
                 raise ValueError(f"outputs: unknown output {name!r}; known: {', '.join(wire.OUTPUTS)}")
         if len(set(self.outputs)) != len(self.outputs):
             raise ValueError("outputs: duplicates")
+        for name in self.on_request:
+            if name not in wire.OUTPUTS:
+                raise ValueError(f"on_request: unknown output {name!r}; known: {', '.join(wire.OUTPUTS)}")
+        if len(set(self.on_request)) != len(self.on_request):
+            raise ValueError("on_request: duplicates")
         if (
             isinstance(self.shm_pool_mb, bool)
             or not isinstance(self.shm_pool_mb, int)
@@ -74,6 +86,12 @@ class ZenohSinkOptions:
             raise ValueError(f"shm_pool_mb: must be an int in [0, 4096], got {self.shm_pool_mb!r}")
         if self.queue_size < 1:
             raise ValueError(f"queue_size must be >= 1, got {self.queue_size}")
+
+
+def _matching(pub: zenoh.Publisher) -> bool:
+    """Whether a subscriber matches ``pub`` (zenoh returns a MatchingStatus; its stubs say bool)."""
+    status: object = pub.matching_status
+    return bool(getattr(status, "matching", status))
 
 
 @SINKS.register("zenoh")
@@ -87,7 +105,7 @@ class ZenohSink(Sink):
     @classmethod
     def needs_depth(cls, options: ZenohSinkOptions) -> bool:
         """True when ``depth`` is among the published ``outputs``."""
-        return "depth" in options.outputs
+        return "depth" in options.outputs or "depth" in options.on_request
 
     def __init__(self, options: ZenohSinkOptions, context: SinkContext) -> None:
         super().__init__(options, context)
@@ -99,6 +117,8 @@ class ZenohSink(Sink):
         self._encode_ms: deque[float] = deque(maxlen=200)
         self._put_ms: deque[float] = deque(maxlen=200)
         self._putter = ShmPutter(options.shm_pool_mb)
+        self._on_request: list[str] = []
+        self._counters["unrequested"] = 0  # on_request outputs not serialized: nobody subscribed
 
     def open(self) -> None:
         """Declare one publisher per output and start the publishing thread."""
@@ -107,8 +127,10 @@ class ZenohSink(Sink):
         session: zenoh.Session | None = self.context.session
         if session is None:
             raise ValueError("sinks.zenoh: needs an open zenoh session (service.zenoh section)")
-        for name in self.options.outputs:
-            visual = name in ("left_vpp", "right_vpp")
+        o = self.options
+        self._on_request = [n for n in o.on_request if n not in o.outputs]
+        for name in [*o.outputs, *self._on_request]:
+            visual = name in ("left_vpp", "right_vpp", "sparse")
             self._pubs[name] = session.declare_publisher(
                 wire.topic(self.context.prefix, self.context.rig, f"out/{name}"),
                 congestion_control=zenoh.CongestionControl.DROP if visual else zenoh.CongestionControl.BLOCK,
@@ -124,6 +146,9 @@ class ZenohSink(Sink):
         """Serialize and publish every output of one result (on the sink's thread)."""
         enc_s = put_s = 0.0
         for name, pub in self._pubs.items():
+            if name in self._on_request and not _matching(pub):
+                self._counters["unrequested"] += 1
+                continue  # nobody asked for it
             t0 = time.perf_counter()
             payload = wire.encode_output_parts(result, name, self.options.image_enc)
             t1 = time.perf_counter()

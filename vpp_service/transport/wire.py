@@ -18,6 +18,7 @@ Topics (``prefix`` defaults to ``"vpp"``)::
     <prefix>/<rig>/out/disparity     dense disparity, float32 px, NaN = invalid
     <prefix>/<rig>/out/depth         dense depth, float32 metres, NaN = invalid
     <prefix>/<rig>/out/left_vpp|right_vpp   painted pair, as Images
+    <prefix>/<rig>/out/sparse        the sparse input points, n x 3 float32 (x, y, disparity)
     <prefix>/<rig>/@status           queryable, JSON
     <prefix>/<rig>/@alive            liveliness token
 """
@@ -41,7 +42,7 @@ VERSION = 1
 #: Default key prefix.
 DEFAULT_PREFIX = "vpp"
 #: Output names a sink may publish.
-OUTPUTS = ("disparity", "depth", "left_vpp", "right_vpp")
+OUTPUTS = ("disparity", "depth", "left_vpp", "right_vpp", "sparse")
 
 
 class WireError(ValueError):
@@ -749,6 +750,13 @@ def encode_output_parts(result: FusionResult, name: str, enc: str = "raw") -> li
         return _map_message(result, result.disparity, extra)
     if name == "depth":
         return None if result.depth is None else _map_message(result, result.depth, {})
+    if name == "sparse":
+        pts = sparse_to_points(fr.sparse_disparity)
+        if pts is None:
+            return None
+        h, w = fr.left.shape[:2]
+        fields = {"v": VERSION, "rig": fr.rig, "seq": int(fr.seq), "stamp_ns": int(fr.stamp_ns), "h": h, "w": w}
+        return _map_parts({**fields, "n": len(pts), "dtype": "f32"}, "data", pts.astype("<f4").tobytes())
     img = result.left_vpp if name == "left_vpp" else result.right_vpp
     if img is None:
         return None
@@ -832,6 +840,50 @@ def decode_output(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> Output
     )
 
 
+def sparse_to_points(sparse_disparity: np.ndarray | None) -> np.ndarray | None:
+    """Valid entries (finite, > 0) of a sparse disparity map as n x 3 float32 rows ``(x, y, d)``, raster order."""
+    if sparse_disparity is None:
+        return None
+    ys, xs = np.nonzero(np.isfinite(sparse_disparity) & (sparse_disparity > 0))
+    return np.stack([xs, ys, sparse_disparity[ys, xs]], axis=1).astype(np.float32)
+
+
+@dataclass
+class OutputPoints:
+    """A decoded ``out/sparse`` message: ``points`` is n x 3 float32 ``(x, y, disparity)`` inside ``w`` x ``h``."""
+
+    rig: str
+    seq: int
+    stamp_ns: int
+    h: int
+    w: int
+    points: np.ndarray
+
+
+def decode_output_points(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> OutputPoints:
+    """Parse and validate an ``out/sparse`` message.
+
+    Raises
+    ------
+    WireError
+        Anything wrong, naming the field (points must lie inside the image, disparities finite and > 0).
+    """
+    msg = unpack(payload, limits)
+    rig, seq, stamp = _header(msg)
+    h = _int(msg, "h", "", 1, limits.max_side)
+    w = _int(msg, "w", "", 1, limits.max_side)
+    n = _int(msg, "n", "", 0, limits.max_points)
+    _str(msg, "dtype", "", ("f32",))
+    pts = _f32(_bytes(msg, "data", ""), 3 * n, "data").reshape(n, 3)
+    if not np.isfinite(pts).all():
+        raise WireError("data: values must be finite")
+    if n and (pts[:, 0].min() < 0 or pts[:, 0].max() > w - 1 or pts[:, 1].min() < 0 or pts[:, 1].max() > h - 1):
+        raise WireError(f"data: points must lie inside the {w}x{h} image")
+    if n and pts[:, 2].min() <= 0:
+        raise WireError("data: disparities must be > 0")
+    return OutputPoints(rig=rig, seq=seq, stamp_ns=stamp, h=h, w=w, points=pts)
+
+
 def decode_output_image(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> tuple[int, np.ndarray]:
     """Parse an ``out/left_vpp`` / ``out/right_vpp`` message; returns ``(seq, image)``."""
     msg = unpack(payload, limits)
@@ -845,6 +897,7 @@ __all__ = [
     "OUTPUTS",
     "VERSION",
     "OutputMap",
+    "OutputPoints",
     "Part",
     "WireError",
     "WireLimits",
@@ -854,6 +907,7 @@ __all__ = [
     "decode_image",
     "decode_output",
     "decode_output_image",
+    "decode_output_points",
     "decode_part",
     "encode_depth",
     "encode_frame",
@@ -862,6 +916,7 @@ __all__ = [
     "encode_output_parts",
     "encode_part",
     "points_to_maps",
+    "sparse_to_points",
     "topic",
     "unpack",
 ]

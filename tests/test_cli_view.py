@@ -1,0 +1,177 @@
+"""``vpp-service view`` between processes on loopback, its Rerun recordings read back."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+import zenoh
+from rerun.chunk import RrdReader
+
+from helpers.frames import make_frame
+from helpers.zenoh_loopback import zenoh_test_config
+from vpp_service.cli.view import decode_part, rig_path
+from vpp_service.frame import FusionResult
+from vpp_service.sinks.base import SinkContext, build_sink
+from vpp_service.transport import wire
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def vpp(*argv: str, **kw) -> subprocess.Popen:
+    """``python -m vpp_service ...`` running this checkout's code."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen(
+        [sys.executable, "-m", "vpp_service", *argv],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **kw,
+    )
+
+
+def read_rrd(path) -> dict[str, dict[str, list]]:
+    """Entity path -> column -> values, over all non-static chunks, rows sorted by seq."""
+    rows: dict[str, list[dict]] = defaultdict(list)
+    for chunk in RrdReader(path).stream().to_chunks():
+        if chunk.is_static:
+            continue
+        rb = chunk.to_record_batch()
+        cols = {}
+        for i, field in enumerate(rb.schema):
+            col = rb.column(i)
+            if pa.types.is_timestamp(field.type) or pa.types.is_duration(field.type):
+                col = col.cast(pa.int64())
+            cols[field.name] = col.to_pylist()
+        for r in range(rb.num_rows):
+            rows[chunk.entity_path].append({n: v[r] for n, v in cols.items()})
+    return {ent: {n: [r.get(n) for r in sorted(rs, key=lambda r: r["seq"])] for n in rs[0]} for ent, rs in rows.items()}
+
+
+def finish(proc: subprocess.Popen, timeout: float) -> tuple[int, str, str]:
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+        pytest.fail(f"timed out; stderr: {err[-2000:]}")
+    return proc.returncode, out, err
+
+
+def test_view_records_a_running_service(tmp_path, zenoh_endpoint):
+    """The service in one process, ``view --save`` in another; the .rrd read back."""
+    cfg = tmp_path / "svc.toml"
+    cfg.write_text(
+        f'[service]\nrig = "rigT"\nsummary = false\nout = "{tmp_path / "out"}"\n'
+        f'[zenoh]\nlisten = ["{zenoh_endpoint}"]\n'
+        '[source]\ntype = "sim"\nscale = 0.5\nrate_hz = 5.0\n'
+        '[matcher]\nname = "sgbm"\nmax_disparity = 64\n'
+        '[[sinks]]\ntype = "zenoh"\n'
+    )
+    service = vpp("run", "--config", str(cfg))
+    try:
+        time.sleep(1.0)
+        rrd = tmp_path / "watch.rrd"
+        view = vpp("view", "--rig", "rigT", "--connect", zenoh_endpoint, "--save", str(rrd), "--max-frames", "3")
+        rc, out, err = finish(view, 90)
+    finally:
+        service.send_signal(signal.SIGINT)
+        finish(service, 30)
+    assert rc == 0, err[-2000:]
+    summary = json.loads(out.strip().splitlines()[-1])
+    got = summary["rigs"]["rigT"]
+    assert got["received"]["disparity"] == 3 and got["rerun"]["errors"] == 0 and summary["rejected"] == 0
+    assert summary["saved"] == [str(rrd)]
+
+    reader = RrdReader(rrd)
+    assert [r.application_id for r in reader.recordings()] == ["vpp-service-rigT"]
+    data = read_rrd(rrd)
+    assert len(data["/rigT/disparity"]["seq"]) == 3
+    disp = data["/rigT/disparity"]
+    assert disp["DepthImage:colormap"][0] is not None and disp["DepthImage:depth_range"][0] is not None
+    # what the service published on request, each on its own entity
+    expected = {"/rigT/left", "/rigT/right", "/rigT/left/sparse", "/rigT/camera", "/rigT/camera/depth"}
+    assert expected <= set(data), sorted(data)
+    assert data["/rigT/left"]["EncodedImage:media_type"][0] == ["image/jpeg"]
+    assert any(e.startswith("/rigT/timing/") for e in data)
+
+
+def test_view_wildcard_keeps_one_recording_per_rig(tmp_path, zenoh_endpoint):
+    """A publisher of outputs for two rigs (this process), ``view --rig '*'`` in another process."""
+    rrd = tmp_path / "all.rrd"
+    with zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as session:
+        sinks = {
+            rig: build_sink(
+                "zenoh",
+                {"outputs": ["disparity", "depth", "left_vpp", "right_vpp", "sparse"], "image_enc": "png"},
+                SinkContext(rig=rig, session=session),
+            )
+            for rig in ("rig0", "rig1")
+        }
+        for s in sinks.values():
+            s.open()
+        view = vpp("view", "--rig", "*", "--connect", zenoh_endpoint, "--save", str(rrd), "--max-frames", "8")
+        sent: dict[str, dict[int, np.ndarray]] = {"rig0": {}, "rig1": {}}
+        seq, deadline = 0, time.monotonic() + 60
+        while view.poll() is None and time.monotonic() < deadline:
+            for k, (rig, sink) in enumerate(sinks.items()):
+                fr = make_frame().with_(rig=rig, seq=seq)
+                sparse = np.full(fr.shape, np.nan, np.float32)
+                sparse[2, 3] = 4.0
+                disp = np.full(fr.shape, 3.0 + k + 0.01 * seq, np.float32)
+                sent[rig][seq] = disp
+                sink.write(
+                    FusionResult(
+                        frame=fr.with_(sparse_disparity=sparse),
+                        disparity=disp,
+                        depth=np.full(fr.shape, 2.0, np.float32),
+                        left_vpp=fr.left,
+                        right_vpp=fr.right,
+                    )
+                )
+            seq += 1
+            time.sleep(0.1)
+        rc, out, err = finish(view, 30)
+        for s in sinks.values():
+            s.close(2.0)
+    assert rc == 0, err[-2000:]
+    summary = json.loads(out.strip().splitlines()[-1])
+    assert sorted(summary["rigs"]) == ["rig0", "rig1"]
+    assert sorted(summary["saved"]) == [str(tmp_path / "all-rig0.rrd"), str(tmp_path / "all-rig1.rrd")]
+    for rig in ("rig0", "rig1"):
+        path = tmp_path / f"all-{rig}.rrd"
+        assert [r.application_id for r in RrdReader(path).recordings()] == [f"vpp-service-{rig}"]
+        data = read_rrd(path)
+        assert {e.split("/")[1] for e in data} == {rig}  # only this rig's entities
+        assert {f"/{rig}/disparity", f"/{rig}/left", f"/{rig}/right", f"/{rig}/left/sparse"} <= set(data)
+        disp = data[f"/{rig}/disparity"]
+        for s, buf in zip(disp["seq"], disp["DepthImage:buffer"], strict=True):
+            values = np.frombuffer(bytes(np.asarray(buf[0], np.uint8)), np.float32)
+            assert np.array_equal(values, sent[rig][s].ravel())
+        pts = data[f"/{rig}/left/sparse"]["Points2D:positions"][0]
+        assert np.allclose(pts, [[3.5, 2.5]])
+
+
+def test_decode_part_rejects_a_foreign_rig():
+    fr = make_frame().with_(rig="rigA")
+    res = FusionResult(frame=fr, disparity=np.ones(fr.shape, np.float32))
+    payload = wire.encode_output(res, "disparity")
+    assert decode_part("disparity", payload, "rigA").disparity is not None
+    with pytest.raises(wire.WireError, match="rig"):
+        decode_part("disparity", payload, "rigB")
+
+
+def test_rig_path():
+    assert rig_path("x/w.rrd", "r1", wildcard=False) == "x/w.rrd"
+    assert rig_path("x/w.rrd", "r1", wildcard=True) == str(Path("x/w-r1.rrd"))
