@@ -29,12 +29,14 @@ def add_parser(subparsers: Any) -> None:
     )
     p.add_argument("--config", help="TOML config file (default: the embedded default)")
     p.add_argument("--rig", help="rig name (service.rig)")
-    p.add_argument("--source", help="source type: sim, files, zenoh (its options come from the config)")
+    p.add_argument("--source", help="source type: sim, files, zenoh, ros2 (its options come from the config)")
     p.add_argument("--sink", action="append", help="sink type (repeatable; replaces the config's sinks)")
     p.add_argument("--matcher", help="matcher name: sgbm, bm, census-sgm")
     p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", help="listen endpoint (repeatable)")
     p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", help="connect endpoint (repeatable)")
     p.add_argument("--rerun-save", metavar="PATH", help="save a Rerun .rrd here (adds/replaces the rerun sink)")
+    p.add_argument("--ros-namespace", metavar="NS", help="ROS 2 namespace of the ros2 source and sinks (e.g. /stereo)")
+    p.add_argument("--ros-domain", type=int, metavar="ID", help="ROS 2 domain id of the ros2 source and sinks")
     p.add_argument("--max-frames", type=int, help="stop after N processed frames")
     p.add_argument("--out", help="output folder (summary.json, default .rrd)")
     p.add_argument("--no-summary", action="store_true", help="no live summary line on stderr")
@@ -78,11 +80,21 @@ def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[
             else:
                 sinks.append({"type": t})
         d["sinks"] = sinks
+    _ros_overrides(d, args)
     if args.rerun_save:
         sinks = [s for s in d.get("sinks", []) if not (isinstance(s, dict) and s.get("type") == "rerun")]
         sinks.append({"type": "rerun", "mode": "save", "path": args.rerun_save})
         d["sinks"] = sinks
     return d
+
+
+def _ros_overrides(d: dict[str, Any], args: argparse.Namespace) -> None:
+    """``--ros-namespace`` / ``--ros-domain``: set on the ros2 source and every ros2 sink of ``d``."""
+    pairs = (("namespace", getattr(args, "ros_namespace", None)), ("domain_id", getattr(args, "ros_domain", None)))
+    ros = {k: v for k, v in pairs if v is not None}
+    for section in [d.get("source"), *d.get("sinks", [])]:
+        if ros and isinstance(section, dict) and section.get("type") == "ros2":
+            section.update(ros)
 
 
 def main(args: argparse.Namespace) -> int:

@@ -24,39 +24,21 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import Literal, TypeVar
+from typing import TYPE_CHECKING, Literal, TypeVar
 
 import numpy as np
-from rosbags.typesys import Stores, get_typestore
-from rosbags.typesys.store import Typestore
-from rosbags.typesys.stores.ros2_jazzy import (
-    builtin_interfaces__msg__Time as Time,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    sensor_msgs__msg__CameraInfo as CameraInfo,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    sensor_msgs__msg__Image as Image,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    sensor_msgs__msg__PointCloud2 as PointCloud2,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    sensor_msgs__msg__PointField as PointField,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    sensor_msgs__msg__RegionOfInterest as RegionOfInterest,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    std_msgs__msg__Header as Header,
-)
-from rosbags.typesys.stores.ros2_jazzy import (
-    stereo_msgs__msg__DisparityImage as DisparityImage,
-)
 
 from vpp_service.frame import Calibration
 from vpp_service.transport.ros2.errors import Ros2Error
 from vpp_service.transport.ros2.keys import CAMERA_INFO, DISPARITY_IMAGE, IMAGE, POINT_CLOUD2
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
+    from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__CameraInfo as CameraInfo
+    from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__Image as Image
+    from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__PointCloud2 as PointCloud2
+    from rosbags.typesys.stores.ros2_jazzy import std_msgs__msg__Header as Header
+    from rosbags.typesys.stores.ros2_jazzy import stereo_msgs__msg__DisparityImage as DisparityImage
 
 M = TypeVar("M")
 
@@ -67,12 +49,28 @@ DEPTH_ENCODINGS = ("32FC1", "16UC1")
 #: How invalid disparity pixels are written.
 Invalid = Literal["below_min", "nan"]
 
-_MSG_CLASSES: dict[str, type] = {
-    IMAGE: Image,
-    CAMERA_INFO: CameraInfo,
-    POINT_CLOUD2: PointCloud2,
-    DISPARITY_IMAGE: DisparityImage,
+#: The message classes, importable from this module (``messages.Image``); ``rosbags`` loads on first use.
+_CLASSES = {
+    "Time": "builtin_interfaces__msg__Time",
+    "Header": "std_msgs__msg__Header",
+    "Image": "sensor_msgs__msg__Image",
+    "CameraInfo": "sensor_msgs__msg__CameraInfo",
+    "RegionOfInterest": "sensor_msgs__msg__RegionOfInterest",
+    "PointField": "sensor_msgs__msg__PointField",
+    "PointCloud2": "sensor_msgs__msg__PointCloud2",
+    "DisparityImage": "stereo_msgs__msg__DisparityImage",
 }
+_SUPPORTED = {IMAGE: "Image", CAMERA_INFO: "CameraInfo", POINT_CLOUD2: "PointCloud2", DISPARITY_IMAGE: "DisparityImage"}
+
+
+def __getattr__(name: str) -> type:
+    """The ``rosbags`` message classes by short name, imported on first use (it takes ~0.3 s)."""
+    if name in _CLASSES:
+        from rosbags.typesys.stores import ros2_jazzy
+
+        cls: type = getattr(ros2_jazzy, _CLASSES[name])
+        return cls
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclass(frozen=True)
@@ -100,9 +98,18 @@ class Limits:
                 raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
 
 
+def message_class(ros_type: str) -> type:
+    """The ``rosbags`` class of one of the four supported types (``sensor_msgs/msg/Image`` -> ``Image``)."""
+    if ros_type not in _SUPPORTED:
+        raise ValueError(f"unsupported message type {ros_type!r}; supported: {', '.join(_SUPPORTED)}")
+    return __getattr__(_SUPPORTED[ros_type])
+
+
 @functools.cache
 def typestore() -> Typestore:
     """The ``rosbags`` type store used for every message (built once, on first use)."""
+    from rosbags.typesys import Stores, get_typestore
+
     return get_typestore(Stores.ROS2_JAZZY)
 
 
@@ -143,7 +150,7 @@ def deserialize(data: bytes | memoryview, ros_type: str, cls: type[M], limits: L
 
 def serialize(msg: object, ros_type: str) -> memoryview:
     """CDR (little endian, header ``00 01 00 00``) of ``msg``."""
-    if not isinstance(msg, _MSG_CLASSES.get(ros_type, object)):
+    if ros_type not in _SUPPORTED or getattr(type(msg), "__msgtype__", None) != ros_type:
         raise TypeError(f"{ros_type}: got a {type(msg).__name__}")
     return typestore().serialize_cdr(msg, ros_type, little_endian=True)
 
@@ -160,6 +167,9 @@ def make_header(stamp: int, frame_id: str) -> Header:
     """A header with ``stamp`` (ns, >= 0) and ``frame_id``."""
     if stamp < 0:
         raise ValueError(f"stamp must be >= 0 ns, got {stamp}")
+    from rosbags.typesys.stores.ros2_jazzy import builtin_interfaces__msg__Time as Time
+    from rosbags.typesys.stores.ros2_jazzy import std_msgs__msg__Header as Header
+
     sec, nsec = divmod(int(stamp), 1_000_000_000)
     return Header(stamp=Time(sec=sec, nanosec=nsec), frame_id=frame_id)
 
@@ -236,6 +246,8 @@ def depth_image_to_array(msg: Image, limits: Limits) -> np.ndarray:
 
 def array_to_image(arr: np.ndarray, header: Header, encoding: Literal["rgb8", "mono8", "32FC1"]) -> Image:
     """An ``Image`` message holding ``arr`` (H x W x 3 uint8 ``rgb8``, H x W uint8 ``mono8``, float32 ``32FC1``)."""
+    from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__Image as Image
+
     want = {"rgb8": (np.uint8, 3), "mono8": (np.uint8, 2), "32FC1": (np.float32, 2)}
     if encoding not in want:
         raise ValueError(f"encoding must be one of {list(want)}, got {encoding!r}")
@@ -324,6 +336,9 @@ def stereo_calibration(left: CameraModel, right: CameraModel) -> Calibration:
 
 def camera_info_message(calib: Calibration, header: Header, width: int, height: int, right: bool) -> CameraInfo:
     """A rectified ``CameraInfo`` for one view of ``calib`` (``doffs`` moves the right ``cx``)."""
+    from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__CameraInfo as CameraInfo
+    from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__RegionOfInterest as RegionOfInterest
+
     cx_l = calib.cx if calib.cx is not None else (width - 1) / 2
     cy = calib.cy if calib.cy is not None else (height - 1) / 2
     cx = cx_l + calib.doffs if right else cx_l
@@ -347,16 +362,9 @@ def camera_info_message(calib: Calibration, header: Header, width: int, height: 
 
 # --------------------------------------------------------------------- point cloud
 
-_POINT_TYPES = {
-    PointField.INT8: "i1",
-    PointField.UINT8: "u1",
-    PointField.INT16: "i2",
-    PointField.UINT16: "u2",
-    PointField.INT32: "i4",
-    PointField.UINT32: "u4",
-    PointField.FLOAT32: "f4",
-    PointField.FLOAT64: "f8",
-}
+#: ``PointField`` datatypes (INT8 = 1 ... FLOAT64 = 8) as numpy kinds.
+_POINT_TYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
+_FLOAT32 = 7
 
 
 def cloud_to_xyz(msg: PointCloud2, limits: Limits) -> np.ndarray:
@@ -397,6 +405,9 @@ def cloud_to_xyz(msg: PointCloud2, limits: Limits) -> np.ndarray:
 
 def xyz_cloud_message(xyz: np.ndarray, header: Header, rgb: np.ndarray | None = None) -> PointCloud2:
     """An unorganized cloud (height 1) of N x 3 points, float32 x y z, plus packed ``rgb`` when given."""
+    from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__PointCloud2 as PointCloud2
+    from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__PointField as PointField
+
     pts = np.ascontiguousarray(xyz, dtype="<f4").reshape(-1, 3)
     n = pts.shape[0]
     names = ["x", "y", "z"] + (["rgb"] if rgb is not None else [])
@@ -405,7 +416,7 @@ def xyz_cloud_message(xyz: np.ndarray, header: Header, rgb: np.ndarray | None = 
     if rgb is not None:
         c = np.ascontiguousarray(rgb, dtype=np.uint8).reshape(n, 3).astype(np.uint32)
         rec[:, 3] = ((c[:, 0] << 16) | (c[:, 1] << 8) | c[:, 2]).astype("<u4").view("<f4")
-    fields = [PointField(name=nm, offset=4 * i, datatype=PointField.FLOAT32, count=1) for i, nm in enumerate(names)]
+    fields = [PointField(name=nm, offset=4 * i, datatype=_FLOAT32, count=1) for i, nm in enumerate(names)]
     step = 4 * len(names)
     return PointCloud2(
         header=header,
@@ -451,6 +462,9 @@ def disparity_message(disparity: np.ndarray, calib: Calibration, header: Header,
     Values become ``d + doffs`` (ROS units, see the module docstring); ``valid_window`` is the
     bounding box of the valid pixels (all zeros when there are none).
     """
+    from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__RegionOfInterest as RegionOfInterest
+    from rosbags.typesys.stores.ros2_jazzy import stereo_msgs__msg__DisparityImage as DisparityImage
+
     d = np.asarray(disparity, dtype=np.float32)
     if d.ndim != 2:
         raise ValueError(f"disparity must be H x W, got shape {d.shape}")
@@ -537,6 +551,7 @@ __all__ = [
     "disparity_message",
     "image_to_array",
     "make_header",
+    "message_class",
     "serialize",
     "stamp_ns",
     "stereo_calibration",
