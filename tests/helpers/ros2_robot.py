@@ -236,3 +236,34 @@ def motorcycle_rig(density: float = 0.05, seed: int = 0) -> tuple[StereoRig, np.
         cloud=xyz,
     )
     return rig, gt, c.doffs
+
+
+def write_bag(path: str, storage: str, rig: StereoRig, stamps: list[int], namespace: str = "/stereo") -> None:
+    """A rosbag2 bag (``storage`` = "mcap" or "sqlite3") with the rig's five topics at each stamp, via rosbags."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    h, w = rig.left.shape[:2]
+    types = {
+        "left/image_rect": "sensor_msgs/msg/Image",
+        "right/image_rect": "sensor_msgs/msg/Image",
+        "left/camera_info": "sensor_msgs/msg/CameraInfo",
+        "right/camera_info": "sensor_msgs/msg/CameraInfo",
+        "points": "sensor_msgs/msg/PointCloud2",
+    }
+    with Writer(path, version=9, storage_plugin=plugin) as writer:
+        conns = {n: writer.add_connection(f"{namespace}/{n}", t, typestore=TS) for n, t in types.items()}
+        for stamp in stamps:
+            msgs = {
+                "left/image_rect": image_msg(rig.left, stamp, "left_optical"),
+                "right/image_rect": image_msg(rig.right, stamp, "right_optical"),
+                "left/camera_info": camera_info_msg(
+                    stamp, "left_optical", (w, h), f=rig.f, cx=rig.cx_left, cy=rig.cy, tx=0.0
+                ),
+                "right/camera_info": camera_info_msg(
+                    stamp, "right_optical", (w, h), f=rig.f, cx=rig.cx_right, cy=rig.cy, tx=-rig.f * rig.baseline
+                ),
+                "points": cloud_msg(rig.cloud, stamp, "left_optical"),
+            }
+            for i, (n, msg) in enumerate(msgs.items()):
+                writer.write(conns[n], stamp + i * 1000, bytes(TS.serialize_cdr(msg, types[n], little_endian=True)))

@@ -35,6 +35,7 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", help="listen endpoint (repeatable)")
     p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", help="connect endpoint (repeatable)")
     p.add_argument("--rerun-save", metavar="PATH", help="save a Rerun .rrd here (adds/replaces the rerun sink)")
+    p.add_argument("--rosbag", metavar="PATH", help="play a rosbag2 bag (.db3/.mcap) as the source (type rosbag2)")
     p.add_argument("--ros-namespace", metavar="NS", help="ROS 2 namespace of the ros2 source and sinks (e.g. /stereo)")
     p.add_argument("--ros-domain", type=int, metavar="ID", help="ROS 2 domain id of the ros2 source and sinks")
     p.add_argument("--max-frames", type=int, help="stop after N processed frames")
@@ -89,12 +90,18 @@ def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[
 
 
 def _ros_overrides(d: dict[str, Any], args: argparse.Namespace) -> None:
-    """``--ros-namespace`` / ``--ros-domain``: set on the ros2 source and every ros2 sink of ``d``."""
+    """``--rosbag`` (the rosbag2 source), ``--ros-namespace`` / ``--ros-domain`` (ros2 source and sinks)."""
+    bag = getattr(args, "rosbag", None)
+    if bag:
+        src = d.get("source", {})
+        d["source"] = {**src, "path": bag} if src.get("type") == "rosbag2" else {"type": "rosbag2", "path": bag}
     pairs = (("namespace", getattr(args, "ros_namespace", None)), ("domain_id", getattr(args, "ros_domain", None)))
     ros = {k: v for k, v in pairs if v is not None}
     for section in [d.get("source"), *d.get("sinks", [])]:
         if ros and isinstance(section, dict) and section.get("type") == "ros2":
             section.update(ros)
+        elif ros.get("namespace") and isinstance(section, dict) and section.get("type") == "rosbag2":
+            section["namespace"] = ros["namespace"]
 
 
 def main(args: argparse.Namespace) -> int:

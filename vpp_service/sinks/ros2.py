@@ -56,25 +56,17 @@ OUTPUTS: dict[str, tuple[str, str]] = {
 
 
 @dataclass(frozen=True)
-class Ros2SinkOptions:
-    """Options of the ``ros2`` sink.
+class Ros2OutputOptions:
+    """What the ROS 2 outputs hold: shared by the ``ros2`` sink and the ``rosbag2`` recorder.
 
     Attributes
     ----------
     namespace : str
         ROS namespace of the output topics.
-    domain_id : int
-        ROS domain id.
-    node_name : str
-        Name of the publishing node.
     outputs : list of str
-        Which of ``disparity``, ``depth``, ``points2``, ``left_vpp``, ``right_vpp`` to publish.
+        Which of ``disparity``, ``depth``, ``points2``, ``left_vpp``, ``right_vpp`` to write.
     topics : dict
         Topic remapping per output name, e.g. ``{disparity = "/robot/disparity"}``.
-    attachment : {"current", "legacy"}
-        Attachment layout (``legacy`` only for Jazzy rmw_zenoh 0.2.0-0.2.3 graphs).
-    lazy : bool
-        Skip an output while no subscriber matches it.
     frame_id : str
         Header frame of results whose frame did not come from ROS.
     min_disparity : float
@@ -86,16 +78,12 @@ class Ros2SinkOptions:
     invalid : {"below_min", "nan"}
         Value of invalid disparity pixels.
     queue_size : int
-        Results buffered between the pipeline and the publishing thread.
+        Results buffered between the pipeline and the writing thread.
     """
 
     namespace: str = "/stereo"
-    domain_id: int = 0
-    node_name: str = "vpp_stereo"
     outputs: list[str] = field(default_factory=lambda: ["disparity"])
     topics: dict[str, str] = field(default_factory=dict)
-    attachment: Layout = "current"
-    lazy: bool = False
     frame_id: str = "left_camera_optical_frame"
     min_disparity: float = 0.0
     max_disparity: float = 0.0
@@ -104,8 +92,6 @@ class Ros2SinkOptions:
     queue_size: int = 4
 
     def __post_init__(self) -> None:
-        keys.check_domain(self.domain_id)
-        keys.check_node_name(self.node_name)
         if not self.outputs or len(set(self.outputs)) != len(self.outputs):
             raise ValueError("outputs: must list at least one output, without duplicates")
         for name in [*self.outputs, *self.topics]:
@@ -125,6 +111,33 @@ class Ros2SinkOptions:
         return keys.fully_qualified(self.namespace, self.topics.get(output, OUTPUTS[output][0]))
 
 
+@dataclass(frozen=True)
+class Ros2SinkOptions(Ros2OutputOptions):
+    """Options of the ``ros2`` sink: :class:`Ros2OutputOptions` plus the node.
+
+    Attributes
+    ----------
+    domain_id : int
+        ROS domain id.
+    node_name : str
+        Name of the publishing node.
+    attachment : {"current", "legacy"}
+        Attachment layout (``legacy`` only for Jazzy rmw_zenoh 0.2.0-0.2.3 graphs).
+    lazy : bool
+        Skip an output while no subscriber matches it.
+    """
+
+    domain_id: int = 0
+    node_name: str = "vpp_stereo"
+    attachment: Layout = "current"
+    lazy: bool = False
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        keys.check_domain(self.domain_id)
+        keys.check_node_name(self.node_name)
+
+
 def points_xyz_rgb(depth: np.ndarray, image: np.ndarray, calib: Calibration) -> tuple[np.ndarray, np.ndarray]:
     """Valid pixels of a depth map as N x 3 points in the left optical frame and N x 3 uint8 colours."""
     h, w = depth.shape
@@ -136,6 +149,53 @@ def points_xyz_rgb(depth: np.ndarray, image: np.ndarray, calib: Calibration) -> 
     xyz = np.stack([(u - cx) * z / calib.f, (v - cy) * z / calib.f, z], axis=1).astype(np.float32)
     rgb = image[valid] if image.ndim == 3 else np.repeat(image[valid][:, None], 3, axis=1)
     return xyz, np.ascontiguousarray(rgb, dtype=np.uint8)
+
+
+class Ros2Encoder:
+    """CDR payloads of the outputs of one result (see the module docstring for what each holds).
+
+    Parameters
+    ----------
+    options : Ros2OutputOptions
+        Outputs, frame id and the ``DisparityImage`` metadata.
+    """
+
+    def __init__(self, options: Ros2OutputOptions) -> None:
+        self.options = options
+        self.range = rm.DisparityRange(options.min_disparity, options.max_disparity, options.delta_d, options.invalid)
+
+    def header(self, result: FusionResult) -> rm.Header:
+        """The left camera_info header the frame came with, else ``frame.stamp_ns`` and ``frame_id``."""
+        ros = result.frame.meta.get("ros")
+        if isinstance(ros, dict) and isinstance(ros.get("stamp_ns"), int) and isinstance(ros.get("frame_id"), str):
+            return rm.make_header(ros["stamp_ns"], ros["frame_id"])
+        return rm.make_header(max(0, int(result.frame.stamp_ns)), self.options.frame_id)
+
+    def encode(self, result: FusionResult, name: str) -> bytes | None:
+        """The CDR payload of output ``name`` for ``result``; None when the result lacks it."""
+        header = self.header(result)
+        calib = result.frame.calib
+        msg: object
+        if name == "disparity":
+            if calib is None:
+                return None
+            msg = rm.disparity_message(result.disparity, calib, header, self.range)
+        elif name == "depth":
+            if result.depth is None:
+                return None
+            msg = rm.array_to_image(np.asarray(result.depth, np.float32), header, "32FC1")
+        elif name == "points2":
+            if result.depth is None or calib is None:
+                return None
+            xyz, rgb = points_xyz_rgb(result.depth, result.frame.left, calib)
+            msg = rm.xyz_cloud_message(xyz, header, rgb)
+        else:
+            img = result.left_vpp if name == "left_vpp" else result.right_vpp
+            if img is None:
+                return None
+            rgb = img if img.ndim == 3 else np.repeat(img[:, :, None], 3, axis=2)
+            msg = rm.array_to_image(np.ascontiguousarray(rgb, np.uint8), header, "rgb8")
+        return bytes(rm.serialize(msg, OUTPUTS[name][1]))
 
 
 @SINKS.register("ros2")
@@ -160,7 +220,7 @@ class Ros2Sink(Sink):
         )
         self._encode_ms: deque[float] = deque(maxlen=200)
         self._counters.update({"lazy_skipped": 0, "missing": 0})
-        self._range = rm.DisparityRange(options.min_disparity, options.max_disparity, options.delta_d, options.invalid)
+        self._encoder = Ros2Encoder(options)
 
     def open(self) -> None:
         """Declare the node, one publisher (and token) per output, and start the publishing thread."""
@@ -179,45 +239,13 @@ class Ros2Sink(Sink):
         """Queue ``result`` for publishing; drops (and counts) the oldest when full."""
         self._worker.put(result)
 
-    def _header(self, result: FusionResult) -> rm.Header:
-        ros = result.frame.meta.get("ros")
-        if isinstance(ros, dict) and isinstance(ros.get("stamp_ns"), int) and isinstance(ros.get("frame_id"), str):
-            return rm.make_header(ros["stamp_ns"], ros["frame_id"])
-        return rm.make_header(max(0, int(result.frame.stamp_ns)), self.options.frame_id)
-
-    def encode(self, result: FusionResult, name: str) -> bytes | None:
-        """The CDR payload of output ``name`` for ``result``; None when the result lacks it."""
-        header = self._header(result)
-        calib = result.frame.calib
-        msg: object
-        if name == "disparity":
-            if calib is None:
-                return None
-            msg = rm.disparity_message(result.disparity, calib, header, self._range)
-        elif name == "depth":
-            if result.depth is None:
-                return None
-            msg = rm.array_to_image(np.asarray(result.depth, np.float32), header, "32FC1")
-        elif name == "points2":
-            if result.depth is None or calib is None:
-                return None
-            xyz, rgb = points_xyz_rgb(result.depth, result.frame.left, calib)
-            msg = rm.xyz_cloud_message(xyz, header, rgb)
-        else:
-            img = result.left_vpp if name == "left_vpp" else result.right_vpp
-            if img is None:
-                return None
-            rgb = img if img.ndim == 3 else np.repeat(img[:, :, None], 3, axis=2)
-            msg = rm.array_to_image(np.ascontiguousarray(rgb, np.uint8), header, "rgb8")
-        return bytes(rm.serialize(msg, OUTPUTS[name][1]))
-
     def _publish(self, result: FusionResult) -> None:
         t0 = time.perf_counter()
         for name, pub in self._pubs.items():
             if self.options.lazy and not pub.matching:
                 self._counters["lazy_skipped"] += 1
                 continue
-            payload = self.encode(result, name)
+            payload = self._encoder.encode(result, name)
             if payload is None:
                 self._counters["missing"] += 1
                 continue
@@ -246,4 +274,4 @@ class Ros2Sink(Sink):
         return out
 
 
-__all__ = ["OUTPUTS", "Ros2Sink", "Ros2SinkOptions", "points_xyz_rgb"]
+__all__ = ["OUTPUTS", "Ros2Encoder", "Ros2OutputOptions", "Ros2Sink", "Ros2SinkOptions", "points_xyz_rgb"]

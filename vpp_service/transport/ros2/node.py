@@ -144,21 +144,24 @@ class RosNode:
         self._tokens.append(self._session.liveliness().declare_token(tok))
         return key
 
-    def publisher(self, topic: str, ros_type: str, qos: Qos = DEFAULT_PUBLISHER, *, block: bool = True) -> RosPublisher:
+    def publisher(
+        self, topic: str, ros_type: str, qos: Qos = DEFAULT_PUBLISHER, *, block: bool = True, hash_: str | None = None
+    ) -> RosPublisher:
         """Declare a publisher of a fully-qualified topic with its token.
 
         ``block``: congestion control BLOCK (the product: never silently lost) or DROP
-        (visualisation images: give way under load).
+        (visualisation images: give way under load). ``hash_``: the type's RIHS01 hash when
+        it is not one of the four built-in types (e.g. from a bag's type store).
         """
         import zenoh
 
-        key = topic_key(self.name.domain_id, topic, ros_type)
+        key = topic_key(self.name.domain_id, topic, ros_type, hash_)
         pub = self._session.declare_publisher(
             key,
             congestion_control=zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP,
             priority=zenoh.Priority.DATA if block else zenoh.Priority.DATA_LOW,
         )
-        tok_key = entity_token(self.name, _next_id(), "MP", topic, ros_type, qos=qos)
+        tok_key = entity_token(self.name, _next_id(), "MP", topic, ros_type, qos=qos, hash_=hash_)
         tok = self._session.liveliness().declare_token(tok_key)
         rp = RosPublisher(pub, tok, topic, key, tok_key)
         self._pubs.append(rp)
