@@ -78,12 +78,18 @@ def cloud_to_depth(
     out = np.full((h, w), np.nan, np.float32)
     finite = np.all(np.isfinite(pts), axis=1)
     pts = pts[finite]
-    cam = pts @ lidar_to_left[:3, :3].T + lidar_to_left[:3, 3]
-    proj = cam @ p[:, :3].T + p[:, 3]
-    z = proj[:, 2]
+    # P [M p; 1] = A p + b: one 3 x 3 product per point, written out per column (a BLAS call
+    # for an N x 3 by 3 x 3 product costs more than the arithmetic)
+    a = p[:, :3] @ lidar_to_left[:3, :3]
+    b = p[:, :3] @ lidar_to_left[:3, 3] + p[:, 3]
+    x, y, zc = pts[:, 0], pts[:, 1], pts[:, 2]
+    z = a[2, 0] * x + a[2, 1] * y + a[2, 2] * zc + b[2]
     front = z > 0
-    proj, z = proj[front], z[front]
-    u, v = proj[:, 0] / z, proj[:, 1] / z
+    x, y, zc, z = x[front], y[front], zc[front], z[front]
+    proj = np.empty((z.size, 2))
+    for row in range(2):
+        proj[:, row] = (a[row, 0] * x + a[row, 1] * y + a[row, 2] * zc + b[row]) / z
+    u, v = proj[:, 0], proj[:, 1]
     inside = (u >= -0.5) & (u < w - 0.5) & (v >= -0.5) & (v < h - 0.5)
     u, v, z = u[inside], v[inside], z[inside]
     lin = np.rint(v).astype(np.int64) * w + np.rint(u).astype(np.int64)

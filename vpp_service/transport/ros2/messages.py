@@ -386,20 +386,26 @@ def cloud_to_xyz(msg: PointCloud2, limits: Limits) -> np.ndarray:
         raise Ros2Error("layout", f"cloud point_step {ps}, row_step {rs}, data {msg.data.size} for {w}x{h}")
     fields = {f.name: f for f in msg.fields}
     order = ">" if msg.is_bigendian else "<"
-    rows = msg.data.reshape(h, rs)[:, : w * ps].reshape(n, ps)
-    out = np.empty((n, 3), np.float64)
-    for i, name in enumerate(("x", "y", "z")):
+    kinds: list[str] = []
+    for name in ("x", "y", "z"):
         f = fields.get(name)
         if f is None:
             raise Ros2Error("fields", f"cloud has no {name!r} field (fields: {', '.join(fields) or 'none'})")
         kind = _POINT_TYPES.get(int(f.datatype))
         if kind not in ("f4", "f8") or int(f.count) != 1:
             raise Ros2Error("fields", f"cloud field {name!r}: datatype {f.datatype} x {f.count}, need one float")
-        size = int(kind[1])
-        if not 0 <= int(f.offset) <= ps - size:
+        if not 0 <= int(f.offset) <= ps - int(kind[1]):
             raise Ros2Error("fields", f"cloud field {name!r}: offset {f.offset} outside point_step {ps}")
-        col = np.ascontiguousarray(rows[:, int(f.offset) : int(f.offset) + size])
-        out[:, i] = col.view(f"{order}{kind}").reshape(n)
+        kinds.append(f"{order}{kind}")
+    # a structured view of the rows (no copy) picks the three fields out of each point
+    view = np.dtype(
+        {"names": ["x", "y", "z"], "formats": kinds, "offsets": [int(fields[n].offset) for n in "xyz"], "itemsize": ps}
+    )
+    rows = msg.data.reshape(h, rs)[:, : w * ps]
+    pts = np.ascontiguousarray(rows).reshape(-1).view(view)
+    out = np.empty((n, 3), np.float64)
+    for i, name in enumerate(("x", "y", "z")):
+        out[:, i] = pts[name]
     return out
 
 
@@ -468,14 +474,18 @@ def disparity_message(disparity: np.ndarray, calib: Calibration, header: Header,
     d = np.asarray(disparity, dtype=np.float32)
     if d.ndim != 2:
         raise ValueError(f"disparity must be H x W, got shape {d.shape}")
-    valid = np.isfinite(d)
     out = d + np.float32(calib.doffs)
+    # fmin/fmax skip NaN: one pass each, NaN when every pixel is invalid
+    smallest, largest = float(np.fmin.reduce(out, axis=None)), float(np.fmax.reduce(d, axis=None))
+    any_valid = math.isfinite(smallest)
     lo = rng.min_disparity + calib.doffs
-    hi_raw = rng.max_disparity if rng.max_disparity > 0 else (float(np.max(d[valid])) if valid.any() else 0.0)
-    if valid.any():
-        lo = min(lo, math.floor(float(np.min(out[valid]))))
+    if any_valid:
+        lo = min(lo, math.floor(smallest))
+    hi_raw = rng.max_disparity if rng.max_disparity > 0 else (largest if any_valid else 0.0)
     hi = max(hi_raw + calib.doffs, lo)
-    out[~valid] = np.float32(lo - 1.0) if rng.invalid == "below_min" else np.float32(np.nan)
+    valid = np.isfinite(d)
+    if rng.invalid == "below_min":
+        np.copyto(out, np.float32(lo - 1.0), where=~valid)
     rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
     if rows.size:
         window = RegionOfInterest(
