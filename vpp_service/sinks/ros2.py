@@ -171,7 +171,7 @@ class Ros2Encoder:
             return rm.make_header(ros["stamp_ns"], ros["frame_id"])
         return rm.make_header(max(0, int(result.frame.stamp_ns)), self.options.frame_id)
 
-    def encode(self, result: FusionResult, name: str) -> bytes | None:
+    def encode(self, result: FusionResult, name: str) -> bytes | bytearray | None:
         """The CDR payload of output ``name`` for ``result``; None when the result lacks it."""
         header = self.header(result)
         calib = result.frame.calib
@@ -195,7 +195,7 @@ class Ros2Encoder:
                 return None
             rgb = img if img.ndim == 3 else np.repeat(img[:, :, None], 3, axis=2)
             msg = rm.array_to_image(np.ascontiguousarray(rgb, np.uint8), header, "rgb8")
-        return bytes(rm.serialize(msg, OUTPUTS[name][1]))
+        return rm.serialize(msg, OUTPUTS[name][1])
 
 
 @SINKS.register("ros2")

@@ -117,7 +117,7 @@ class BagWriter:
         self._conns: dict[str, object] = {}
         self.written = 0
 
-    def write(self, topic: str, ros_type: str, log_time_ns: int, data: bytes) -> None:
+    def write(self, topic: str, ros_type: str, log_time_ns: int, data: bytes | bytearray) -> None:
         """Append one message (its connection is added on the topic's first message)."""
         from rosbags.interfaces import Connection
 
@@ -126,7 +126,7 @@ class BagWriter:
             conn = self._writer.add_connection(topic, ros_type, typestore=typestore())
             self._conns[topic] = conn
         assert isinstance(conn, Connection)
-        self._writer.write(conn, int(log_time_ns), data)
+        self._writer.write(conn, int(log_time_ns), data if isinstance(data, bytes) else memoryview(data))
         self.written += 1
 
     def close(self) -> None:

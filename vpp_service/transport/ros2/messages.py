@@ -148,11 +148,13 @@ def deserialize(data: bytes | memoryview, ros_type: str, cls: type[M], limits: L
     return msg
 
 
-def serialize(msg: object, ros_type: str) -> memoryview:
-    """CDR (little endian, header ``00 01 00 00``) of ``msg``."""
+def serialize(msg: object, ros_type: str) -> bytes | bytearray:
+    """CDR (little endian, header ``00 01 00 00``) of ``msg``, without a copy of the buffer rosbags wrote."""
     if ros_type not in _SUPPORTED or getattr(type(msg), "__msgtype__", None) != ros_type:
         raise TypeError(f"{ros_type}: got a {type(msg).__name__}")
-    return typestore().serialize_cdr(msg, ros_type, little_endian=True)
+    view = typestore().serialize_cdr(msg, ros_type, little_endian=True)
+    buf = view.obj
+    return buf if isinstance(buf, bytearray) and len(buf) == view.nbytes else bytes(view)
 
 
 # -------------------------------------------------------------------------- header

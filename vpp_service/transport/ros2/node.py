@@ -81,7 +81,7 @@ class RosPublisher:
         status: object = self._pub.matching_status
         return bool(getattr(status, "matching", status))
 
-    def put(self, payload: bytes, layout: attachment.Layout = "current") -> int:
+    def put(self, payload: bytes | bytearray, layout: attachment.Layout = "current") -> int:
         """Publish one CDR payload with its attachment; returns its sequence number."""
         with self._lock:
             self.sequence_number += 1
