@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vpp_service.transport import _points
+
 
 @dataclass(frozen=True)
 class CloudCounts:
@@ -74,37 +76,36 @@ def cloud_to_depth(
     (depth map, counts)
     """
     h, w = shape
-    pts = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    cols = np.ascontiguousarray(np.asarray(xyz).reshape(-1, 3).T, dtype=np.float64)  # 3 x N
+    n = cols.shape[1]
     out = np.full((h, w), np.nan, np.float32)
-    finite = np.all(np.isfinite(pts), axis=1)
-    pts = pts[finite]
-    # P [M p; 1] = A p + b: one 3 x 3 product per point, written out per column (a BLAS call
-    # for an N x 3 by 3 x 3 product costs more than the arithmetic)
+    # P [M p; 1] = A p + b: the 3 x 3 product per point written out per row (a BLAS call for
+    # an N x 3 by 3 x 3 product costs more than the arithmetic)
     a = p[:, :3] @ lidar_to_left[:3, :3]
     b = p[:, :3] @ lidar_to_left[:3, 3] + p[:, 3]
-    x, y, zc = pts[:, 0], pts[:, 1], pts[:, 2]
-    z = a[2, 0] * x + a[2, 1] * y + a[2, 2] * zc + b[2]
-    front = z > 0
-    x, y, zc, z = x[front], y[front], zc[front], z[front]
-    proj = np.empty((z.size, 2))
-    for row in range(2):
-        proj[:, row] = (a[row, 0] * x + a[row, 1] * y + a[row, 2] * zc + b[row]) / z
-    u, v = proj[:, 0], proj[:, 1]
-    inside = (u >= -0.5) & (u < w - 0.5) & (v >= -0.5) & (v < h - 0.5)
-    u, v, z = u[inside], v[inside], z[inside]
-    lin = np.rint(v).astype(np.int64) * w + np.rint(u).astype(np.int64)
-    order = np.lexsort((z, lin))  # by pixel, nearest first
-    lin_s = lin[order]
-    first = np.ones(lin_s.size, bool)
-    first[1:] = lin_s[1:] != lin_s[:-1]
-    out.reshape(-1)[lin_s[first]] = z[order][first].astype(np.float32)
-    counts = CloudCounts(
-        used=int(lin.size),
-        nonfinite=int((~finite).sum()),
-        behind=int((~front).sum()),
-        outside=int((~inside).sum()),
-    )
+    x, y, zc = cols
+    nonfinite = int(n - np.count_nonzero(np.isfinite(x + y + zc)))
+    z = a[2, 0] * x + a[2, 1] * y + a[2, 2] * zc + b[2]  # NaN whenever a coordinate is not finite
+    sel = np.flatnonzero(z > 0)
+    x, y, zc = cols[:, sel]
+    z = z[sel]
+    # the scatter kernel tests the bounds in float32: test them on the same float32 values
+    u = ((a[0, 0] * x + a[0, 1] * y + a[0, 2] * zc + b[0]) / z).astype(np.float32)
+    v = ((a[1, 0] * x + a[1, 1] * y + a[1, 2] * zc + b[1]) / z).astype(np.float32)
+    lo = np.float32(-0.5)
+    inside = (u >= lo) & (u < np.float32(w - 0.5)) & (v >= lo) & (v < np.float32(h - 0.5))
+    m = int(np.count_nonzero(inside))
+    uv = np.empty((m, 2), np.float32)
+    uv[:, 0], uv[:, 1] = u[inside], v[inside]
+    # one pass in Cython: each point on pixel (rint(v), rint(u)), the nearest wins
+    bad = _points.scatter_points(uv.reshape(-1), z[inside].astype(np.float32), True, out, _NO_MAP, 0.0, 0.0)
+    if bad:  # cannot happen: bounds and depth were checked above
+        raise RuntimeError(f"cloud_to_depth: scatter refused the projected points (mask {bad})")
+    counts = CloudCounts(used=m, nonfinite=nonfinite, behind=n - nonfinite - sel.size, outside=sel.size - m)
     return out, counts
+
+
+_NO_MAP = np.empty((0, 0), np.float32)
 
 
 __all__ = ["CloudCounts", "check_extrinsic", "cloud_to_depth"]
