@@ -81,3 +81,23 @@ def test_bad_options(opts):
 
     with pytest.raises(SettingsError):
         parse_source_options("ros2", opts)
+
+
+def test_oversized_sample_refused_before_copy(sessions):
+    svc, bot = sessions
+    opts = {"depth_type": "none", "max_message_mb": 0.001}  # 1048 bytes: a 6x8 camera_info fits, an image does not
+    src = build_source("ros2", opts, SourceContext(rig="r", session=svc))
+    frames, rejects = [], []
+    src.open()
+    src.start(lambda f: frames.append(f) or True, rejects.append)
+    robot = Robot(bot)
+    try:
+        assert robot.wait_for_subscribers(["left/image_rect"])
+        big = np.zeros((20, 30, 3), np.uint8)  # 1800 bytes of pixels
+        robot.put("left/image_rect", image_msg(big, 1, "l"))
+        assert wait_for(lambda: src.stats()["received"] == 1)
+        st = src.stats()
+        assert st["rejected_by"] == {"too_large": 1} and not frames and "too_large" in rejects[0]
+    finally:
+        robot.close()
+        src.stop(2.0)
