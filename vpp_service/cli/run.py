@@ -81,11 +81,11 @@ def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[
             else:
                 sinks.append({"type": t})
         d["sinks"] = sinks
-    _ros_overrides(d, args)
     if args.rerun_save:
         sinks = [s for s in d.get("sinks", []) if not (isinstance(s, dict) and s.get("type") == "rerun")]
         sinks.append({"type": "rerun", "mode": "save", "path": args.rerun_save})
         d["sinks"] = sinks
+    _ros_overrides(d, args)
     return d
 
 
