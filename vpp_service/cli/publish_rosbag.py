@@ -69,6 +69,8 @@ def _replay(
     hashes = pubs_for
     sent = 0
     with open_session(zsec) as session:
+        if session is None:  # zsec is enabled: open_session always opens one
+            raise ValueError("publish --rosbag: no zenoh session")
         node = RosNode(session, args.ros_domain, "/", "vpp_bag_player")
         node.open()
         pubs: dict[str, RosPublisher] = {t: node.publisher(t, topics[t], hash_=h) for t, h in hashes.items()}
