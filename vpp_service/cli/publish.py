@@ -38,6 +38,9 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument(
         "--recording", metavar="DIR", help="replay a folder of .msgpack frames (the record sink's output) instead"
     )
+    p.add_argument("--rosbag", metavar="PATH", help="replay a rosbag2 bag (.db3/.mcap) onto rmw_zenoh topics instead")
+    p.add_argument("--rosbag-rate", type=float, default=1.0, help="--rosbag: recorded-timing multiplier (0 = fastest)")
+    p.add_argument("--ros-domain", type=int, default=0, help="--rosbag: ROS 2 domain id")
     p.add_argument("--scene", default="motorcycle", choices=["motorcycle", "synthetic"], help="simulator scene")
     p.add_argument("--scale", type=float, default=1.0, help="resize factor in (0, 1]")
     p.add_argument("--sensor", default="uniform", help="sensor simulator (uniform, lidar, tof, none)")
@@ -150,6 +153,10 @@ def _source(args: argparse.Namespace) -> Source:
 
 def main(args: argparse.Namespace) -> int:
     """Publish until ``--count``, the end of the dataset, or SIGINT/SIGTERM."""
+    if getattr(args, "rosbag", None):
+        from vpp_service.cli.publish_rosbag import play
+
+        return play(args)
     import queue as _queue
 
     import zenoh

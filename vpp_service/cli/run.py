@@ -30,7 +30,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     )
     p.add_argument("--config", help="TOML config file (default: the embedded default)")
     p.add_argument("--rig", help="rig name (service.rig)")
-    p.add_argument("--source", help="source type: sim, files, zenoh (its options come from the config)")
+    p.add_argument("--source", help="source type: sim, files, zenoh, ros2 (its options come from the config)")
     p.add_argument("--sink", action="append", help="sink type (repeatable; replaces the config's sinks)")
     p.add_argument("--matcher", help="matcher name: sgbm, bm, census-sgm")
     p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", help="listen endpoint (repeatable)")
@@ -54,6 +54,9 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     )
     viewer.add_argument("--rerun-spawn", action="store_true", help="spawn a local Rerun viewer and stream to it")
     viewer.add_argument("--headless", action="store_true", help="no Rerun output at all (drops the rerun sink)")
+    p.add_argument("--rosbag", metavar="PATH", help="play a rosbag2 bag (.db3/.mcap) as the source (type rosbag2)")
+    p.add_argument("--ros-namespace", metavar="NS", help="ROS 2 namespace of the ros2 source and sinks (e.g. /stereo)")
+    p.add_argument("--ros-domain", type=int, metavar="ID", help="ROS 2 domain id of the ros2 source and sinks")
     p.add_argument("--max-frames", type=int, help="stop after N processed frames")
     p.add_argument("--out", help="output folder (summary.json, default .rrd)")
     p.add_argument("--no-summary", action="store_true", help="no live summary line on stderr")
@@ -66,6 +69,7 @@ _SINK_DEFAULTS: dict[str, dict[str, object]] = {
     "rerun": {"mode": "save", "path": "{out}/vpp.rrd"},
     "files": {"dir": "{out}/frames", "create_dir": True},
     "record": {"dir": "{out}/recording", "create_dir": True},
+    "rosbag2": {"path": "{out}/bag"},
 }
 
 
@@ -107,6 +111,7 @@ def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[
             kept = {k: v for k, v in old.items() if k not in ("mode", "path", "url", "grpc_port")}
             sinks.append({**kept, "type": "rerun", **rerun})
         d["sinks"] = sinks
+    _ros_overrides(d, args)
     return d
 
 
@@ -123,6 +128,21 @@ def _rerun_flag(args: argparse.Namespace) -> dict[str, object] | None:
     if getattr(args, "rerun_spawn", False):
         return {"mode": "spawn"}
     return None
+
+
+def _ros_overrides(d: dict[str, Any], args: argparse.Namespace) -> None:
+    """``--rosbag`` (the rosbag2 source), ``--ros-namespace`` / ``--ros-domain`` (ros2 source and sinks)."""
+    bag = getattr(args, "rosbag", None)
+    if bag:
+        src = d.get("source", {})
+        d["source"] = {**src, "path": bag} if src.get("type") == "rosbag2" else {"type": "rosbag2", "path": bag}
+    pairs = (("namespace", getattr(args, "ros_namespace", None)), ("domain_id", getattr(args, "ros_domain", None)))
+    ros = {k: v for k, v in pairs if v is not None}
+    for section in [d.get("source"), *d.get("sinks", [])]:
+        if ros and isinstance(section, dict) and section.get("type") == "ros2":
+            section.update(ros)
+        elif ros.get("namespace") and isinstance(section, dict) and section.get("type") == "rosbag2":
+            section["namespace"] = ros["namespace"]
 
 
 def main(args: argparse.Namespace) -> int:

@@ -1,0 +1,269 @@
+"""A ROS 2 "robot" written from the rmw_zenoh contract alone (rosbags + zenoh, none of vpp_service's ROS code).
+
+It publishes a rectified stereo pair, both camera_info and a PointCloud2 the way an
+rmw_zenoh node does (keys ``<domain>/<topic>/<type>/<hash>``, CDR payloads, the
+33-byte attachment, liveliness tokens) and subscribes to ``DisparityImage`` with a
+subscriber token, so the tests check the service against the contract, not against itself.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import zenoh
+import zenoh.ext
+from rosbags.typesys import Stores, get_typestore
+
+TS = get_typestore(Stores.ROS2_JAZZY)
+T = TS.types
+
+HASH = {
+    "sensor_msgs/msg/Image": "RIHS01_d31d41a9a4c4bc8eae9be757b0beed306564f7526c88ea6a4588fb9582527d47",
+    "sensor_msgs/msg/CameraInfo": "RIHS01_b3dfd68ff46c9d56c80fd3bd4ed22c7a4ddce8c8348f2f59c299e73118e7e275",
+    "sensor_msgs/msg/PointCloud2": "RIHS01_9198cabf7da3796ae6fe19c4cb3bdd3525492988c70522628af5daa124bae2b5",
+    "stereo_msgs/msg/DisparityImage": "RIHS01_1ec1ff6b5bace919e4544a37f2d96ead9f81783701b7b7a4d97a09325ecf2711",
+}
+QOS = "1:2:1,10:,:,:,,"
+
+
+def dds(ros_type: str) -> str:
+    pkg, _, msg = ros_type.split("/")
+    return f"{pkg}::msg::dds_::{msg}_"
+
+
+def key(domain: int, topic: str, ros_type: str) -> str:
+    return f"{domain}/{topic.strip('/')}/{dds(ros_type)}/{HASH[ros_type]}"
+
+
+def header(stamp_ns: int, frame_id: str) -> object:
+    sec, nsec = divmod(stamp_ns, 1_000_000_000)
+    return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec), frame_id=frame_id)
+
+
+def image_msg(img: np.ndarray, stamp_ns: int, frame_id: str, encoding: str = "rgb8") -> object:
+    h, w = img.shape[:2]
+    data = np.ascontiguousarray(img).reshape(-1).view(np.uint8)
+    return T["sensor_msgs/msg/Image"](
+        header=header(stamp_ns, frame_id),
+        height=h,
+        width=w,
+        encoding=encoding,
+        is_bigendian=0,
+        step=data.size // h,
+        data=data,
+    )
+
+
+def camera_info_msg(
+    stamp_ns: int, frame_id: str, size: tuple[int, int], *, f: float, cx: float, cy: float, tx: float
+) -> object:
+    w, h = size
+    roi = T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
+    return T["sensor_msgs/msg/CameraInfo"](
+        header=header(stamp_ns, frame_id),
+        height=h,
+        width=w,
+        distortion_model="plumb_bob",
+        d=np.zeros(5),
+        k=np.array([f, 0, cx, 0, f, cy, 0, 0, 1.0]),
+        r=np.eye(3).reshape(-1),
+        p=np.array([f, 0, cx, tx, 0, f, cy, 0, 0, 0, 1.0, 0]),
+        binning_x=0,
+        binning_y=0,
+        roi=roi,
+    )
+
+
+def cloud_msg(xyz: np.ndarray, stamp_ns: int, frame_id: str) -> object:
+    pts = np.zeros(len(xyz), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4")])
+    pts["x"], pts["y"], pts["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    pf = T["sensor_msgs/msg/PointField"]
+    fields = [pf(name=n, offset=4 * i, datatype=7, count=1) for i, n in enumerate(("x", "y", "z", "intensity"))]
+    return T["sensor_msgs/msg/PointCloud2"](
+        header=header(stamp_ns, frame_id),
+        height=1,
+        width=len(xyz),
+        fields=fields,
+        is_bigendian=False,
+        point_step=16,
+        row_step=16 * len(xyz),
+        data=pts.view(np.uint8).reshape(-1),
+        is_dense=True,
+    )
+
+
+@dataclass
+class StereoRig:
+    """What the robot publishes: an RGB pair, its rectified calibration and a cloud in the left optical frame."""
+
+    left: np.ndarray
+    right: np.ndarray
+    f: float
+    baseline: float
+    cx_left: float
+    cx_right: float
+    cy: float
+    cloud: np.ndarray
+
+
+class Robot:
+    """An rmw_zenoh node ``/stereo/robot`` that publishes a stereo rig and receives disparity."""
+
+    def __init__(self, session: zenoh.Session, domain: int = 0, namespace: str = "/stereo") -> None:
+        self.session, self.domain, self.ns = session, domain, namespace
+        self.zid = str(session.zid())
+        self.seq: dict[str, int] = {}
+        self.tokens = [session.liveliness().declare_token(f"@ros2_lv/{domain}/{self.zid}/0/0/NN/%/%stereo/robot")]
+        self.pubs: dict[str, zenoh.Publisher] = {}
+        self.topics = {
+            "left/image_rect": "sensor_msgs/msg/Image",
+            "left/camera_info": "sensor_msgs/msg/CameraInfo",
+            "right/image_rect": "sensor_msgs/msg/Image",
+            "right/camera_info": "sensor_msgs/msg/CameraInfo",
+            "points": "sensor_msgs/msg/PointCloud2",
+        }
+        for eid, (name, ros_type) in enumerate(self.topics.items(), start=1):
+            topic = f"{namespace}/{name}"
+            self.pubs[name] = session.declare_publisher(
+                key(domain, topic, ros_type), congestion_control=zenoh.CongestionControl.BLOCK
+            )
+            self.tokens.append(
+                session.liveliness().declare_token(
+                    f"@ros2_lv/{domain}/{self.zid}/0/{eid}/MP/%/%stereo/robot/{topic.replace('/', '%')}/"
+                    f"{dds(ros_type)}/{HASH[ros_type]}/{QOS}"
+                )
+            )
+        self.gid = {name: bytes([i] * 16) for i, name in enumerate(self.topics)}
+        # the graph as rmw_zenoh keeps it: a liveliness subscriber with history (PUT = alive, DELETE = gone)
+        self._alive: set[str] = set()
+        self._lock = threading.Lock()
+        self._graph_sub = session.liveliness().declare_subscriber(f"@ros2_lv/{domain}/**", self._on_token, history=True)
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self._alive.add(str(sample.key_expr))
+            else:
+                self._alive.discard(str(sample.key_expr))
+
+    def put(self, name: str, msg: object, attachment: bytes | None = None) -> None:
+        ros_type = self.topics[name]
+        payload = bytes(TS.serialize_cdr(msg, ros_type, little_endian=True))
+        self.seq[name] = self.seq.get(name, 0) + 1
+        if attachment is None:
+            attachment = zenoh.ext.z_serialize(
+                (zenoh.ext.Int64(self.seq[name]), zenoh.ext.Int64(time.time_ns()), self.gid[name])
+            ).to_bytes()
+        self.pubs[name].put(payload, attachment=attachment)
+
+    def publish(self, rig: StereoRig, stamp_ns: int, frame_id: str = "left_optical") -> None:
+        h, w = rig.left.shape[:2]
+        self.put("left/image_rect", image_msg(rig.left, stamp_ns, frame_id))
+        self.put("right/image_rect", image_msg(rig.right, stamp_ns, "right_optical"))
+        self.put(
+            "left/camera_info", camera_info_msg(stamp_ns, frame_id, (w, h), f=rig.f, cx=rig.cx_left, cy=rig.cy, tx=0.0)
+        )
+        tx = -rig.f * rig.baseline
+        self.put(
+            "right/camera_info",
+            camera_info_msg(stamp_ns, "right_optical", (w, h), f=rig.f, cx=rig.cx_right, cy=rig.cy, tx=tx),
+        )
+        self.put("points", cloud_msg(rig.cloud, stamp_ns, frame_id))
+
+    def subscribe_disparity(self, topic: str = "/stereo/disparity") -> zenoh.Subscriber:
+        ros_type = "stereo_msgs/msg/DisparityImage"
+        self.tokens.append(
+            self.session.liveliness().declare_token(
+                f"@ros2_lv/{self.domain}/{self.zid}/0/9/MS/%/%stereo/robot/{topic.replace('/', '%')}/"
+                f"{dds(ros_type)}/{HASH[ros_type]}/2:2:1,5:,:,:,,"
+            )
+        )
+        return self.session.declare_subscriber(key(self.domain, topic, ros_type), zenoh.handlers.FifoChannel(64))
+
+    def graph(self) -> list[str]:
+        """Every rmw_zenoh liveliness token of this domain now alive."""
+        with self._lock:
+            return sorted(self._alive)
+
+    def wait_for_subscribers(self, names: list[str], timeout: float = 10.0) -> bool:
+        """Wait like a lazy publisher until some node declares a subscriber token on each topic."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            toks = self.graph()
+            subs = [t for t in toks if "/MS/" in t]
+            if all(any(f"/{(self.ns + '/' + n).replace('/', '%')}/" in t for t in subs) for n in names):
+                return True
+            time.sleep(0.1)
+        return False
+
+    def close(self) -> None:
+        self._graph_sub.undeclare()
+        for t in self.tokens:
+            t.undeclare()
+        for p in self.pubs.values():
+            p.undeclare()
+
+
+def motorcycle_rig(density: float = 0.05, seed: int = 0) -> tuple[StereoRig, np.ndarray, float]:
+    """The scikit-image Motorcycle scene as a ROS rig: returns the rig, the ground truth and ``doffs``.
+
+    The cloud holds ``density`` of the valid ground-truth pixels, back-projected to
+    the left optical frame (``Z = f B / (d + doffs)``).
+    """
+    from vpp_service.datasets.skimage_scene import MOTORCYCLE_CALIB, motorcycle_arrays
+
+    left, right, gt = motorcycle_arrays()
+    c = MOTORCYCLE_CALIB
+    h, w = gt.shape
+    cx, cy = (w - 1) / 2, (h - 1) / 2
+    rng = np.random.default_rng(seed)
+    vs, us = np.nonzero(np.isfinite(gt))
+    pick = rng.random(vs.size) < density
+    vs, us = vs[pick], us[pick]
+    z = c.f * c.baseline / (gt[vs, us].astype(np.float64) + c.doffs)
+    xyz = np.stack([(us - cx) * z / c.f, (vs - cy) * z / c.f, z], axis=1).astype(np.float32)
+    rig = StereoRig(
+        left=np.ascontiguousarray(left),
+        right=np.ascontiguousarray(right),
+        f=c.f,
+        baseline=c.baseline,
+        cx_left=cx,
+        cx_right=cx + c.doffs,
+        cy=cy,
+        cloud=xyz,
+    )
+    return rig, gt, c.doffs
+
+
+def write_bag(path: str, storage: str, rig: StereoRig, stamps: list[int], namespace: str = "/stereo") -> None:
+    """A rosbag2 bag (``storage`` = "mcap" or "sqlite3") with the rig's five topics at each stamp, via rosbags."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    h, w = rig.left.shape[:2]
+    types = {
+        "left/image_rect": "sensor_msgs/msg/Image",
+        "right/image_rect": "sensor_msgs/msg/Image",
+        "left/camera_info": "sensor_msgs/msg/CameraInfo",
+        "right/camera_info": "sensor_msgs/msg/CameraInfo",
+        "points": "sensor_msgs/msg/PointCloud2",
+    }
+    with Writer(path, version=9, storage_plugin=plugin) as writer:
+        conns = {n: writer.add_connection(f"{namespace}/{n}", t, typestore=TS) for n, t in types.items()}
+        for stamp in stamps:
+            msgs = {
+                "left/image_rect": image_msg(rig.left, stamp, "left_optical"),
+                "right/image_rect": image_msg(rig.right, stamp, "right_optical"),
+                "left/camera_info": camera_info_msg(
+                    stamp, "left_optical", (w, h), f=rig.f, cx=rig.cx_left, cy=rig.cy, tx=0.0
+                ),
+                "right/camera_info": camera_info_msg(
+                    stamp, "right_optical", (w, h), f=rig.f, cx=rig.cx_right, cy=rig.cy, tx=-rig.f * rig.baseline
+                ),
+                "points": cloud_msg(rig.cloud, stamp, "left_optical"),
+            }
+            for i, (n, msg) in enumerate(msgs.items()):
+                writer.write(conns[n], stamp + i * 1000, bytes(TS.serialize_cdr(msg, types[n], little_endian=True)))

@@ -1,0 +1,114 @@
+"""Loopback with a Zenoh router: a ROS 2 robot written from the contract <-> the service (ros2 source and sink).
+
+The robot (tests/helpers/ros2_robot.py: rosbags + zenoh only) waits for the service's
+subscriber tokens like a lazy publisher, publishes the Motorcycle pair, both camera_info
+and a PointCloud2 with attachments, and must receive a DisparityImage on the exact key
+with a 33-byte attachment, a publisher token in the graph, the left camera_info header
+copied, and bad-2 vs ground truth as good as the same scene through the msgpack wire format.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+import zenoh
+
+from helpers.ros2_robot import TS, Robot, motorcycle_rig
+from helpers.zenoh_loopback import free_port, zenoh_test_config
+from vpp_service.evaluation.metrics import compute_metrics
+from vpp_service.frame import Calibration, StereoFrame
+from vpp_service.fusion import fuse
+from vpp_service.matchers import build_matcher
+from vpp_service.service.app import run_service
+from vpp_service.service.config import validate_config
+from vpp_service.transport import wire
+from vpp_service.vpp import VPPConfig
+
+MAXD = 96
+DISPARITY_KEY = (
+    "0/stereo/disparity/stereo_msgs::msg::dds_::DisparityImage_/"
+    "RIHS01_1ec1ff6b5bace919e4544a37f2d96ead9f81783701b7b7a4d97a09325ecf2711"
+)
+
+
+def msgpack_bad2(rig, gt, doffs) -> float:
+    """The same frame (same points, same seed) through the msgpack wire format and fuse()."""
+    h, w = gt.shape
+    z = np.full((h, w), np.nan, np.float32)
+    u = np.rint(rig.cloud[:, 0] * rig.f / rig.cloud[:, 2] + rig.cx_left).astype(int)
+    v = np.rint(rig.cloud[:, 1] * rig.f / rig.cloud[:, 2] + rig.cy).astype(int)
+    z[v, u] = rig.cloud[:, 2]
+    calib = Calibration(f=rig.f, baseline=rig.baseline, doffs=doffs, cx=rig.cx_left, cy=rig.cy)
+    frame = StereoFrame(left=rig.left, right=rig.right, calib=calib, sensor_depth=z, seq=1)
+    frame = wire.decode_frame(wire.encode_frame(frame))
+    res = fuse(frame, build_matcher("sgbm", {"max_disparity": MAXD}), VPPConfig(), seed=1, depth=False)
+    return compute_metrics(res.disparity, gt)["bad2"]
+
+
+@pytest.mark.slow
+def test_robot_receives_disparity(tmp_path):
+    rig, gt, doffs = motorcycle_rig()
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    cfg = validate_config(
+        {
+            "service": {"out": str(tmp_path / "run"), "summary": False, "shutdown_timeout_s": 3.0},
+            # as rmw_zenoh nodes: peers that listen on a random port and meet through the router (gossip)
+            "zenoh": {"mode": "peer", "listen": ["tcp/127.0.0.1:0"], "connect": [ep]},
+            "source": {"type": "ros2", "depth_wait_ms": 2000.0},
+            "matcher": {"name": "sgbm", "max_disparity": MAXD},
+            "queues": {"input_policy": "block", "output_policy": "block"},
+            "sinks": [{"type": "ros2", "outputs": ["disparity"], "max_disparity": float(MAXD)}],
+        }
+    )
+    stop = threading.Event()
+    status: dict = {}
+    with zenoh.open(zenoh_test_config(listen=[ep], mode="router")):
+        svc = threading.Thread(target=lambda: status.update(run_service(cfg, stop, None)), daemon=True)
+        svc.start()
+        with zenoh.open(zenoh_test_config(listen=["tcp/127.0.0.1:0"], connect=[ep])) as robot_session:
+            robot = Robot(robot_session)
+            sub = robot.subscribe_disparity()
+            try:
+                names = ["left/image_rect", "left/camera_info", "right/image_rect", "right/camera_info", "points"]
+                assert robot.wait_for_subscribers(names, timeout=15.0), robot.graph()
+                stamp = 1_700_000_000_123_456_789
+                sample = None
+                deadline = time.monotonic() + 30.0
+                while sample is None and time.monotonic() < deadline:
+                    robot.publish(rig, stamp)
+                    t_end = time.monotonic() + 3.0
+                    while sample is None and time.monotonic() < t_end:
+                        sample = sub.try_recv()
+                        time.sleep(0.02)
+                    stamp += 100_000_000 if sample is None else 0
+                assert sample is not None, "no DisparityImage received"
+                graph = robot.graph()
+            finally:
+                stop.set()
+                svc.join(10.0)
+                robot.close()
+    assert str(sample.key_expr) == DISPARITY_KEY
+    att = sample.attachment.to_bytes()
+    assert len(att) == 33 and att[16] == 0x10 and int.from_bytes(att[:8], "little") >= 1
+    pub_tokens = [t for t in graph if "/MP/" in t and "%stereo%disparity/stereo_msgs::msg::dds_::DisparityImage_" in t]
+    assert pub_tokens and pub_tokens[0].endswith("/1:2:1,10:,:,:,,")
+    assert any("/NN/" in t and t.endswith("/vpp_stereo") for t in graph)
+    msg = TS.deserialize_cdr(sample.payload.to_bytes(), "stereo_msgs/msg/DisparityImage")
+    assert msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec == stamp
+    assert msg.header.frame_id == "left_optical"
+    assert msg.image.encoding == "32FC1" and msg.image.step == 4 * msg.image.width
+    assert msg.f == pytest.approx(rig.f) and msg.t == pytest.approx(rig.baseline, rel=1e-6)
+    d = msg.image.data.view("<f4").reshape(msg.image.height, msg.image.width).astype(np.float32)
+    d[d < msg.min_disparity] = np.nan  # the message definition's rule for invalid pixels
+    ros_bad2 = compute_metrics(d - np.float32(doffs), gt)["bad2"]
+    ref_bad2 = msgpack_bad2(rig, gt, doffs)
+    # same pixels, points and seed: equal up to float rounding of the calibration through P
+    assert ros_bad2 <= ref_bad2 + 0.1, (ros_bad2, ref_bad2)
+    plain = fuse(
+        StereoFrame(left=rig.left, right=rig.right), build_matcher("sgbm", {"max_disparity": MAXD}), depth=False
+    )
+    assert ros_bad2 < compute_metrics(plain.disparity, gt)["bad2"] - 1.0  # VPP ran on the cloud's points
+    assert status["counters"]["processed"] >= 1 and status["counters"]["no_depth"] == 0

@@ -1,0 +1,134 @@
+"""ros2 sink over real Zenoh sessions: every output on its key, attachments (both layouts), lazy outputs."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+import zenoh
+
+from helpers.ros2_robot import TS, key
+from helpers.zenoh_loopback import collect, zenoh_test_config
+from vpp_service.frame import Calibration, FusionResult, StereoFrame
+from vpp_service.settings import SettingsError
+from vpp_service.sinks.base import SinkContext, build_sink, parse_sink_options
+
+
+@pytest.fixture
+def sessions(zenoh_endpoint):
+    with (
+        zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as svc,
+        zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as bot,
+    ):
+        yield svc, bot
+
+
+def result() -> FusionResult:
+    rng = np.random.default_rng(0)
+    left = rng.integers(0, 256, (4, 5, 3), dtype=np.uint8)
+    calib = Calibration(f=100.0, baseline=0.2, doffs=3.0, cx=2.0, cy=1.5)
+    disp = np.full((4, 5), 7.0, np.float32)
+    disp[0, 0] = np.nan
+    depth = (100.0 * 0.2 / (disp + 3.0)).astype(np.float32)
+    frame = StereoFrame(left=left, right=left, calib=calib, stamp_ns=9, meta={"ros": {"stamp_ns": 77, "frame_id": "L"}})
+    return FusionResult(frame=frame, disparity=disp, depth=depth, left_vpp=left, right_vpp=left[:, :, 0])
+
+
+TOPICS = {
+    "disparity": ("/cam/disparity", "stereo_msgs/msg/DisparityImage"),
+    "depth": ("/cam/depth", "sensor_msgs/msg/Image"),
+    "points2": ("/cam/points2", "sensor_msgs/msg/PointCloud2"),
+    "left_vpp": ("/cam/left/image_vpp", "sensor_msgs/msg/Image"),
+    "right_vpp": ("/cam/right/image_vpp", "sensor_msgs/msg/Image"),
+}
+
+
+@pytest.mark.parametrize("layout", ["current", "legacy"])
+def test_all_outputs(sessions, layout):
+    svc, bot = sessions
+    subs = {n: bot.declare_subscriber(key(4, t, ty), zenoh.handlers.FifoChannel(8)) for n, (t, ty) in TOPICS.items()}
+    opts = {"namespace": "/cam", "domain_id": 4, "outputs": list(TOPICS), "attachment": layout}
+    sink = build_sink("ros2", opts, SinkContext(session=svc))
+    sink.open()
+    time.sleep(0.3)
+    try:
+        sink.write(result())
+        got = {n: collect(s, 1) for n, s in subs.items()}
+    finally:
+        sink.close(2.0)
+    assert all(len(v) == 1 for v in got.values()), {n: len(v) for n, v in got.items()}
+    msgs = {n: TS.deserialize_cdr(got[n][0].payload.to_bytes(), TOPICS[n][1]) for n in TOPICS}
+    for n in TOPICS:
+        att = got[n][0].attachment.to_bytes()
+        assert len(att) == (33 if layout == "current" else 77) and int.from_bytes(att[-25:-17], "little") >= 0
+        h = msgs[n].header
+        assert (h.stamp.sec, h.stamp.nanosec, h.frame_id) == (0, 77, "L")
+    d = msgs["disparity"]
+    img = d.image.data.view("<f4").reshape(4, 5)
+    assert img[1, 1] == 10.0 and img[0, 0] < d.min_disparity and d.min_disparity == 3.0
+    assert d.f == 100.0 and d.t == pytest.approx(0.2)
+    assert msgs["depth"].encoding == "32FC1" and np.isnan(msgs["depth"].data.view("<f4")[0])
+    cloud = msgs["points2"]
+    assert cloud.width == 19 and [f.name for f in cloud.fields] == ["x", "y", "z", "rgb"]
+    pts = cloud.data.view("<f4").reshape(19, 4)
+    assert pts[0, 2] == pytest.approx(2.0) and pts[0, 0] == pytest.approx((1 - 2.0) * 2.0 / 100.0)
+    assert msgs["left_vpp"].encoding == "rgb8" and msgs["right_vpp"].encoding == "rgb8"
+    assert sink.stats()["written"] == 1
+
+
+def test_lazy_skips_unsubscribed_outputs(sessions):
+    svc, bot = sessions
+    sub = bot.declare_subscriber(key(0, "/stereo/disparity", TOPICS["disparity"][1]), zenoh.handlers.FifoChannel(8))
+    sink = build_sink("ros2", {"outputs": ["disparity", "depth"], "lazy": True}, SinkContext(session=svc))
+    sink.open()
+    time.sleep(0.3)
+    try:
+        sink.write(result())
+        assert len(collect(sub, 1)) == 1
+    finally:
+        sink.close(2.0)
+    st = sink.stats()
+    assert st["lazy_skipped"] == 1 and st["written"] == 1
+
+
+def test_frame_without_ros_header_uses_options(sessions):
+    svc, bot = sessions
+    sub = bot.declare_subscriber(key(0, "/stereo/disparity", TOPICS["disparity"][1]), zenoh.handlers.FifoChannel(8))
+    sink = build_sink("ros2", {"frame_id": "cam0", "invalid": "nan"}, SinkContext(session=svc))
+    sink.open()
+    time.sleep(0.3)
+    r = result()
+    r.frame.meta.clear()
+    try:
+        sink.write(r)
+        (sample,) = collect(sub, 1)
+    finally:
+        sink.close(2.0)
+    msg = TS.deserialize_cdr(sample.payload.to_bytes(), TOPICS["disparity"][1])
+    assert msg.header.frame_id == "cam0" and msg.header.stamp.nanosec == 9
+    assert np.isnan(msg.image.data.view("<f4")[0])
+
+
+def test_needs_depth():
+    from vpp_service.sinks.ros2 import Ros2Sink
+
+    assert not Ros2Sink.needs_depth(parse_sink_options("ros2", {}))
+    assert Ros2Sink.needs_depth(parse_sink_options("ros2", {"outputs": ["points2"]}))
+
+
+@pytest.mark.parametrize(
+    "opts",
+    [
+        {"outputs": []},
+        {"outputs": ["disparity", "disparity"]},
+        {"outputs": ["confidence"]},
+        {"topics": {"disparity": "bad name"}},
+        {"attachment": "v2"},
+        {"delta_d": 0.0},
+        {"domain_id": -1},
+    ],
+)
+def test_bad_options(opts):
+    with pytest.raises(SettingsError):
+        parse_sink_options("ros2", opts)

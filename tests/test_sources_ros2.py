@@ -1,0 +1,103 @@
+"""ros2 source over real Zenoh sessions on 127.0.0.1: tokens, both attachment layouts, refusals, frames."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+import zenoh
+
+from helpers.ros2_robot import Robot, StereoRig, image_msg
+from helpers.zenoh_loopback import zenoh_test_config
+from vpp_service.sources.base import SourceContext, build_source
+
+LEGACY = (
+    b"\x0fsequence_number" + (1).to_bytes(8, "little") + b"\x10source_timestamp" + (5).to_bytes(8, "little")
+    + b"\x0asource_gid\x10" + bytes(16)
+)  # fmt: skip
+
+
+@pytest.fixture
+def sessions(zenoh_endpoint):
+    with (
+        zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as svc,
+        zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as bot,
+    ):
+        yield svc, bot
+
+
+def tiny_rig() -> StereoRig:
+    rng = np.random.default_rng(0)
+    img = rng.integers(0, 256, (6, 8, 3), dtype=np.uint8)
+    return StereoRig(img, img, 100.0, 0.1, 3.5, 5.5, 2.5, np.array([[0, 0, 2.0]], np.float32))
+
+
+def wait_for(cond, timeout=5.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and not cond():
+        time.sleep(0.01)
+    return cond()
+
+
+def test_frames_tokens_and_attachments(sessions):
+    svc, bot = sessions
+    src = build_source("ros2", {"domain_id": 0, "depth_wait_ms": 2000.0}, SourceContext(rig="r", session=svc))
+    frames, rejects = [], []
+    src.open()
+    src.start(lambda f: frames.append(f) or True, rejects.append)
+    robot = Robot(bot)
+    try:
+        names = ["left/image_rect", "left/camera_info", "right/image_rect", "right/camera_info", "points"]
+        assert robot.wait_for_subscribers(names)
+        assert any("/NN/%/%stereo/vpp_stereo_input" in t for t in robot.graph())
+        rig = tiny_rig()
+        robot.publish(rig, 1_000)
+        assert wait_for(lambda: len(frames) == 1)
+        assert frames[0].sensor_depth[2, 4] == pytest.approx(2.0) and frames[0].calib.doffs == 2.0
+        # the older labelled layout is accepted; a sample without attachment is refused and counted
+        for name in ("left/image_rect", "right/image_rect"):
+            robot.put(name, image_msg(rig.left, 2_000, "l"), LEGACY)
+        robot.pubs["left/camera_info"].put(b"\x00\x01\x00\x00")  # no attachment
+        assert wait_for(lambda: src.stats()["received"] == 8)
+        st = src.stats()
+        assert st["attachment_legacy"] == 2 and st["rejected_by"] == {"attachment": 1} and st["rejected"] == 1
+        assert any("attachment" in r for r in rejects)
+    finally:
+        robot.close()
+        src.stop(2.0)
+
+
+def test_needs_session():
+    src = build_source("ros2", {}, SourceContext())
+    with pytest.raises(ValueError, match="session"):
+        src.open()
+
+
+@pytest.mark.parametrize("opts", [{"domain_id": 300}, {"node_name": "a/b"}, {"ring_size": 0}, {"poll_s": 0.0}])
+def test_bad_options(opts):
+    from vpp_service.settings import SettingsError
+    from vpp_service.sources.base import parse_source_options
+
+    with pytest.raises(SettingsError):
+        parse_source_options("ros2", opts)
+
+
+def test_oversized_sample_refused_before_copy(sessions):
+    svc, bot = sessions
+    opts = {"depth_type": "none", "max_message_mb": 0.001}  # 1048 bytes: a 6x8 camera_info fits, an image does not
+    src = build_source("ros2", opts, SourceContext(rig="r", session=svc))
+    frames, rejects = [], []
+    src.open()
+    src.start(lambda f: frames.append(f) or True, rejects.append)
+    robot = Robot(bot)
+    try:
+        assert robot.wait_for_subscribers(["left/image_rect"])
+        big = np.zeros((20, 30, 3), np.uint8)  # 1800 bytes of pixels
+        robot.put("left/image_rect", image_msg(big, 1, "l"))
+        assert wait_for(lambda: src.stats()["received"] == 1)
+        st = src.stats()
+        assert st["rejected_by"] == {"too_large": 1} and not frames and "too_large" in rejects[0]
+    finally:
+        robot.close()
+        src.stop(2.0)

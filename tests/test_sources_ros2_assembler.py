@@ -1,0 +1,160 @@
+"""StereoAssembler: stereo sync (exact / approximate), depth matching and waiting, refusals counted by cause."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from helpers.ros2_robot import TS, camera_info_msg, cloud_msg, image_msg
+from vpp_service.settings import SettingsError, from_mapping
+from vpp_service.sources.ros2_assembler import StereoAssembler, StereoTopics
+
+H, W, F, B = 6, 8, 100.0, 0.1
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def cdr(msg: object, ros_type: str) -> bytes:
+    return bytes(TS.serialize_cdr(msg, ros_type, little_endian=True))
+
+
+def pair(stamp: int, *, encoding: str = "rgb8", width: int = W, doffs: float = 2.0) -> dict[str, bytes]:
+    rng = np.random.default_rng(stamp % 1000)
+    img = rng.integers(0, 256, (H, width, 3), dtype=np.uint8)
+    if encoding == "mono8":
+        img = img[:, :, 0].copy()
+    img_t, info_t = "sensor_msgs/msg/Image", "sensor_msgs/msg/CameraInfo"
+    return {
+        "left_image": cdr(image_msg(img, stamp, "left", encoding), img_t),
+        "right_image": cdr(image_msg(img, stamp, "right", encoding), img_t),
+        "left_info": cdr(camera_info_msg(stamp, "left", (W, H), f=F, cx=3.5, cy=2.5, tx=0.0), info_t),
+        "right_info": cdr(camera_info_msg(stamp, "right", (W, H), f=F, cx=3.5 + doffs, cy=2.5, tx=-F * B), info_t),
+    }
+
+
+def cloud(stamp: int, z: float = 2.0) -> bytes:
+    xyz = np.array([[0.0, 0.0, z], [0.0, 0.0, -1.0], [5.0, 0.0, 1.0]], np.float32)
+    return cdr(cloud_msg(xyz, stamp, "left"), "sensor_msgs/msg/PointCloud2")
+
+
+def make(clock: Clock | None = None, **opts: object) -> tuple[StereoAssembler, list[str]]:
+    rejects: list[str] = []
+    topics = from_mapping(StereoTopics, opts, "source")
+    return StereoAssembler(topics, "r", rejects.append, clock or Clock()), rejects
+
+
+def feed(asm: StereoAssembler, parts: dict[str, bytes]) -> list:
+    out = []
+    for role, payload in parts.items():
+        out += asm.add(role, payload)
+    return out
+
+
+def test_exact_sync_with_cloud_and_calibration():
+    asm, rejects = make()
+    assert asm.add("depth", cloud(1_000)) == []
+    frames = feed(asm, pair(1_000))
+    assert len(frames) == 1 and not rejects
+    f = frames[0]
+    assert f.calib.f == F and f.calib.baseline == pytest.approx(B) and f.calib.doffs == 2.0 and f.calib.cx == 3.5
+    assert f.stamp_ns == 1_000 and f.meta["ros"] == {"stamp_ns": 1_000, "frame_id": "left"} and f.seq == 1
+    assert f.left.shape == (H, W, 3) and "decode" in f.meta["timing_ms"]
+    # (0, 0, 2) projects on the principal point (3.5, 2.5) -> pixel rint: (2, 4)
+    assert f.sensor_depth[2, 4] == 2.0 and np.isfinite(f.sensor_depth).sum() == 1
+    st = asm.stats()
+    assert (st["cloud_behind"], st["cloud_outside"], st["cloud_points"], st["no_depth"]) == (1, 1, 1, 0)
+
+
+def test_exact_sync_needs_equal_stamps():
+    asm, _ = make(depth_type="none")
+    p1, p2 = pair(1_000), pair(1_001)
+    assert asm.add("left_image", p1["left_image"]) == []
+    assert asm.add("left_info", p1["left_info"]) == []
+    assert asm.add("right_image", p2["right_image"]) == []
+    assert asm.add("right_info", p2["right_info"]) == []
+    assert asm.add("right_image", p1["right_image"]) == []
+    frames = asm.add("right_info", p1["right_info"])
+    assert len(frames) == 1 and frames[0].sensor_depth is None and asm.stats()["no_depth"] == 1
+
+
+def test_approximate_sync_within_tolerance():
+    asm, _ = make(depth_type="none", sync="approximate", sync_tolerance_ms=1.0)
+    p1, p2 = pair(1_000_000), pair(1_500_000)
+    parts = {"left_image": p1["left_image"], "left_info": p1["left_info"]}
+    parts |= {"right_image": p2["right_image"], "right_info": p2["right_info"]}
+    frames = feed(asm, parts)
+    assert len(frames) == 1
+
+
+def test_depth_nearest_within_tolerance_and_wait():
+    clock = Clock()
+    asm, _ = make(clock, depth_tolerance_ms=10.0, depth_wait_ms=100.0)
+    assert feed(asm, pair(100_000_000)) == []  # waits for its depth
+    clock.t = 0.05
+    assert asm.expire() == []
+    frames = asm.add("depth", cloud(95_000_000, z=3.0))  # within 10 ms: used
+    assert len(frames) == 1 and frames[0].sensor_depth[2, 4] == 3.0
+    assert feed(asm, pair(200_000_000)) == []
+    clock.t = 0.2  # 150 ms later: no depth came
+    frames = asm.expire()
+    assert len(frames) == 1 and frames[0].sensor_depth is None
+    assert asm.stats()["no_depth"] == 1
+
+
+def test_later_depth_ends_the_wait():
+    asm, _ = make(depth_tolerance_ms=10.0, depth_wait_ms=10_000.0)
+    assert feed(asm, pair(100_000_000)) == []
+    frames = asm.add("depth", cloud(300_000_000))  # newer than the pair + tolerance: none will match
+    assert len(frames) == 1 and frames[0].sensor_depth is None
+
+
+def test_depth_image_16uc1():
+    asm, rejects = make(depth_type="image")
+    mm = np.zeros((H, W), np.uint16)
+    mm[1, 2] = 1500
+    depth = cdr(image_msg(mm, 5, "left", "16UC1"), "sensor_msgs/msg/Image")
+    asm.add("depth", depth)
+    frames = feed(asm, pair(5))
+    assert not rejects and frames[0].sensor_depth[1, 2] == pytest.approx(1.5)
+    assert np.isfinite(frames[0].sensor_depth).sum() == 1
+
+
+def test_refusals_counted_by_cause():
+    asm, rejects = make(depth_type="none")
+    asm.add("left_image", b"\x00\x01\x00\x00\x01")
+    feed(asm, pair(7, encoding="bgr8") | {"left_image": pair(7, encoding="mono8")["left_image"]})  # shape mismatch
+    bad = pair(8)
+    bad["left_image"] = cdr(image_msg(np.zeros((H, W), np.uint16), 8, "left", "mono12"), "sensor_msgs/msg/Image")
+    feed(asm, bad)
+    feed(asm, pair(9, width=W + 2))  # camera_info says 8 wide
+    assert asm.rejected_by == {"cdr": 1, "shape": 2, "encoding": 1}
+    assert any("mono12" in r for r in rejects)
+
+
+def test_mono_frames():
+    asm, _ = make(depth_type="none")
+    frames = feed(asm, pair(3, encoding="mono8"))
+    assert frames[0].left.shape == (H, W)
+
+
+@pytest.mark.parametrize(
+    "opts",
+    [
+        {"left_image": "bad name"},
+        {"namespace": "stereo"},
+        {"lidar_to_left": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]},
+        {"sync_queue_size": 0},
+        {"depth_tolerance_ms": -1.0},
+        {"max_message_mb": 0.0},
+        {"depth_type": "laser"},
+    ],
+)
+def test_bad_options(opts):
+    with pytest.raises(SettingsError):
+        from_mapping(StereoTopics, opts, "source")

@@ -1,0 +1,223 @@
+"""CDR <-> numpy for Image, CameraInfo, PointCloud2, DisparityImage: a hand-decoded Image, bounds, conventions."""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import pytest
+
+from vpp_service.frame import Calibration
+from vpp_service.transport.ros2 import messages as m
+from vpp_service.transport.ros2.errors import Ros2Error
+from vpp_service.transport.ros2.keys import CAMERA_INFO, DISPARITY_IMAGE, IMAGE, POINT_CLOUD2
+
+LIMITS = m.Limits()
+
+# sensor_msgs/Image, 2 x 1 mono8, stamp 1 s 2 ns, frame "cam", pixels 7 and 9, written byte by byte:
+# CDR little endian, alignment counted from after the 4-byte encapsulation header.
+TINY_IMAGE = bytes.fromhex(
+    "00010000"  # encapsulation: CDR_LE, options 0
+    "01000000"  # header.stamp.sec = 1
+    "02000000"  # header.stamp.nanosec = 2
+    "04000000"
+    "63616d00"  # header.frame_id = "cam" (length with NUL)
+    "01000000"  # height = 1
+    "02000000"  # width = 2
+    "06000000"
+    "6d6f6e6f3800"  # encoding = "mono8"
+    "00"  # is_bigendian
+    "00"  # padding to 4
+    "02000000"  # step = 2
+    "02000000"
+    "0709"  # data: length 2, bytes 7 9
+)
+
+
+def image(arr: np.ndarray, encoding: str, step: int | None = None, big: bool = False) -> m.Image:
+    data = np.ascontiguousarray(arr).view(np.uint8)
+    h = arr.shape[0]
+    row = data.reshape(h, -1)
+    if step is not None:
+        pad = np.zeros((h, step - row.shape[1]), np.uint8)
+        row = np.hstack([row, pad])
+    return m.Image(
+        header=m.make_header(5, "f"),
+        height=h,
+        width=arr.shape[1],
+        encoding=encoding,
+        is_bigendian=int(big),
+        step=row.shape[1],
+        data=row.reshape(-1),
+    )
+
+
+def roundtrip(msg, ros_type, cls):
+    return m.deserialize(m.serialize(msg, ros_type), ros_type, cls, LIMITS)
+
+
+def test_hand_decoded_tiny_image():
+    msg = m.deserialize(TINY_IMAGE, IMAGE, m.Image, LIMITS)
+    assert (msg.height, msg.width, msg.encoding, msg.step) == (1, 2, "mono8", 2)
+    assert m.stamp_ns(msg.header) == 1_000_000_002 and msg.header.frame_id == "cam"
+    np.testing.assert_array_equal(m.image_to_array(msg, LIMITS), [[7, 9]])
+    assert bytes(m.serialize(msg, IMAGE)) == TINY_IMAGE
+
+
+def test_rgb_bgr_mono_and_padding():
+    rng = np.random.default_rng(0)
+    rgb = rng.integers(0, 256, (3, 4, 3), dtype=np.uint8)
+    got = m.image_to_array(roundtrip(image(rgb, "rgb8", step=16), IMAGE, m.Image), LIMITS)
+    np.testing.assert_array_equal(got, rgb)
+    got = m.image_to_array(roundtrip(image(rgb[:, :, ::-1].copy(), "bgr8"), IMAGE, m.Image), LIMITS)
+    np.testing.assert_array_equal(got, rgb)
+    mono = rgb[:, :, 0].copy()
+    np.testing.assert_array_equal(m.image_to_array(roundtrip(image(mono, "mono8"), IMAGE, m.Image), LIMITS), mono)
+
+
+@pytest.mark.parametrize("big", [False, True])
+def test_mono16_scaled(big):
+    v = np.array([[0, 257, 65535, 32768]], dtype=">u2" if big else "<u2")
+    got = m.image_to_array(image(v, "mono16", big=big), LIMITS)
+    np.testing.assert_array_equal(got, [[0, 1, 255, 128]])
+
+
+def test_unsupported_encoding_named():
+    with pytest.raises(Ros2Error) as err:
+        m.image_to_array(image(np.zeros((2, 2), np.uint8), "bayer_rggb8"), LIMITS)
+    assert err.value.reason == "encoding" and "bayer_rggb8" in str(err.value)
+
+
+def test_bounds_checked_before_work():
+    big = image(np.zeros((4, 4), np.uint8), "mono8")
+    with pytest.raises(Ros2Error) as err:
+        m.image_to_array(big, m.Limits(max_pixels=15))
+    assert err.value.reason == "too_large"
+    payload = m.serialize(big, IMAGE)
+    with pytest.raises(Ros2Error) as err:
+        m.deserialize(payload, IMAGE, m.Image, m.Limits(max_bytes=len(payload) - 1))
+    assert err.value.reason == "too_large"
+    lying = image(np.zeros((4, 4), np.uint8), "mono8")
+    lying.height = lying.width = 1 << 20  # claims a huge image, carries 16 bytes
+    with pytest.raises(Ros2Error) as err:
+        m.image_to_array(lying, LIMITS)
+    assert err.value.reason == "too_large"
+    lying.height, lying.width = 5, 4
+    with pytest.raises(Ros2Error) as err:
+        m.image_to_array(lying, LIMITS)
+    assert err.value.reason == "layout"
+
+
+@pytest.mark.parametrize("cut", [3, 10, len(TINY_IMAGE) - 1])
+def test_truncated_cdr_rejected(cut):
+    with pytest.raises(Ros2Error) as err:
+        m.deserialize(TINY_IMAGE[:cut], IMAGE, m.Image, LIMITS)
+    assert err.value.reason == "cdr"
+
+
+def test_wrong_class_rejected():
+    with pytest.raises(Ros2Error, match="decoded as"):
+        m.deserialize(TINY_IMAGE, IMAGE, m.CameraInfo, LIMITS)
+
+
+def test_depth_images():
+    z = np.array([[1.5, 0.0, np.nan, -1.0]], np.float32)
+    got = m.depth_image_to_array(image(z, "32FC1"), LIMITS)
+    np.testing.assert_array_equal(got, [[1.5, np.nan, np.nan, np.nan]])
+    mm = np.array([[1500, 0, 65535]], np.uint16)
+    got = m.depth_image_to_array(image(mm, "16UC1"), LIMITS)
+    np.testing.assert_allclose(got, [[1.5, np.nan, 65.535]])
+    with pytest.raises(Ros2Error, match="depth encoding"):
+        m.depth_image_to_array(image(mm.astype(np.uint8), "mono8"), LIMITS)
+
+
+def test_calibration_from_camera_info():
+    calib = Calibration(f=500.0, baseline=0.12, doffs=30.0, cx=300.0, cy=200.0)
+    header = m.make_header(1, "left")
+    left = m.camera_model(roundtrip(m.camera_info_message(calib, header, 640, 480, False), CAMERA_INFO, m.CameraInfo))
+    right = m.camera_model(m.camera_info_message(calib, header, 640, 480, True))
+    assert right.p[0, 3] == pytest.approx(-60.0) and right.p[0, 2] == 330.0
+    got = m.stereo_calibration(left, right)
+    assert (got.f, got.doffs, got.cx, got.cy) == (500.0, 30.0, 300.0, 200.0)
+    assert got.baseline == pytest.approx(0.12, rel=1e-12)
+    bad = m.camera_info_message(Calibration(f=400.0, baseline=0.12), header, 640, 480, True)
+    with pytest.raises(Ros2Error, match="rectified pair"):
+        m.stereo_calibration(left, m.camera_model(bad))
+    flipped = m.camera_info_message(calib, header, 640, 480, True)
+    flipped.p[3] = 60.0
+    with pytest.raises(Ros2Error, match="baseline"):
+        m.stereo_calibration(left, m.camera_model(flipped))
+    nan_p = m.camera_info_message(calib, header, 640, 480, False)
+    nan_p.p[0] = np.nan
+    with pytest.raises(Ros2Error) as err:
+        m.camera_model(nan_p)
+    assert err.value.reason == "calibration"
+
+
+def test_cloud_fields_and_layout():
+    xyz = np.array([[1, 2, 3], [4, 5, 6]], np.float32)
+    rgb = np.array([[255, 0, 1], [2, 3, 4]], np.uint8)
+    msg = roundtrip(m.xyz_cloud_message(xyz, m.make_header(0, "lidar"), rgb), POINT_CLOUD2, m.PointCloud2)
+    assert [f.name for f in msg.fields] == ["x", "y", "z", "rgb"] and msg.point_step == 16
+    np.testing.assert_array_equal(m.cloud_to_xyz(msg, LIMITS), xyz)
+    packed = msg.data.reshape(2, 16)[:, 12:16].copy().view("<u4").reshape(-1)
+    assert packed[0] == 0xFF0001
+    with pytest.raises(Ros2Error) as err:
+        m.cloud_to_xyz(msg, m.Limits(max_points=1))
+    assert err.value.reason == "too_large"
+    msg.fields = msg.fields[1:]
+    with pytest.raises(Ros2Error, match="no 'x' field"):
+        m.cloud_to_xyz(msg, LIMITS)
+
+
+def test_cloud_big_endian_float64_and_padding():
+    pts = np.zeros(3, dtype=[("pad", "u1", 4), ("x", ">f8"), ("y", ">f8"), ("z", ">f8"), ("i", ">f4")])
+    pts["x"], pts["y"], pts["z"] = [1, 2, 3], [4, 5, 6], [7, 8, 9]
+    f = [m.PointField(name=n, offset=o, datatype=8, count=1) for n, o in (("x", 4), ("y", 12), ("z", 20))] + [
+        m.PointField(name="i", offset=28, datatype=7, count=1)
+    ]
+    msg = m.PointCloud2(
+        header=m.make_header(0, "l"),
+        height=1,
+        width=3,
+        fields=f,
+        is_bigendian=True,
+        point_step=32,
+        row_step=96,
+        data=pts.view(np.uint8).reshape(-1),
+        is_dense=True,
+    )
+    np.testing.assert_array_equal(m.cloud_to_xyz(msg, LIMITS), [[1, 4, 7], [2, 5, 8], [3, 6, 9]])
+    msg.row_step = 95
+    with pytest.raises(Ros2Error) as err:
+        m.cloud_to_xyz(msg, LIMITS)
+    assert err.value.reason == "layout"
+
+
+def test_disparity_message_conventions():
+    calib = Calibration(f=500.0, baseline=0.1, doffs=20.0)
+    d = np.array([[np.nan, 10.0, 12.5], [np.nan, np.nan, 11.0]], np.float32)
+    msg = m.disparity_message(d, calib, m.make_header(42, "left_optical"), m.DisparityRange(max_disparity=64.0))
+    msg = roundtrip(msg, DISPARITY_IMAGE, m.DisparityImage)
+    assert msg.image.encoding == "32FC1" and msg.image.step == 12
+    assert msg.f == 500.0 and msg.t == pytest.approx(0.1) and msg.delta_d == 1 / 16
+    assert msg.min_disparity == 20.0 and msg.max_disparity == 84.0
+    assert m.stamp_ns(msg.header) == 42 and msg.header.frame_id == "left_optical"
+    w = msg.valid_window
+    assert (w.x_offset, w.y_offset, w.width, w.height) == (1, 0, 2, 2)
+    raw = msg.image.data.view("<f4").reshape(2, 3)
+    assert raw[0, 0] == 19.0 and raw[0, 1] == 30.0  # invalid below min_disparity; values + doffs
+    back = m.disparity_from_message(msg, LIMITS)
+    np.testing.assert_array_equal(back.image, d + 20.0)
+    nan_msg = m.disparity_message(d, calib, msg.header, m.DisparityRange(invalid="nan"))
+    assert np.isnan(nan_msg.image.data.view("<f4")[0]) and nan_msg.max_disparity == 32.5
+    depth = calib.f * back.t / back.image
+    np.testing.assert_allclose(depth[0, 1], 500 * 0.1 / 30.0, rtol=1e-6)
+
+
+def test_array_to_image_checks():
+    with pytest.raises(ValueError, match="rgb8"):
+        m.array_to_image(np.zeros((2, 2), np.uint8), m.make_header(0, ""), "rgb8")
+    msg = m.array_to_image(np.zeros((2, 3), np.float32), m.make_header(0, ""), "32FC1")
+    assert msg.step == 12 and msg.data.size == 24
+    assert struct.unpack("<I", bytes(m.serialize(msg, IMAGE))[-28:-24])[0] == 24

@@ -1,0 +1,277 @@
+"""ROS 2 sink: publish results as an ``rmw_zenoh`` node does, for rviz, Foxglove and ``ros2 topic echo``.
+
+Under ``namespace`` (default ``/stereo``) and ``domain_id`` (default 0), outputs
+(``outputs``; topic names remappable with ``topics``):
+
+``disparity`` -> ``disparity``
+    ``stereo_msgs/DisparityImage`` as stereo_image_proc fills it: ``32FC1``, header =
+    the left camera_info header (stamp and frame_id), ``f``, ``t``, ``min_disparity``,
+    ``max_disparity``, ``delta_d``, ``valid_window`` (the bounding box of valid pixels);
+    values are ``x_l - x_r - (cx_l - cx_r)`` and invalid pixels hold ``min_disparity - 1``
+    (or NaN with ``invalid = "nan"``), see :mod:`vpp_service.transport.ros2.messages`.
+``depth`` -> ``depth``
+    ``sensor_msgs/Image`` ``32FC1``, metres, NaN = invalid.
+``points2`` -> ``points2``
+    ``sensor_msgs/PointCloud2``, x y z rgb in the left optical frame, valid pixels only
+    (unorganized: height 1).
+``left_vpp`` / ``right_vpp`` -> ``left/image_vpp`` / ``right/image_vpp``
+    The painted pair, ``rgb8`` (congestion control DROP: they give way under load).
+
+Each publisher has a liveliness token and every sample the attachment (``current``
+33-byte layout, or ``legacy`` for Jazzy rmw_zenoh 0.2.0-0.2.3). With ``lazy = true`` an
+output with no subscriber on the graph is not serialized (counted in ``lazy_skipped``).
+Frames from a non-ROS source get the header stamp ``frame.stamp_ns`` and ``frame_id``.
+
+``write`` never blocks the pipeline: results go through a
+:class:`~vpp_service.queueing.QueueWorker` (``queue_size``, oldest dropped and counted).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vpp_service.frame import Calibration, FusionResult
+from vpp_service.queueing import QueueWorker
+from vpp_service.sinks.base import SINKS, Sink, SinkContext
+from vpp_service.transport.ros2 import keys
+from vpp_service.transport.ros2 import messages as rm
+from vpp_service.transport.ros2.attachment import Layout
+from vpp_service.transport.ros2.node import RosNode, RosPublisher
+
+log = logging.getLogger(__name__)
+
+#: Output name -> (default topic relative to the namespace, message type).
+OUTPUTS: dict[str, tuple[str, str]] = {
+    "disparity": ("disparity", keys.DISPARITY_IMAGE),
+    "depth": ("depth", keys.IMAGE),
+    "points2": ("points2", keys.POINT_CLOUD2),
+    "left_vpp": ("left/image_vpp", keys.IMAGE),
+    "right_vpp": ("right/image_vpp", keys.IMAGE),
+}
+
+
+@dataclass(frozen=True)
+class Ros2OutputOptions:
+    """What the ROS 2 outputs hold: shared by the ``ros2`` sink and the ``rosbag2`` recorder.
+
+    Attributes
+    ----------
+    namespace : str
+        ROS namespace of the output topics.
+    outputs : list of str
+        Which of ``disparity``, ``depth``, ``points2``, ``left_vpp``, ``right_vpp`` to write.
+    topics : dict
+        Topic remapping per output name, e.g. ``{disparity = "/robot/disparity"}``.
+    frame_id : str
+        Header frame of results whose frame did not come from ROS.
+    min_disparity : float
+        The matcher's smallest disparity (project units; written corrected).
+    max_disparity : float
+        The matcher's largest disparity; 0 = each frame's largest valid value.
+    delta_d : float
+        Smallest disparity step (1/16 for OpenCV's matchers).
+    invalid : {"below_min", "nan"}
+        Value of invalid disparity pixels.
+    queue_size : int
+        Results buffered between the pipeline and the writing thread.
+    """
+
+    namespace: str = "/stereo"
+    outputs: list[str] = field(default_factory=lambda: ["disparity"])
+    topics: dict[str, str] = field(default_factory=dict)
+    frame_id: str = "left_camera_optical_frame"
+    min_disparity: float = 0.0
+    max_disparity: float = 0.0
+    delta_d: float = 1.0 / 16.0
+    invalid: rm.Invalid = "below_min"
+    queue_size: int = 4
+
+    def __post_init__(self) -> None:
+        if not self.outputs or len(set(self.outputs)) != len(self.outputs):
+            raise ValueError("outputs: must list at least one output, without duplicates")
+        for name in [*self.outputs, *self.topics]:
+            if name not in OUTPUTS:
+                raise ValueError(f"outputs: unknown output {name!r}; known: {', '.join(OUTPUTS)}")
+        for name in self.outputs:
+            self.topic(name)  # validates the names
+        if not (np.isfinite(self.min_disparity) and np.isfinite(self.max_disparity) and self.max_disparity >= 0):
+            raise ValueError("min_disparity, max_disparity: must be finite, max_disparity >= 0")
+        if not 0 < self.delta_d <= 1:
+            raise ValueError(f"delta_d must be in (0, 1], got {self.delta_d}")
+        if not 1 <= self.queue_size <= 1000:
+            raise ValueError(f"queue_size must be in [1, 1000], got {self.queue_size}")
+
+    def topic(self, output: str) -> str:
+        """The fully-qualified topic of ``output``."""
+        return keys.fully_qualified(self.namespace, self.topics.get(output, OUTPUTS[output][0]))
+
+
+@dataclass(frozen=True)
+class Ros2SinkOptions(Ros2OutputOptions):
+    """Options of the ``ros2`` sink: :class:`Ros2OutputOptions` plus the node.
+
+    Attributes
+    ----------
+    domain_id : int
+        ROS domain id.
+    node_name : str
+        Name of the publishing node.
+    attachment : {"current", "legacy"}
+        Attachment layout (``legacy`` only for Jazzy rmw_zenoh 0.2.0-0.2.3 graphs).
+    lazy : bool
+        Skip an output while no subscriber matches it.
+    """
+
+    domain_id: int = 0
+    node_name: str = "vpp_stereo"
+    attachment: Layout = "current"
+    lazy: bool = False
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        keys.check_domain(self.domain_id)
+        keys.check_node_name(self.node_name)
+
+
+def points_xyz_rgb(depth: np.ndarray, image: np.ndarray, calib: Calibration) -> tuple[np.ndarray, np.ndarray]:
+    """Valid pixels of a depth map as N x 3 points in the left optical frame and N x 3 uint8 colours."""
+    h, w = depth.shape
+    cx = calib.cx if calib.cx is not None else (w - 1) / 2
+    cy = calib.cy if calib.cy is not None else (h - 1) / 2
+    valid = np.isfinite(depth) & (depth > 0)
+    v, u = np.nonzero(valid)
+    z = depth[valid].astype(np.float32)
+    xyz = np.stack([(u - cx) * z / calib.f, (v - cy) * z / calib.f, z], axis=1).astype(np.float32)
+    rgb = image[valid] if image.ndim == 3 else np.repeat(image[valid][:, None], 3, axis=1)
+    return xyz, np.ascontiguousarray(rgb, dtype=np.uint8)
+
+
+class Ros2Encoder:
+    """CDR payloads of the outputs of one result (see the module docstring for what each holds).
+
+    Parameters
+    ----------
+    options : Ros2OutputOptions
+        Outputs, frame id and the ``DisparityImage`` metadata.
+    """
+
+    def __init__(self, options: Ros2OutputOptions) -> None:
+        self.options = options
+        self.range = rm.DisparityRange(options.min_disparity, options.max_disparity, options.delta_d, options.invalid)
+
+    def header(self, result: FusionResult) -> rm.Header:
+        """The left camera_info header the frame came with, else ``frame.stamp_ns`` and ``frame_id``."""
+        ros = result.frame.meta.get("ros")
+        if isinstance(ros, dict) and isinstance(ros.get("stamp_ns"), int) and isinstance(ros.get("frame_id"), str):
+            return rm.make_header(ros["stamp_ns"], ros["frame_id"])
+        return rm.make_header(max(0, int(result.frame.stamp_ns)), self.options.frame_id)
+
+    def encode(self, result: FusionResult, name: str) -> bytes | bytearray | None:
+        """The CDR payload of output ``name`` for ``result``; None when the result lacks it."""
+        header = self.header(result)
+        calib = result.frame.calib
+        msg: object
+        if name == "disparity":
+            if calib is None:
+                return None
+            msg = rm.disparity_message(result.disparity, calib, header, self.range)
+        elif name == "depth":
+            if result.depth is None:
+                return None
+            msg = rm.array_to_image(np.asarray(result.depth, np.float32), header, "32FC1")
+        elif name == "points2":
+            if result.depth is None or calib is None:
+                return None
+            xyz, rgb = points_xyz_rgb(result.depth, result.frame.left, calib)
+            msg = rm.xyz_cloud_message(xyz, header, rgb)
+        else:
+            img = result.left_vpp if name == "left_vpp" else result.right_vpp
+            if img is None:
+                return None
+            rgb = img if img.ndim == 3 else np.repeat(img[:, :, None], 3, axis=2)
+            msg = rm.array_to_image(np.ascontiguousarray(rgb, np.uint8), header, "rgb8")
+        return rm.serialize(msg, OUTPUTS[name][1])
+
+
+@SINKS.register("ros2")
+class Ros2Sink(Sink):
+    """Publish results on ROS 2 topics over Zenoh (see the module docstring). Needs ``context.session``."""
+
+    Options = Ros2SinkOptions
+    needs_session = True
+
+    @classmethod
+    def needs_depth(cls, options: Ros2SinkOptions) -> bool:
+        """True when ``depth`` or ``points2`` is published."""
+        return "depth" in options.outputs or "points2" in options.outputs
+
+    def __init__(self, options: Ros2SinkOptions, context: SinkContext) -> None:
+        super().__init__(options, context)
+        self.options: Ros2SinkOptions = options
+        self._node: RosNode | None = None
+        self._pubs: dict[str, RosPublisher] = {}
+        self._worker: QueueWorker[FusionResult] = QueueWorker(
+            self._publish, size=options.queue_size, policy="latest", name="sink-ros2", on_error=self._failed
+        )
+        self._encode_ms: deque[float] = deque(maxlen=200)
+        self._counters.update({"lazy_skipped": 0, "missing": 0})
+        self._encoder = Ros2Encoder(options)
+
+    def open(self) -> None:
+        """Declare the node, one publisher (and token) per output, and start the publishing thread."""
+        session = self.context.session
+        if session is None:
+            raise ValueError("sinks.ros2: needs an open zenoh session (service.zenoh section)")
+        o = self.options
+        self._node = RosNode(session, o.domain_id, o.namespace, o.node_name)
+        self._node.open()
+        for name in o.outputs:
+            visual = name in ("left_vpp", "right_vpp")
+            self._pubs[name] = self._node.publisher(o.topic(name), OUTPUTS[name][1], block=not visual)
+        self._worker.start()
+
+    def write(self, result: FusionResult) -> None:
+        """Queue ``result`` for publishing; drops (and counts) the oldest when full."""
+        self._worker.put(result)
+
+    def _publish(self, result: FusionResult) -> None:
+        t0 = time.perf_counter()
+        for name, pub in self._pubs.items():
+            if self.options.lazy and not pub.matching:
+                self._counters["lazy_skipped"] += 1
+                continue
+            payload = self._encoder.encode(result, name)
+            if payload is None:
+                self._counters["missing"] += 1
+                continue
+            pub.put(payload, self.options.attachment)
+        self._encode_ms.append((time.perf_counter() - t0) * 1e3)
+        self._counters["written"] += 1
+
+    def _failed(self, result: FusionResult, exc: Exception) -> None:
+        self._counters["errors"] += 1
+        log.warning("ros2 sink: %s", exc)
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Flush the queue within ``timeout`` seconds, then undeclare the node."""
+        self._worker.close(timeout)
+        if self._node is not None:
+            self._node.close()
+            self._node = None
+        self._pubs.clear()
+
+    def stats(self) -> dict[str, object]:  # type: ignore[override]  # nested timing, like the zenoh sink
+        """Counters plus ``timing_ms.publish``: median encode + put time per result (recent window)."""
+        out: dict[str, object] = dict(self._counters)
+        out["dropped"] = self._worker.dropped + self._worker.discarded
+        vals = sorted(self._encode_ms)
+        out["timing_ms"] = {"publish": vals[len(vals) // 2]} if vals else {}
+        return out
+
+
+__all__ = ["OUTPUTS", "Ros2Encoder", "Ros2OutputOptions", "Ros2Sink", "Ros2SinkOptions", "points_xyz_rgb"]

@@ -1,0 +1,353 @@
+"""Stereo frames from ROS 2 messages: the part the live ``ros2`` source and the ``rosbag2`` source share.
+
+:class:`StereoAssembler` takes serialized messages by role (``left_image``,
+``left_info``, ``right_image``, ``right_info``, ``depth``) and returns finished
+:class:`~vpp_service.frame.StereoFrame` objects:
+
+1. Each payload is size-checked and CDR-decoded (:mod:`vpp_service.transport.ros2.messages`;
+   an ``Image`` stays a zero-copy view until its pair is complete).
+2. The four stereo messages are joined like stereo_image_proc does
+   (:class:`~vpp_service.transport.sync.Synchronizer`): ``exact`` = identical header
+   stamps, ``approximate`` = stamps within ``sync_tolerance_ms``.
+3. A complete pair takes the depth message (``PointCloud2`` or a depth ``Image``) with
+   the nearest stamp within ``depth_tolerance_ms``. It waits for one at most
+   ``depth_wait_ms`` (wall clock) or until a later depth message shows none will come;
+   then it goes on without depth (counted ``no_depth``: processed without VPP).
+4. Calibration comes from the two camera_info messages
+   (:func:`~vpp_service.transport.ros2.messages.stereo_calibration`); the cloud is moved by
+   ``lidar_to_left`` and projected with the left ``P``
+   (:func:`~vpp_service.transport.ros2.cloud.cloud_to_depth`).
+
+Every refused message or pair is counted by cause in :attr:`StereoAssembler.rejected_by`
+and reported through ``reject``; every message that never reaches a frame is counted
+(``sync_dropped``, ``depth_unused``, ``pending_dropped``).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from vpp_service.frame import StereoFrame
+from vpp_service.transport.ros2 import keys
+from vpp_service.transport.ros2 import messages as rm
+from vpp_service.transport.ros2.cloud import check_extrinsic, cloud_to_depth
+from vpp_service.transport.ros2.errors import Ros2Error
+from vpp_service.transport.sync import Synchronizer
+
+#: Roles of the subscribed topics, in the order of the stereo set.
+STEREO_ROLES = ("left_image", "left_info", "right_image", "right_info")
+#: Every role (``depth`` only when a depth topic is used).
+ROLES = (*STEREO_ROLES, "depth")
+#: What the depth topic carries.
+DepthType = Literal["cloud", "image", "none"]
+
+_ROLE_TYPES = {
+    "left_image": keys.IMAGE,
+    "right_image": keys.IMAGE,
+    "left_info": keys.CAMERA_INFO,
+    "right_info": keys.CAMERA_INFO,
+}
+
+_IDENTITY = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+
+
+@dataclass(frozen=True)
+class StereoTopics:
+    """Topic names (relative to the namespace unless absolute) and how frames are assembled.
+
+    Attributes
+    ----------
+    namespace : str
+        ROS namespace of the relative topic names.
+    left_image, left_info, right_image, right_info : str
+        The rectified images and their camera_info.
+    depth_topic : str
+        Sparse depth: a ``PointCloud2`` (``depth_type = "cloud"``) or a depth ``Image``
+        registered to the left camera (``"image"``: ``32FC1`` metres or ``16UC1`` mm).
+    depth_type : {"cloud", "image", "none"}
+        What ``depth_topic`` carries; ``none`` = no depth subscription.
+    lidar_to_left : list of list of float
+        4 x 4 transform from the cloud's frame to the left optical frame (rows).
+    sync : {"exact", "approximate"}
+        Stereo matching rule (stereo_image_proc's ``approximate_sync``).
+    sync_queue_size : int
+        Messages kept per topic while waiting for partners (stereo_image_proc: 5).
+    sync_tolerance_ms : float
+        Approximate sync: largest stamp difference inside a stereo set.
+    depth_tolerance_ms : float
+        Largest stamp difference between a pair and its depth message.
+    depth_wait_ms : float
+        Longest wall time a complete pair waits for its depth message.
+    max_message_mb : float
+        Larger messages are refused before decoding.
+    max_pixels : int
+        Larger images are refused before conversion.
+    max_points : int
+        Larger clouds are refused before conversion.
+    """
+
+    namespace: str = "/stereo"
+    left_image: str = "left/image_rect"
+    left_info: str = "left/camera_info"
+    right_image: str = "right/image_rect"
+    right_info: str = "right/camera_info"
+    depth_topic: str = "points"
+    depth_type: DepthType = "cloud"
+    lidar_to_left: list[list[float]] = field(default_factory=lambda: [list(r) for r in _IDENTITY])
+    sync: Literal["exact", "approximate"] = "exact"
+    sync_queue_size: int = 5
+    sync_tolerance_ms: float = 10.0
+    depth_tolerance_ms: float = 50.0
+    depth_wait_ms: float = 100.0
+    max_message_mb: float = 256.0
+    max_pixels: int = 50_000_000
+    max_points: int = 10_000_000
+
+    def __post_init__(self) -> None:
+        for role in ROLES:
+            self.topic(role)  # validates the names
+        check_extrinsic(np.asarray(self.lidar_to_left, dtype=np.float64))
+        if not 1 <= self.sync_queue_size <= 1000:
+            raise ValueError(f"sync_queue_size must be in [1, 1000], got {self.sync_queue_size}")
+        for name in ("sync_tolerance_ms", "depth_tolerance_ms", "depth_wait_ms"):
+            if not 0 <= getattr(self, name) <= 60_000:
+                raise ValueError(f"{name} must be in [0, 60000], got {getattr(self, name)}")
+        if not 0 < self.max_message_mb <= 4096:
+            raise ValueError(f"max_message_mb must be in (0, 4096], got {self.max_message_mb}")
+        for name in ("max_pixels", "max_points"):
+            if not 1 <= getattr(self, name) <= 1_000_000_000:
+                raise ValueError(f"{name} must be in [1, 1e9], got {getattr(self, name)}")
+
+    def topic(self, role: str) -> str:
+        """The fully-qualified topic of ``role``."""
+        name = self.depth_topic if role == "depth" else getattr(self, role)
+        return keys.fully_qualified(self.namespace, name)
+
+    def roles(self) -> tuple[str, ...]:
+        """The roles subscribed to (``depth`` only when ``depth_type`` is not ``none``)."""
+        return ROLES if self.depth_type != "none" else STEREO_ROLES
+
+    def ros_type(self, role: str) -> str:
+        """The message type of ``role``."""
+        if role == "depth":
+            return keys.POINT_CLOUD2 if self.depth_type == "cloud" else keys.IMAGE
+        return _ROLE_TYPES[role]
+
+    def limits(self) -> rm.Limits:
+        """The message bounds."""
+        return rm.Limits(int(self.max_message_mb * 1024 * 1024), self.max_pixels, self.max_points)
+
+
+@dataclass
+class _Msg:
+    msg: object
+    stamp_ns: int
+    decode_s: float
+
+
+@dataclass
+class _Pair:
+    parts: dict[str, _Msg]
+    stamp_ns: int
+    since: float
+
+
+class StereoAssembler:
+    """Join serialized ROS 2 messages into stereo frames (see the module docstring).
+
+    Parameters
+    ----------
+    topics : StereoTopics
+        Topic names and assembly rules.
+    rig : str
+        Rig name given to the frames.
+    reject : callable
+        ``reject(reason)`` for each refused message or pair (the source's reporter).
+    clock : callable
+        Monotonic clock in seconds (``depth_wait_ms``); tests pass their own.
+
+    Attributes
+    ----------
+    counters : dict
+        ``frames``, ``no_depth``, ``sync_dropped``, ``depth_unused``, ``pending_dropped``,
+        ``cloud_points``, ``cloud_behind``, ``cloud_outside``, ``cloud_nonfinite``.
+    rejected_by : dict
+        Refused messages or pairs per cause (``too_large``, ``cdr``, ``encoding``, ...).
+    """
+
+    def __init__(
+        self,
+        topics: StereoTopics,
+        rig: str,
+        reject: Callable[[str], None],
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.topics = topics
+        self.rig = rig
+        self._reject = reject
+        self._clock = clock
+        self._limits = topics.limits()
+        self._extrinsic = check_extrinsic(np.asarray(topics.lidar_to_left, dtype=np.float64))
+        self.sync: Synchronizer[_Msg] = Synchronizer(
+            STEREO_ROLES, topics.sync, topics.sync_queue_size, int(topics.sync_tolerance_ms * 1e6)
+        )
+        self._pending: deque[_Pair] = deque()
+        self._depth: deque[tuple[_Msg, list[bool]]] = deque()
+        self._seq = 0
+        self.counters: dict[str, int] = dict.fromkeys(
+            (
+                "frames",
+                "no_depth",
+                "sync_dropped",
+                "depth_unused",
+                "pending_dropped",
+                "cloud_points",
+                "cloud_behind",
+                "cloud_outside",
+                "cloud_nonfinite",
+            ),
+            0,
+        )
+        self.rejected_by: dict[str, int] = {}
+
+    # ----------------------------------------------------------------- input
+    def refuse(self, role: str, exc: Ros2Error) -> None:
+        """Count and report a refused message of ``role``."""
+        self.rejected_by[exc.reason] = self.rejected_by.get(exc.reason, 0) + 1
+        self._reject(f"{self.topics.topic(role) if role in ROLES else role}: {exc}")
+
+    def add(self, role: str, payload: bytes | memoryview) -> list[StereoFrame]:
+        """Offer one serialized message of ``role``; returns the frames it completes (oldest first)."""
+        if role not in self.topics.roles():
+            raise ValueError(f"role must be one of {list(self.topics.roles())}, got {role!r}")
+        t0 = time.perf_counter()
+        ros_type = self.topics.ros_type(role)
+        try:
+            msg: object = rm.deserialize(payload, ros_type, rm.message_class(ros_type), self._limits)
+        except Ros2Error as exc:
+            self.refuse(role, exc)
+            return []
+        header = msg.header  # type: ignore[attr-defined]  # every supported message has one
+        item = _Msg(msg, rm.stamp_ns(header), time.perf_counter() - t0)
+        if role == "depth":
+            self._depth.append((item, [False]))
+            while len(self._depth) > 2 * self.topics.sync_queue_size:
+                _, used = self._depth.popleft()
+                if not used[0]:
+                    self.counters["depth_unused"] += 1
+            return self._resolve()
+        before = self.sync.dropped
+        joined = self.sync.add(role, item.stamp_ns, item.stamp_ns, item)
+        self.counters["sync_dropped"] += self.sync.dropped - before
+        if joined is not None:
+            self._pending.append(_Pair(joined, joined["left_info"].stamp_ns, self._clock()))
+            while len(self._pending) > self.topics.sync_queue_size:
+                self._pending.popleft()
+                self.counters["pending_dropped"] += 1
+        return self._resolve()
+
+    def expire(self) -> list[StereoFrame]:
+        """Frames whose depth wait is over (call periodically)."""
+        return self._resolve()
+
+    def flush(self) -> list[StereoFrame]:
+        """Every pending pair, with depth if one matches now (end of a bag)."""
+        return self._resolve(final=True)
+
+    # ---------------------------------------------------------------- output
+    def _nearest_depth(self, stamp: int) -> tuple[_Msg, list[bool]] | None:
+        tol = int(self.topics.depth_tolerance_ms * 1e6)
+        best = min(self._depth, key=lambda d: abs(d[0].stamp_ns - stamp), default=None)
+        if best is None or abs(best[0].stamp_ns - stamp) > tol:
+            return None
+        return best
+
+    def _resolve(self, final: bool = False) -> list[StereoFrame]:
+        out: list[StereoFrame] = []
+        wait_s = self.topics.depth_wait_ms / 1e3
+        tol = int(self.topics.depth_tolerance_ms * 1e6)
+        while self._pending:
+            pair = self._pending[0]
+            depth = None
+            if self.topics.depth_type != "none":
+                depth = self._nearest_depth(pair.stamp_ns)
+                newest = self._depth[-1][0].stamp_ns if self._depth else None
+                hopeless = newest is not None and newest > pair.stamp_ns + tol
+                if depth is None and not (final or hopeless or self._clock() - pair.since >= wait_s):
+                    break  # keep waiting, and keep the order
+            self._pending.popleft()
+            if depth is not None:
+                depth[1][0] = True
+            frame = self._frame(pair, depth[0] if depth is not None else None)
+            if frame is not None:
+                out.append(frame)
+        return out
+
+    def _frame(self, pair: _Pair, depth: _Msg | None) -> StereoFrame | None:
+        t0 = time.perf_counter()
+        p = pair.parts
+        try:
+            li, ri = p["left_info"].msg, p["right_info"].msg
+            lm, rim = p["left_image"].msg, p["right_image"].msg
+            assert isinstance(li, rm.CameraInfo) and isinstance(ri, rm.CameraInfo)
+            assert isinstance(lm, rm.Image) and isinstance(rim, rm.Image)
+            lc, rc = rm.camera_model(li), rm.camera_model(ri)
+            calib = rm.stereo_calibration(lc, rc)
+            left, right = rm.image_to_array(lm, self._limits), rm.image_to_array(rim, self._limits)
+            h, w = left.shape[:2]
+            if left.shape != right.shape:
+                raise Ros2Error("shape", f"left {left.shape} and right {right.shape} images differ")
+            if (lc.width, lc.height) != (w, h):
+                raise Ros2Error("shape", f"camera_info is {lc.width}x{lc.height}, images are {w}x{h}")
+            sensor_depth = self._depth_map(depth, lc.p, (h, w)) if depth is not None else None
+        except Ros2Error as exc:
+            self.refuse("stereo pair", exc)
+            return None
+        if sensor_depth is None:
+            self.counters["no_depth"] += 1
+        decode_s = sum(m.decode_s for m in p.values()) + (depth.decode_s if depth is not None else 0.0)
+        self._seq += 1
+        self.counters["frames"] += 1
+        return StereoFrame(
+            left=left,
+            right=right,
+            calib=calib,
+            sensor_depth=sensor_depth,
+            name="ros2",
+            rig=self.rig,
+            seq=self._seq,
+            stamp_ns=pair.stamp_ns,
+            meta={
+                "ros": {"stamp_ns": pair.stamp_ns, "frame_id": lc.frame_id},
+                "timing_ms": {"decode": (decode_s + time.perf_counter() - t0) * 1e3},
+            },
+        )
+
+    def _depth_map(self, depth: _Msg, p: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+        msg = depth.msg
+        if isinstance(msg, rm.PointCloud2):
+            xyz = rm.cloud_to_xyz(msg, self._limits)
+            z, counts = cloud_to_depth(xyz, self._extrinsic, p, shape)
+            self.counters["cloud_points"] += counts.used
+            self.counters["cloud_behind"] += counts.behind
+            self.counters["cloud_outside"] += counts.outside
+            self.counters["cloud_nonfinite"] += counts.nonfinite
+            return z
+        assert isinstance(msg, rm.Image)
+        z = rm.depth_image_to_array(msg, self._limits)
+        if z.shape != shape:
+            raise Ros2Error("shape", f"depth image is {z.shape[1]}x{z.shape[0]}, images are {shape[1]}x{shape[0]}")
+        return z
+
+    def stats(self) -> dict[str, object]:
+        """Counters, refusals by cause, and the synchronizer's state."""
+        return {**self.counters, "rejected_by": dict(self.rejected_by), "sync": self.sync.stats()}
+
+
+__all__ = ["ROLES", "STEREO_ROLES", "DepthType", "StereoAssembler", "StereoTopics"]
