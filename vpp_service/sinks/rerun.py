@@ -511,6 +511,9 @@ class RerunSink(Sink):
                 self._server.wait(timeout=2.0)
             except subprocess.TimeoutExpired:
                 self._server.kill()
+                self._server.wait()
+            if self._server.stderr is not None:
+                self._server.stderr.close()
             self._server = None
         st = self.stats()
         if st["dropped"]:
