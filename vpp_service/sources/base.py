@@ -14,7 +14,11 @@ pipeline. Life cycle, mirroring :mod:`vpp_service.sinks.base`:
    nothing left it sets :attr:`Source.finished` and calls ``on_finished()`` when given.
 4. ``src.stop(timeout)`` -- stop producing and release, within ``timeout`` seconds.
 
-``src.stats()`` returns counters (``emitted``, ``rejected`` and extras) for ``@status``.
+``src.stats()`` returns counters (``emitted``, ``rejected`` and extras) for ``@status``;
+``src.losses()`` the valid input the source itself lost, by cause (the pipeline
+adds them to its one ``dropped`` count). ``src.input_policy`` is the pipeline's
+input policy, set before ``open``: under ``block`` a source that buffers must
+hold its producer back rather than drop.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from typing import Any
 
 from vpp_service.frame import StereoFrame
 from vpp_service.plugin import Plugin, PluginContext, parse_plugin_options
+from vpp_service.queueing import Policy
 from vpp_service.registry import Registry
 
 #: Registered source classes by name ("zenoh", "files", "sim").
@@ -56,6 +61,8 @@ class Source(Plugin):
 
     def __init__(self, options: object, context: SourceContext) -> None:
         super().__init__(options, context)
+        #: The pipeline's input policy (set before :meth:`open`): ``block`` asks for back-pressure, not drops.
+        self.input_policy: Policy = "latest"
         #: Set when a finite source has produced its last frame.
         self.finished = threading.Event()
         self._stop = threading.Event()
@@ -115,6 +122,10 @@ class Source(Plugin):
 
     def close(self) -> None:
         """Release resources (called by :meth:`stop`)."""
+
+    def losses(self) -> dict[str, int]:
+        """Valid input this source lost before emitting it, by cause (none by default)."""
+        return {}
 
 
 def parse_source_options(name: str, options: Mapping[str, Any] | None, section: str | None = None) -> object:
