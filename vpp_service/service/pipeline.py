@@ -23,6 +23,9 @@ them, the source's own losses such as ``source_ring`` and ``sync``, and
 ``sink.<Name>`` for each sink's dropped outputs). Under the ``block`` input
 policy the source is asked to back-pressure its producer instead of dropping.
 
+A source whose thread dies on an exception ends the pipeline like an exhausted
+one, but ``status()["source_error"]`` names the exception (the service exits 1).
+
 Bad input never stops the pipeline: a rejected message is counted and logged
 (at most once per ``reject_log_period_s``); a frame the process step raises
 on is counted as rejected and dropped.
@@ -78,6 +81,8 @@ class PipelineStatus(TypedDict):
     uptime_s: float
     counters: dict[str, int]
     dropped: dict[str, int]
+    source_error: str | None
+    zenoh: dict[str, int] | None
     fps: float
     queues: dict[str, QueueStatus]
     timing_ms: dict[str, dict[str, float]]
@@ -399,6 +404,8 @@ class Pipeline:
             "uptime_s": elapsed,
             "counters": counters,
             "dropped": dropped,
+            "source_error": None if self.source.error is None else repr(self.source.error),
+            "zenoh": self.connectivity(),
             "fps": counters["processed"] / elapsed if elapsed > 0 else 0.0,
             "queues": {
                 "input": {
@@ -421,6 +428,16 @@ class Pipeline:
             "sinks": sinks,
             "metrics": {"last": self._last_metrics, "bad2_mean": float(np.mean(self._bad2)) if self._bad2 else None},
         }
+
+    def connectivity(self) -> dict[str, int] | None:
+        """Routers and peers the session reaches now (None without a session)."""
+        if self.session is None:
+            return None
+        try:
+            info = self.session.info
+            return {"routers": len(list(info.routers_zid())), "peers": len(list(info.peers_zid()))}
+        except Exception:  # noqa: BLE001 - a closing session must not break @status
+            return None
 
     def _losses(self, sinks: Mapping[str, Mapping[str, object]]) -> dict[str, int]:
         """Every loss by cause (see the module docstring); ``counters["dropped"]`` is their sum."""
