@@ -217,7 +217,7 @@ def test_prepare_next_runs_after_each_result_and_cannot_break_the_service():
     ref: list = []
     proc = PreparingProcess(ref)
     sink = CollectSink()
-    pipe = Pipeline(sim_source(6), proc, [sink], input_policy="block")
+    pipe = Pipeline(sim_source(6), proc, [sink], input_policy="block", output_policy="block")  # no race with the sinks
     ref.append(pipe)
     run(pipe)
     assert proc.prepared == [r.frame.seq for r in sink.results] == list(range(6))

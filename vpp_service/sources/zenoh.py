@@ -1,7 +1,6 @@
 """Zenoh source: receive wire-format v1 frames from cameras on the network.
 
-Subscribes with a callback (run by Zenoh on a Python thread of its own, not on
-its network thread) that decodes and validates each message
+Subscribes with a callback that decodes and validates each message
 (:mod:`vpp_service.transport.wire`) and buffers the valid ones in a bounded ring
 (``ring_size`` per topic), then signals an event. A bad message is rejected
 (counted, reason reported) and never enters the ring, so junk cannot displace
@@ -10,12 +9,15 @@ valid frames; the source keeps serving. This source's thread wakes on the event
 frames.
 
 When the ring is full, the pipeline's input policy (:attr:`Source.input_policy`)
-decides: ``latest`` drops the oldest sample (counted in ``ring_dropped``);
-``block`` makes the callback wait for room, which holds Zenoh's receive path
-and back-pressures the publisher: with reliable transport and
-``CongestionControl.BLOCK`` on the publisher, nothing is lost end to end (a
-publisher using ``DROP`` loses samples in its own session, where no counter of
-this service can see them).
+decides: ``latest`` drops the oldest sample (counted in ``ring_dropped``; the
+callback runs on a Python thread Zenoh feeds, never on its network thread);
+``block`` makes the callback, run directly on Zenoh's receive thread, wait for
+room, which holds the link back and with it the publisher (no queue in between
+to fill: an indirect callback's channel would buffer seconds of frames). With
+reliable transport and ``CongestionControl.BLOCK`` on the publisher nothing is
+lost end to end (a publisher using ``DROP`` loses samples in its own session,
+where no counter of this service can see them). While the link is held back,
+other traffic on it waits too (``@status`` answers within about a frame time).
 
 Topics: ``<prefix>/<rig>/in/frame`` (default), or with ``topics = "separate"``
 ``in/left``, ``in/right`` and ``in/depth`` joined by
@@ -157,7 +159,10 @@ class ZenohSource(Source):
             )
         for part in parts:
             key = wire.topic(self.context.prefix, self.context.rig, f"in/{part}")
-            self._subs[part] = session.declare_subscriber(key, zenoh.handlers.Callback(partial(self._on_sample, part)))
+            # block: run on Zenoh's receive thread, so the wait for room holds the link back with no queue in
+            # between (an indirect callback's channel buffers hundreds of frames: seconds of latency)
+            handler = zenoh.handlers.Callback(partial(self._on_sample, part), indirect=self.input_policy != "block")
+            self._subs[part] = session.declare_subscriber(key, handler)
 
     def start(self, emit: Emit, reject: Reject | None = None, on_finished: Callable[[], None] | None = None) -> None:
         """Start the receive thread; ``reject`` also hears of messages the subscriber callback turns away."""
@@ -167,10 +172,9 @@ class ZenohSource(Source):
     def _on_sample(self, part: str, sample: zenoh.Sample) -> None:
         """Subscriber callback: decode and validate, buffer what is valid, wake the receive thread.
 
-        Zenoh runs it on a Python thread of its own (``indirect`` callbacks, fed
-        by a bounded channel), not on its network thread. Under the ``block``
-        input policy a full ring makes it wait for room (back-pressure through
-        Zenoh); under ``latest`` it never waits.
+        Under the ``block`` input policy it runs on Zenoh's receive thread and a
+        full ring makes it wait for room (back-pressure through Zenoh); under
+        ``latest`` it runs on Zenoh's Python callback thread and never waits.
         """
         recv_ns = time.time_ns()
         t0 = time.perf_counter()
