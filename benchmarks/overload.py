@@ -98,11 +98,22 @@ def _status(session: zenoh.Session) -> dict[str, object] | None:
 
 
 def _run(  # noqa: PLR0915 - one scenario, step by step
-    a: argparse.Namespace, policy: str, payloads: list[bytes], *, rate_hz: float, tmp: Path, seconds: float
+    a: argparse.Namespace,
+    policy: str,
+    payloads: list[bytes],
+    *,
+    rate_hz: float,
+    tmp: Path,
+    seconds: float,
+    junk: list[bytes] | None = None,
 ) -> dict[str, object]:
-    """One service process under ``policy``, fed at ``rate_hz`` (0 = as fast as it takes) for ``seconds``."""
+    """One service process under ``policy``, fed at ``rate_hz`` (0 = as fast as it takes) for ``seconds``.
+
+    With ``junk``, a second session floods the same key with those messages as fast as it can meanwhile.
+    """
     port = _port()
-    out = tmp / f"out-{policy}"
+    name = policy + ("-junk" if junk else "")
+    out = tmp / f"out-{name}"
     cfg: dict[str, object] = {
         "service": {"rig": RIG, "out": str(out), "summary": False, "summary_period_s": 1.0},
         "zenoh": {"mode": "peer", "listen": [f"tcp/127.0.0.1:{port}"], "connect": []},
@@ -111,10 +122,10 @@ def _run(  # noqa: PLR0915 - one scenario, step by step
         "queues": {"input_size": 2, "input_policy": policy, "output_size": 4, "output_policy": "latest"},
         "sinks": [{"type": "zenoh", "outputs": ["disparity"]}],
     }
-    path = tmp / f"{policy}.toml"
+    path = tmp / f"{name}.toml"
     path.write_text(_toml(cfg))
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    log = (tmp / f"{policy}.log").open("wb")
+    log = (tmp / f"{name}.log").open("wb")
     proc = subprocess.Popen(
         [sys.executable, "-m", "vpp_service", "run", "--config", str(path)], cwd=REPO, env=env, stderr=log, stdout=log
     )
@@ -123,6 +134,8 @@ def _run(  # noqa: PLR0915 - one scenario, step by step
     conf.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
     conf.insert_json5("scouting/multicast/enabled", "false")
     rss: list[float] = []
+    flood_stop = threading.Event()
+    junk_sent = [0]
     try:
         time.sleep(1.0)
         with zenoh.open(conf) as cam:
@@ -148,6 +161,9 @@ def _run(  # noqa: PLR0915 - one scenario, step by step
 
             sampler = threading.Thread(target=sample_rss, daemon=True)
             sampler.start()
+            if junk:
+                flooder = threading.Thread(target=_flood, args=(conf, junk, flood_stop, junk_sent), daemon=True)
+                flooder.start()
             period = 1.0 / rate_hz if rate_hz > 0 else 0.0
             t0 = time.monotonic()
             sent = 0
@@ -162,6 +178,7 @@ def _run(  # noqa: PLR0915 - one scenario, step by step
                 if period and delay > 0:
                     time.sleep(delay)
             publish_s = time.monotonic() - t0
+            flood_stop.set()
             warm = warm_rss if warm_rss is not None else rss[-1]
             # drain: wait until the service has processed everything it will process
             last, still = -1, time.monotonic()
@@ -191,7 +208,9 @@ def _run(  # noqa: PLR0915 - one scenario, step by step
     c = summary["counters"]
     lat = summary["timing_ms"].get("latency", {})
     return {
-        "policy": policy,
+        "policy": name,
+        "junk_sent": junk_sent[0],
+        "rejected": c["rejected"],
         "seconds": seconds,
         "offered_hz": rate_hz,
         "achieved_publish_hz": sent / publish_s,
@@ -217,6 +236,31 @@ def _run(  # noqa: PLR0915 - one scenario, step by step
     }
 
 
+def _flood(conf: zenoh.Config, junk: list[bytes], stop: threading.Event, sent: list[int]) -> None:
+    """An attacker's session: junk on the frame key, as fast as it goes, until ``stop``."""
+    with zenoh.open(conf) as attacker:
+        pub = attacker.declare_publisher(f"vpp/{RIG}/in/frame", congestion_control=zenoh.CongestionControl.DROP)
+        while not stop.is_set():
+            pub.put(junk[sent[0] % len(junk)])
+            sent[0] += 1
+
+
+def _junk_messages(valid: bytes) -> list[bytes]:
+    """Messages the service must reject: truncated, wrong types, non-finite calibration, lying sizes, no map."""
+    import msgpack
+
+    good = msgpack.unpackb(valid, raw=False)
+    return [
+        valid[: len(valid) // 2],
+        msgpack.packb({**good, "seq": "seven"}, use_bin_type=True),
+        msgpack.packb({**good, "calib": {"f": float("nan"), "baseline": 0.1}}, use_bin_type=True),
+        msgpack.packb({**good, "left": {**good["left"], "h": 1 << 20}}, use_bin_type=True),
+        msgpack.packb({**good, "v": 9}, use_bin_type=True),
+        msgpack.packb([1, 2, 3]),
+        b"\xc1" * 64,
+    ]
+
+
 def _with_seq(data: bytearray, seq: int) -> bytes:
     """The frame message with its ``seq`` replaced (msgpack re-pack of the small header only)."""
     import msgpack
@@ -236,6 +280,8 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--width", type=int, default=320)
     p.add_argument("--matcher", default="sgbm")
     p.add_argument("--policies", nargs="+", default=["latest", "block"], choices=["latest", "block"])
+    p.add_argument("--junk", action="store_true", help="also: valid frames at --junk-valid-hz under a junk flood")
+    p.add_argument("--junk-valid-hz", type=float, default=10.0)
     p.add_argument(
         "--json", default=str(Path(tempfile.gettempdir()) / "vpp-overload.json"), help="report path (not committed)"
     )
@@ -253,6 +299,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         rate = a.factor * fps
         print(f"service processes {fps:.1f} fps (unpaced block run, {a.calibrate_s:g} s) -> offering {rate:.1f} Hz")
         rows = [_run(a, p, payloads, rate_hz=rate, tmp=Path(d), seconds=a.seconds) for p in a.policies]
+        if a.junk:
+            junk = _junk_messages(payloads[0])
+            rows.append(_run(a, "latest", payloads, rate_hz=a.junk_valid_hz, tmp=Path(d), seconds=a.seconds, junk=junk))
     head = f"{'policy':7} {'sent':>6} {'proc':>6} {'lost':>6} {'dropped':>7} {'counted':>7} {'pub Hz':>7} " + (
         f"{'lat p50':>8} {'lat p99':>8} {'RSS warm':>8} {'peak':>6} {'end':>6} {'growth':>7}  causes"
     )
@@ -268,6 +317,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     path = write_report(
         a.json, rows, processing_fps=fps, offered_hz=rate, factor=a.factor, size=[a.height, a.width], calibration=cal
     )
+    for r in rows:
+        if r["junk_sent"]:
+            print(
+                f"junk flood: {r['junk_sent']} junk messages sent, {r['rejected']} rejected; valid frames at "
+                f"{a.junk_valid_hz:g} Hz: {r['processed']}/{r['sent']} processed "
+                f"({100.0 * int(r['processed']) / max(1, int(r['sent'])):.1f} %)"
+            )
     print(f"wrote {path}")
     return 0
 
