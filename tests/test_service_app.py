@@ -3,11 +3,20 @@
 from __future__ import annotations
 
 import copy
+import json
+import threading
+import time
 
 import pytest
+import zenoh
 
-from vpp_service.service.app import build_pipeline
+from helpers.toml import toml_dumps
+from helpers.zenoh_loopback import collect, zenoh_test_config
+from vpp_service.cli import build_parser
+from vpp_service.service.app import build_pipeline, run_service
 from vpp_service.service.config import DEFAULT_CONFIG, validate_config
+from vpp_service.sources.base import SOURCES, Source
+from vpp_service.sources.sim import SimSource, SimSourceOptions
 
 
 def config(sinks: list[dict]) -> dict:
@@ -34,3 +43,116 @@ def test_metric_depth_only_when_a_sink_reads_it(tmp_path, sinks, depth):
     pipe = build_pipeline(validate_config(config(sinks)), session=None)  # built, not opened
     assert pipe.process.depth is depth
     assert [type(s).__name__ for s in pipe.sinks] == [f"{s['type'].capitalize()}Sink" for s in sinks]
+
+
+# ------------------------------------------------------------ runtime failures (issue: a dead source, full disk)
+class DyingSource(Source):
+    """A source whose thread dies on an unexpected error after two frames."""
+
+    Options = SimSourceOptions
+
+    def run(self, emit, reject):
+        sim = SimSource(self.options, self.context)
+        sim.open()
+        for seq in range(2):
+            emit(sim.frame(seq))
+        raise RuntimeError("camera driver crashed")
+
+
+def small_config(tmp_path, **service) -> dict:
+    data = config([])
+    data["zenoh"] = {"enabled": False}
+    data["source"] = {
+        "type": "sim",
+        "scene": "synthetic",
+        "scene_options": {"height": 48, "width": 96, "max_disparity": 16},
+        "count": 3,
+    }
+    data["matcher"] = {"name": "bm", "max_disparity": 16}
+    data["service"] = {"out": str(tmp_path / "out"), "summary": False, **service}
+    return data
+
+
+@pytest.fixture
+def dying_source(monkeypatch):
+    monkeypatch.setitem(SOURCES._items, "dies", DyingSource)
+
+
+def test_dead_source_is_a_failure_not_a_clean_exit(tmp_path, dying_source):
+    data = small_config(tmp_path)
+    data["source"]["type"] = "dies"
+    data["source"].pop("count")
+    summary = run_service(validate_config(data), stream=None)
+    assert summary["counters"]["processed"] == 2
+    assert "camera driver crashed" in summary["source_error"]
+    written = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert "camera driver crashed" in written["source_error"]
+    # the CLI turns it into exit code 1 (systemd restarts the service)
+    cfg = tmp_path / "dies.toml"
+    cfg.write_text(toml_dumps(data))
+    args = build_parser().parse_args(["run", "--config", str(cfg), "--no-summary"])
+    assert args.func(args) == 1
+
+
+def test_healthy_run_exits_0(tmp_path):
+    cfg = tmp_path / "ok.toml"
+    cfg.write_text(toml_dumps(small_config(tmp_path)))
+    args = build_parser().parse_args(["run", "--config", str(cfg), "--no-summary"])
+    assert args.func(args) == 0
+
+
+def test_summary_write_failure_is_counted_not_fatal(tmp_path):
+    """summary.json cannot be written (its temporary file's name is taken by a folder): counted, logged, run ends."""
+    out = tmp_path / "out"
+    (out / "summary.json.tmp").mkdir(parents=True)
+    summary = run_service(validate_config(small_config(tmp_path, summary_period_s=0.05)), stream=None)
+    assert summary["counters"]["processed"] == 3
+    assert summary["summary_write_errors"] >= 1
+    assert not (out / "summary.json").exists()
+
+
+@pytest.mark.parametrize("mode", ["peer", "client"])
+def test_starts_with_the_router_down_and_connects_when_it_appears(tmp_path, zenoh_endpoint, mode):
+    """Pointed at a router that is not up yet, the service waits for it, then outputs flow once it appears.
+
+    Peer mode runs at once and connects in the background; client mode retries opening its session.
+    """
+    data = small_config(tmp_path)
+    data["source"].update(count=0, rate_hz=20.0)
+    data["zenoh"] = {"mode": mode, "listen": [], "connect": [zenoh_endpoint]}
+    data["sinks"] = [{"type": "zenoh", "outputs": ["disparity"]}]
+    data["service"]["rig"] = "rd"
+    stop = threading.Event()
+    result = {}
+    runner = threading.Thread(target=lambda: result.update(run_service(validate_config(data), stop, None)))
+    runner.start()
+    try:
+        time.sleep(1.0)
+        assert runner.is_alive(), "the service did not survive the missing router"
+        with (
+            zenoh.open(zenoh_test_config(listen=[zenoh_endpoint], mode="router")),
+            zenoh.open(zenoh_test_config(connect=[zenoh_endpoint], mode="client")) as viewer,
+        ):
+            sub = viewer.declare_subscriber("vpp/rd/out/disparity", zenoh.handlers.FifoChannel(64))
+            t0 = time.monotonic()
+            assert collect(sub, 1, timeout=8.0), "no output after the router appeared"
+            assert time.monotonic() - t0 < 8.0
+            replies = list(viewer.get("vpp/rd/@status", timeout=5.0))
+            status = json.loads(replies[0].ok.payload.to_string())
+            assert status["zenoh"]["routers"] == 1
+    finally:
+        stop.set()
+        runner.join(20)
+    assert not runner.is_alive() and result["counters"]["published"] > 0
+
+
+def test_stop_while_waiting_for_the_router(tmp_path, zenoh_endpoint):
+    """A client whose router never appears still stops promptly on request (nothing ran)."""
+    data = small_config(tmp_path)
+    data["zenoh"] = {"mode": "client", "listen": [], "connect": [zenoh_endpoint]}
+    stop = threading.Event()
+    threading.Timer(0.5, stop.set).start()
+    t0 = time.monotonic()
+    summary = run_service(validate_config(data), stop, None)
+    assert time.monotonic() - t0 < 5.0
+    assert summary["counters"]["processed"] == 0 and summary["zenoh"] == {"routers": 0, "peers": 0}

@@ -134,6 +134,33 @@ def test_files_bad_file_rejected_and_skipped(msgpack_folder):
     assert len(frames) == 2 and len(rejects) == 1 and "001.msgpack" in rejects[0]
 
 
+def test_files_directory_named_msgpack_is_skipped(msgpack_folder):
+    """A folder named like a frame is counted and skipped; the frames after it are replayed (it ended the run)."""
+    folder, _ = msgpack_folder
+    (folder / "000b.msgpack").mkdir()
+    src = build_source("files", {"root": str(folder), "format": "msgpack"})
+    frames, rejects = drain(src)
+    assert [f.seq for f in frames] == [0, 1, 2]
+    assert len(rejects) == 1 and "000b.msgpack" in rejects[0] and src.stats()["rejected"] == 1
+    assert src.error is None
+
+
+def test_files_corrupt_dataset_image_is_skipped(tmp_path):
+    """A corrupt image in a folder dataset is counted and skipped; the other pairs are replayed."""
+    import cv2
+
+    rng = np.random.default_rng(0)
+    for side in ("left", "right"):
+        (tmp_path / side).mkdir()
+        for i in range(3):
+            cv2.imwrite(str(tmp_path / side / f"{i:03d}.png"), rng.integers(0, 256, (24, 32, 3), dtype=np.uint8))
+    (tmp_path / "left" / "001.png").write_bytes(b"\x89PNG\r\n\x1a\n not really")
+    src = build_source("files", {"root": str(tmp_path), "dataset": "folder", "sensor": "none"})
+    frames, rejects = drain(src)
+    assert len(frames) == 2 and len(rejects) == 1 and "[1]" in rejects[0]
+    assert src.error is None
+
+
 def test_files_errors(tmp_path):
     with pytest.raises(SettingsError, match="root"):
         build_source("files", {})

@@ -194,3 +194,90 @@ def test_per_topic_ring_sizes(sessions):
         assert [f.seq for f in frames] == [4, 5]
     finally:
         src.stop(2.0)
+
+
+def put_block(cam, key, payload):
+    cam.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+
+
+def test_junk_never_displaces_valid_frames(sessions):
+    """A flood of rejected messages on a full ring leaves the valid frames queued (the old ring evicted them)."""
+    svc, cam = sessions
+    src = build_source("zenoh", {"ring_size": 2}, SourceContext(rig="z", session=svc))
+    src.open()
+    try:
+        time.sleep(0.3)  # let the subscription propagate
+        base = make_frame()
+        for seq in (1, 2):
+            put_block(cam, "vpp/z/in/frame", wire.encode_frame(base.with_(seq=seq)))
+        for p in bad_payloads() * 10:
+            put_block(cam, "vpp/z/in/frame", p)
+        assert wait_for(lambda: src.stats()["rejected"] == 50)
+        frames = []
+        src.start(lambda f: frames.append(f) or True, lambda r: None)
+        assert wait_for(lambda: len(frames) == 2)
+        assert [f.seq for f in frames] == [1, 2]
+        assert src.stats()["ring_dropped"] == 0 and src.losses()["source_ring"] == 0
+    finally:
+        src.stop(2.0)
+
+
+def test_forged_depth_part_cannot_destroy_the_victims_frame(sessions):
+    """Separate topics: a 4x6 depth part (images 6x8) with seq 5 arrives first; frame 5 still goes through."""
+    svc, cam = sessions
+    src, frames, rejects = started(svc, topics="separate", ring_size=16)
+    try:
+        victim = make_frame().with_(seq=5, stamp_ns=1_000_000_000)
+        forged = make_frame(h=4, w=6).with_(seq=5, stamp_ns=1_000_000_000)
+        put_block(cam, "vpp/z/in/depth", wire.encode_part(forged, "depth"))
+        time.sleep(0.05)
+        for part in ("left", "right", "depth"):
+            put_block(cam, f"vpp/z/in/{part}", wire.encode_part(victim, part))
+            time.sleep(0.02)
+        assert wait_for(lambda: len(frames) == 1)
+        assert frames[0].seq == 5 and frames[0].sensor_depth.shape == victim.left.shape[:2]
+        st = src.stats()
+        assert st["sync_inconsistent"] == 1 and src.losses()["sync_inconsistent"] == 1 and not rejects
+    finally:
+        src.stop(2.0)
+
+
+def test_block_policy_backpressures_instead_of_dropping(sessions):
+    """Under the block input policy a full ring holds Zenoh back: every frame of a burst arrives, in order."""
+    svc, cam = sessions
+    src = build_source("zenoh", {"ring_size": 2}, SourceContext(rig="z", session=svc))
+    src.input_policy = "block"
+    src.open()
+    pub = cam.declare_publisher(
+        "vpp/z/in/frame", congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE
+    )
+    frames = []
+    try:
+        time.sleep(0.3)  # let the subscription propagate
+        base = make_frame()
+        for seq in range(12):  # the ring holds 2: the rest wait in Zenoh (the publisher's puts are not lost)
+            pub.put(wire.encode_frame(base.with_(seq=seq)))
+        time.sleep(0.3)
+        assert src.stats()["ring_dropped"] == 0
+        src.start(lambda f: frames.append(f) or True, lambda r: None)
+        assert wait_for(lambda: len(frames) == 12)
+        assert [f.seq for f in frames] == list(range(12))
+        assert src.losses() == {"source_ring": 0, "sync": 0, "sync_inconsistent": 0}
+    finally:
+        pub.undeclare()
+        src.stop(2.0)
+
+
+def test_block_policy_stop_releases_a_waiting_callback(sessions):
+    """A callback waiting for room gives up when the source stops (the stop stays bounded)."""
+    svc, cam = sessions
+    src = build_source("zenoh", {"ring_size": 1}, SourceContext(rig="z", session=svc))
+    src.input_policy = "block"
+    src.open()
+    time.sleep(0.3)
+    for seq in range(3):
+        put_block(cam, "vpp/z/in/frame", wire.encode_frame(make_frame().with_(seq=seq)))
+    time.sleep(0.3)
+    t0 = time.monotonic()
+    src.stop(2.0)
+    assert time.monotonic() - t0 < 1.5

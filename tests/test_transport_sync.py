@@ -95,3 +95,52 @@ def test_bad_arguments(kwargs, match):
 def test_unknown_topic():
     with pytest.raises(ValueError, match="topic"):
         Synchronizer(("a", "b")).add("c", 0, 0, None)
+
+
+def _same_size(parts):
+    """Consistency check of the tests: every part's value is (name, size) and the sizes agree."""
+    return len({size for _, size in parts.values()}) == 1
+
+
+@pytest.mark.parametrize("forged_first", [True, False])
+def test_inconsistent_part_cannot_destroy_a_consistent_set(forged_first):
+    """A forged part carrying a victim's seq (wrong size) is passed over; the genuine set still matches."""
+    sync = Synchronizer(("l", "r", "d"), "exact", queue_size=5, consistent=_same_size)
+    forged = ("forged", 1)
+    out = []
+    if forged_first:
+        assert sync.add("d", 3, 0, forged) is None
+    for t in ("l", "r"):
+        assert sync.add(t, 3, 0, (t, 64)) is None
+    if not forged_first:
+        assert sync.add("d", 3, 0, forged) is None  # completes an inconsistent set: not emitted, nothing consumed
+    got = sync.add("d", 3, 0, ("d", 64))
+    out.append(got)
+    assert out == [{"l": ("l", 64), "r": ("r", 64), "d": ("d", 64)}]
+    assert sync.matched == 1 and sync.inconsistent == 1 and sync.dropped == 0
+    assert sync.pending() == {"l": 0, "r": 0, "d": 0}
+
+
+def test_approximate_skips_an_inconsistent_closest_candidate():
+    sync = Synchronizer(("l", "r"), "approximate", queue_size=5, threshold_ns=10 * MS, consistent=_same_size)
+    sync.add("r", 0, 99 * MS, ("forged", 1))
+    sync.add("r", 1, 97 * MS, ("r", 64))
+    assert sync.add("l", 7, 100 * MS, ("l", 64)) == {"l": ("l", 64), "r": ("r", 64)}
+
+
+def test_candidate_combinations_are_bounded():
+    """A flood of same-seq forgeries costs at most max_candidates checks per offered message."""
+    calls = []
+
+    def never(parts):
+        calls.append(1)
+        return False
+
+    sync = Synchronizer(("a", "b"), "exact", queue_size=50, consistent=never, max_candidates=8)
+    for _ in range(40):
+        sync.add("a", 1, 0, "x")
+    calls.clear()
+    assert sync.add("b", 1, 0, "y") is None
+    assert len(calls) == 8
+    with pytest.raises(ValueError, match="max_candidates"):
+        Synchronizer(("a", "b"), max_candidates=0)

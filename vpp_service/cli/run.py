@@ -5,7 +5,8 @@ the simulated Motorcycle rig with a uniform 5 % sensor, VPP + SGBM, publishing o
 a local Zenoh peer (``tcp/127.0.0.1:7447``, multicast scouting off; set
 ``[zenoh] multicast_scouting = true`` to enable discovery) and saving
 ``vpp-run/vpp.rrd``. Stops on SIGINT/SIGTERM (clean, bounded shutdown, exit 0)
-or after ``--max-frames``; leaves ``<out>/summary.json``.
+or after ``--max-frames``; leaves ``<out>/summary.json``. Exits 1 when the source
+died on an error (a runtime failure).
 """
 
 from __future__ import annotations
@@ -171,4 +172,7 @@ def main(args: argparse.Namespace) -> int:
             {"counters": status["counters"], "out": cfg.service.out, "shutdown_s": round(status["shutdown_s"], 3)}
         )
     )
+    if status["source_error"] is not None:  # a dead source is a runtime failure: exit 1 so systemd restarts it
+        print(f"vpp-service run: the source failed: {status['source_error']}", file=sys.stderr)
+        return 1
     return 0

@@ -5,6 +5,14 @@ the source, matcher, VPP step and sinks, runs the :class:`Pipeline` until
 ``max_frames``, the end of a finite source, or ``stop`` being set (the CLI sets
 it on SIGINT/SIGTERM), prints a live one-line summary on stderr, and writes
 ``<out>/summary.json``. Shutdown is bounded by ``service.shutdown_timeout_s``.
+
+Runtime failures never crash it: a summary.json that cannot be written (full
+disk, read-only folder) is counted in ``summary_write_errors`` and logged; a
+dead source ends the run with ``source_error`` set (the CLI then exits 1). A
+Zenoh router that is down at start is retried in the background (peer/router
+mode: the session opens at once and connects when the router appears; client
+mode: opening is retried until it succeeds or the service is stopped);
+``@status`` and summary.json say whether the session reaches a router.
 """
 
 from __future__ import annotations
@@ -34,7 +42,13 @@ class ServiceSummary(PipelineStatus):
     """The final status :func:`run_service` returns and writes to ``<out>/summary.json``."""
 
     shutdown_s: float
+    summary_write_errors: int
     config: dict[str, Any]
+
+
+#: Reconnection to the configured endpoints (Zenoh's ``connect/retry``): first retry after 0.5 s, then at most
+#: every 2 s, so outputs flow again within a few seconds after a router returns.
+CONNECT_RETRY = {"period_init_ms": 500, "period_max_ms": 2000, "period_increase_factor": 2}
 
 
 def zenoh_config(section: ZenohSection) -> zenoh.Config:
@@ -46,6 +60,11 @@ def zenoh_config(section: ZenohSection) -> zenoh.Config:
     conf.insert_json5("listen/endpoints", json.dumps(list(section.listen)))
     conf.insert_json5("connect/endpoints", json.dumps(list(section.connect)))
     conf.insert_json5("scouting/multicast/enabled", "true" if section.multicast_scouting else "false")
+    if not section.config_file:  # a config file decides these itself
+        # keep retrying unreachable endpoints in the background instead of failing the open
+        conf.insert_json5("connect/timeout_ms", json.dumps({"router": -1, "peer": -1, "client": 0}))
+        conf.insert_json5("connect/exit_on_failure", json.dumps({"router": False, "peer": False, "client": True}))
+        conf.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
     return conf
 
 
@@ -63,12 +82,33 @@ def zenoh_session(section: ZenohSection) -> Iterator[zenoh.Session]:
 
 
 @contextlib.contextmanager
-def open_session(section: ZenohSection) -> Iterator[zenoh.Session | None]:
-    """``with open_session(cfg.zenoh) as session`` (None when zenoh is disabled)."""
+def open_session(
+    section: ZenohSection, stop: threading.Event | None = None, retry_s: float = 2.0
+) -> Iterator[zenoh.Session | None]:
+    """``with open_session(cfg.zenoh, stop) as session`` (None when zenoh is disabled, or ``stop`` set first).
+
+    An open that fails because no endpoint answers (a client whose router is
+    down) is retried every ``retry_s`` seconds until it succeeds or ``stop`` is set.
+    """
+    import zenoh
+
     if not section.enabled:
         yield None
         return
-    with zenoh_session(section) as session:
+    stop = stop or threading.Event()
+    zenoh.init_log_from_env_or("error")
+    session: zenoh.Session | None = None
+    while session is None:
+        try:
+            session = zenoh.open(zenoh_config(section))
+        except zenoh.ZError as exc:
+            if "Unable to connect" not in str(exc):
+                raise
+            log.warning("zenoh: %s; retrying every %.0f s", str(exc).split(" at ", 1)[0], retry_s)
+            if stop.wait(retry_s):
+                yield None
+                return
+    with session:
         yield session
 
 
@@ -127,15 +167,22 @@ def run_service(
     summary_path = out / "summary.json"
     if s.reuse_memory:
         reuse_freed_memory()
-    with open_session(cfg.zenoh) as session:
+    write_errors = [0]
+    with open_session(cfg.zenoh, stop) as session:
+        if session is None and cfg.zenoh.enabled:  # stopped while waiting for the router: nothing ran
+            return _not_started(cfg)
         pipe = build_pipeline(cfg, session)
         pipe.start()
+        linked: bool | None = None
         if session is not None:
             log.info("zenoh session %s listening on %s", session.info.zid(), list(cfg.zenoh.listen))
         try:
             next_report = time.monotonic() + s.summary_period_s
             while not stop.is_set() and not pipe.done.is_set():
                 stop.wait(0.1)
+                link = pipe.connectivity() if cfg.zenoh.connect else None
+                if link is not None:
+                    linked = _log_link(link, linked, cfg.zenoh.connect)
                 if time.monotonic() >= next_report:
                     next_report += s.summary_period_s
                     if s.summary and stream is not None:
@@ -146,16 +193,18 @@ def run_service(
                             file=stream,
                             flush=True,
                         )
-                    _write_json(summary_path, pipe.status())
+                    _write_json(summary_path, {**pipe.status(), "summary_write_errors": write_errors[0]}, write_errors)
         finally:
             t0 = time.monotonic()
             pipe.stop(s.shutdown_timeout_s)
             status: ServiceSummary = {
                 **pipe.status(),
                 "shutdown_s": time.monotonic() - t0,
+                "summary_write_errors": write_errors[0],
                 "config": cfg.to_dict(),
             }
-            _write_json(summary_path, status)
+            if not _write_json(summary_path, status, write_errors):
+                status["summary_write_errors"] = write_errors[0]
             if s.summary and stream is not None:
                 print(
                     ("\r" if getattr(stream, "isatty", lambda: False)() else "") + pipe.summary_line(),
@@ -165,10 +214,52 @@ def run_service(
     return status
 
 
-def _write_json(path: Path, data: Mapping[str, object]) -> None:
+def _write_json(path: Path, data: Mapping[str, object], errors: list[int]) -> bool:
+    """Write ``data`` atomically; a failure (full disk, read-only folder) is counted in ``errors[0]`` and logged."""
     tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=2, default=str))
-    tmp.replace(path)
+    try:
+        tmp.write_text(json.dumps(data, indent=2, default=str))
+        tmp.replace(path)
+    except OSError as exc:
+        errors[0] += 1
+        if errors[0] == 1 or errors[0] % 100 == 0:
+            log.error("writing %s failed (%d failures so far): %s", path, errors[0], exc)
+        return False
+    return True
+
+
+def _log_link(now: Mapping[str, int], linked: bool | None, endpoints: list[str]) -> bool:
+    """Log when the session gains or loses its connected endpoints; returns whether any is connected."""
+    up = now["routers"] + now["peers"] > 0
+    if up != linked:
+        if up:
+            log.info("zenoh: connected (%d router(s), %d peer(s))", now["routers"], now["peers"])
+        else:
+            log.warning("zenoh: not connected to %s; retrying in the background", ", ".join(endpoints))
+    return up
+
+
+def _not_started(cfg: ServiceConfig) -> ServiceSummary:
+    """The summary of a run stopped before its Zenoh session could open."""
+    empty = {"received": 0, "rejected": 0, "processed": 0, "published": 0, "no_depth": 0, "errors": 0, "dropped": 0}
+    return {
+        "rig": cfg.service.rig,
+        "prefix": cfg.service.prefix,
+        "uptime_s": 0.0,
+        "counters": empty,
+        "dropped": {},
+        "source_error": None,
+        "zenoh": {"routers": 0, "peers": 0},
+        "fps": 0.0,
+        "queues": {},
+        "timing_ms": {},
+        "source": {},
+        "sinks": {},
+        "metrics": {"last": {}, "bad2_mean": None},
+        "shutdown_s": 0.0,
+        "summary_write_errors": 0,
+        "config": cfg.to_dict(),
+    }
 
 
 __all__ = ["ServiceSummary", "build_pipeline", "open_session", "run_service", "zenoh_config", "zenoh_session"]

@@ -16,6 +16,16 @@ reported by :meth:`Pipeline.status`, which the service also serves as JSON on
 the ``<prefix>/<rig>/@status`` queryable; a liveliness token
 ``<prefix>/<rig>/@alive`` is held while the pipeline runs.
 
+Every loss of valid input or output anywhere is in one count: ``counters["dropped"]``
+is the sum of ``status()["dropped"]``, which names each cause (``input_queue``,
+``output_queue``, ``shutdown`` for frames still queued when a stop abandons
+them, the source's own losses such as ``source_ring`` and ``sync``, and
+``sink.<Name>`` for each sink's dropped outputs). Under the ``block`` input
+policy the source is asked to back-pressure its producer instead of dropping.
+
+A source whose thread dies on an exception ends the pipeline like an exhausted
+one, but ``status()["source_error"]`` names the exception (the service exits 1).
+
 Bad input never stops the pipeline: a rejected message is counted and logged
 (at most once per ``reject_log_period_s``); a frame the process step raises
 on is counted as rejected and dropped.
@@ -70,6 +80,9 @@ class PipelineStatus(TypedDict):
     prefix: str
     uptime_s: float
     counters: dict[str, int]
+    dropped: dict[str, int]
+    source_error: str | None
+    zenoh: dict[str, int] | None
     fps: float
     queues: dict[str, QueueStatus]
     timing_ms: dict[str, dict[str, float]]
@@ -158,6 +171,7 @@ class Pipeline:
         if max_frames < 0:
             raise ValueError(f"max_frames must be >= 0, got {max_frames}")
         self.source = source
+        source.input_policy = input_policy  # "block": the source back-pressures its producer too
         self.process = process
         self.sinks = list(sinks)
         # the process stage finishes the sink stage when it ends; the sink stage then sets `done`
@@ -177,10 +191,9 @@ class Pipeline:
         self.prefix, self.rig = prefix, rig
         self.timer = StageTimer(timing_window)
         self.reject_log_period_s = reject_log_period_s
-        self.counters = {
+        self._counts = {
             "received": 0,
             "rejected": 0,
-            "dropped": 0,
             "processed": 0,
             "published": 0,
             "no_depth": 0,
@@ -199,25 +212,31 @@ class Pipeline:
         self._queryable: zenoh.Queryable[None] | None = None
         self._token: zenoh.LivelinessToken | None = None
         self._opened: list[Sink] = []
+        self._refused = 0  # frames the source emitted while the pipeline was stopping
 
     # ----------------------------------------------------------- counters
     def _inc(self, key: str, n: int = 1) -> None:
         with self._lock:
-            self.counters[key] += n
+            self._counts[key] += n
+
+    @property
+    def counters(self) -> dict[str, int]:
+        """A snapshot of the counters; ``dropped`` is the sum of every loss by cause (:meth:`status`)."""
+        return self.status()["counters"]
 
     def _emit(self, frame: StereoFrame) -> bool:
         self._inc("received")
-        if self._stop.is_set() or self._enough.is_set():
-            return False
+        ok = False
         if self.input.policy == "block":
             while not (self._stop.is_set() or self._enough.is_set()):
                 if self.input.put(frame, timeout=0.1):
-                    return True
-            return False
-        before = self.input.dropped
-        ok = self.input.put(frame)
-        if self.input.dropped != before:
-            self._inc("dropped", self.input.dropped - before)
+                    ok = True
+                    break
+        elif not (self._stop.is_set() or self._enough.is_set()):
+            ok = self.input.put(frame)
+        if not ok and not self._enough.is_set():  # after max_frames, input is unwanted, not lost
+            with self._lock:
+                self._refused += 1
         return ok
 
     def _source_reject(self, reason: str) -> None:
@@ -254,17 +273,14 @@ class Pipeline:
                 if self._stop.is_set() or self.output.closed:
                     break
         else:
-            before = self.output.dropped
             self.output.put(result)
-            if self.output.dropped != before:
-                self._inc("dropped", self.output.dropped - before)
         prepare = getattr(self.process, "prepare_next", None)
         if prepare is not None:
             try:
                 prepare(result.frame)  # optional idle-time work for the next frame
             except Exception as exc:  # noqa: BLE001 - optional idle-time work: a failure only costs the head start
                 log.debug("prepare_next(seq=%s): %r", result.frame.seq, exc)
-        if self.max_frames and self.counters["processed"] >= self.max_frames:
+        if self.max_frames and self._counts["processed"] >= self.max_frames:
             self._enough.set()
             self.source.request_stop()  # no more input wanted
             self.input.abort()  # frames still queued are not processed
@@ -372,7 +388,7 @@ class Pipeline:
     def status(self) -> PipelineStatus:
         """Counters, queue fill, timings, source and sink stats (JSON-ready)."""
         with self._lock:
-            counters = dict(self.counters)
+            counters = dict(self._counts)
         elapsed = time.monotonic() - self._started if self._started else 0.0
         sinks: dict[str, Mapping[str, object]] = {}
         for s in self.sinks:
@@ -380,11 +396,16 @@ class Pipeline:
                 sinks[type(s).__name__] = s.stats()
             except Exception:  # noqa: BLE001 - a sink's broken counters must not break @status
                 sinks[type(s).__name__] = {}
+        dropped = self._losses(sinks)
+        counters["dropped"] = sum(dropped.values())  # derived: every cause in one count
         return {
             "rig": self.rig,
             "prefix": self.prefix,
             "uptime_s": elapsed,
             "counters": counters,
+            "dropped": dropped,
+            "source_error": None if self.source.error is None else repr(self.source.error),
+            "zenoh": self.connectivity(),
             "fps": counters["processed"] / elapsed if elapsed > 0 else 0.0,
             "queues": {
                 "input": {
@@ -407,6 +428,33 @@ class Pipeline:
             "sinks": sinks,
             "metrics": {"last": self._last_metrics, "bad2_mean": float(np.mean(self._bad2)) if self._bad2 else None},
         }
+
+    def connectivity(self) -> dict[str, int] | None:
+        """Routers and peers the session reaches now (None without a session)."""
+        if self.session is None:
+            return None
+        try:
+            info = self.session.info
+            return {"routers": len(list(info.routers_zid())), "peers": len(list(info.peers_zid()))}
+        except Exception:  # noqa: BLE001 - a closing session must not break @status
+            return None
+
+    def _losses(self, sinks: Mapping[str, Mapping[str, object]]) -> dict[str, int]:
+        """Every loss by cause (see the module docstring); ``counters["dropped"]`` is their sum."""
+        out = {
+            "input_queue": self.input.dropped,
+            "output_queue": self.output.dropped,
+            # frames left queued when max_frames is reached were not wanted: only a stop's discards are losses
+            "shutdown": (0 if self._enough.is_set() else self.input.discarded) + self.output.discarded + self._refused,
+        }
+        try:
+            out.update({k: int(v) for k, v in self.source.losses().items()})
+        except Exception:  # a source's broken counters must not break @status
+            log.debug("source.losses() failed", exc_info=True)
+        for name, st in sinks.items():
+            n = st.get("dropped", 0)
+            out[f"sink.{name}"] = n if isinstance(n, int) else 0
+        return out
 
     def summary_line(self) -> str:
         """One-line live summary: fps, latency p50/p99, bad-2 vs GT when known, counters."""

@@ -12,13 +12,20 @@ pipeline. Life cycle, mirroring :mod:`vpp_service.sinks.base`:
    happens when it is full), ``reject(reason)`` reports a bad input message,
    which the pipeline counts and logs (rate-limited). When a finite source has
    nothing left it sets :attr:`Source.finished` and calls ``on_finished()`` when given.
+   An exception escaping :meth:`Source.run` is fatal: it is logged, kept in
+   :attr:`Source.error`, and the source finishes (the service then exits non-zero).
 4. ``src.stop(timeout)`` -- stop producing and release, within ``timeout`` seconds.
 
-``src.stats()`` returns counters (``emitted``, ``rejected`` and extras) for ``@status``.
+``src.stats()`` returns counters (``emitted``, ``rejected`` and extras) for ``@status``;
+``src.losses()`` the valid input the source itself lost, by cause (the pipeline
+adds them to its one ``dropped`` count). ``src.input_policy`` is the pipeline's
+input policy, set before ``open``: under ``block`` a source that buffers must
+hold its producer back rather than drop.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
 from abc import abstractmethod
 from collections.abc import Callable, Mapping
@@ -26,7 +33,10 @@ from typing import Any
 
 from vpp_service.frame import StereoFrame
 from vpp_service.plugin import Plugin, PluginContext, parse_plugin_options
+from vpp_service.queueing import Policy
 from vpp_service.registry import Registry
+
+log = logging.getLogger(__name__)
 
 #: Registered source classes by name ("zenoh", "files", "sim").
 SOURCES: Registry[Source] = Registry("source")
@@ -56,6 +66,10 @@ class Source(Plugin):
 
     def __init__(self, options: object, context: SourceContext) -> None:
         super().__init__(options, context)
+        #: The exception that ended :meth:`run` (a dead source), None while healthy or after a clean end.
+        self.error: BaseException | None = None
+        #: The pipeline's input policy (set before :meth:`open`): ``block`` asks for back-pressure, not drops.
+        self.input_policy: Policy = "latest"
         #: Set when a finite source has produced its last frame.
         self.finished = threading.Event()
         self._stop = threading.Event()
@@ -81,6 +95,9 @@ class Source(Plugin):
         def body() -> None:
             try:
                 self.run(emit, reject)
+            except Exception as exc:  # kept for the service's exit code, not lost with the thread
+                self.error = exc
+                log.exception("source %s failed", type(self).__name__)
             finally:
                 self.finished.set()
                 if on_finished is not None:
@@ -115,6 +132,10 @@ class Source(Plugin):
 
     def close(self) -> None:
         """Release resources (called by :meth:`stop`)."""
+
+    def losses(self) -> dict[str, int]:
+        """Valid input this source lost before emitting it, by cause (none by default)."""
+        return {}
 
 
 def parse_source_options(name: str, options: Mapping[str, Any] | None, section: str | None = None) -> object:

@@ -14,6 +14,9 @@ Two layouts:
   applied. With ``format = "dataset"`` and ``dataset = "auto"``, a folder that
   matches no dataset layout but holds ``*.msgpack`` files is replayed this way.
 
+An item that cannot be read (a corrupt image, a folder named ``*.msgpack``, a
+file that vanished) is rejected, counted and skipped; the rest is replayed.
+
 ``rate_hz`` paces the replay (0 = as fast as possible), ``loop`` restarts at the
 end, ``count`` caps the number of frames (0 = no cap). Frames are renumbered
 ``seq`` = 0, 1, ... in replay order and stamped with the wall clock.
@@ -137,6 +140,9 @@ class FilesSource(Source):
             raise wire.WireError(f"message: {size} bytes exceeds the limit")
         return wire.decode_frame(path.read_bytes())
 
+    def _item_name(self, index: int) -> str:
+        return str(self._files[index]) if self._dataset is None else f"{self.options.root}[{index}]"
+
     def run(self, emit: Emit, reject: Reject) -> None:
         """Replay until the end (or ``count``), looping if asked, or until stopped."""
         o = self.options
@@ -153,9 +159,9 @@ class FilesSource(Source):
                 return
             try:
                 frame = self._load(index)
-            except wire.WireError as exc:
+            except Exception as exc:  # noqa: BLE001 - one unreadable item (any error) is skipped, not fatal
                 self._counters["rejected"] += 1
-                reject(f"{self._files[index]}: {exc}")
+                reject(f"{self._item_name(index)}: {exc if isinstance(exc, wire.WireError) else repr(exc)}")
                 index += 1
                 if index >= n and seq == 0 and not o.loop:
                     return

@@ -1,17 +1,31 @@
 """Zenoh source: receive wire-format v1 frames from cameras on the network.
 
-Subscribes with a callback that only appends the sample to a bounded ring
-(``ring_size`` per topic; when the service falls behind the oldest samples are
-dropped and counted in ``ring_dropped``) and signals an event: no decoding and
-no blocking in Zenoh's thread.  This source's thread wakes on that event (no
-polling delay), drains the rings, decodes and validates every message
-(:mod:`vpp_service.transport.wire`) and emits frames; a bad message is rejected
-(counted, reason reported) and the source keeps serving.
+Subscribes with a callback that decodes and validates each message
+(:mod:`vpp_service.transport.wire`) and buffers the valid ones in a bounded ring
+(``ring_size`` per topic), then signals an event. A bad message is rejected
+(counted, reason reported) and never enters the ring, so junk cannot displace
+valid frames; the source keeps serving. This source's thread wakes on the event
+(no polling delay), drains the rings, joins separate-topics parts and emits
+frames.
+
+When the ring is full, the pipeline's input policy (:attr:`Source.input_policy`)
+decides: ``latest`` drops the oldest sample (counted in ``ring_dropped``; the
+callback runs on a Python thread Zenoh feeds, never on its network thread);
+``block`` makes the callback, run directly on Zenoh's receive thread, wait for
+room, which holds the link back and with it the publisher (no queue in between
+to fill: an indirect callback's channel would buffer seconds of frames). With
+reliable transport and ``CongestionControl.BLOCK`` on the publisher nothing is
+lost end to end (a publisher using ``DROP`` loses samples in its own session,
+where no counter of this service can see them). While the link is held back,
+other traffic on it waits too (``@status`` answers within about a frame time).
 
 Topics: ``<prefix>/<rig>/in/frame`` (default), or with ``topics = "separate"``
 ``in/left``, ``in/right`` and ``in/depth`` joined by
 :class:`vpp_service.transport.sync.Synchronizer` (``sync = "exact"`` by seq or
-``"approximate"`` by stamp within ``sync_threshold_ms``).
+``"approximate"`` by stamp within ``sync_threshold_ms``). A set whose parts do
+not fit together (image and depth sizes differ) is never emitted and does not
+consume its parts: a forged part carrying another frame's ``seq`` is counted as
+``inconsistent`` and the genuine frame still goes through.
 """
 
 from __future__ import annotations
@@ -20,10 +34,12 @@ import contextlib
 import threading
 import time
 from collections import deque
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import partial
 from typing import TYPE_CHECKING, Any, Literal
 
+from vpp_service.frame import StereoFrame
 from vpp_service.sources.base import SOURCES, Emit, Reject, Source, SourceContext
 from vpp_service.transport import wire
 from vpp_service.transport.sync import Synchronizer
@@ -92,6 +108,16 @@ class ZenohSourceOptions:
             raise ValueError(f"poll_s must be in (0, 1], got {self.poll_s}")
 
 
+@dataclass(frozen=True)
+class _Received:
+    """A decoded, valid message waiting in a ring: a whole frame or a separate-topics part."""
+
+    key_expr: str
+    value: wire.Part | StereoFrame
+    recv_ns: int
+    decode_ms: float
+
+
 @SOURCES.register("zenoh")
 class ZenohSource(Source):
     """Frames from Zenoh (see the module docstring). Needs ``context.session``."""
@@ -104,11 +130,13 @@ class ZenohSource(Source):
         super().__init__(options, context)
         self._subs: dict[str, zenoh.Subscriber[None]] = {}
         self._limits = wire.WireLimits(max_message_bytes=int(options.max_message_mb * 1024 * 1024))
-        self._rings: dict[str, deque[zenoh.Sample]] = {}
-        self._ring_lock = threading.Lock()
+        self._rings: dict[str, deque[_Received]] = {}
+        self._ring_sizes: dict[str, int] = {}
+        self._ring_lock = threading.Condition()
         self._arrived = threading.Event()
+        self._reject: Reject | None = None
         self.sync: Synchronizer[wire.Part] | None = None
-        self._counters.update({"received": 0, "ring_dropped": 0, "sync_dropped": 0})
+        self._counters.update({"received": 0, "ring_dropped": 0, "sync_dropped": 0, "sync_inconsistent": 0})
 
     def open(self) -> None:
         """Declare the subscribers on the service's session."""
@@ -123,24 +151,67 @@ class ZenohSource(Source):
         )
         for part in parts:
             key = wire.topic(self.context.prefix, self.context.rig, f"in/{part}")
-            self._rings[part] = deque(maxlen=o.ring_sizes.get(part, o.ring_size))
-            self._subs[part] = session.declare_subscriber(key, zenoh.handlers.Callback(partial(self._on_sample, part)))
+            self._rings[part] = deque()
+            self._ring_sizes[part] = o.ring_sizes.get(part, o.ring_size)
         if o.topics == "separate":
-            self.sync = Synchronizer(parts, o.sync, o.sync_queue_size, int(o.sync_threshold_ms * 1e6))
+            self.sync = Synchronizer(
+                parts, o.sync, o.sync_queue_size, int(o.sync_threshold_ms * 1e6), consistent=_parts_fit
+            )
+        for part in parts:
+            key = wire.topic(self.context.prefix, self.context.rig, f"in/{part}")
+            # block: run on Zenoh's receive thread, so the wait for room holds the link back with no queue in
+            # between (an indirect callback's channel buffers hundreds of frames: seconds of latency)
+            handler = zenoh.handlers.Callback(partial(self._on_sample, part), indirect=self.input_policy != "block")
+            self._subs[part] = session.declare_subscriber(key, handler)
+
+    def start(self, emit: Emit, reject: Reject | None = None, on_finished: Callable[[], None] | None = None) -> None:
+        """Start the receive thread; ``reject`` also hears of messages the subscriber callback turns away."""
+        self._reject = reject
+        super().start(emit, reject, on_finished)
 
     def _on_sample(self, part: str, sample: zenoh.Sample) -> None:
-        """Zenoh callback: buffer the sample and wake the receive thread (never blocks long)."""
-        ring = self._rings[part]
+        """Subscriber callback: decode and validate, buffer what is valid, wake the receive thread.
+
+        Under the ``block`` input policy it runs on Zenoh's receive thread and a
+        full ring makes it wait for room (back-pressure through Zenoh); under
+        ``latest`` it runs on Zenoh's Python callback thread and never waits.
+        """
+        recv_ns = time.time_ns()
+        t0 = time.perf_counter()
+        try:
+            payload = sample.payload.to_bytes()
+            value: wire.Part | StereoFrame = (
+                wire.decode_frame(payload, self._limits)
+                if part == "frame"
+                else wire.decode_part(payload, part, self._limits)
+            )
+        except wire.WireError as exc:
+            with self._ring_lock:  # received and rejected here; the valid ones count as received when drained
+                self._counters["received"] += 1
+                self._counters["rejected"] += 1
+            if self._reject is not None:
+                self._reject(f"{sample.key_expr}: {exc}")
+            return
+        item = _Received(str(sample.key_expr), value, recv_ns, (time.perf_counter() - t0) * 1e3)
+        ring, size = self._rings[part], self._ring_sizes[part]
         with self._ring_lock:
-            if len(ring) == ring.maxlen:
+            if self.input_policy == "block":
+                while len(ring) >= size and not self.stopping():
+                    self._ring_lock.wait(self.options.poll_s)
+            if len(ring) >= size:  # latest, or stopping: the oldest goes
+                ring.popleft()
                 self._counters["ring_dropped"] += 1
-            ring.append(sample)
+            ring.append(item)
         self._arrived.set()
 
-    def _next(self, part: str) -> zenoh.Sample | None:
+    def _next(self, part: str) -> _Received | None:
         with self._ring_lock:
             ring = self._rings[part]
-            return ring.popleft() if ring else None
+            if not ring:
+                return None
+            item = ring.popleft()
+            self._ring_lock.notify_all()
+            return item
 
     def run(self, emit: Emit, reject: Reject) -> None:
         """Drain the rings, decode, validate, synchronize and emit until stopped."""
@@ -161,34 +232,35 @@ class ZenohSource(Source):
         """Ask the receive thread to stop and wake it (safe from any thread)."""
         super().request_stop()
         self._arrived.set()
+        with self._ring_lock:
+            self._ring_lock.notify_all()
 
     def stop(self, timeout: float = 5.0) -> None:
         """Wake the receive thread, stop it within ``timeout`` seconds and undeclare the subscribers."""
         self._arrived.set()
         super().stop(timeout)
 
-    def _handle(self, part: str, sample: zenoh.Sample, emit: Emit, reject: Reject) -> None:
-        recv_ns = time.time_ns()
+    def _handle(self, part: str, item: _Received, emit: Emit, reject: Reject) -> None:
         t0 = time.perf_counter()
-        try:
-            payload = sample.payload.to_bytes()
-            if part == "frame":
-                frame = wire.decode_frame(payload, self._limits)
-            else:
-                p = wire.decode_part(payload, part, self._limits)
-                assert self.sync is not None
-                before = self.sync.dropped
-                joined = self.sync.add(part, p.seq, p.stamp_ns, p)
-                self._counters["sync_dropped"] += self.sync.dropped - before
-                if joined is None:
-                    return
+        if isinstance(item.value, StereoFrame):
+            frame = item.value
+        else:
+            p = item.value
+            assert self.sync is not None
+            before, inconsistent = self.sync.dropped, self.sync.inconsistent
+            joined = self.sync.add(part, p.seq, p.stamp_ns, p)
+            self._counters["sync_dropped"] += self.sync.dropped - before
+            self._counters["sync_inconsistent"] += self.sync.inconsistent - inconsistent
+            if joined is None:
+                return
+            try:  # the synchronizer only joins parts that fit; this guards the contract
                 frame = wire.assemble(joined["left"], joined["right"], joined.get("depth"))
-        except wire.WireError as exc:
-            self._counters["rejected"] += 1
-            reject(f"{sample.key_expr}: {exc}")
-            return
-        frame.meta["recv_ns"] = recv_ns
-        frame.meta["timing_ms"] = {"decode": (time.perf_counter() - t0) * 1e3}
+            except wire.WireError as exc:
+                self._counters["rejected"] += 1
+                reject(f"{item.key_expr}: {exc}")
+                return
+        frame.meta["recv_ns"] = item.recv_ns
+        frame.meta["timing_ms"] = {"decode": item.decode_ms + (time.perf_counter() - t0) * 1e3}
         self._counters["emitted"] += 1
         emit(frame)
 
@@ -202,11 +274,29 @@ class ZenohSource(Source):
         self._subs.clear()
 
     def stats(self) -> dict[str, Any]:
-        """Counters (``received``, ``ring_dropped``, ``sync_dropped`` and the base ones), plus ``sync`` statistics."""
+        """Counters (``received``, ``ring_dropped``, ``sync_dropped``, ``sync_inconsistent``, base ones), ``sync``."""
         out: dict[str, Any] = dict(self._counters)
         if self.sync is not None:
             out["sync"] = self.sync.stats()
         return out
+
+    def losses(self) -> dict[str, int]:
+        """Valid messages lost in this source, by cause: the ring (``latest``), the synchronizer."""
+        c = self._counters
+        return {
+            "source_ring": c["ring_dropped"],
+            "sync": c["sync_dropped"],
+            "sync_inconsistent": c["sync_inconsistent"],
+        }
+
+
+def _parts_fit(parts: Mapping[str, wire.Part]) -> bool:
+    """Whether separate-topics parts make one frame (same image sizes, depth of the image's size)."""
+    try:
+        wire.assemble(parts["left"], parts["right"], parts.get("depth"))
+    except (wire.WireError, ValueError):
+        return False
+    return True
 
 
 __all__ = ["ZenohSource", "ZenohSourceOptions"]
