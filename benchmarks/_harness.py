@@ -1,4 +1,4 @@
-"""What the benchmark scripts share: median timing of a call and the JSON report.
+"""What the benchmark scripts share: timing a call and the JSON report.
 
 Import from a script run as ``python benchmarks/<script>.py`` (the script's
 folder is on ``sys.path``): ``from _harness import median_ms, write_report``.
@@ -10,47 +10,72 @@ import json
 import os
 import platform
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
 
 import numpy as np
+import numpy.typing as npt
 
 
-def times_ms(fn: Callable[[], Any], reps: int) -> np.ndarray:
+def _check_reps(reps: int) -> None:
+    if isinstance(reps, bool) or not isinstance(reps, int) or reps < 1:
+        raise ValueError(f"reps: must be an integer >= 1, got {reps!r}")
+
+
+def times_ms(fn: Callable[[], object], reps: int) -> npt.NDArray[np.float64]:
     """Wall times of ``fn()`` in milliseconds, ``reps`` runs after one warm-up run.
 
     Parameters
     ----------
     fn : callable
-        Zero-argument call to time.
+        Zero-argument call to time (its result is discarded).
     reps : int
         Timed runs (>= 1).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``reps`` float64 times in milliseconds, in the order they ran.
     """
-    if isinstance(reps, bool) or not isinstance(reps, int) or reps < 1:
-        raise ValueError(f"reps: must be an integer >= 1, got {reps!r}")
+    _check_reps(reps)
     fn()
     ts = []
     for _ in range(reps):
         t = time.perf_counter()
         fn()
         ts.append(time.perf_counter() - t)
-    return np.asarray(ts) * 1e3
+    return np.asarray(ts, dtype=np.float64) * 1e3
 
 
-def median_ms(fn: Callable[[], Any], reps: int) -> float:
-    """Median wall time of ``fn()`` in milliseconds over ``reps`` runs after one warm-up run
-    (see :func:`times_ms`)."""
+def median_ms(fn: Callable[[], object], reps: int) -> float:
+    """Median wall time of ``fn()`` in milliseconds over ``reps`` runs after one warm-up run.
+
+    See :func:`times_ms` for the parameters.
+    """
     return float(np.median(times_ms(fn, reps)))
 
 
-def paired_ratio(fn: Callable[[], Any], ref: Callable[[], Any], reps: int) -> float:
+def paired_ratio(fn: Callable[[], object], ref: Callable[[], object], reps: int) -> float:
     """Median over ``reps`` alternating runs of ``time(fn) / time(ref)``, after one warm-up each.
 
     Both calls see the same machine state (a shared VM drifts by tens of
     percent between a block of one and a block of the other).
+
+    Parameters
+    ----------
+    fn : callable
+        Zero-argument call to time.
+    ref : callable
+        Zero-argument reference call, run right before each run of ``fn``.
+    reps : int
+        Pairs of runs (>= 1).
+
+    Returns
+    -------
+    float
+        The median ratio.
     """
-    if isinstance(reps, bool) or not isinstance(reps, int) or reps < 1:
-        raise ValueError(f"reps: must be an integer >= 1, got {reps!r}")
+    _check_reps(reps)
     fn()
     ref()
     ratios = []
@@ -64,11 +89,22 @@ def paired_ratio(fn: Callable[[], Any], ref: Callable[[], Any], reps: int) -> fl
     return float(np.median(ratios))
 
 
-def write_report(path: str | Path, rows: list[dict[str, Any]], **meta: Any) -> Path:
+def write_report(path: str | Path, rows: list[dict[str, object]], **meta: object) -> Path:
     """Write ``{"meta": {...}, "results": rows}`` as indented JSON; create the folder.
 
-    ``meta`` always gets ``cpu_count`` and ``platform``; keyword arguments add to it.
-    Returns the path written.
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        File to write.
+    rows : list of dict
+        One JSON-serialisable mapping per result.
+    **meta
+        Added to ``meta``, which always has ``cpu_count`` and ``platform``.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
     """
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from vpp_service.settings import from_mapping
@@ -31,7 +33,7 @@ def test_from_mapping_rejects_unknown_keys():
 
 
 @pytest.mark.parametrize(
-    "field,value,exc",
+    ("field", "value", "exc"),
     [
         ("pattern", "stripes", ValueError),
         ("patch", 4, ValueError),
@@ -60,5 +62,5 @@ def test_invalid_field_named(field, value, exc):
 
 
 def test_frozen():
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError, match="cannot assign to field 'alpha'"):
         VPPConfig().alpha = 0.3

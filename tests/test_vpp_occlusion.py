@@ -85,8 +85,9 @@ def test_bad_disparity(disp, exc):
 @pytest.mark.parametrize(("lam", "gamma", "t"), [(2.0, 0.4375, 1.0), (0.3, 0.37, 0.1), (1.7, 0.9, 0.0)])
 @pytest.mark.parametrize("window", [(9, 7), (3, 3), (5, 9), (9, 1)])  # each screen path of the kernel
 def test_threshold_ties_match_reference(d0, lam, gamma, t, window):
-    """Neighbours at exactly ``d + t + pen`` and a few float32 ulps around it: the
-    kernel's float screen must never miss a cell that the exact (double) rule flags.
+    """Neighbours at exactly ``d + t + pen`` and a few float32 ulps around it.
+
+    The kernel's float screen must never miss a cell that the exact (double) rule flags.
     """
     H, W = 9, 4000
     x0, y0 = 2600, 4

@@ -37,7 +37,7 @@ def sweep_cases(n: int = 44):
     return cases
 
 
-@pytest.mark.parametrize("i,cfg,shape,density", sweep_cases(), ids=lambda v: None)
+@pytest.mark.parametrize(("i", "cfg", "shape", "density"), sweep_cases(), ids=lambda v: None)
 def test_reference_equality(build, i, cfg, shape, density):
     rng = np.random.default_rng(i)
     left, right, disp = make_case(rng, *shape, density)
@@ -52,7 +52,7 @@ def test_reference_equality(build, i, cfg, shape, density):
 
 
 @pytest.mark.parametrize(
-    "shape,search", [((12, 97, 3), (64, 3)), ((9, 70, 1), (16, 1)), ((7, 33, 3), (7, 3)), ((10, 131, 3), (100, 5))]
+    ("shape", "search"), [((12, 97, 3), (64, 3)), ((9, 70, 1), (16, 1)), ((7, 33, 3), (7, 3)), ((10, 131, 3), (100, 5))]
 )
 def test_histogram_tables_both_builders_match_reference(build, shape, search):
     """Wider than the 32-column blocks (full, partial last block), both builders."""
@@ -96,7 +96,7 @@ def test_alpha_one_pointwise_integer_disparity_same_values():
     disp[ys, xs] = ds
     cfg = VPPConfig(patch=1, alpha=1.0, occlusion="off")
     res = project(left, right, disp, cfg, seed=5)
-    for y, x in zip(*np.nonzero(disp)):
+    for y, x in zip(*np.nonzero(disp), strict=True):
         d = int(disp[y, x])
         np.testing.assert_array_equal(res.left[y, x], res.right[y, x - d])
         np.testing.assert_array_equal(res.left[y, x], pattern_bytes(5, x, y, 3))
@@ -219,7 +219,7 @@ def test_patch_larger_than_image():
 
 # ------------------------------------------------------------ bad input
 @pytest.mark.parametrize(
-    "kwargs,exc,word",
+    ("kwargs", "exc", "word"),
     [
         (dict(left=np.zeros((4, 5), np.uint16)), TypeError, "left"),
         (dict(right=np.zeros((4, 6), np.uint8)), ValueError, "shape"),

@@ -45,7 +45,7 @@ def test_pattern_bytes_reference_equality():
     ys = np.array([0, 3, 374, 1, 2, 1987])
     got = rng.pattern_bytes(seed, xs, ys, C)
     assert got.shape == (6, 3)
-    for (x, y), v in zip(zip(xs, ys), got):
+    for (x, y), v in zip(zip(xs, ys, strict=True), got, strict=True):
         i = (int(x) + int(y) * rng.ROW_STEP) % rng.TABLE_SIZE
         np.testing.assert_array_equal(v, t[3 * i : 3 * i + 3])
 
@@ -60,8 +60,9 @@ def test_values_are_uniform_bytes():
 
 
 def test_no_repeat_within_rows_and_near_rows():
-    """Two pixels share a table entry only if dx + dy * ROW_STEP = 0 (mod 2**16):
-    never within a row, never for |dy| <= 16 and |dx| < 1000, nowhere within 274 px.
+    """Two pixels share a table entry only if dx + dy * ROW_STEP = 0 (mod 2**16).
+
+    So never within a row, never for |dy| <= 16 and |dx| < 1000, nowhere within 274 px.
     """
     N, M = rng.TABLE_SIZE, rng.ROW_STEP
     assert M % 2 == 1
@@ -76,7 +77,7 @@ def test_no_repeat_within_rows_and_near_rows():
 
 
 @pytest.mark.parametrize("build", BUILDS, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
-@pytest.mark.parametrize("channels,hmax", [(1, 0), (3, 1), (3, 4), (1, 7)])
+@pytest.mark.parametrize(("channels", "hmax"), [(1, 0), (3, 1), (3, 4), (1, 7)])
 def test_compiled_table_equals_reference(build, channels, hmax):
     seed = 987654321
     pad = build.table_padding(channels, hmax)
@@ -102,7 +103,7 @@ def test_kernel_table_cached_and_padded():
 
 
 @pytest.mark.parametrize(
-    "args,exc,match",
+    ("args", "exc", "match"),
     [
         ((-1, 3, 1), ValueError, "seed"),
         ((2**64, 3, 1), ValueError, "seed"),

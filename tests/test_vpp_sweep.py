@@ -82,7 +82,7 @@ def expected_stats(disp, occluded, occ):
 
 
 @pytest.mark.parametrize(
-    "window,lam,gamma,t",
+    ("window", "lam", "gamma", "t"),
     [((9, 7), 2.0, 0.4375, 1.0), ((3, 5), 0.0, 1.0, 0.0), ((21, 1), 1.3, 0.1, 2.5), ((1, 13), 5.0, 0.9, 0.25)],
 )
 def test_detect_matches_reference_many_chunks(build, window, lam, gamma, t):
@@ -97,8 +97,9 @@ def test_detect_matches_reference_many_chunks(build, window, lam, gamma, t):
 
 
 def test_points_at_both_row_ends_and_past_the_left_border(build):
-    """Patches clipped at column 0 and W-1 in L, matches left of R's column 0 and
-    splats that straddle R's last column (the SIMD fast paths must step aside).
+    """Patches clipped at column 0 and W-1 in L, matches left of R's column 0, splats across R's last column.
+
+    The SIMD fast paths must step aside at both row ends.
     """
     H, W = 9, 40
     rng = np.random.default_rng(2)
@@ -137,9 +138,10 @@ def test_backend_falls_back_to_the_portable_build(monkeypatch):
 
 
 def test_pooled_buffers_are_reset_between_calls(build):
-    """Work buffers are kept between calls: a call after a wider image, a taller
-    occlusion window, occlusion off, or after release_scratch() gives the bytes
-    of the reference (no state or capacity leaks from the previous call).
+    """Work buffers are kept between calls, yet every call gives the bytes of the reference.
+
+    A call after a wider image, a taller occlusion window, occlusion off, or
+    after release_scratch(): no state or capacity leaks from the previous call.
     """
     order = [0, 6, 5, 0, 7, 1, 6, 0]  # default, tall window, occlusion off, ...
     for k, i in enumerate(order):
@@ -185,8 +187,9 @@ def _ordered_disparities(kind, rng, H, W):
 
 @pytest.mark.parametrize("kind", ["two_values", "constant", "decreasing", "few_ties", "small_ties", "sparse"])
 def test_paint_order_with_tied_and_crowded_disparities(build, kind):
-    """Overlapping patches painted far to near, ties by row then column, whatever
-    the distribution of d within a band (crowded buckets, one value, reversed).
+    """Overlapping patches are painted far to near, ties by row then column.
+
+    Whatever the distribution of d within a band: crowded buckets, one value, reversed.
     """
     rng = np.random.default_rng(7)
     H, W = 40, 150

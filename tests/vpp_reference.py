@@ -1,9 +1,16 @@
-"""Slow, literal NumPy/Python reference of VPP (the semantics of ``vpp_service.vpp.project``).
+"""The rules of VPP in executable form: a slow, literal NumPy/Python reference.
 
-Shares only the RNG hash definition with the library.  Everything else is a
-direct transcription of the pinned rules (see the module docstring of
-``vpp_service/vpp/project.py``): a dense warped grid for occlusions, a global
-sort of the points, a loop over patch pixels, explicit histograms.
+This module IS the definition of what ``vpp_service.vpp.project`` and
+``vpp_service.vpp.detect_occlusions`` compute, to the last rounding; the
+compiled kernel must match it byte for byte on both builds and every thread
+count (``tests/test_vpp_*.py``).  ``docs/algorithm.md`` ("The rules")
+summarises the rules in prose; where the two differ, this module is right.
+
+It shares only the random-pattern table (``vpp_service.vpp.rng``) with the
+library.  Everything else is a direct transcription of the rules, one step
+after another, with no attempt at speed: a dense warped grid for the
+occlusions, a global sort of the points, a loop over the patch pixels and
+explicit histograms.
 """
 
 from __future__ import annotations
@@ -12,20 +19,24 @@ import math
 
 import numpy as np
 
+from vpp_service.vpp.config import VPPConfig
 from vpp_service.vpp.rng import pattern_bytes
+
+#: A valid point: (d, y, x); sorting these gives the paint order.
+Point = tuple[float, int, int]
 
 
 def w16(w: float) -> int:
-    return int(math.floor(w * 65536.0 + 0.5))
+    return math.floor(w * 65536.0 + 0.5)
 
 
 def blend(i: int, a: int, w: int) -> int:
     return (int(i) * (65536 - w) + int(a) * w + 32768) >> 16
 
 
-def valid_points(disp: np.ndarray):
+def valid_points(disp: np.ndarray) -> list[Point]:
     H, W = disp.shape
-    pts = []
+    pts: list[Point] = []
     for y in range(H):
         for x in range(W):
             v = float(disp[y, x])
@@ -34,15 +45,17 @@ def valid_points(disp: np.ndarray):
     return pts
 
 
-def ref_occlusions(disp: np.ndarray, window=(9, 7), lam=2.0, gamma=0.4375, t=1.0) -> np.ndarray:
+def ref_occlusions(
+    disp: np.ndarray, window: tuple[int, int] = (9, 7), lam: float = 2.0, gamma: float = 0.4375, t: float = 1.0
+) -> np.ndarray:
     """Dense-grid literal occlusion heuristic."""
     disp = disp.astype(np.float32)
     H, W = disp.shape
     rx2, ry2 = window[0] // 2, window[1] // 2
     occ = np.zeros((H, W), bool)
-    grid = {}  # (xw, y) -> (d, x) winner
+    grid: dict[tuple[int, int], tuple[float, int]] = {}  # (xw, y) -> (d, x) winner
     for d, y, x in valid_points(disp):
-        xw = x - int(math.floor(d + 0.5))
+        xw = x - math.floor(d + 0.5)
         cur = grid.get((xw, y))
         if cur is None or d > cur[0]:
             if cur is not None:
@@ -76,7 +89,7 @@ def hist_pick(counts: np.ndarray) -> int:
     return int(np.argmax(dist))  # first maximum = smallest i
 
 
-def hist_value(Lo, Ro, c, r, cl, cr, sw, sh):
+def hist_value(Lo: np.ndarray, Ro: np.ndarray, c: int, r: int, *, cl: int, cr: int, sw: int, sh: int) -> int:
     H, W = Lo.shape[:2]
     y0, y1 = max(0, r - sh // 2), min(H - 1, r + sh // 2)
     counts = np.zeros(256, np.int64)
@@ -87,7 +100,9 @@ def hist_value(Lo, Ro, c, r, cl, cr, sw, sh):
     return hist_pick(counts)
 
 
-def ref_project(left, right, disp, cfg, seed=0):
+def ref_project(  # noqa: PLR0912, PLR0915 - a literal transcription of the rules, one step after another
+    left: np.ndarray, right: np.ndarray, disp: np.ndarray, cfg: VPPConfig, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Literal projection; returns (left, right, occluded)."""
     Lo = left if left.ndim == 3 else left[:, :, None]
     Ro = right if right.ndim == 3 else right[:, :, None]
@@ -112,43 +127,42 @@ def ref_project(left, right, disp, cfg, seed=0):
     neglog = -math.log(cfg.bilateral_threshold)
     two_ss = 2.0 * cfg.bilateral_sigma_space**2
     two_sc = 2.0 * cfg.bilateral_sigma_color**2
+    sw, sh = cfg.search_width, cfg.search_height
 
-    def half(d):
+    def half(d: float) -> int:
         if cfg.adaptive_patch != "distance":
             return hmax
         if dmax <= dmin:
             return hmax
         u = (float(d) - dmin) / (dmax - dmin)
         u = min(max(u, 0.0), 1.0)
-        return int(math.floor(math.pow(u, cfg.adaptive_gamma) * hmax + 0.5))
+        return math.floor(math.pow(u, cfg.adaptive_gamma) * hmax + 0.5)
 
-    def mask(x, y, dx, dy):
+    def mask(x: int, y: int, dx: int, dy: int) -> bool:
         if not (0 <= x + dx < W and 0 <= y + dy < H):
             return False
         if cfg.adaptive_patch == "bilateral":
             diff = Lo[y + dy, x + dx].astype(np.int64) - Lo[y, x].astype(np.int64)
             sumsq = int((diff * diff).sum())
             e = (dx * dx + dy * dy) / two_ss + (sumsq / C) / two_sc
-            return e < neglog
+            return bool(e < neglog)
         return True
 
-    def value(x, y, d, dx, dy):
-        cn = int(math.floor(x - float(d) + 0.5))
+    def value(x: int, y: int, d: float, dx: int, dy: int) -> np.ndarray:
+        cn = math.floor(x - float(d) + 0.5)
         if cfg.pattern == "random":
             if cfg.uniform_patch:
                 return pattern_bytes(seed, x, y, C)
             return pattern_bytes(seed, x + dx, y + dy, C)
         if cfg.uniform_patch:
-            return np.array([hist_value(Lo, Ro, c, y, x, cn, cfg.search_width, cfg.search_height) for c in range(C)])
-        return np.array(
-            [hist_value(Lo, Ro, c, y + dy, x + dx, cn + dx, cfg.search_width, cfg.search_height) for c in range(C)]
-        )
+            return np.array([hist_value(Lo, Ro, c, y, cl=x, cr=cn, sw=sw, sh=sh) for c in range(C)])
+        return np.array([hist_value(Lo, Ro, c, y + dy, cl=x + dx, cr=cn + dx, sw=sw, sh=sh) for c in range(C)])
 
-    def is_fgd(y, x):
-        return cfg.occlusion == "fgd" and occ[y, x]
+    def is_fgd(y: int, x: int) -> bool:
+        return cfg.occlusion == "fgd" and bool(occ[y, x])
 
-    def skipped(y, x):
-        return cfg.occlusion == "no" and occ[y, x]
+    def skipped(y: int, x: int) -> bool:
+        return cfg.occlusion == "no" and bool(occ[y, x])
 
     # right view first, in global order
     for d, y, x in pts:

@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+from types import ModuleType
+
 import numpy as np
 
 from vpp_service.vpp import backend
 
 #: the builds of the sweep kernel (None: not runnable on this CPU / platform)
-BUILDS = {"portable": backend.portable, "avx2": backend.avx2_build()}
+BUILDS: dict[str, ModuleType | None] = {"portable": backend.portable, "avx2": backend.avx2_build()}
 
 
-def make_case(rng: np.random.Generator, H: int, W: int, C: int, density: float):
+def make_case(
+    rng: np.random.Generator, H: int, W: int, C: int, density: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Random smooth+noisy images and a sparse disparity with border, colliding and invalid points."""
     base = rng.integers(0, 256, (H, W, C)).astype(np.float64)
     base = 0.5 * base + 0.5 * np.roll(base, 1, axis=1)

@@ -14,7 +14,7 @@ Conventions
 * every routine takes ``nthreads`` (>= 1) for its ``prange``.
 """
 from cython.parallel cimport prange, threadid
-from libc.stdint cimport uint8_t, uint16_t, int16_t, uint32_t, int32_t
+from libc.stdint cimport uint8_t, uint16_t, int16_t, uint32_t
 from libc.stdlib cimport malloc, free
 from libc.math cimport floor, isnan, NAN, fabs
 
@@ -239,7 +239,10 @@ cdef int vertical_pass(const uint16_t[:, :, ::1] C, const uint8_t[:, ::1] g,
     cdef int16_t* tmp
     cdef int i, y, x, yp, first
     if bufa == NULL or bufb == NULL or mina == NULL or minb == NULL:
-        free(bufa); free(bufb); free(mina); free(minb)
+        free(bufa)
+        free(bufb)
+        free(mina)
+        free(minb)
         return -1
     fill_sentinels(bufa, ndirs * W, stride)
     fill_sentinels(bufb, ndirs * W, stride)
@@ -258,7 +261,10 @@ cdef int vertical_pass(const uint16_t[:, :, ::1] C, const uint8_t[:, ::1] g,
         tmp = mina
         mina = minb
         minb = tmp
-    free(bufa); free(bufb); free(mina); free(minb)
+    free(bufa)
+    free(bufb)
+    free(mina)
+    free(minb)
     return 0
 
 
@@ -388,7 +394,7 @@ cdef inline float median_pixel(const float[:, ::1] src, int y, int x, int H,
                                int W) noexcept nogil:
     cdef float vals[9]
     cdef float v
-    cdef int n = 0, i, j, yy, xx
+    cdef int n = 0, j, yy, xx
     for yy in range(y - 1, y + 2):
         if yy < 0 or yy >= H:
             continue

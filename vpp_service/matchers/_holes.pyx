@@ -1,6 +1,6 @@
 """Row-wise background hole filling kernel (unchecked; see ``holes.fill_holes``)."""
 from cython.parallel cimport prange
-from libc.math cimport isnan, NAN
+from libc.math cimport isnan
 
 
 cdef inline void fill_row(const float* src, float* dst, int W, float empty) noexcept nogil:

@@ -11,19 +11,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import Any
 
 PATTERNS = ("random", "histogram")
 OCCLUSION_MODES = ("fgd", "no", "bkgd", "off")
 ADAPTIVE_MODES = (None, "distance", "bilateral")
 
 
-def _check_bool(name: str, v: Any) -> None:
+def _check_bool(name: str, v: object) -> None:
     if not isinstance(v, bool):
         raise TypeError(f"VPPConfig.{name} must be a bool, got {type(v).__name__}")
 
 
-def _check_int(name: str, v: Any, lo: int, odd: bool = False) -> None:
+def _check_int(name: str, v: object, lo: int, *, odd: bool = False) -> None:
     if isinstance(v, bool) or not isinstance(v, int):
         raise TypeError(f"VPPConfig.{name} must be an int, got {type(v).__name__}")
     if v < lo:
@@ -33,7 +32,13 @@ def _check_int(name: str, v: Any, lo: int, odd: bool = False) -> None:
 
 
 def _check_float(
-    name: str, v: Any, lo: float | None = None, hi: float | None = None, lo_open: bool = False, hi_open: bool = False
+    name: str,
+    v: object,
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    lo_open: bool = False,
+    hi_open: bool = False,
 ) -> None:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise TypeError(f"VPPConfig.{name} must be a number, got {type(v).__name__}")
@@ -133,8 +138,10 @@ class VPPConfig:
         _check_float("bilateral_sigma_color", self.bilateral_sigma_color, 0.0, lo_open=True)
         _check_float("bilateral_threshold", self.bilateral_threshold, 0.0, 1.0, lo_open=True, hi_open=True)
 
-    def to_dict(self) -> dict[str, Any]:
-        """Plain-dict form (JSON/msgpack friendly); :func:`vpp_service.settings.from_mapping`
-        (``from_mapping(VPPConfig, d)``) builds a config back from such a mapping.
+    def to_dict(self) -> dict[str, str | int | float | bool | None]:
+        """Plain-dict form of the config, JSON and msgpack friendly.
+
+        :func:`vpp_service.settings.from_mapping` (``from_mapping(VPPConfig, d)``)
+        builds a config back from such a mapping.
         """
         return asdict(self)

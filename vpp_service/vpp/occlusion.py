@@ -21,10 +21,10 @@ from vpp_service.vpp.params import kernel_params
 def detect_occlusions(
     disparity: np.ndarray,
     *,
-    window: tuple[int, int] = (9, 7),
-    lam: float = 2.0,
-    gamma: float = 0.4375,
-    t: float = 1.0,
+    window: tuple[int | np.integer, int | np.integer] = (9, 7),
+    lam: float | np.floating = 2.0,
+    gamma: float | np.floating = 0.4375,
+    t: float | np.floating = 1.0,
     num_threads: int | None = None,
 ) -> np.ndarray:
     """Classify the sparse points of a disparity map as occluded in the right view.
@@ -35,11 +35,13 @@ def detect_occlusions(
         H x W float32 (float64 is converted) sparse disparity of the left view;
         0 or NaN = no point; negative, infinite or >= W values are ignored.
     window : tuple of int
-        ``(r_x, r_y)``, odd window sizes of the neighbourhood.  Default (9, 7).
+        ``(r_x, r_y)``, odd window sizes of the neighbourhood (Python or
+        numpy integers).  Default (9, 7).
     lam, gamma, t : float
-        Heuristic parameters (defaults 2, 0.4375, 1).  They are validated as
-        the ``occ_window_x``, ``occ_window_y``, ``occ_lambda``, ``occ_gamma``
-        and ``occ_t`` fields of :class:`VPPConfig`.
+        Heuristic parameters (Python or numpy floats; defaults 2, 0.4375,
+        1).  They are validated as the ``occ_window_x``, ``occ_window_y``,
+        ``occ_lambda``, ``occ_gamma`` and ``occ_t`` fields of
+        :class:`VPPConfig`.
     num_threads : int or None
         OpenMP threads (None: all cores).  The result does not depend on it.
 

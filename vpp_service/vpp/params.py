@@ -55,8 +55,23 @@ class KernelParams(TypedDict):
 
 
 def adaptive_range(config: VPPConfig, disparity: np.ndarray) -> tuple[float, float]:
-    """``(d_min, d_max)`` of the distance-adaptive patch: the smallest valid d of
-    the frame and ``adaptive_max_disparity`` or the largest valid d ((0, 0) if none).
+    """The disparity range ``(d_min, d_max)`` of the distance-adaptive patch.
+
+    ``d_min`` is the smallest valid d of the frame; ``d_max`` is
+    ``config.adaptive_max_disparity`` when set, else the largest valid d.
+    Both are 0 when the frame has no valid point (0 < d < W).
+
+    Parameters
+    ----------
+    config : VPPConfig
+        The variant (only ``adaptive_max_disparity`` is read).
+    disparity : numpy.ndarray
+        H x W float32 disparity map of the frame.
+
+    Returns
+    -------
+    tuple of float
+        ``(d_min, d_max)``.
     """
     with np.errstate(invalid="ignore"):
         valid = disparity[(disparity > 0) & (disparity < disparity.shape[1])]
