@@ -1,18 +1,49 @@
-"""What the benchmark scripts share: median timing of a call and the JSON report.
+"""What the benchmark scripts share: median timing of a call, the JSON report and where it goes.
 
 Import from a script run as ``python benchmarks/<script>.py`` (the script's
 folder is on ``sys.path``): ``from _harness import median_ms, write_report``.
+Reports go to ``out/benchmarks/`` (ignored by git) unless ``--update-committed``
+asks for the committed ``benchmarks/results/`` (see :func:`add_output_args`).
 """
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+#: Where a benchmark writes its JSON by default: not committed (``out/`` is ignored by git).
+SCRATCH = REPO / "out" / "benchmarks"
+#: The committed results, overwritten only with ``--update-committed``.
+COMMITTED = REPO / "benchmarks" / "results"
+
+
+def add_output_args(ap: argparse.ArgumentParser, name: str) -> None:
+    """Add ``--json PATH`` and ``--update-committed`` (resolved by :func:`output_path`) to ``ap``."""
+    ap.add_argument(
+        "--json",
+        type=Path,
+        help=f"write the JSON report here (default out/benchmarks/{name}.json, not committed)",
+    )
+    ap.add_argument(
+        "--update-committed",
+        action="store_true",
+        help=f"overwrite the committed benchmarks/results/{name}.json instead",
+    )
+
+
+def output_path(a: argparse.Namespace, name: str) -> Path:
+    """The report path: ``--json``, else the committed file with ``--update-committed``, else the scratch one."""
+    if a.json is not None:
+        return Path(a.json)
+    return (COMMITTED if a.update_committed else SCRATCH) / f"{name}.json"
 
 
 def times_ms(fn: Callable[[], Any], reps: int) -> np.ndarray:
@@ -38,7 +69,8 @@ def times_ms(fn: Callable[[], Any], reps: int) -> np.ndarray:
 
 def median_ms(fn: Callable[[], Any], reps: int) -> float:
     """Median wall time of ``fn()`` in milliseconds over ``reps`` runs after one warm-up run
-    (see :func:`times_ms`)."""
+    (see :func:`times_ms`).
+    """
     return float(np.median(times_ms(fn, reps)))
 
 

@@ -23,11 +23,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
-from pathlib import Path
 
 import numpy as np
-
-from _harness import paired_ratio, times_ms
+from _harness import add_output_args, output_path, paired_ratio, times_ms
 
 from vpp_service.service.allocator import reuse_freed_memory
 from vpp_service.vpp import VPPConfig, project
@@ -48,7 +46,7 @@ def scene(H: int, W: int, density: float, seed: int = 0):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--json", default="benchmarks/results/bench_vpp.json")
+    add_output_args(ap, "bench_vpp")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--reps", type=int, default=15)
     ap.add_argument("--fresh-memory", action="store_true",
@@ -93,8 +91,10 @@ def main(argv=None) -> int:
                                      min_ratio=mn / copy_min, paired_ratio=paired, points=npts))
                     print(f"{name:10s} {density:5.2f} {pattern:10s} {nt:3d} {ms:8.2f} {mn:8.2f} "
                           f"{ms / copy_ms:7.2f} {mn / copy_min:7.2f} {paired:7.2f} {npts:8d}")
-    Path(a.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.json).write_text(json.dumps({"cpu_count": allt, "memory": memory, "results": rows}, indent=1))
+    out = output_path(a, "bench_vpp")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"cpu_count": allt, "memory": memory, "results": rows}, indent=1))
+    print(f"wrote {out}")
     return 0
 
 
