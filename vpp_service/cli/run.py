@@ -36,21 +36,31 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         formatter_class=HelpFormatter,
     )
     p.add_argument("--config", help="TOML config file (default: the embedded default)")
-    p.add_argument("--rig", help="rig name (service.rig)")
-    p.add_argument("--source", help="source type: sim, files, zenoh (its options come from the config)")
+    p.add_argument("--rig", help="rig name (service.rig; default: the config's, rig0)")
+    p.add_argument(
+        "--source", help="source type: sim, files, zenoh (its options come from the config; default: the config's, sim)"
+    )
     p.add_argument("--sink", action="append", help="sink type (repeatable; replaces the config's sinks)")
-    p.add_argument("--matcher", help="matcher name: sgbm, bm, census-sgm")
+    p.add_argument("--matcher", help="matcher name: sgbm, bm, census-sgm (default: the config's, sgbm)")
     p.add_argument(
         "--input-policy",
         choices=["latest", "block"],
         help="input queue when full: drop the oldest (live camera) or wait (lossless replay); "
         "default: the config's, and block with --source zenoh",
     )
-    p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", help="listen endpoint (repeatable)")
+    p.add_argument(
+        "--zenoh-listen",
+        action="append",
+        metavar="ENDPOINT",
+        help="listen endpoint (repeatable; default tcp/127.0.0.1:7447, the one publish and status use, "
+        "or $VPP_SERVICE_ENDPOINT)",
+    )
     p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", help="connect endpoint (repeatable)")
     p.add_argument("--rerun-save", metavar="PATH", help="save a Rerun .rrd here (adds/replaces the rerun sink)")
-    p.add_argument("--max-frames", type=int, help="stop after N processed frames")
-    p.add_argument("--out", help="output folder (summary.json, default .rrd)")
+    p.add_argument(
+        "--max-frames", type=int, help="stop after N processed frames (default: the config's, 0 = run until stopped)"
+    )
+    p.add_argument("--out", help="output folder for summary.json and the default .rrd (default: the config's, vpp-run)")
     p.add_argument("--no-summary", action="store_true", help="no live summary line on stderr")
     p.add_argument(
         "--check",
