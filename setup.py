@@ -4,15 +4,23 @@ New kernels need no edit here: drop a ``.pyx`` next to its Python wrapper.
 Set ``VPP_DEBUG_BOUNDS=1`` at build time to compile with bounds checks and
 wrap-around on (a debug build used to fuzz the wrappers against out-of-bounds
 access); the default build turns them off for speed.
+
+A kernel already built in place (``pip install -e .`` leaves the compiled modules
+next to their sources) and newer than its sources is reused instead of being
+compiled again, so the README's second command (``pip install -e ".[test]"``)
+does not rebuild what its first command built. ``--force`` (or a debug build)
+compiles everything.
 """
 import os
 import platform
+import shutil
 import sys
 from pathlib import Path
 
 import numpy as np
 from Cython.Build import cythonize
 from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
 
 ROOT = Path(__file__).parent
 debug_bounds = os.environ.get("VPP_DEBUG_BOUNDS", "0") == "1"
@@ -59,4 +67,29 @@ directives = {
     "cdivision": True,
 }
 
-setup(ext_modules=cythonize(extensions, compiler_directives=directives, nthreads=2))
+
+
+class ReusingBuildExt(build_ext):
+    """``build_ext`` that copies an up-to-date in-place build of a kernel instead of compiling it again."""
+
+    def build_extension(self, ext: Extension) -> None:
+        target = Path(self.get_ext_fullpath(ext.name)).resolve()
+        built = (ROOT / self.get_ext_filename(ext.name)).resolve()
+        sources = [Path(p) for p in [*ext.sources, *ext.depends]]
+        if (
+            not (self.force or debug_bounds)
+            and built != target
+            and built.is_file()
+            and all(p.is_file() and p.stat().st_mtime <= built.stat().st_mtime for p in sources)
+        ):
+            print(f"reusing {built.relative_to(ROOT)} (newer than its sources)")
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(built, target)
+            return
+        super().build_extension(ext)
+
+
+setup(
+    ext_modules=cythonize(extensions, compiler_directives=directives, nthreads=2),
+    cmdclass={"build_ext": ReusingBuildExt},
+)
