@@ -11,6 +11,7 @@ import pytest
 from helpers.service_thread import service_in_thread
 from helpers.zenoh_loopback import free_port
 from vpp_service.cli import EXIT_FAILURE, main
+from vpp_service.cli.status import query_status
 from vpp_service.service.config import ENDPOINT_ENV
 
 
@@ -41,6 +42,9 @@ def test_publish_run_and_status_meet_on_the_default_endpoint(tmp_path, shared_en
         "sinks": [],
     }
     with service_in_thread(data) as (thread, result):
+        deadline = time.monotonic() + 30  # the service is up once it answers @status on the default endpoint
+        while not query_status([shared_endpoint], rig="rig0", timeout=1.0) and time.monotonic() < deadline:
+            time.sleep(0.1)
         assert main(["status", "--rig", "rig0", "--timeout", "10"]) == 0
         assert '"vpp/rig0/@status"' in capsys.readouterr().out
         rc = main(["publish", "--scale", "0.25", "--count", "3", "--rate", "5", "--wait-subscriber", "10"])

@@ -52,8 +52,14 @@ def test_summary_lines_in_a_log_only_when_something_changed(tmp_path):
         "sinks": [],
     }
     stream, stop = io.StringIO(), threading.Event()
-    timer = threading.Timer(1.5, stop.set)
-    timer.start()
+
+    def stop_later() -> None:  # 1.5 s (~30 summary periods) after the service has started
+        while "started" not in stream.getvalue() and not stop.wait(0.05):
+            pass
+        stop.wait(1.5)
+        stop.set()
+
+    threading.Thread(target=stop_later, daemon=True).start()
     run_service(validate_config(data), stop, stream, banner="started")
     lines = stream.getvalue().splitlines()
     assert lines[0] == "started"

@@ -224,6 +224,9 @@ def main(args: argparse.Namespace) -> int:
             for p in parts
         }
         if args.wait_subscriber > 0 and not _wait_for_subscribers(pubs.values(), args.wait_subscriber, stop):
+            if stop.is_set():  # interrupted while waiting
+                src.stop(2.0)
+                return 130
             if not args.send_anyway:
                 src.stop(2.0)
                 where = ", ".join(connect + list(args.listen))
