@@ -73,6 +73,7 @@ class ReusingBuildExt(build_ext):
     """``build_ext`` that copies an up-to-date in-place build of a kernel instead of compiling it again."""
 
     def build_extension(self, ext: Extension) -> None:
+        """Copy ``ext``'s in-place module when it is newer than every source; else compile it."""
         target = Path(self.get_ext_fullpath(ext.name)).resolve()
         built = (ROOT / self.get_ext_filename(ext.name)).resolve()
         sources = [Path(p) for p in [*ext.sources, *ext.depends]]
