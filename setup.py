@@ -6,15 +6,17 @@ wrap-around on (a debug build used to fuzz the wrappers against out-of-bounds
 access); the default build turns them off for speed.
 
 A kernel already built in place (``pip install -e .`` leaves the compiled modules
-next to their sources) and newer than its sources is reused instead of being
-compiled again, so the README's second command (``pip install -e ".[test]"``)
-does not rebuild what its first command built. ``--force`` (or a debug build)
-compiles everything.
+next to their sources) and newer than its ``.pyx`` and headers is reused instead of
+being cythonized and compiled again, so the README's second command
+(``pip install -e ".[test]"``) does not rebuild what its first command built.
+``build_ext --force`` (or a debug build) compiles everything; so does deleting the
+``.so`` files.
 """
 import os
 import platform
 import shutil
 import sys
+import sysconfig
 from pathlib import Path
 
 import numpy as np
@@ -67,30 +69,47 @@ directives = {
     "cdivision": True,
 }
 
+EXT_SUFFIX = sysconfig.get_config_var("EXT_SUFFIX")
+rebuild = debug_bounds or bool({"--force", "-f"} & set(sys.argv))
+
+
+def built_in_place(ext: Extension) -> Path | None:
+    """``ext``'s compiled module next to its sources when newer than the project's sources of it (.pyx, .h).
+
+    Generated C and Cython's own includes are not compared: a fresh isolated build
+    environment gives those new times although nothing the module is built from changed.
+    """
+    module = ROOT / (ext.name.replace(".", "/") + EXT_SUFFIX)
+    ours = [ROOT / p for p in [*ext.sources, *ext.depends]]
+    if rebuild or not module.is_file():
+        return None
+    newest = max(p.stat().st_mtime for p in ours)
+    return module if newest <= module.stat().st_mtime else None
+
+
+#: Modules whose in-place build is reused (neither cythonized nor compiled again).
+REUSED = {ext.name: built for ext in extensions if (built := built_in_place(ext)) is not None}
 
 
 class ReusingBuildExt(build_ext):
     """``build_ext`` that copies an up-to-date in-place build of a kernel instead of compiling it again."""
 
     def build_extension(self, ext: Extension) -> None:
-        """Copy ``ext``'s in-place module when it is newer than every source; else compile it."""
+        """Copy ``ext``'s in-place module when :data:`REUSED` lists it; else compile it."""
+        built = REUSED.get(ext.name)
+        if built is None:
+            super().build_extension(ext)
+            return
         target = Path(self.get_ext_fullpath(ext.name)).resolve()
-        built = (ROOT / self.get_ext_filename(ext.name)).resolve()
-        sources = [Path(p) for p in [*ext.sources, *ext.depends]]
-        if (
-            not (self.force or debug_bounds)
-            and built != target
-            and built.is_file()
-            and all(p.is_file() and p.stat().st_mtime <= built.stat().st_mtime for p in sources)
-        ):
-            print(f"reusing {built.relative_to(ROOT)} (newer than its sources)")
+        print(f"reusing {built.relative_to(ROOT)} (newer than its sources)")
+        if target != built.resolve():
             target.parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(built, target)
-            return
-        super().build_extension(ext)
 
 
+fresh = [ext for ext in extensions if ext.name not in REUSED]
 setup(
-    ext_modules=cythonize(extensions, compiler_directives=directives, nthreads=2),
+    ext_modules=[ext for ext in extensions if ext.name in REUSED]
+    + (cythonize(fresh, compiler_directives=directives, nthreads=2) if fresh else []),
     cmdclass={"build_ext": ReusingBuildExt},
 )
