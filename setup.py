@@ -4,16 +4,26 @@ New kernels need no edit here: drop a ``.pyx`` next to its Python wrapper.
 Set ``VPP_DEBUG_BOUNDS=1`` at build time to compile with bounds checks and
 wrap-around on (a debug build used to fuzz the wrappers against out-of-bounds
 access); the default build turns them off for speed.
+
+A kernel already built in place (``pip install -e .`` leaves the compiled modules
+next to their sources) and newer than its ``.pyx`` and headers is reused instead of
+being cythonized and compiled again, so the README's second command
+(``pip install -e ".[test]"``) does not rebuild what its first command built.
+``build_ext --force`` (or a debug build) compiles everything; so does deleting the
+``.so`` files.
 """
 
 import os
 import platform
+import shutil
 import sys
+import sysconfig
 from pathlib import Path
 
 import numpy as np
 from Cython.Build import cythonize
 from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
 
 ROOT = Path(__file__).parent
 debug_bounds = os.environ.get("VPP_DEBUG_BOUNDS", "0") == "1"
@@ -62,4 +72,47 @@ directives = {
     "cdivision": True,
 }
 
-setup(ext_modules=cythonize(extensions, compiler_directives=directives, nthreads=2))
+EXT_SUFFIX = sysconfig.get_config_var("EXT_SUFFIX")
+rebuild = debug_bounds or bool({"--force", "-f"} & set(sys.argv))
+
+
+def built_in_place(ext: Extension) -> Path | None:
+    """``ext``'s compiled module next to its sources when newer than the project's sources of it (.pyx, .h).
+
+    Generated C and Cython's own includes are not compared: a fresh isolated build
+    environment gives those new times although nothing the module is built from changed.
+    """
+    module = ROOT / (ext.name.replace(".", "/") + EXT_SUFFIX)
+    ours = [ROOT / p for p in [*ext.sources, *ext.depends]]
+    if rebuild or not module.is_file():
+        return None
+    newest = max(p.stat().st_mtime for p in ours)
+    return module if newest <= module.stat().st_mtime else None
+
+
+#: Modules whose in-place build is reused (neither cythonized nor compiled again).
+REUSED = {ext.name: built for ext in extensions if (built := built_in_place(ext)) is not None}
+
+
+class ReusingBuildExt(build_ext):
+    """``build_ext`` that copies an up-to-date in-place build of a kernel instead of compiling it again."""
+
+    def build_extension(self, ext: Extension) -> None:
+        """Copy ``ext``'s in-place module when :data:`REUSED` lists it; else compile it."""
+        built = REUSED.get(ext.name)
+        if built is None:
+            super().build_extension(ext)
+            return
+        target = Path(self.get_ext_fullpath(ext.name)).resolve()
+        print(f"reusing {built.relative_to(ROOT)} (newer than its sources)")
+        if target != built.resolve():
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(built, target)
+
+
+fresh = [ext for ext in extensions if ext.name not in REUSED]
+setup(
+    ext_modules=[ext for ext in extensions if ext.name in REUSED]
+    + (cythonize(fresh, compiler_directives=directives, nthreads=2) if fresh else []),
+    cmdclass={"build_ext": ReusingBuildExt},
+)

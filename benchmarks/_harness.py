@@ -1,11 +1,14 @@
-"""What the benchmark scripts share: timing a call and the JSON report.
+"""What the benchmark scripts share: median timing of a call, the JSON report and where it goes.
 
 Import from a script run as ``python benchmarks/<script>.py`` (the script's
 folder is on ``sys.path``): ``from _harness import median_ms, write_report``.
+Reports go to ``out/benchmarks/`` (ignored by git) unless ``--update-committed``
+asks for the committed ``benchmarks/results/`` (see :func:`add_output_args`).
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
@@ -15,6 +18,33 @@ from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
+
+REPO = Path(__file__).resolve().parents[1]
+#: Where a benchmark writes its JSON by default: not committed (``out/`` is ignored by git).
+SCRATCH = REPO / "out" / "benchmarks"
+#: The committed results, overwritten only with ``--update-committed``.
+COMMITTED = REPO / "benchmarks" / "results"
+
+
+def add_output_args(ap: argparse.ArgumentParser, name: str) -> None:
+    """Add ``--json PATH`` and ``--update-committed`` (resolved by :func:`output_path`) to ``ap``."""
+    ap.add_argument(
+        "--json",
+        type=Path,
+        help=f"write the JSON report here (default out/benchmarks/{name}.json, not committed)",
+    )
+    ap.add_argument(
+        "--update-committed",
+        action="store_true",
+        help=f"overwrite the committed benchmarks/results/{name}.json instead",
+    )
+
+
+def output_path(a: argparse.Namespace, name: str) -> Path:
+    """The report path: ``--json``, else the committed file with ``--update-committed``, else the scratch one."""
+    if a.json is not None:
+        return Path(a.json)
+    return (COMMITTED if a.update_committed else SCRATCH) / f"{name}.json"
 
 
 def _check_reps(reps: int) -> None:

@@ -8,7 +8,8 @@ KITTI size 1242x375 (D = 192; 1241x376 in the data, rounded for OpenCV's
 its own threading. Each entry is the median over ``--reps`` runs after one
 warm-up run (the first call also pays page faults for the cost volumes).
 Also reports the census-SGM stages at 1 thread. Prints a table and writes
-JSON (default ``benchmarks/results/bench_matchers.json``).
+JSON (default ``out/benchmarks/bench_matchers.json``; ``--update-committed`` writes
+``benchmarks/results/bench_matchers.json``).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from functools import partial
 
 import cv2
 import numpy as np
-from _harness import median_ms, write_report
+from _harness import add_output_args, median_ms, output_path, write_report
 
 from vpp_service.threads import configure_openmp, resolve_threads
 
@@ -130,7 +131,7 @@ def stage_rows(size: str, reps: int) -> list[Row]:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the benchmark (``--help`` for the options); write the JSON report."""
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--json", default="benchmarks/results/bench_matchers.json")
+    add_output_args(ap, "bench_matchers")
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="Middlebury size only, 3 reps")
     a = ap.parse_args(argv)
@@ -143,7 +144,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for size in sizes:
         rows += matcher_rows(size, reps, allt)
         rows += stage_rows(size, reps)
-    out = write_report(a.json, rows, threads_all=allt, opencv=cv2.__version__, reps=reps)
+    out = write_report(output_path(a, "bench_matchers"), rows, threads_all=allt, opencv=cv2.__version__, reps=reps)
     print(f"wrote {out}")
     return 0
 

@@ -55,7 +55,9 @@ if TYPE_CHECKING:
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-DEFAULT_JSON = REPO / "benchmarks" / "results" / "bench_service.json"
+sys.path.insert(0, str(REPO / "benchmarks"))
+from _harness import add_output_args, output_path  # noqa: E402 - after the path set-up above
+
 RIG = "bench"
 #: stamp_ns placeholder written by the encoder, patched in place before each put.
 _SENTINEL = 0x7EDC_BA98_7654_3210
@@ -124,7 +126,7 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         help="shared-memory pool of the camera's and the service's publishers "
         "(vpp_service.transport.shm); 0 = plain puts",
     )
-    ap.add_argument("--json", default=str(DEFAULT_JSON))
+    add_output_args(ap, "bench_service")
     return ap.parse_args(argv)
 
 
@@ -463,7 +465,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     results = _results(a, runs, m_before)
     _print_results(a, results)
-    out = Path(a.json)
+    out = output_path(a, "bench_service")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(results, indent=2))
     print(f"wrote {out}")

@@ -11,7 +11,7 @@ patterns random (vi) and histogram (vii), default 3x3 / alpha 0.4 / FGD;
 threads 1 and all (:func:`vpp_service.threads.resolve_threads`).  ``--quick``
 runs a smaller subset.
 
-Output: the JSON goes to ``--out`` (default ``benchmarks/results/local/``, not
+Output: the JSON goes to ``--out`` (default ``out/benchmarks/``, not
 committed), so a run never overwrites the committed results.
 ``--update-docs`` also writes the committed ``benchmarks/results/bench_vpp.json``
 and regenerates the performance table of ``docs/algorithm.md`` (between the
@@ -51,7 +51,7 @@ from vpp_service.threads import configure_openmp, resolve_threads
 
 ROOT = Path(__file__).resolve().parent.parent
 #: Where a run writes its JSON unless told otherwise (git-ignored).
-LOCAL_JSON = ROOT / "benchmarks" / "results" / "local" / "bench_vpp.json"
+LOCAL_JSON = ROOT / "out" / "benchmarks" / "bench_vpp.json"
 #: The committed results, written only with ``--update-docs``.
 COMMITTED_JSON = ROOT / "benchmarks" / "results" / "bench_vpp.json"
 #: The page whose performance table ``--update-docs`` regenerates.
@@ -311,7 +311,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the benchmark (``--help`` for the options); write the JSON and, if asked, the docs."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument(
-        "--out", type=Path, default=LOCAL_JSON, help="JSON output (default: benchmarks/results/local/bench_vpp.json)"
+        "--out", type=Path, default=LOCAL_JSON, help="JSON output (default: out/benchmarks/bench_vpp.json)"
     )
     ap.add_argument(
         "--update-docs",

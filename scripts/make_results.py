@@ -2,7 +2,10 @@
 
 Usage::
 
-    python scripts/make_results.py [--data ../shared/data] [--out docs] [--limit N] [--render-only]
+    python scripts/make_results.py [--data ../shared/data] [--out DIR | --update-docs] [--limit N] [--render-only]
+
+It writes to ``out/results`` (ignored by git) unless ``--update-docs`` asks it to overwrite
+the committed ``docs/results.md`` and ``docs/results/`` (or ``--out`` names a folder).
 
 What it runs (in-process, one thread, seed 0, default :class:`~vpp_service.vpp.VPPConfig`
 = the paper's random per-pixel 3x3 patches, alpha 0.4, splatting, FGD occlusion handling):
@@ -41,6 +44,8 @@ from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
+#: Where the results go unless ``--update-docs`` (not committed: ``out/`` is ignored by git).
+DEFAULT_OUT = REPO / "out" / "results"
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
@@ -688,12 +693,21 @@ def main(argv: list[str] | None = None) -> int:
         default=REPO.parent / "shared" / "data",
         help="folder holding the dataset folders (default ../shared/data)",
     )
-    ap.add_argument("--out", type=Path, default=REPO / "docs", help="docs folder (default docs)")
+    ap.add_argument(
+        "--out", type=Path, help="output folder (default out/results, not committed; docs with --update-docs)"
+    )
+    ap.add_argument(
+        "--update-docs", action="store_true", help="overwrite the committed docs/results.md and docs/results/"
+    )
     ap.add_argument("--limit", type=int, help="first N scenes per dataset only (quick check)")
     ap.add_argument(
         "--render-only", action="store_true", help="rebuild results.md and the plot from <out>/results/results.json"
     )
     a = ap.parse_args(argv)
+    if a.out is None:
+        a.out = REPO / "docs" if a.update_docs else DEFAULT_OUT
+    elif a.update_docs:
+        ap.error("--out and --update-docs: give one of them")
     if a.limit is not None and a.limit < 1:
         ap.error(f"--limit: must be >= 1, got {a.limit}")
     if a.render_only:

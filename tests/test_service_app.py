@@ -156,3 +156,34 @@ def test_stop_while_waiting_for_the_router(tmp_path, zenoh_endpoint):
     summary = run_service(validate_config(data), stop, None)
     assert time.monotonic() - t0 < 5.0
     assert summary["counters"]["processed"] == 0 and summary["zenoh"] == {"routers": 0, "peers": 0}
+
+
+def test_summary_lines_in_a_log_only_when_something_changed(tmp_path):
+    """Not a terminal (a journal, a file): an idle service does not repeat its summary every period."""
+    import io
+    import threading
+
+    from helpers.zenoh_loopback import free_port
+    from vpp_service.service.app import run_service
+
+    data = {
+        "service": {"out": str(tmp_path), "summary_period_s": 0.05},
+        "zenoh": {"listen": [f"tcp/127.0.0.1:{free_port()}"]},
+        "source": {"type": "zenoh"},  # nobody publishes: idle
+        "matcher": {"name": "bm", "max_disparity": 32},
+        "sinks": [],
+    }
+    stream, stop = io.StringIO(), threading.Event()
+
+    def stop_later() -> None:  # 1.5 s (~30 summary periods) after the service has started
+        while "started" not in stream.getvalue() and not stop.wait(0.05):
+            pass
+        stop.wait(1.5)
+        stop.set()
+
+    threading.Thread(target=stop_later, daemon=True).start()
+    run_service(validate_config(data), stop, stream, banner="started")
+    lines = stream.getvalue().splitlines()
+    assert lines[0] == "started"
+    assert len(lines) == 3, lines  # banner, one periodic line (first report), the final line; ~30 periods passed
+    assert lines[1].startswith("0.0 fps") and lines[1] == lines[2]

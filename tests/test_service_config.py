@@ -127,6 +127,7 @@ def test_file_config_and_cli_overrides(tmp_path):
         zenoh_connect=None,
         sink=["zenoh", "rerun"],
         rerun_save=None,
+        input_policy=None,
     )
     cfg = validate_config(overrides_from_args(read_toml(p), args))
     assert (cfg.service.rig, cfg.service.max_frames, cfg.service.summary) == ("b", 3, False)

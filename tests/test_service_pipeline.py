@@ -297,3 +297,20 @@ def test_block_end_to_end_through_zenoh_loses_nothing(zenoh_endpoint):
             pipe.stop(2.0)
         assert [r.frame.seq for r in sink.results] == list(range(n))
         assert pipe.status()["counters"]["dropped"] == 0
+
+
+def test_fps_is_measured_over_a_recent_window(monkeypatch):
+    """Fps falls to 0 once frames stop coming (not processed / uptime, which only decays)."""
+    from vpp_service.service import pipeline as pipeline_module
+
+    monkeypatch.setattr(pipeline_module, "FPS_WINDOW_S", 0.5)
+    sink = CollectSink()
+    pipe = Pipeline(sim_source(10), lambda f: FusionResult(f, np.zeros(f.shape, np.float32)), [sink])
+    pipe.start()
+    assert pipe.wait(20)
+    assert pipe.status()["fps"] > 0
+    time.sleep(0.6)
+    st = pipe.status()
+    assert st["counters"]["processed"] > 0 and st["uptime_s"] > 0
+    assert st["fps"] == 0.0
+    pipe.stop(2.0)

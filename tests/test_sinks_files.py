@@ -96,6 +96,28 @@ def test_painted_pngs(tmp_path, result):
         assert np.array_equal(bgr[..., ::-1], img)
 
 
+@pytest.mark.parametrize("top", [0.0, 400.0])
+def test_preview_png_is_colour_mapped_rgb(tmp_path, result, top):
+    """The preview is an 8-bit RGB PNG an image viewer shows: turbo over [0, top] (or the frame's range)."""
+    from vpp_service.sinks.colorize import colorize_disparity
+
+    sink = make_sink(tmp_path, formats=["png16"], preview=True, preview_max_disparity=top)
+    sink.write(result)
+    bgr = cv2.imread(str(tmp_path / "rigA_000042_disparity_preview.png"), cv2.IMREAD_UNCHANGED)
+    assert bgr.dtype == np.uint8 and bgr.shape == (H, W, 3)
+    rgb = bgr[..., ::-1]
+    expected = colorize_disparity(result.disparity, 0.0, top) if top else colorize_disparity(result.disparity)
+    assert np.array_equal(rgb, expected)
+    valid = np.isfinite(result.disparity)
+    assert np.all(rgb[~valid] == 0) and rgb[valid].max(axis=-1).min() > 0  # invalid black, valid coloured
+    assert sink.stats()["files"] == 2
+
+
+def test_preview_bad_range():
+    with pytest.raises(SettingsError, match="preview_max_disparity"):
+        build_sink("files", {"dir": "x", "preview": True, "preview_max_disparity": -1.0})
+
+
 def test_missing_optional_data_is_skipped(tmp_path, result):
     result.left_vpp = result.right_vpp = result.depth = None
     sink = make_sink(tmp_path, formats=["npy"], painted=True, depth=True)

@@ -20,6 +20,7 @@ from __future__ import annotations
 from abc import ABC
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 from vpp_service.registry import Registry
@@ -110,6 +111,28 @@ class Plugin(ABC):
             The parsed ``Options`` instance.
         section : str
             Config section of this plugin (prefix of error messages).
+        """
+
+    @classmethod  # noqa: B027 - optional hook, a no-op by default
+    def check_paths(cls, options: Any, section: str, created_dirs: frozenset[Path] = frozenset()) -> None:
+        """Check the files and folders the options name; nothing by default.
+
+        Runs for ``vpp-service run --check`` and before the service opens anything
+        (validation itself never touches the file system).
+
+        Parameters
+        ----------
+        options : Any
+            The parsed ``Options`` instance.
+        section : str
+            Config section of this plugin (prefix of error messages).
+        created_dirs : frozenset of Path
+            Folders the service creates before it opens the plugins (they count as existing).
+
+        Raises
+        ------
+        OSError
+            A path is missing or of the wrong kind; the message names ``section.key``.
         """
 
     def __init__(self, options: Any, context: PluginContext) -> None:

@@ -2,7 +2,8 @@
 
 Each sub-command lives in its own module of this package and exposes
 ``add_parser(subparsers)`` (which sets ``func`` on its parser); this module only
-dispatches. :func:`main` first sets the OpenMP wait policy
+dispatches and maps failures to exit statuses (:data:`EXIT_STARTUP`, :data:`EXIT_FAILURE`).
+:func:`main` first sets the OpenMP wait policy
 (:func:`vpp_service.threads.configure_openmp`): it must run before any kernel
 module is imported, so neither this module nor the sub-command modules import
 kernels at module level.
@@ -14,11 +15,37 @@ import argparse
 import importlib
 import logging
 import sys
+from typing import Any
 
+from vpp_service import __version__
+from vpp_service.cli.help import HelpFormatter, plain
+from vpp_service.errors import StartupError
 from vpp_service.threads import configure_openmp
 
 #: Sub-command modules, in the order ``--help`` lists them.
 COMMANDS = ("run", "publish", "status", "view", "eval", "demo")
+
+#: Exit status of a configuration or start-up error (bad flag, bad config key, missing path, Zenoh cannot open).
+EXIT_STARTUP = 2
+#: Exit status of a failure after start-up (nobody answered or subscribed, an unexpected error while running).
+EXIT_FAILURE = 1
+
+EPILOG = f"""exit status: 0 done; {EXIT_STARTUP} configuration or start-up error (one line on stderr);
+{EXIT_FAILURE} failure while running (e.g. no service answered, no subscriber); 130 interrupted.
+Every command meets the others on tcp/127.0.0.1:7447 unless told otherwise ($VPP_SERVICE_ENDPOINT)."""
+
+
+class _SubParsers(argparse._SubParsersAction):  # type: ignore[type-arg]
+    """Adds ``-v/--verbose`` to every sub-command (so it works after it too); plain help with defaults."""
+
+    def add_parser(self, name: str, **kwargs: Any) -> argparse.ArgumentParser:
+        kwargs["description"] = plain(kwargs.get("description"))  # docstrings -> plain text, defaults shown
+        kwargs["formatter_class"] = HelpFormatter
+        parser = super().add_parser(name, **kwargs)
+        parser.add_argument(
+            "-v", "--verbose", action="count", default=argparse.SUPPRESS, help="more log output (-vv for debug)"
+        )
+        return parser
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -26,8 +53,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="vpp-service",
         description="Virtual Pattern Projection: stereo + sparse depth fusion service.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    parser.register("action", "parsers", _SubParsers)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         try:
@@ -49,14 +80,24 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     if not getattr(args, "func", None):
         parser.print_help()
-        return 2
+        return EXIT_STARTUP
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         return 130
-    except (ValueError, FileNotFoundError) as exc:
-        print(f"vpp-service {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+    except (ValueError, OSError, StartupError) as exc:  # config, paths, endpoints: before anything ran
+        print(f"vpp-service {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_STARTUP
+    except Exception as exc:
+        logging.getLogger(__name__).debug("traceback", exc_info=True)
+        print(f"vpp-service {args.command}: failed: {type(exc).__name__}: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_FAILURE
+
+
+def _one_line(exc: BaseException) -> str:
+    """The first line of ``exc``'s message (its type when it has none)."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
 
 
 if __name__ == "__main__":  # pragma: no cover

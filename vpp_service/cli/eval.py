@@ -95,13 +95,25 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     )
     g.add_argument("--seed", type=int, default=0, help="seed of the points and of the VPP pattern")
     g = p.add_argument_group("VPP")
-    g.add_argument("--pattern", choices=("random", "histogram"))
+    g.add_argument(
+        "--pattern",
+        choices=("random", "histogram"),
+        help="pattern values: random bytes, or the value farthest from the search windows' histogram (default random)",
+    )
     g.add_argument("--patch", type=int, help="patch side (odd)")
     g.add_argument("--uniform-patch", action="store_true", default=None, help="one value per patch")
     g.add_argument("--alpha", type=float, help="blending weight in [0, 1]")
     g.add_argument("--no-splat", dest="splat", action="store_false", default=None, help="no sub-pixel splatting")
-    g.add_argument("--occlusion", choices=("fgd", "no", "bkgd", "off"))
-    g.add_argument("--adaptive-patch", choices=("distance", "bilateral"))
+    g.add_argument(
+        "--occlusion",
+        choices=("fgd", "no", "bkgd", "off"),
+        help="occlusion strategy; off runs no detection (default fgd)",
+    )
+    g.add_argument(
+        "--adaptive-patch",
+        choices=("distance", "bilateral"),
+        help="patch grows with disparity, or a bilateral mask inside it (default none)",
+    )
     g = p.add_argument_group("output")
     g.add_argument("--json", type=Path, help="write results + summary as JSON")
     g.add_argument("--markdown", type=Path, help="write the Markdown report")

@@ -1,21 +1,29 @@
-"""``vpp-service publish``: play a dataset or the simulator onto Zenoh like a camera rig.
+"""vpp-service publish: play a dataset or the simulator onto Zenoh like a camera rig.
 
 Frames (with sparse depth and, as an extension, ground truth) are sent as wire
-format v1 on ``<prefix>/<rig>/in/frame`` or, with ``--separate-topics``, on
-``in/left``, ``in/right`` and ``in/depth``. Publishing uses
-``CongestionControl.BLOCK`` so large frames are never silently dropped.
+format v1 on <prefix>/<rig>/in/frame or, with --separate-topics, on
+in/left, in/right and in/depth. It connects to the same default endpoint that
+vpp-service run listens on, waits for a matching subscriber (a service started
+with --source zenoh) and exits 1 with a message when none appears, unless
+--send-anyway. Publishing uses reliable CongestionControl.BLOCK, so frames are
+never silently dropped on the way.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import logging
 import signal
 import sys
 import threading
 import time
 from collections.abc import Iterable
 from typing import TYPE_CHECKING
+
+from vpp_service.cli.help import HelpFormatter, plain
+
+log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:  # imported where they are used: the sub-command modules load no kernel at import time
     import zenoh
@@ -27,11 +35,13 @@ if TYPE_CHECKING:  # imported where they are used: the sub-command modules load 
 
 def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register the ``publish`` sub-command."""
+    from vpp_service.service.config import ENDPOINT_ENV, default_endpoint
+
     p = subparsers.add_parser(
         "publish",
         help="publish frames onto Zenoh as a camera rig would",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=plain(__doc__),
+        formatter_class=HelpFormatter,
     )
     p.add_argument("--dataset", help="dataset name or 'auto' (default: the simulator)")
     p.add_argument("--root", help="dataset folder (with --dataset)")
@@ -48,13 +58,24 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--rate", type=float, default=10.0, help="frames per second (0 = as fast as possible)")
     p.add_argument("--count", type=int, default=0, help="frames to send (0 = until interrupted / end)")
     p.add_argument("--loop", action="store_true", help="loop over the dataset")
-    p.add_argument("--rig", default="rig0")
-    p.add_argument("--prefix", default="vpp")
-    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="connect endpoint")
-    p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT", help="listen endpoint")
+    p.add_argument("--rig", default="rig0", help="rig name: frames go to <prefix>/<rig>/in/...")
+    p.add_argument("--prefix", default="vpp", help="Zenoh key prefix")
+    p.add_argument(
+        "--connect",
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
+        help=f"connect endpoint (repeatable; default {default_endpoint()}, or ${ENDPOINT_ENV}, unless --listen)",
+    )
+    p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT", help="listen endpoint (repeatable)")
     p.add_argument("--multicast-scouting", action="store_true", help="enable multicast discovery")
     p.add_argument("--enc", default="raw", choices=["raw", "png", "jpeg"], help="image encoding")
-    p.add_argument("--depth-kind", default="auto", choices=["auto", "points", "disparity_points", "map"])
+    p.add_argument(
+        "--depth-kind",
+        default="auto",
+        choices=["auto", "points", "disparity_points", "map"],
+        help="how sparse depth is sent: 3-D points, (u, v, disparity) points, or a sparse map",
+    )
     p.add_argument("--no-depth", action="store_true", help="send frames without sparse depth")
     p.add_argument("--no-gt", action="store_true", help="do not attach ground truth")
     p.add_argument("--separate-topics", action="store_true", help="publish in/left, in/right, in/depth")
@@ -63,9 +84,14 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         type=float,
         default=5.0,
         metavar="S",
-        help="wait up to S seconds for a matching subscriber before sending (0 = don't)",
+        help="wait up to S seconds for a matching subscriber before sending (0 = don't wait)",
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--send-anyway",
+        action="store_true",
+        help="send even when no subscriber matched within --wait-subscriber (else exit 1)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the simulated depth sensor")
     p.add_argument(
         "--shm-pool-mb",
         type=int,
@@ -84,13 +110,16 @@ def _has_subscriber(publisher: zenoh.Publisher) -> bool:
     return status.matching if isinstance(status, zenoh.MatchingStatus) else bool(status)
 
 
-def _wait_for_subscribers(pubs: Iterable[zenoh.Publisher], seconds: float, stop: threading.Event) -> None:
-    """Wait up to ``seconds`` (or until ``stop``) for a subscriber on every publisher."""
+def _wait_for_subscribers(pubs: Iterable[zenoh.Publisher], seconds: float, stop: threading.Event) -> bool:
+    """Wait up to ``seconds`` (or until ``stop``) for a subscriber on every publisher; True when all have one."""
     deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline and not stop.is_set():
+    while not stop.is_set():
         if all(_has_subscriber(pub) for pub in pubs):
-            return
+            return True
+        if time.monotonic() >= deadline:
+            return False
         time.sleep(0.02)
+    return False
 
 
 def _send(frame: StereoFrame, args: argparse.Namespace, pubs: dict[str, zenoh.Publisher], putter: ShmPutter) -> None:
@@ -162,7 +191,7 @@ def main(args: argparse.Namespace) -> int:
     import zenoh
 
     from vpp_service.service.app import zenoh_session
-    from vpp_service.service.config import ZenohSection
+    from vpp_service.service.config import ZenohSection, default_endpoint
     from vpp_service.sources.base import Pacer
     from vpp_service.transport import wire
     from vpp_service.transport.shm import ShmPutter
@@ -172,8 +201,9 @@ def main(args: argparse.Namespace) -> int:
     if args.rate < 0 or args.count < 0:
         raise ValueError("--rate and --count must be >= 0")
     putter = ShmPutter(args.shm_pool_mb)  # validates the pool size before anything starts
+    connect = list(args.connect) or ([] if args.listen else [default_endpoint()])
     zsec = ZenohSection(
-        mode="peer", listen=list(args.listen), connect=list(args.connect), multicast_scouting=args.multicast_scouting
+        mode="peer", listen=list(args.listen), connect=connect, multicast_scouting=args.multicast_scouting
     )
     src = _source(args)
     src.open()
@@ -200,8 +230,21 @@ def main(args: argparse.Namespace) -> int:
             )
             for p in parts
         }
-        if args.wait_subscriber > 0:
-            _wait_for_subscribers(pubs.values(), args.wait_subscriber, stop)
+        if args.wait_subscriber > 0 and not _wait_for_subscribers(pubs.values(), args.wait_subscriber, stop):
+            if stop.is_set():  # interrupted while waiting
+                src.stop(2.0)
+                return 130
+            if not args.send_anyway:
+                src.stop(2.0)
+                where = ", ".join(connect + list(args.listen))
+                keys = ", ".join(str(pub.key_expr) for pub in pubs.values())
+                print(
+                    f"vpp-service publish: no subscriber on {keys} within {args.wait_subscriber:g} s "
+                    f"(via {where}); start `vpp-service run --source zenoh` there, or pass --send-anyway",
+                    file=sys.stderr,
+                )
+                return 1
+            log.warning("no subscriber on %s; sending anyway", [str(p.key_expr) for p in pubs.values()])
         src.start(emit)
         pacer = Pacer(args.rate)
         t0 = time.monotonic()

@@ -1,12 +1,14 @@
-"""``vpp-service run``: run the streaming service.
+"""vpp-service run: run the streaming service.
 
 With no arguments it runs the embedded default (:data:`vpp_service.service.config.DEFAULT_CONFIG`):
 the simulated Motorcycle rig with a uniform 5 % sensor, VPP + SGBM, publishing on
-a local Zenoh peer (``tcp/127.0.0.1:7447``, multicast scouting off; set
-``[zenoh] multicast_scouting = true`` to enable discovery) and saving
-``vpp-run/vpp.rrd``. Stops on SIGINT/SIGTERM (clean, bounded shutdown, exit 0)
-or after ``--max-frames``; leaves ``<out>/summary.json``. Exits 1 when the source
-died on an error (a runtime failure).
+a local Zenoh peer (``tcp/127.0.0.1:7447``, the endpoint publish and status use too;
+multicast scouting off) and saving ``vpp-run/vpp.rrd``. With ``--source zenoh`` it
+takes frames from ``vpp-service publish`` or a camera instead, losslessly by default
+(``--input-policy block``; a live camera wants ``latest``). It prints one line when
+it has started (endpoint, topics, sinks) and one when it stops (where the files went).
+Stops on SIGINT/SIGTERM (clean, bounded shutdown, exit 0) or after ``--max-frames``;
+exits 1 when the source died on an error (a runtime failure).
 """
 
 from __future__ import annotations
@@ -18,7 +20,12 @@ import signal
 import sys
 import threading
 from types import FrameType
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+from vpp_service.cli.help import HelpFormatter, plain
+
+if TYPE_CHECKING:
+    from vpp_service.service.config import ServiceConfig
 
 
 def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -26,15 +33,30 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p = subparsers.add_parser(
         "run",
         help="run the streaming fusion service",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=plain(__doc__),
+        formatter_class=HelpFormatter,
     )
     p.add_argument("--config", help="TOML config file (default: the embedded default)")
-    p.add_argument("--rig", help="rig name (service.rig)")
-    p.add_argument("--source", help="source type: sim, files, zenoh, ros2 (its options come from the config)")
+    p.add_argument("--rig", help="rig name (service.rig; default: the config's, rig0)")
+    p.add_argument(
+        "--source",
+        help="source type: sim, files, zenoh, ros2, rosbag2 (options from the config; default: the config's, sim)",
+    )
     p.add_argument("--sink", action="append", help="sink type (repeatable; replaces the config's sinks)")
-    p.add_argument("--matcher", help="matcher name: sgbm, bm, census-sgm")
-    p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", help="listen endpoint (repeatable)")
+    p.add_argument("--matcher", help="matcher name: sgbm, bm, census-sgm (default: the config's, sgbm)")
+    p.add_argument(
+        "--input-policy",
+        choices=["latest", "block"],
+        help="input queue when full: drop the oldest (live camera) or wait (lossless replay); "
+        "default: the config's, and block with --source zenoh",
+    )
+    p.add_argument(
+        "--zenoh-listen",
+        action="append",
+        metavar="ENDPOINT",
+        help="listen endpoint (repeatable; default tcp/127.0.0.1:7447, the one publish and status use, "
+        "or $VPP_SERVICE_ENDPOINT)",
+    )
     p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", help="connect endpoint (repeatable)")
     viewer = p.add_mutually_exclusive_group()
     viewer.add_argument("--rerun-save", metavar="PATH", help="save a Rerun .rrd here (adds/replaces the rerun sink)")
@@ -58,10 +80,16 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--rosbag", metavar="PATH", help="play a rosbag2 bag (.db3/.mcap) as the source (type rosbag2)")
     p.add_argument("--ros-namespace", metavar="NS", help="ROS 2 namespace of the ros2 source and sinks (e.g. /stereo)")
     p.add_argument("--ros-domain", type=int, metavar="ID", help="ROS 2 domain id of the ros2 source and sinks")
-    p.add_argument("--max-frames", type=int, help="stop after N processed frames")
-    p.add_argument("--out", help="output folder (summary.json, default .rrd)")
+    p.add_argument(
+        "--max-frames", type=int, help="stop after N processed frames (default: the config's, 0 = run until stopped)"
+    )
+    p.add_argument("--out", help="output folder for summary.json and the default .rrd (default: the config's, vpp-run)")
     p.add_argument("--no-summary", action="store_true", help="no live summary line on stderr")
-    p.add_argument("--check", action="store_true", help="validate the configuration, print it as JSON, exit")
+    p.add_argument(
+        "--check",
+        action="store_true",
+        help="validate the configuration and the paths it names, print it as JSON, exit (2 on an error)",
+    )
     p.set_defaults(func=main)
 
 
@@ -94,6 +122,10 @@ def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[
         svc["summary"] = False
     if args.source and d.get("source", {}).get("type") != args.source:
         d["source"] = {"type": args.source}
+        if args.source == "zenoh" and "input_policy" not in d.get("queues", {}):
+            d.setdefault("queues", {})["input_policy"] = "block"  # a replay into the service loses nothing
+    if args.input_policy:
+        d.setdefault("queues", {})["input_policy"] = args.input_policy
     if args.matcher and d.get("matcher", {}).get("name") != args.matcher:
         d["matcher"] = {"name": args.matcher}
     zen = d.setdefault("zenoh", {})
@@ -149,10 +181,11 @@ def _ros_overrides(d: dict[str, Any], args: argparse.Namespace) -> None:
 def main(args: argparse.Namespace) -> int:
     """Validate the whole configuration, then run until done or signalled."""
     from vpp_service.service.app import run_service
-    from vpp_service.service.config import DEFAULT_CONFIG, read_toml, validate_config
+    from vpp_service.service.config import DEFAULT_CONFIG, check_paths, read_toml, validate_config
 
     data = read_toml(args.config) if args.config else copy.deepcopy(DEFAULT_CONFIG)
     cfg = validate_config(overrides_from_args(data, args))
+    check_paths(cfg)
     if args.check:
         print(json.dumps(cfg.to_dict(), indent=2))
         return 0
@@ -163,10 +196,11 @@ def main(args: argparse.Namespace) -> int:
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        status = run_service(cfg, stop, sys.stderr)
+        status = run_service(cfg, stop, sys.stderr, banner=startup_line(cfg))
     finally:
         for s, h in old.items():
             signal.signal(s, h)
+    print(closing_line(cfg, status["counters"]), file=sys.stderr)
     print(
         json.dumps(
             {"counters": status["counters"], "out": cfg.service.out, "shutdown_s": round(status["shutdown_s"], 3)}
@@ -176,3 +210,39 @@ def main(args: argparse.Namespace) -> int:
         print(f"vpp-service run: the source failed: {status['source_error']}", file=sys.stderr)
         return 1
     return 0
+
+
+def _sink_text(spec_name: str, raw: dict[str, Any]) -> str:
+    """``name`` plus the file or folder it writes, when it names one."""
+    where = raw.get("path") if raw.get("mode", "save") == "save" else raw.get("mode")
+    where = where or raw.get("dir")
+    return f"{spec_name} ({where})" if where else spec_name
+
+
+def startup_line(cfg: ServiceConfig) -> str:
+    """The line ``run`` prints once started: rig, Zenoh endpoints, input and output topics, sinks."""
+    from vpp_service.transport.wire import topic
+
+    s, z = cfg.service, cfg.zenoh
+    if z.enabled:
+        ends = [f"listen {e}" for e in z.listen] + [f"connect {e}" for e in z.connect]
+        zenoh_s = f"zenoh {z.mode} {', '.join(ends) or 'no endpoints'}"
+    else:
+        zenoh_s = "zenoh off"
+    src = f"in {topic(s.prefix, s.rig, 'in/*')}" if cfg.source.name == "zenoh" else f"source {cfg.source.name}"
+    sinks = ", ".join(_sink_text(sp.name, sp.raw) for sp in cfg.sinks) or "none"
+    outputs = f" | out {topic(s.prefix, s.rig, 'out/*')}" if any(sp.name == "zenoh" for sp in cfg.sinks) else ""
+    return (
+        f"vpp-service run: rig {s.rig} | {zenoh_s} | {src}{outputs} | sinks {sinks} | "
+        f"status {topic(s.prefix, s.rig, '@status')} | stop with Ctrl-C"
+    )
+
+
+def closing_line(cfg: ServiceConfig, counters: dict[str, int]) -> str:
+    """The line ``run`` prints when it stops: frames processed, where the summary and the files went."""
+    from pathlib import Path
+
+    files = [str(Path(cfg.service.out) / "summary.json")]
+    files += [str(sp.raw["path"]) for sp in cfg.sinks if sp.name == "rerun" and sp.raw.get("mode", "save") == "save"]
+    files += [str(sp.raw["dir"]) for sp in cfg.sinks if "dir" in sp.raw]
+    return f"vpp-service run: stopped after {counters.get('processed', 0)} frames; wrote {', '.join(files)}"

@@ -1,23 +1,38 @@
-"""``vpp-service status``: query a running service's ``@status`` and print the JSON reply."""
+"""vpp-service status: query running services' @status and print the replies as JSON.
+
+The output maps each service's own key (<prefix>/<rig>/@status) to its status,
+so --rig '*' lists every rig that answered, one entry each. When no service
+answers within --timeout it says so on stderr and exits 1.
+"""
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from typing import Any
+
+from vpp_service.cli.help import HelpFormatter, plain
 
 
 def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register the ``status`` sub-command."""
-    p = subparsers.add_parser("status", help="query a running service's @status (JSON)", description=__doc__)
+    from vpp_service.service.config import ENDPOINT_ENV, default_endpoint
+
+    p = subparsers.add_parser(
+        "status",
+        help="query running services' @status (JSON)",
+        description=plain(__doc__),
+        formatter_class=HelpFormatter,
+    )
     p.add_argument("--rig", default="*", help="rig name ('*' = every rig)")
-    p.add_argument("--prefix", default="vpp")
+    p.add_argument("--prefix", default="vpp", help="Zenoh key prefix of the service")
     p.add_argument(
         "--connect",
         action="append",
         default=[],
         metavar="ENDPOINT",
-        help="endpoint of the service (default tcp/127.0.0.1:7447)",
+        help=f"endpoint of the service (repeatable; default {default_endpoint()}, or ${ENDPOINT_ENV})",
     )
     p.add_argument("--multicast-scouting", action="store_true", help="enable multicast discovery")
     p.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for replies")
@@ -27,7 +42,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
 def query_status(
     connect: list[str], prefix: str = "vpp", rig: str = "*", timeout: float = 3.0, multicast_scouting: bool = False
 ) -> dict[str, Any]:
-    """Query ``<prefix>/<rig>/@status``; returns ``{key: reply JSON}`` (each reply a decoded JSON object).
+    """Query ``<prefix>/<rig>/@status``; returns ``{service key: reply JSON}``, one entry per answering rig.
 
     Raises
     ------
@@ -38,7 +53,7 @@ def query_status(
     from vpp_service.service.config import ZenohSection
 
     if not timeout > 0:
-        raise ValueError(f"timeout must be > 0, got {timeout}")
+        raise ValueError(f"--timeout: must be > 0, got {timeout}")
     zsec = ZenohSection(mode="peer", listen=[], connect=list(connect), multicast_scouting=multicast_scouting)
     out: dict[str, Any] = {}
     with zenoh_session(zsec) as session:
@@ -52,9 +67,17 @@ def query_status(
 
 
 def main(args: argparse.Namespace) -> int:
-    """Print the replies as JSON; exit 1 when no service answered."""
-    replies = query_status(
-        args.connect or ["tcp/127.0.0.1:7447"], args.prefix, args.rig, args.timeout, args.multicast_scouting
-    )
+    """Print the replies as JSON; exit 1 with a message when no service answered."""
+    from vpp_service.service.config import default_endpoint
+
+    connect = args.connect or [default_endpoint()]
+    replies = query_status(connect, args.prefix, args.rig, args.timeout, args.multicast_scouting)
+    if not replies:
+        print(
+            f"vpp-service status: no service answered on {args.prefix}/{args.rig}/@status "
+            f"within {args.timeout:g} s (connected to {', '.join(connect)})",
+            file=sys.stderr,
+        )
+        return 1
     print(json.dumps(replies, indent=2))
-    return 0 if replies else 1
+    return 0

@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import re
 import sys
 import threading
 import time
@@ -27,6 +28,7 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
+from vpp_service.errors import StartupError
 from vpp_service.fusion import Fusion
 from vpp_service.service.allocator import reuse_freed_memory
 from vpp_service.service.config import ServiceConfig, ZenohSection
@@ -68,16 +70,30 @@ def zenoh_config(section: ZenohSection) -> zenoh.Config:
     return conf
 
 
+def zenoh_message(exc: BaseException) -> str:
+    """Zenoh's error text without its Rust source locations (`` at /path/file.rs:61.``)."""
+    return re.sub(r"\s+at \S+\.rs:\d+\.?", "", str(exc)).strip() or type(exc).__name__
+
+
 @contextlib.contextmanager
 def zenoh_session(section: ZenohSection) -> Iterator[zenoh.Session]:
     """``with zenoh_session(section) as session``: a session configured by ``section``, ``enabled`` or not.
 
     For the tools that always talk to Zenoh (``publish``, ``status``); the service uses :func:`open_session`.
+
+    Raises
+    ------
+    StartupError
+        Zenoh could not open the session (an endpoint in use or malformed, ...), in one line.
     """
     import zenoh
 
     zenoh.init_log_from_env_or("error")
-    with zenoh.open(zenoh_config(section)) as session:
+    try:
+        session = zenoh.open(zenoh_config(section))
+    except zenoh.ZError as exc:
+        raise StartupError(f"zenoh: {zenoh_message(exc)}") from None
+    with session:
         yield session
 
 
@@ -147,7 +163,10 @@ def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> 
 
 
 def run_service(
-    cfg: ServiceConfig, stop: threading.Event | None = None, stream: TextIO | None = sys.stderr
+    cfg: ServiceConfig,
+    stop: threading.Event | None = None,
+    stream: TextIO | None = sys.stderr,
+    banner: str | None = None,
 ) -> ServiceSummary:
     """Run until done or ``stop`` is set; return the final status (also in ``<out>/summary.json``).
 
@@ -158,7 +177,10 @@ def run_service(
     stop : threading.Event or None
         Set it to stop (signal handlers do).
     stream : text stream or None
-        Where the live summary line goes (None = nowhere).
+        Where the live summary goes (None = nowhere): on a terminal one line rewritten every
+        ``summary_period_s``; otherwise a new line only when the counters changed.
+    banner : str or None
+        Printed on ``stream`` once everything has started.
     """
     stop = stop or threading.Event()
     s = cfg.service
@@ -176,6 +198,10 @@ def run_service(
         linked: bool | None = None
         if session is not None:
             log.info("zenoh session %s listening on %s", session.info.zid(), list(cfg.zenoh.listen))
+        if banner and stream is not None:
+            print(banner, file=stream, flush=True)
+        tty = bool(getattr(stream, "isatty", lambda: False)())
+        last_counters: dict[str, int] | None = None
         try:
             next_report = time.monotonic() + s.summary_period_s
             while not stop.is_set() and not pipe.done.is_set():
@@ -185,14 +211,16 @@ def run_service(
                     linked = _log_link(link, linked, cfg.zenoh.connect)
                 if time.monotonic() >= next_report:
                     next_report += s.summary_period_s
-                    if s.summary and stream is not None:
-                        tty = getattr(stream, "isatty", lambda: False)()
+                    counters = pipe.status()["counters"]
+                    # a terminal gets a live line; a log (journal, file) only a line when something changed
+                    if s.summary and stream is not None and (tty or counters != last_counters):
                         print(
                             ("\r" if tty else "") + pipe.summary_line(),
                             end="" if tty else "\n",
                             file=stream,
                             flush=True,
                         )
+                    last_counters = counters
                     _write_json(summary_path, {**pipe.status(), "summary_write_errors": write_errors[0]}, write_errors)
         finally:
             t0 = time.monotonic()
@@ -206,11 +234,7 @@ def run_service(
             if not _write_json(summary_path, status, write_errors):
                 status["summary_write_errors"] = write_errors[0]
             if s.summary and stream is not None:
-                print(
-                    ("\r" if getattr(stream, "isatty", lambda: False)() else "") + pipe.summary_line(),
-                    file=stream,
-                    flush=True,
-                )
+                print(("\r" if tty else "") + pipe.summary_line(), file=stream, flush=True)
     return status
 
 
@@ -262,4 +286,12 @@ def _not_started(cfg: ServiceConfig) -> ServiceSummary:
     }
 
 
-__all__ = ["ServiceSummary", "build_pipeline", "open_session", "run_service", "zenoh_config", "zenoh_session"]
+__all__ = [
+    "ServiceSummary",
+    "build_pipeline",
+    "open_session",
+    "run_service",
+    "zenoh_config",
+    "zenoh_message",
+    "zenoh_session",
+]

@@ -21,6 +21,7 @@ hook). Errors are :class:`~vpp_service.settings.SettingsError` naming the key
 from __future__ import annotations
 
 import copy
+import os
 import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -40,6 +41,19 @@ P = TypeVar("P", bound=Plugin)
 
 #: ``parse(name, raw_options, section)``: a plugin's parsed ``Options`` (raises SettingsError).
 ParseOptions = Callable[[str, Mapping[str, Any], str], object]
+
+#: The endpoint every command meets on unless told otherwise: ``run`` listens on it, ``publish`` and
+#: ``status`` connect to it.
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+
+#: Environment variable that replaces :data:`DEFAULT_ENDPOINT` for every command.
+ENDPOINT_ENV = "VPP_SERVICE_ENDPOINT"
+
+
+def default_endpoint() -> str:
+    """The shared default endpoint: ``$VPP_SERVICE_ENDPOINT`` when set, else :data:`DEFAULT_ENDPOINT`."""
+    return os.environ.get(ENDPOINT_ENV, "").strip() or DEFAULT_ENDPOINT
+
 
 #: Top-level tables a config may contain.
 SECTIONS = ("service", "zenoh", "source", "vpp", "matcher", "queues", "sinks")
@@ -116,7 +130,7 @@ class ZenohSection:
     mode : {"peer", "client", "router"}
         Zenoh mode.
     listen, connect : list of str
-        Endpoints, e.g. ``"tcp/127.0.0.1:7447"``.
+        Endpoints, e.g. ``"tcp/127.0.0.1:7447"``; ``listen`` defaults to :func:`default_endpoint`.
     multicast_scouting : bool
         Multicast peer discovery; off by default (explicit endpoints only).
     config_file : str
@@ -125,7 +139,7 @@ class ZenohSection:
 
     enabled: bool = True
     mode: Literal["peer", "client", "router"] = "peer"
-    listen: list[str] = field(default_factory=lambda: ["tcp/127.0.0.1:7447"])
+    listen: list[str] = field(default_factory=lambda: [default_endpoint()])
     connect: list[str] = field(default_factory=list)
     multicast_scouting: bool = False
     config_file: str = ""
@@ -217,7 +231,7 @@ class ServiceConfig:
 #: VPP + SGBM, publishing on a local Zenoh peer and saving ``<out>/vpp.rrd``.
 DEFAULT_CONFIG: dict[str, Any] = {
     "service": {"rig": "rig0", "prefix": "vpp", "max_frames": 0, "out": "vpp-run"},
-    "zenoh": {"mode": "peer", "listen": ["tcp/127.0.0.1:7447"], "connect": [], "multicast_scouting": False},
+    "zenoh": {"mode": "peer", "connect": [], "multicast_scouting": False},  # listens on default_endpoint()
     "source": {
         "type": "sim",
         "scene": "motorcycle",
@@ -227,7 +241,7 @@ DEFAULT_CONFIG: dict[str, Any] = {
     },
     "vpp": {"enabled": True},
     "matcher": {"name": "sgbm", "max_disparity": 128},
-    "queues": {"input_size": 2, "input_policy": "latest", "output_size": 4, "output_policy": "latest"},
+    # no [queues]: the section's defaults (latest), which `run --source zenoh` turns into a lossless block
     "sinks": [
         {"type": "zenoh", "outputs": ["disparity", "depth"]},
         {"type": "rerun", "mode": "save", "path": "{out}/vpp.rrd"},
@@ -334,6 +348,26 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
     )
 
 
+def check_paths(cfg: ServiceConfig) -> None:
+    """Check the paths the configuration names (each plugin's ``check_paths``), before anything starts.
+
+    Raises
+    ------
+    OSError
+        A dataset root, output folder or recording folder is missing or not a folder; names the key.
+    """
+    from vpp_service.sinks import SINKS
+    from vpp_service.sources import SOURCES
+
+    out = Path(cfg.service.out).expanduser()
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"service.out: {str(out)!r} is not a folder")
+    made = frozenset({out.resolve()})  # the service creates it first
+    SOURCES.get(cfg.source.name).check_paths(cfg.source.options, "source", made)
+    for i, spec in enumerate(cfg.sinks):
+        SINKS.get(spec.name).check_paths(spec.options, f"sinks[{i}]", made)
+
+
 def read_toml(path: str | Path) -> dict[str, Any]:
     """Read a TOML config file.
 
@@ -378,12 +412,16 @@ def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | N
 
 __all__ = [
     "DEFAULT_CONFIG",
+    "DEFAULT_ENDPOINT",
+    "ENDPOINT_ENV",
     "SECTIONS",
     "PluginSpec",
     "QueuesSection",
     "ServiceConfig",
     "ServiceSection",
     "ZenohSection",
+    "check_paths",
+    "default_endpoint",
     "load_config",
     "merge",
     "read_toml",

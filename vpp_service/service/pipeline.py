@@ -73,6 +73,10 @@ class MetricsStatus(TypedDict):
     bad2_mean: float | None
 
 
+#: Seconds over which ``fps`` is measured (a recent window: it falls to 0 when frames stop coming).
+FPS_WINDOW_S = 5.0
+
+
 class PipelineStatus(TypedDict):
     """What :meth:`Pipeline.status` reports (JSON-ready; also served on ``@status``)."""
 
@@ -209,6 +213,7 @@ class Pipeline:
         self._started = 0.0
         self._last_metrics: dict[str, float] = {}
         self._bad2: deque[float] = deque(maxlen=timing_window)
+        self._done_at: deque[float] = deque(maxlen=10000)  # monotonic time of each processed frame (for fps)
         self._queryable: zenoh.Queryable[None] | None = None
         self._token: zenoh.LivelinessToken | None = None
         self._opened: list[Sink] = []
@@ -268,6 +273,7 @@ class Pipeline:
         if result.frame.sparse_disparity is None and result.frame.sensor_depth is None:
             self._inc("no_depth")
         self._inc("processed")
+        self._done_at.append(time.monotonic())
         if self.output.policy == "block":
             while not self.output.put(result, timeout=0.1):
                 if self._stop.is_set() or self.output.closed:
@@ -343,9 +349,12 @@ class Pipeline:
         self.source.start(self._emit, self._source_reject, on_finished=self.input.finish)
 
     def _on_query(self, query: zenoh.Query) -> None:
+        from vpp_service.transport.wire import topic
+
         # runs on a Zenoh thread: build a small JSON reply, never block
         try:
-            query.reply(query.key_expr, json.dumps(self.status()))
+            # the service's own key, not the query's: a wildcard query gets one entry per rig
+            query.reply(topic(self.prefix, self.rig, "@status"), json.dumps(self.status()))
         except Exception as exc:  # noqa: BLE001 - session closing; nothing may raise into Zenoh's thread
             log.debug("@status reply failed: %s", exc)
 
@@ -406,7 +415,7 @@ class Pipeline:
             "dropped": dropped,
             "source_error": None if self.source.error is None else repr(self.source.error),
             "zenoh": self.connectivity(),
-            "fps": counters["processed"] / elapsed if elapsed > 0 else 0.0,
+            "fps": self._recent_fps(elapsed),
             "queues": {
                 "input": {
                     "len": len(self.input),
@@ -456,6 +465,15 @@ class Pipeline:
             out[f"sink.{name}"] = n if isinstance(n, int) else 0
         return out
 
+    def _recent_fps(self, elapsed: float) -> float:
+        """Frames processed per second over the last :data:`FPS_WINDOW_S` (0 when input stopped that long ago)."""
+        span = min(FPS_WINDOW_S, elapsed)
+        if span <= 0:
+            return 0.0
+        cutoff = time.monotonic() - span
+        recent = sum(1 for t in list(self._done_at) if t >= cutoff)
+        return recent / span
+
     def summary_line(self) -> str:
         """One-line live summary: fps, latency p50/p99, bad-2 vs GT when known, counters."""
         st = self.status()
@@ -474,4 +492,4 @@ class Pipeline:
         )
 
 
-__all__ = ["MetricsStatus", "Pipeline", "PipelineStatus", "QueueStatus", "StageTimer"]
+__all__ = ["FPS_WINDOW_S", "MetricsStatus", "Pipeline", "PipelineStatus", "QueueStatus", "StageTimer"]

@@ -12,12 +12,16 @@ Disparity formats (``formats`` option, any subset):
 ``npy``
     float32 ``.npy``; invalid = NaN (exactly the in-memory convention).
 
-Extras: ``painted`` saves the VPP-painted pair as 8-bit PNGs and ``depth`` saves
-metric depth (metres, NaN invalid) as float32 ``.npy``.
+Extras: ``painted`` saves the VPP-painted pair as 8-bit PNGs, ``depth`` saves
+metric depth (metres, NaN invalid) as float32 ``.npy``, and ``preview`` saves a
+colour-mapped 8-bit RGB PNG of the disparity (turbo, near = red, invalid = black)
+for looking at: the 16-bit PNGs look black in an ordinary image viewer. Its range
+is ``[0, preview_max_disparity]`` (fixed, comparable between frames) or, when that
+is 0, each frame's own range of valid values.
 
 File names are ``<pattern>_<what>.<ext>`` where ``pattern`` (default
 ``{rig}_{seq:06d}``) may use ``rig``, ``seq``, ``stamp_ns`` and ``name``, and
-``<what>`` is ``disparity``, ``depth``, ``left_vpp`` or ``right_vpp``.
+``<what>`` is ``disparity``, ``disparity_preview``, ``depth``, ``left_vpp`` or ``right_vpp``.
 
 Every file is written to a temporary name in the same folder and then renamed
 into place, so readers never see a partial file. After :meth:`FilesSink.open`
@@ -39,6 +43,7 @@ import numpy as np
 from vpp_service.datasets.pfm import write_pfm
 from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import SINKS, SinkContext
+from vpp_service.sinks.colorize import colorize_disparity
 from vpp_service.sinks.folder import FolderSink, check_pattern, write_atomic
 
 log = logging.getLogger(__name__)
@@ -71,6 +76,10 @@ class FilesSinkOptions:
         counted, and the new file is not written).
     create_dir : bool
         Create ``dir`` (with parents) at open instead of failing when missing.
+    preview : bool
+        Also save a colour-mapped RGB PNG of the disparity (``<stem>_disparity_preview.png``).
+    preview_max_disparity : float
+        Top of the preview's colour range (pixels, >= 0); 0 = each frame's own range.
     """
 
     dir: str
@@ -80,8 +89,12 @@ class FilesSinkOptions:
     pattern: str = "{rig}_{seq:06d}"
     overwrite: bool = False
     create_dir: bool = False
+    preview: bool = False
+    preview_max_disparity: float = 0.0
 
     def __post_init__(self) -> None:
+        if not (self.preview_max_disparity >= 0 and np.isfinite(self.preview_max_disparity)):
+            raise ValueError(f"preview_max_disparity: must be a finite number >= 0, got {self.preview_max_disparity}")
         if not self.dir.strip():
             raise ValueError("dir: must not be empty")
         if not self.formats:
@@ -205,7 +218,7 @@ class FilesSink(FolderSink):
         """The files :meth:`write` would produce for ``result``, by kind.
 
         Keys are ``png16``/``pfm``/``npy`` (the enabled formats), and
-        ``depth``, ``left_vpp``, ``right_vpp`` when enabled (whether or not the
+        ``preview``, ``depth``, ``left_vpp``, ``right_vpp`` when enabled (whether or not the
         result carries that data).
 
         Raises
@@ -215,6 +228,8 @@ class FilesSink(FolderSink):
         """
         stem = self.frame_stem(result)
         paths = {f: self._dir / f"{stem}_disparity{_EXT[f]}" for f in self.options.formats}
+        if self.options.preview:
+            paths["preview"] = self._dir / f"{stem}_disparity_preview.png"
         if self.options.depth:
             paths["depth"] = self._dir / f"{stem}_depth.npy"
         if self.options.painted:
@@ -260,6 +275,11 @@ class FilesSink(FolderSink):
             pfm = np.array(d, dtype=np.float32, copy=True)
             pfm[~np.isfinite(pfm)] = np.inf
             return lambda p: write_pfm(p, pfm)
+        if kind == "preview":
+            d = _check_disparity(result.disparity)
+            top = self.options.preview_max_disparity
+            rgb = colorize_disparity(d, 0.0, top) if top > 0 else colorize_disparity(d)
+            return _png_writer(rgb, kind)
         if kind in ("npy", "depth"):
             arr = result.disparity if kind == "npy" else result.depth
             if arr is None:
@@ -270,17 +290,26 @@ class FilesSink(FolderSink):
             np.save(buf, _float_nan(arr), allow_pickle=False)
             data = buf.getvalue()
             return lambda p: Path(p).write_bytes(data)
-        img = result.left_vpp if kind == "left_vpp" else result.right_vpp
-        if img is None:
-            return None
-        if not isinstance(img, np.ndarray) or img.dtype != np.uint8 or img.ndim not in (2, 3):
-            raise ValueError(f"{kind}: must be an H x W (x C) uint8 image")
-        bgr = img[..., ::-1] if img.ndim == 3 and img.shape[2] == 3 else img
-        ok, png = cv2.imencode(".png", np.ascontiguousarray(bgr))
-        if not ok:
-            raise ValueError(f"{kind}: OpenCV could not encode shape {img.shape}")
-        data = png.tobytes()
-        return lambda p: Path(p).write_bytes(data)
+        return _painted_writer(result.left_vpp if kind == "left_vpp" else result.right_vpp, kind)
+
+
+def _painted_writer(img: np.ndarray | None, kind: str) -> Callable[[str], object] | None:
+    """A ``f(tmp_path)`` writing the painted image ``img`` as PNG, or None when absent."""
+    if img is None:
+        return None
+    if not isinstance(img, np.ndarray) or img.dtype != np.uint8 or img.ndim not in (2, 3):
+        raise ValueError(f"{kind}: must be an H x W (x C) uint8 image")
+    return _png_writer(img, kind)
+
+
+def _png_writer(img: np.ndarray, kind: str) -> Callable[[str], object]:
+    """A ``f(tmp_path)`` writing the RGB (or grey) uint8 ``img`` as PNG."""
+    bgr = img[..., ::-1] if img.ndim == 3 and img.shape[2] == 3 else img
+    ok, png = cv2.imencode(".png", np.ascontiguousarray(bgr))
+    if not ok:
+        raise ValueError(f"{kind}: OpenCV could not encode shape {img.shape}")
+    data = png.tobytes()
+    return lambda p: Path(p).write_bytes(data)
 
 
 __all__ = ["FORMATS", "FilesSink", "FilesSinkOptions", "decode_png16", "encode_png16"]

@@ -154,6 +154,18 @@ class FolderSink(Sink):
         self._dir = Path(options.dir).expanduser()
         self._open = False
 
+    @classmethod
+    def check_paths(cls, options: FolderOptions, section: str, created_dirs: frozenset[Path] = frozenset()) -> None:
+        """``dir`` must be a folder, or missing with ``create_dir`` (or created by the service)."""
+        d = Path(options.dir).expanduser()
+        if d.exists():
+            if not d.is_dir():
+                raise NotADirectoryError(f"{section}.dir: {str(d)!r} is not a folder")
+        elif not options.create_dir and d.resolve() not in created_dirs:
+            raise FileNotFoundError(
+                f"{section}.dir: {cls.DIR_WHAT} {str(d)!r} does not exist (create it or set create_dir = true)"
+            )
+
     def open(self) -> None:
         """Check that ``dir`` exists (or create it) and is writable.
 

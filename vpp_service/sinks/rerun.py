@@ -340,6 +340,17 @@ class RerunSink(Sink):
         self._blueprint_sent = True
         return self.blueprint()
 
+    @classmethod
+    def check_paths(cls, options: RerunSinkOptions, section: str, created_dirs: frozenset[Path] = frozenset()) -> None:
+        """In ``save`` mode the ``.rrd``'s folder must exist (or be created by the service)."""
+        if options.mode != "save":
+            return
+        path = Path(options.path).expanduser()
+        if not path.parent.is_dir() and path.parent.resolve() not in created_dirs:
+            raise FileNotFoundError(f"{section}.path: folder {str(path.parent)!r} does not exist")
+        if path.is_dir():
+            raise IsADirectoryError(f"{section}.path: {str(path)!r} is a folder, expected a .rrd file")
+
     def open(self) -> None:
         """Create the recording stream, attach the output and start the logging thread.
 

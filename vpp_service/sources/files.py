@@ -102,6 +102,14 @@ class FilesSource(Source):
         self._files: list[Path] = []
         self.sensor: Sensor[NominalGeometry] | None = None
 
+    @classmethod
+    def check_paths(
+        cls, options: FilesSourceOptions, section: str, created_dirs: frozenset[Path] = frozenset()
+    ) -> None:
+        """``root`` must be an existing folder."""
+        if not Path(options.root).expanduser().is_dir():
+            raise FileNotFoundError(f"{section}.root: no such folder: {options.root}")
+
     def open(self) -> None:
         """Open the dataset / list the files; raises FileNotFoundError/ValueError early."""
         o = self.options

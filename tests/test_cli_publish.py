@@ -1,0 +1,71 @@
+"""``vpp-service publish``: meets ``run`` on the shared default endpoint; says so when nobody subscribes."""
+
+from __future__ import annotations
+
+import signal
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from helpers.service_thread import service_in_thread
+from helpers.zenoh_loopback import free_port
+from vpp_service.cli import EXIT_FAILURE, main
+from vpp_service.cli.status import query_status
+from vpp_service.service.config import ENDPOINT_ENV
+
+
+@pytest.fixture
+def shared_endpoint(monkeypatch: pytest.MonkeyPatch) -> str:
+    """A free loopback port as every command's default endpoint (what ``$VPP_SERVICE_ENDPOINT`` sets)."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    monkeypatch.setenv(ENDPOINT_ENV, endpoint)
+    return endpoint
+
+
+@pytest.fixture
+def keep_signal_handlers() -> Iterator[None]:
+    """``publish`` installs SIGINT/SIGTERM handlers; put pytest's back afterwards."""
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    yield
+    for s, h in handlers.items():
+        signal.signal(s, h)
+
+
+def test_publish_run_and_status_meet_on_the_default_endpoint(tmp_path, shared_endpoint, keep_signal_handlers, capsys):
+    """No endpoint flag anywhere: run listens where publish and status connect, and the frames are processed."""
+    data = {
+        "service": {"out": str(tmp_path / "run"), "max_frames": 3, "summary": False},
+        "source": {"type": "zenoh"},
+        "matcher": {"name": "bm", "max_disparity": 32},
+        "queues": {"input_policy": "block"},  # what `run --source zenoh` chooses
+        "sinks": [],
+    }
+    with service_in_thread(data) as (thread, result):
+        deadline = time.monotonic() + 30  # the service is up once it answers @status on the default endpoint
+        while not query_status([shared_endpoint], rig="rig0", timeout=1.0) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert main(["status", "--rig", "rig0", "--timeout", "10"]) == 0
+        assert '"vpp/rig0/@status"' in capsys.readouterr().out
+        rc = main(["publish", "--scale", "0.25", "--count", "3", "--rate", "5", "--wait-subscriber", "10"])
+        assert rc == 0
+        thread.join(30)
+        assert not thread.is_alive()
+    assert result["status"]["counters"]["processed"] == 3  # max_frames reached: every frame arrived
+
+
+def test_publish_without_subscriber_exits_1_with_a_message(shared_endpoint, keep_signal_handlers, capsys):
+    t0 = time.monotonic()
+    assert main(["publish", "--scale", "0.25", "--count", "1", "--wait-subscriber", "0.5"]) == EXIT_FAILURE
+    assert time.monotonic() - t0 < 10
+    captured = capsys.readouterr()
+    assert "no subscriber on vpp/rig0/in/frame" in captured.err and shared_endpoint in captured.err
+    assert "--send-anyway" in captured.err and '"sent"' not in captured.out
+
+
+def test_publish_send_anyway_sends_without_subscriber(shared_endpoint, keep_signal_handlers, capsys):
+    rc = main(
+        ["publish", "--scale", "0.25", "--count", "1", "--rate", "0", "--wait-subscriber", "0.2", "--send-anyway"]
+    )
+    assert rc == 0
+    assert '"sent": 1' in capsys.readouterr().out
