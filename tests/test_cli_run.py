@@ -1,4 +1,4 @@
-"""The ``run`` sub-command: its flags (Rerun, ROS 2) via the real parser, --check on paths, start-up and closing lines."""
+"""The ``run`` sub-command: flags (Rerun, ROS 2) via the real parser, --check on paths, start-up and closing lines."""
 
 from __future__ import annotations
 
