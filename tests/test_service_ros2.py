@@ -1,10 +1,12 @@
 """Loopback with a Zenoh router: a ROS 2 robot written from the contract <-> the service (ros2 source and sink).
 
 The robot (tests/helpers/ros2_robot.py: rosbags + zenoh only) waits for the service's
-subscriber tokens like a lazy publisher, publishes the Motorcycle pair, both camera_info
-and a PointCloud2 with attachments, and must receive a DisparityImage on the exact key
-with a 33-byte attachment, a publisher token in the graph, the left camera_info header
-copied, and bad-2 vs ground truth as good as the same scene through the msgpack wire format.
+subscriber tokens like a lazy publisher, publishes a scene (tests/helpers/ros2_scenes.py: the
+Motorcycle RGB pair, or the shared data's KITTI 2012 gray pair as mono8 with its real P0/P1),
+both camera_info and a PointCloud2 with attachments, and must receive a DisparityImage on the
+exact key with a 33-byte attachment, a publisher token in the graph, the left camera_info header
+copied, f and baseline as the project's reader has them, and bad-2 vs ground truth as good as
+the same scene through the msgpack wire format.
 """
 
 from __future__ import annotations
@@ -16,41 +18,24 @@ import numpy as np
 import pytest
 import zenoh
 
-from helpers.ros2_robot import TS, Robot, motorcycle_rig
+from helpers.ros2_robot import TS, Robot
+from helpers.ros2_scenes import SCENES, load_scene, msgpack_bad2, plain_bad2
 from helpers.zenoh_loopback import free_port, zenoh_test_config
 from vpp_service.evaluation.metrics import compute_metrics
-from vpp_service.frame import Calibration, StereoFrame
-from vpp_service.fusion import fuse
-from vpp_service.matchers import build_matcher
 from vpp_service.service.app import run_service
 from vpp_service.service.config import validate_config
-from vpp_service.transport import wire
-from vpp_service.vpp import VPPConfig
 
-MAXD = 96
 DISPARITY_KEY = (
     "0/stereo/disparity/stereo_msgs::msg::dds_::DisparityImage_/"
     "RIHS01_1ec1ff6b5bace919e4544a37f2d96ead9f81783701b7b7a4d97a09325ecf2711"
 )
 
 
-def msgpack_bad2(rig, gt, doffs) -> float:
-    """The same frame (same points, same seed) through the msgpack wire format and fuse()."""
-    h, w = gt.shape
-    z = np.full((h, w), np.nan, np.float32)
-    u = np.rint(rig.cloud[:, 0] * rig.f / rig.cloud[:, 2] + rig.cx_left).astype(int)
-    v = np.rint(rig.cloud[:, 1] * rig.f / rig.cloud[:, 2] + rig.cy).astype(int)
-    z[v, u] = rig.cloud[:, 2]
-    calib = Calibration(f=rig.f, baseline=rig.baseline, doffs=doffs, cx=rig.cx_left, cy=rig.cy)
-    frame = StereoFrame(left=rig.left, right=rig.right, calib=calib, sensor_depth=z, seq=1)
-    frame = wire.decode_frame(wire.encode_frame(frame))
-    res = fuse(frame, build_matcher("sgbm", {"max_disparity": MAXD}), VPPConfig(), seed=1, depth=False)
-    return compute_metrics(res.disparity, gt)["bad2"]
-
-
 @pytest.mark.slow
-def test_robot_receives_disparity(tmp_path):
-    rig, gt, doffs = motorcycle_rig()
+@pytest.mark.parametrize("scene_name", SCENES)
+def test_robot_receives_disparity(tmp_path, scene_name):
+    scene = load_scene(scene_name)
+    rig, gt, maxd = scene.rig, scene.gt, scene.max_disparity
     ep = f"tcp/127.0.0.1:{free_port()}"
     cfg = validate_config(
         {
@@ -58,9 +43,9 @@ def test_robot_receives_disparity(tmp_path):
             # as rmw_zenoh nodes: peers that listen on a random port and meet through the router (gossip)
             "zenoh": {"mode": "peer", "listen": ["tcp/127.0.0.1:0"], "connect": [ep]},
             "source": {"type": "ros2", "depth_wait_ms": 2000.0},
-            "matcher": {"name": "sgbm", "max_disparity": MAXD},
+            "matcher": {"name": "sgbm", "max_disparity": maxd},
             "queues": {"input_policy": "block", "output_policy": "block"},
-            "sinks": [{"type": "ros2", "outputs": ["disparity"], "max_disparity": float(MAXD)}],
+            "sinks": [{"type": "ros2", "outputs": ["disparity"], "max_disparity": float(maxd)}],
         }
     )
     stop = threading.Event()
@@ -101,14 +86,13 @@ def test_robot_receives_disparity(tmp_path):
     assert msg.header.frame_id == "left_optical"
     assert msg.image.encoding == "32FC1" and msg.image.step == 4 * msg.image.width
     assert msg.f == pytest.approx(rig.f) and msg.t == pytest.approx(rig.baseline, rel=1e-6)
+    # the calibration read from camera_info's P is the one the project's reader has for the scene
+    assert msg.f == pytest.approx(scene.calib.f) and msg.t == pytest.approx(scene.calib.baseline, rel=1e-6)
     d = msg.image.data.view("<f4").reshape(msg.image.height, msg.image.width).astype(np.float32)
     d[d < msg.min_disparity] = np.nan  # the message definition's rule for invalid pixels
-    ros_bad2 = compute_metrics(d - np.float32(doffs), gt)["bad2"]
-    ref_bad2 = msgpack_bad2(rig, gt, doffs)
+    ros_bad2 = compute_metrics(d - np.float32(scene.calib.doffs), gt)["bad2"]
+    ref_bad2 = msgpack_bad2(scene)
     # same pixels, points and seed: equal up to float rounding of the calibration through P
     assert ros_bad2 <= ref_bad2 + 0.1, (ros_bad2, ref_bad2)
-    plain = fuse(
-        StereoFrame(left=rig.left, right=rig.right), build_matcher("sgbm", {"max_disparity": MAXD}), depth=False
-    )
-    assert ros_bad2 < compute_metrics(plain.disparity, gt)["bad2"] - 1.0  # VPP ran on the cloud's points
+    assert ros_bad2 < plain_bad2(scene) - 1.0  # VPP ran on the cloud's points
     assert status["counters"]["processed"] >= 1 and status["counters"]["no_depth"] == 0

@@ -43,8 +43,11 @@ def header(stamp_ns: int, frame_id: str) -> object:
     return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec), frame_id=frame_id)
 
 
-def image_msg(img: np.ndarray, stamp_ns: int, frame_id: str, encoding: str = "rgb8") -> object:
+def image_msg(img: np.ndarray, stamp_ns: int, frame_id: str, encoding: str | None = None) -> object:
+    """An Image of ``img``; the encoding defaults to ``mono8`` for H x W and ``rgb8`` for H x W x 3 arrays."""
     h, w = img.shape[:2]
+    if encoding is None:
+        encoding = "mono8" if img.ndim == 2 else "rgb8"
     data = np.ascontiguousarray(img).reshape(-1).view(np.uint8)
     return T["sensor_msgs/msg/Image"](
         header=header(stamp_ns, frame_id),
@@ -60,7 +63,15 @@ def image_msg(img: np.ndarray, stamp_ns: int, frame_id: str, encoding: str = "rg
 def camera_info_msg(
     stamp_ns: int, frame_id: str, size: tuple[int, int], *, f: float, cx: float, cy: float, tx: float
 ) -> object:
+    """A rectified CameraInfo with ``P = [f 0 cx tx; 0 f cy 0; 0 0 1 0]``."""
+    p = np.array([[f, 0, cx, tx], [0, f, cy, 0], [0, 0, 1.0, 0]])
+    return camera_info_from_p(stamp_ns, frame_id, size, p)
+
+
+def camera_info_from_p(stamp_ns: int, frame_id: str, size: tuple[int, int], p: np.ndarray) -> object:
+    """A rectified CameraInfo carrying the 3 x 4 projection ``p`` as given (``K`` = its left 3 x 3, ``R`` = I)."""
     w, h = size
+    p = np.asarray(p, np.float64).reshape(3, 4)
     roi = T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
     return T["sensor_msgs/msg/CameraInfo"](
         header=header(stamp_ns, frame_id),
@@ -68,9 +79,9 @@ def camera_info_msg(
         width=w,
         distortion_model="plumb_bob",
         d=np.zeros(5),
-        k=np.array([f, 0, cx, 0, f, cy, 0, 0, 1.0]),
+        k=p[:, :3].reshape(-1).copy(),
         r=np.eye(3).reshape(-1),
-        p=np.array([f, 0, cx, tx, 0, f, cy, 0, 0, 0, 1.0, 0]),
+        p=p.reshape(-1).copy(),
         binning_x=0,
         binning_y=0,
         roi=roi,
@@ -97,7 +108,11 @@ def cloud_msg(xyz: np.ndarray, stamp_ns: int, frame_id: str) -> object:
 
 @dataclass
 class StereoRig:
-    """What the robot publishes: an RGB pair, its rectified calibration and a cloud in the left optical frame."""
+    """What the robot publishes: a pair (RGB or gray), its rectified calibration and a cloud in the left optical frame.
+
+    ``p_left``/``p_right`` are the 3 x 4 projections published in camera_info; when None they are built
+    from ``f``, ``cx_left``/``cx_right``, ``cy`` and ``tx = -f * baseline`` (right).
+    """
 
     left: np.ndarray
     right: np.ndarray
@@ -107,6 +122,40 @@ class StereoRig:
     cx_right: float
     cy: float
     cloud: np.ndarray
+    p_left: np.ndarray | None = None
+    p_right: np.ndarray | None = None
+
+    @classmethod
+    def from_projections(
+        cls, left: np.ndarray, right: np.ndarray, p_left: np.ndarray, p_right: np.ndarray, cloud: np.ndarray
+    ) -> StereoRig:
+        """A rig whose camera_info carries ``p_left``/``p_right`` exactly.
+
+        The scalars are read off them as stereo_image_proc does: ``f = P_right[0]``,
+        ``baseline = -P_right[3] / P_right[0]``.
+        """
+        pl = np.asarray(p_left, np.float64).reshape(3, 4)
+        pr = np.asarray(p_right, np.float64).reshape(3, 4)
+        return cls(
+            left=np.ascontiguousarray(left),
+            right=np.ascontiguousarray(right),
+            f=float(pr[0, 0]),
+            baseline=float(-pr[0, 3] / pr[0, 0]),
+            cx_left=float(pl[0, 2]),
+            cx_right=float(pr[0, 2]),
+            cy=float(pl[1, 2]),
+            cloud=cloud,
+            p_left=pl,
+            p_right=pr,
+        )
+
+    def projection(self, right: bool) -> np.ndarray:
+        """The 3 x 4 projection published in the left (``right=False``) or right camera_info."""
+        given = self.p_right if right else self.p_left
+        if given is not None:
+            return given
+        cx, tx = (self.cx_right, -self.f * self.baseline) if right else (self.cx_left, 0.0)
+        return np.array([[self.f, 0, cx, tx], [0, self.f, self.cy, 0], [0, 0, 1.0, 0]])
 
 
 class Robot:
@@ -163,14 +212,8 @@ class Robot:
         h, w = rig.left.shape[:2]
         self.put("left/image_rect", image_msg(rig.left, stamp_ns, frame_id))
         self.put("right/image_rect", image_msg(rig.right, stamp_ns, "right_optical"))
-        self.put(
-            "left/camera_info", camera_info_msg(stamp_ns, frame_id, (w, h), f=rig.f, cx=rig.cx_left, cy=rig.cy, tx=0.0)
-        )
-        tx = -rig.f * rig.baseline
-        self.put(
-            "right/camera_info",
-            camera_info_msg(stamp_ns, "right_optical", (w, h), f=rig.f, cx=rig.cx_right, cy=rig.cy, tx=tx),
-        )
+        self.put("left/camera_info", camera_info_from_p(stamp_ns, frame_id, (w, h), rig.projection(right=False)))
+        self.put("right/camera_info", camera_info_from_p(stamp_ns, "right_optical", (w, h), rig.projection(right=True)))
         self.put("points", cloud_msg(rig.cloud, stamp_ns, frame_id))
 
     def subscribe_disparity(self, topic: str = "/stereo/disparity") -> zenoh.Subscriber:
@@ -207,37 +250,6 @@ class Robot:
             p.undeclare()
 
 
-def motorcycle_rig(density: float = 0.05, seed: int = 0) -> tuple[StereoRig, np.ndarray, float]:
-    """The scikit-image Motorcycle scene as a ROS rig: returns the rig, the ground truth and ``doffs``.
-
-    The cloud holds ``density`` of the valid ground-truth pixels, back-projected to
-    the left optical frame (``Z = f B / (d + doffs)``).
-    """
-    from vpp_service.datasets.skimage_scene import MOTORCYCLE_CALIB, motorcycle_arrays
-
-    left, right, gt = motorcycle_arrays()
-    c = MOTORCYCLE_CALIB
-    h, w = gt.shape
-    cx, cy = (w - 1) / 2, (h - 1) / 2
-    rng = np.random.default_rng(seed)
-    vs, us = np.nonzero(np.isfinite(gt))
-    pick = rng.random(vs.size) < density
-    vs, us = vs[pick], us[pick]
-    z = c.f * c.baseline / (gt[vs, us].astype(np.float64) + c.doffs)
-    xyz = np.stack([(us - cx) * z / c.f, (vs - cy) * z / c.f, z], axis=1).astype(np.float32)
-    rig = StereoRig(
-        left=np.ascontiguousarray(left),
-        right=np.ascontiguousarray(right),
-        f=c.f,
-        baseline=c.baseline,
-        cx_left=cx,
-        cx_right=cx + c.doffs,
-        cy=cy,
-        cloud=xyz,
-    )
-    return rig, gt, c.doffs
-
-
 def write_bag(path: str, storage: str, rig: StereoRig, stamps: list[int], namespace: str = "/stereo") -> None:
     """A rosbag2 bag (``storage`` = "mcap" or "sqlite3") with the rig's five topics at each stamp, via rosbags."""
     from rosbags.rosbag2 import StoragePlugin, Writer
@@ -257,12 +269,8 @@ def write_bag(path: str, storage: str, rig: StereoRig, stamps: list[int], namesp
             msgs = {
                 "left/image_rect": image_msg(rig.left, stamp, "left_optical"),
                 "right/image_rect": image_msg(rig.right, stamp, "right_optical"),
-                "left/camera_info": camera_info_msg(
-                    stamp, "left_optical", (w, h), f=rig.f, cx=rig.cx_left, cy=rig.cy, tx=0.0
-                ),
-                "right/camera_info": camera_info_msg(
-                    stamp, "right_optical", (w, h), f=rig.f, cx=rig.cx_right, cy=rig.cy, tx=-rig.f * rig.baseline
-                ),
+                "left/camera_info": camera_info_from_p(stamp, "left_optical", (w, h), rig.projection(right=False)),
+                "right/camera_info": camera_info_from_p(stamp, "right_optical", (w, h), rig.projection(right=True)),
                 "points": cloud_msg(rig.cloud, stamp, "left_optical"),
             }
             for i, (n, msg) in enumerate(msgs.items()):
