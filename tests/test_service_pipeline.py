@@ -7,11 +7,11 @@ import time
 import numpy as np
 import pytest
 
-from vpp_service.frame import FusionResult
+from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.fusion import Fusion
 from vpp_service.service.pipeline import Pipeline, StageTimer
 from vpp_service.sinks.base import Sink, SinkContext
-from vpp_service.sources.base import SourceContext, build_source
+from vpp_service.sources.base import Source, SourceContext, build_source
 
 
 class CollectSink(Sink):
@@ -55,7 +55,7 @@ def sim_source(count: int, rate_hz: float = 0.0, sensor: str = "none"):
             "count": count,
             "rate_hz": rate_hz,
         },
-        SourceContext(rig="t"),
+        SourceContext(rig="rig0"),  # the rig the Pipeline serves by default
     )
 
 
@@ -244,3 +244,32 @@ def test_fusion_prepare_next_caches_the_next_frames_pattern_table(pattern, cache
     again = fusion(frame.with_(seq=42))
     np.testing.assert_array_equal(res.left_vpp, again.left_vpp)
     np.testing.assert_array_equal(res.right_vpp, again.right_vpp)
+
+
+class ForgedRigSource(Source):
+    """Emits frames of the served rig interleaved with frames whose rig a message could have forged."""
+
+    Options = None
+    RIGS = ("rig0", "../../x/relative", "rig0", "/abs/path", "rig1", ".hidden", "a\x00b", "rig0")
+
+    def run(self, emit, reject):
+        for seq, rig in enumerate(self.RIGS):
+            emit(FRAME.with_(rig=rig, seq=seq))
+
+
+FRAME = StereoFrame(np.zeros((4, 6, 3), np.uint8), np.zeros((4, 6, 3), np.uint8), rig="rig0")
+
+
+def test_frames_of_another_rig_are_rejected_before_any_sink():
+    sink = CollectSink()
+    pipe = Pipeline(
+        ForgedRigSource(None, SourceContext(rig="rig0")),
+        lambda f: FusionResult(f, np.zeros(f.shape, np.float32)),
+        [sink],
+        input_policy="block",
+    )
+    run(pipe)
+    c = pipe.counters
+    assert c["received"] == 8 and c["rejected"] == 5 and c["processed"] == 3
+    assert [r.frame.seq for r in sink.results] == [0, 2, 7]
+    assert {r.frame.rig for r in sink.results} == {"rig0"}

@@ -18,7 +18,9 @@ the ``<prefix>/<rig>/@status`` queryable; a liveliness token
 
 Bad input never stops the pipeline: a rejected message is counted and logged
 (at most once per ``reject_log_period_s``); a frame the process step raises
-on is counted as rejected and dropped.
+on is counted as rejected and dropped. A frame whose ``rig`` (it comes from
+the message) is not the rig the pipeline serves is rejected before it is queued,
+so sinks never see a foreign or forged rig name.
 """
 
 from __future__ import annotations
@@ -207,6 +209,9 @@ class Pipeline:
 
     def _emit(self, frame: StereoFrame) -> bool:
         self._inc("received")
+        if frame.rig != self.rig:  # the rig comes from the message: only the served rig's frames go on
+            self._reject(f"frame seq={frame.seq}: rig {frame.rig[:64]!r} is not the served rig {self.rig!r}")
+            return False
         if self._stop.is_set() or self._enough.is_set():
             return False
         if self.input.policy == "block":
