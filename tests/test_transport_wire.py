@@ -9,6 +9,7 @@ import msgpack
 import numpy as np
 import pytest
 
+from helpers import hostile
 from helpers.frames import make_frame
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
 from vpp_service.transport import wire
@@ -390,3 +391,60 @@ def test_topic_validation(prefix, rig, message):
 
 def test_topic():
     assert wire.topic("vpp", "rig0", "out/disparity") == "vpp/rig0/out/disparity"
+
+
+# ------------------------------------------------ hostile messages: caps before work
+@pytest.mark.parametrize("kind", [k for k in hostile.KINDS if hostile.stage(k) in ("wire", "size")])
+def test_every_hostile_kind_is_rejected_by_the_decoder(kind):
+    cap = 4 << 20
+    with pytest.raises(wire.WireError):
+        wire.decode_frame(hostile.hostile_message(kind, 3, cap), wire.WireLimits(max_message_bytes=cap))
+
+
+@pytest.mark.parametrize("kind", [k for k in hostile.KINDS if hostile.stage(k) == "rig"])
+def test_hostile_rig_kinds_decode_with_the_forged_rig(kind):
+    # well-formed frames: the pipeline rejects them by their rig (test_service_pipeline)
+    assert wire.decode_frame(hostile.hostile_message(kind, 3)).rig != "rig0"
+
+
+@pytest.mark.parametrize(
+    ("kind", "match"),
+    [
+        ("nested_empty_maps", "element limit"),
+        ("unknown_key_nested", "element limit"),
+        ("many_small_containers", "element limit|more than 4096 objects"),
+        ("png_bomb", r"h\*w = 67108864 exceeds the limit of 8388608"),
+        ("raw_declared_huge", "exceeds the limit of 8388608"),
+        ("jpeg_marker_flood", "no JPEG frame header within 1024 markers"),
+        ("png_bad_crc", "bad CRC"),
+        ("png_corrupt_data", "truncated PNG stream"),
+    ],
+)
+def test_caps_stop_hostile_messages_before_the_work(kind, match):
+    cap = 16 << 20
+    with pytest.raises(wire.WireError, match=match):
+        wire.decode_frame(hostile.hostile_message(kind, 0, cap), wire.WireLimits(max_message_bytes=cap))
+
+
+def test_default_pixel_cap_admits_full_resolution_middlebury():
+    h, w = 1988, 2964
+    img = wire.decode_image({"h": h, "w": w, "c": 3, "dtype": "u8", "enc": "raw", "data": bytes(h * w * 3)})
+    assert img.shape == (h, w, 3)
+    assert wire.DEFAULT_LIMITS.max_pixels >= h * w and wire.DEFAULT_LIMITS.max_message_bytes > 2 * h * w * 3
+
+
+def test_depth_part_size_is_capped_before_allocating():
+    msg = {"v": 1, "rig": "rig0", "seq": 0, "stamp_ns": 0, "h": 16384, "w": 16384}
+    msg["depth"] = {"kind": "points", "n": 0, "uv": b"", "z": b""}
+    with pytest.raises(wire.WireError, match="exceeds the limit of 8388608"):
+        wire.decode_part(msgpack.packb(msg, use_bin_type=True), "depth")
+
+
+def test_unknown_top_level_keys_are_skipped_not_built():
+    good = msgpack.unpackb(wire.encode_frame(make_frame()), raw=False)
+    msg = {**good, "x-future": {"a": list(range(100))}}
+    frame = wire.decode_frame(msgpack.packb(msg, use_bin_type=True))
+    assert frame.seq == 7
+    too_many = {**good, "x-future": [[0] * 15] * 300}  # 4800 objects: over the element cap even unbuilt
+    with pytest.raises(wire.WireError, match=r"element limit|more than 4096 objects"):
+        wire.decode_frame(msgpack.packb(too_many, use_bin_type=True))

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from vpp_service.fusion import Fusion
-from vpp_service.service.allocator import reuse_freed_memory
+from vpp_service.service.allocator import reuse_freed_memory, trim_freed_memory
 from vpp_service.service.config import ServiceConfig, ZenohSection
 from vpp_service.service.pipeline import Pipeline, PipelineStatus
 
@@ -37,8 +37,16 @@ class ServiceSummary(PipelineStatus):
     config: dict[str, Any]
 
 
+#: Room for Zenoh's own headers on top of ``[zenoh] max_message_mb`` of payload.
+_ZENOH_HEADER_SLACK = 64 * 1024
+
+
 def zenoh_config(section: ZenohSection) -> zenoh.Config:
-    """A ``zenoh.Config`` from the ``[zenoh]`` section (multicast scouting off unless enabled)."""
+    """A ``zenoh.Config`` from the ``[zenoh]`` section (multicast scouting off unless enabled).
+
+    The largest message the session assembles is capped at ``max_message_mb``
+    (``transport/link/rx/max_message_size``): Zenoh drops a larger one unread.
+    """
     import zenoh
 
     conf = zenoh.Config.from_file(section.config_file) if section.config_file else zenoh.Config()
@@ -46,6 +54,8 @@ def zenoh_config(section: ZenohSection) -> zenoh.Config:
     conf.insert_json5("listen/endpoints", json.dumps(list(section.listen)))
     conf.insert_json5("connect/endpoints", json.dumps(list(section.connect)))
     conf.insert_json5("scouting/multicast/enabled", "true" if section.multicast_scouting else "false")
+    max_bytes = int(section.max_message_mb * 1024 * 1024) + _ZENOH_HEADER_SLACK
+    conf.insert_json5("transport/link/rx/max_message_size", str(max_bytes))
     return conf
 
 
@@ -134,8 +144,13 @@ def run_service(
             log.info("zenoh session %s listening on %s", session.info.zid(), list(cfg.zenoh.listen))
         try:
             next_report = time.monotonic() + s.summary_period_s
+            rejected_seen, next_trim = 0, 0.0
             while not stop.is_set() and not pipe.done.is_set():
                 stop.wait(0.1)
+                # a rejected message may have been large: hand its memory back (at most once a second)
+                if pipe.counters["rejected"] != rejected_seen and time.monotonic() >= next_trim:
+                    rejected_seen, next_trim = pipe.counters["rejected"], time.monotonic() + 1.0
+                    trim_freed_memory()
                 if time.monotonic() >= next_report:
                     next_report += s.summary_period_s
                     if s.summary and stream is not None:

@@ -56,7 +56,14 @@ class ZenohSourceOptions:
         Per-topic overrides of ``ring_size`` in separate-topics mode, e.g.
         ``{depth = 16}`` for a sensor that runs ahead of the cameras.
     max_message_mb : float
-        Messages larger than this are rejected before unpacking.
+        Messages larger than this are rejected (and counted) in the Zenoh
+        callback, before the payload is copied out or buffered; keep the
+        session's ``[zenoh] max_message_mb`` at least as large.
+    max_pixels : int
+        Largest image / depth map (``h * w``) accepted, checked before
+        anything that size is allocated or decoded (PNG/JPEG sizes are read
+        from the stream's header); the default admits full-resolution
+        Middlebury (2964 x 1988).
     poll_s : float
         Longest idle sleep of the receive thread between checks for a stop
         request; arriving samples wake it at once.
@@ -69,7 +76,8 @@ class ZenohSourceOptions:
     sync_threshold_ms: float = 20.0
     ring_size: int = 4
     ring_sizes: dict[str, int] = field(default_factory=dict)
-    max_message_mb: float = 256.0
+    max_message_mb: float = 64.0
+    max_pixels: int = wire.DEFAULT_LIMITS.max_pixels
     poll_s: float = 0.05
 
     def __post_init__(self) -> None:
@@ -88,6 +96,8 @@ class ZenohSourceOptions:
             raise ValueError('ring_sizes: only for topics = "separate" (use ring_size)')
         if not 0 < self.max_message_mb <= 4096:
             raise ValueError(f"max_message_mb must be in (0, 4096], got {self.max_message_mb}")
+        if isinstance(self.max_pixels, bool) or not 1 <= self.max_pixels <= 1 << 28:
+            raise ValueError(f"max_pixels must be in [1, {1 << 28}], got {self.max_pixels}")
         if not 0 < self.poll_s <= 1:
             raise ValueError(f"poll_s must be in (0, 1], got {self.poll_s}")
 
@@ -103,7 +113,10 @@ class ZenohSource(Source):
     def __init__(self, options: ZenohSourceOptions, context: SourceContext) -> None:
         super().__init__(options, context)
         self._subs: dict[str, zenoh.Subscriber[None]] = {}
-        self._limits = wire.WireLimits(max_message_bytes=int(options.max_message_mb * 1024 * 1024))
+        self._limits = wire.WireLimits(
+            max_message_bytes=int(options.max_message_mb * 1024 * 1024), max_pixels=options.max_pixels
+        )
+        self._reject: Reject | None = None  # run()'s reject callback, for oversized messages seen in Zenoh's thread
         self._rings: dict[str, deque[zenoh.Sample]] = {}
         self._ring_lock = threading.Lock()
         self._arrived = threading.Event()
@@ -129,7 +142,19 @@ class ZenohSource(Source):
             self.sync = Synchronizer(parts, o.sync, o.sync_queue_size, int(o.sync_threshold_ms * 1e6))
 
     def _on_sample(self, part: str, sample: zenoh.Sample) -> None:
-        """Zenoh callback: buffer the sample and wake the receive thread (never blocks long)."""
+        """Zenoh callback: buffer the sample and wake the receive thread (never blocks long).
+
+        An oversized message is rejected here, by its length, before its payload is copied or buffered.
+        """
+        n = len(sample.payload)
+        if n > self._limits.max_message_bytes:
+            self._counters["received"] += 1
+            self._counters["rejected"] += 1
+            if self._reject is not None:
+                self._reject(
+                    f"{sample.key_expr}: message: {n} bytes exceeds the limit of {self._limits.max_message_bytes}"
+                )
+            return
         ring = self._rings[part]
         with self._ring_lock:
             if len(ring) == ring.maxlen:
@@ -144,6 +169,7 @@ class ZenohSource(Source):
 
     def run(self, emit: Emit, reject: Reject) -> None:
         """Drain the rings, decode, validate, synchronize and emit until stopped."""
+        self._reject = reject
         while not self.stopping():
             self._arrived.clear()  # before draining: a later sample sets it again
             got = False
