@@ -273,3 +273,26 @@ def test_frames_of_another_rig_are_rejected_before_any_sink():
     assert c["received"] == 8 and c["rejected"] == 5 and c["processed"] == 3
     assert [r.frame.seq for r in sink.results] == [0, 2, 7]
     assert {r.frame.rig for r in sink.results} == {"rig0"}
+
+
+class StampSource(Source):
+    """Emits served-rig frames whose sender stamps are hostile (far past, zero, far future)."""
+
+    Options = None
+
+    def run(self, emit, reject):
+        for seq, stamp in enumerate((1, 0, (1 << 63) - 1, 5)):
+            emit(FRAME.with_(seq=seq, stamp_ns=stamp))
+
+
+def test_latency_is_measured_from_receive_time_not_the_senders_stamp():
+    pipe = Pipeline(
+        StampSource(None, SourceContext(rig="rig0")),
+        lambda f: FusionResult(f, np.zeros(f.shape, np.float32)),
+        [CollectSink()],
+        input_policy="block",
+    )
+    run(pipe)
+    lat = pipe.status()["timing_ms"]["latency"]
+    assert lat["n"] == 4
+    assert 0 <= lat["p99"] < 60_000  # the stamps would say 56 years, 0 or minus 236 years

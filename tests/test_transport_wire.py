@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import math
 import re
+import subprocess
+import sys
+from pathlib import Path
 
 import msgpack
 import numpy as np
@@ -448,3 +451,25 @@ def test_unknown_top_level_keys_are_skipped_not_built():
     too_many = {**good, "x-future": [[0] * 15] * 300}  # 4800 objects: over the element cap even unbuilt
     with pytest.raises(wire.WireError, match=r"element limit|more than 4096 objects"):
         wire.decode_frame(msgpack.packb(too_many, use_bin_type=True))
+
+
+_QUIET_PROBE = r"""
+import sys
+sys.path.insert(0, "tests")
+from helpers import hostile
+from vpp_service.transport import wire
+for kind in ("png_corrupt_data", "png_bad_crc", "jpeg_corrupt", "png_header_lies", "jpeg_marker_flood"):
+    try:
+        wire.decode_frame(hostile.hostile_message(kind, 1, 4 << 20), wire.WireLimits(max_message_bytes=4 << 20))
+    except wire.WireError:
+        pass
+"""
+
+
+def test_corrupt_images_are_rejected_without_decoder_noise_on_stderr():
+    # libpng reports a corrupt stream on stderr itself, past any log rate limit: it must never see one
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run(
+        [sys.executable, "-c", _QUIET_PROBE], capture_output=True, text=True, timeout=60, check=True, cwd=root
+    )
+    assert out.stderr == ""

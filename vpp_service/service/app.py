@@ -46,6 +46,9 @@ def zenoh_config(section: ZenohSection) -> zenoh.Config:
 
     The largest message the session assembles is capped at ``max_message_mb``
     (``transport/link/rx/max_message_size``): Zenoh drops a larger one unread.
+    Without a ``config_file``, the transmit queues give a ``DROP`` message
+    16 batches of room, 10 ms to find one, and 250 ms for the rest of its
+    fragments once it started.
     """
     import zenoh
 
@@ -56,6 +59,12 @@ def zenoh_config(section: ZenohSection) -> zenoh.Config:
     conf.insert_json5("scouting/multicast/enabled", "true" if section.multicast_scouting else "false")
     max_bytes = int(section.max_message_mb * 1024 * 1024) + _ZENOH_HEADER_SLACK
     conf.insert_json5("transport/link/rx/max_message_size", str(max_bytes))
+    if not section.config_file:  # an operator's file tunes its own queues
+        # outputs go out with DROP (sinks.zenoh): give a busy but healthy link room and time before a
+        # multi-MB map is dropped on it, while a consumer that never reads costs each put at most 10 ms
+        conf.insert_json5("transport/link/tx/queue/size/data", "16")
+        conf.insert_json5("transport/link/tx/queue/congestion_control/drop/wait_before_drop", "10000")
+        conf.insert_json5("transport/link/tx/queue/congestion_control/drop/max_wait_before_drop_fragments", "250000")
     return conf
 
 
@@ -137,6 +146,7 @@ def run_service(
     summary_path = out / "summary.json"
     if s.reuse_memory:
         reuse_freed_memory()
+    _quiet_opencv()
     with open_session(cfg.zenoh) as session:
         pipe = build_pipeline(cfg, session)
         pipe.start()
@@ -178,6 +188,19 @@ def run_service(
                     flush=True,
                 )
     return status
+
+
+def _quiet_opencv() -> None:
+    """Keep OpenCV's own warnings (e.g. about a stream it cannot decode) out of the log.
+
+    A bad image in a message is rejected with its reason through the pipeline's
+    rate-limited reject log; a line per hostile message from OpenCV would bypass it.
+    """
+    import cv2
+
+    logging_mod = getattr(getattr(cv2, "utils", None), "logging", None)
+    if logging_mod is not None:
+        logging_mod.setLogLevel(logging_mod.LOG_LEVEL_ERROR)
 
 
 def _write_json(path: Path, data: Mapping[str, object]) -> None:

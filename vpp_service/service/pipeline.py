@@ -18,7 +18,9 @@ the ``<prefix>/<rig>/@status`` queryable; a liveliness token
 
 Bad input never stops the pipeline: a rejected message is counted and logged
 (at most once per ``reject_log_period_s``); a frame the process step raises
-on is counted as rejected and dropped. A frame whose ``rig`` (it comes from
+on is counted as rejected and dropped. The ``latency`` statistic runs from
+when the frame was received (``meta["recv_ns"]``), never from the sender's
+``stamp_ns``, which any peer can set. A frame whose ``rig`` (it comes from
 the message) is not the rig the pipeline serves is rejected before it is queued,
 so sinks never see a foreign or forged rig name.
 """
@@ -214,6 +216,7 @@ class Pipeline:
             return False
         if self._stop.is_set() or self._enough.is_set():
             return False
+        frame.meta.setdefault("recv_ns", time.time_ns())  # sources that receive stamp it earlier
         if self.input.policy == "block":
             while not (self._stop.is_set() or self._enough.is_set()):
                 if self.input.put(frame, timeout=0.1):
@@ -293,10 +296,10 @@ class Pipeline:
             except Exception as exc:  # noqa: BLE001 - a broken sink must not stop the others
                 self._inc("errors")
                 log.warning("sink %s: %s", type(sink).__name__, exc)
-        fr = result.frame
-        now_ns = time.time_ns()
-        if fr.stamp_ns > 0:
-            self.timer.add("latency", (now_ns - fr.stamp_ns) / 1e6)
+        # latency from when this service received the frame, never from the sender's stamp_ns (a peer sets it)
+        recv_ns = result.frame.meta.get("recv_ns")
+        if isinstance(recv_ns, int):
+            self.timer.add("latency", (time.time_ns() - recv_ns) / 1e6)
         self._inc("published")
 
     def _sinks_done(self) -> None:
