@@ -27,13 +27,13 @@ from vpp_service.transport import wire
 Stage = str
 
 
-def _frame(rig: str = "rig0", seq: int = 0) -> StereoFrame:
-    return make_frame(h=12, w=16, seed=seq).with_(rig=rig, seq=seq)
+def _frame(rig: str = "rig0", seq: int = 0, h: int = 12, w: int = 16) -> StereoFrame:
+    return make_frame(h=h, w=w, seed=seq).with_(rig=rig, seq=seq)
 
 
-def valid_message(rig: str = "rig0", seq: int = 0, stamp_ns: int = 123456789) -> bytes:
-    """A small valid ``in/frame`` message (12 x 16 RGB, metric points, ground truth)."""
-    return wire.encode_frame(_frame(rig, seq).with_(stamp_ns=stamp_ns))
+def valid_message(rig: str = "rig0", seq: int = 0, stamp_ns: int = 123456789, h: int = 12, w: int = 16) -> bytes:
+    """A small valid ``in/frame`` message (``h`` x ``w`` RGB, metric points, ground truth)."""
+    return wire.encode_frame(_frame(rig, seq, h, w).with_(stamp_ns=stamp_ns))
 
 
 def _fields(seq: int) -> dict[str, object]:

@@ -154,13 +154,10 @@ def run_service(
             log.info("zenoh session %s listening on %s", session.info.zid(), list(cfg.zenoh.listen))
         try:
             next_report = time.monotonic() + s.summary_period_s
-            rejected_seen, next_trim = 0, 0.0
+            trim = _TrimAfterRejects()
             while not stop.is_set() and not pipe.done.is_set():
                 stop.wait(0.1)
-                # a rejected message may have been large: hand its memory back (at most once a second)
-                if pipe.counters["rejected"] != rejected_seen and time.monotonic() >= next_trim:
-                    rejected_seen, next_trim = pipe.counters["rejected"], time.monotonic() + 1.0
-                    trim_freed_memory()
+                trim.poll(pipe.counters["rejected"])
                 if time.monotonic() >= next_report:
                     next_report += s.summary_period_s
                     if s.summary and stream is not None:
@@ -188,6 +185,30 @@ def run_service(
                     flush=True,
                 )
     return status
+
+
+class _TrimAfterRejects:
+    """Hand freed memory back after rejected input (which may have been large): :func:`trim_freed_memory`.
+
+    Polled with the ``rejected`` counter: trims once the counter has been still
+    for ``quiet_s`` (the rejected message is freed by then), and at most every
+    ``period_s`` while rejects keep coming.
+    """
+
+    def __init__(self, quiet_s: float = 0.3, period_s: float = 1.0) -> None:
+        self.quiet_s, self.period_s = quiet_s, period_s
+        self._seen = 0
+        self._due = False
+        self._changed = self._next = 0.0
+
+    def poll(self, rejected: int) -> None:
+        """Look at the ``rejected`` counter; trim when due."""
+        now = time.monotonic()
+        if rejected != self._seen:
+            self._seen, self._due, self._changed = rejected, True, now
+        if self._due and (now - self._changed >= self.quiet_s or now >= self._next):
+            self._due, self._next = False, now + self.period_s
+            trim_freed_memory()
 
 
 def _quiet_opencv() -> None:
