@@ -73,18 +73,21 @@ class RssSampler:
     def __init__(self, period_s: float = 0.005) -> None:
         self.period_s = period_s
         self.peak = _rss_mb()
+        self._lock = threading.Lock()  # a sample read before a reset must not land after it
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
 
     def _run(self) -> None:
         while not self._stop.wait(self.period_s):
-            self.peak = max(self.peak, _rss_mb())
+            with self._lock:
+                self.peak = max(self.peak, _rss_mb())
 
     def reset(self) -> float:
         """Start a new peak from the current size; returns it."""
-        self.peak = _rss_mb()
-        return self.peak
+        with self._lock:
+            self.peak = _rss_mb()
+            return self.peak
 
     def stop(self) -> None:
         """Stop sampling."""
@@ -109,6 +112,7 @@ def decode_cost(cap: int) -> dict[str, dict[str, Any]]:
         ms = (time.perf_counter() - t0) * 1e3
         time.sleep(0.005)
         out[kind] = {"bytes": len(msg), "ms": ms, "peak_growth_mb": sampler.peak - base, "outcome": outcome}
+        del msg
     sampler.stop()
     return out
 
@@ -217,7 +221,7 @@ def run(  # noqa: PLR0915 - one scenario, step by step
             for kind, msg in big.items():
                 time.sleep(1.5)
                 n_before = (status() or {"counters": {"received": 0}})["counters"]["received"]
-                base = sampler.reset()
+                rss0 = sampler.reset()
                 pub.put(msg)
                 deadline = time.monotonic() + timeout_s
                 while time.monotonic() < deadline:
@@ -226,7 +230,7 @@ def run(  # noqa: PLR0915 - one scenario, step by step
                         break
                     time.sleep(0.02)
                 time.sleep(0.5)
-                growth[kind] = sampler.peak - base
+                growth[kind] = sampler.peak - rss0
                 sent_hostile += 1
             del big
             trim_freed_memory()  # the publisher's copies (this process plays the camera too)

@@ -96,7 +96,9 @@ def _small_containers(n: int) -> bytes:
 def _encoded(seq: int, enc: str) -> bytes:
     """A real PNG/JPEG of the frame's left image, with one byte in the middle of its data flipped."""
     img = _frame(seq=seq).left
-    data = bytearray(wire.encode_image(img, enc)["data"])  # type: ignore[arg-type]
+    encoded = wire.encode_image(img, enc)["data"]
+    assert isinstance(encoded, bytes)
+    data = bytearray(encoded)
     data[len(data) // 2] ^= 0x5A
     return bytes(data)
 
