@@ -310,9 +310,7 @@ def write_json(path: Path, doc: Report) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the benchmark (``--help`` for the options); write the JSON and, if asked, the docs."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument(
-        "--out", type=Path, default=LOCAL_JSON, help="JSON output (default: out/benchmarks/bench_vpp.json)"
-    )
+    ap.add_argument("--out", type=Path, default=LOCAL_JSON, help="JSON output (default: out/benchmarks/bench_vpp.json)")
     ap.add_argument(
         "--update-docs",
         action="store_true",

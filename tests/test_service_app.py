@@ -187,3 +187,34 @@ def test_summary_lines_in_a_log_only_when_something_changed(tmp_path):
     assert lines[0] == "started"
     assert len(lines) == 3, lines  # banner, one periodic line (first report), the final line; ~30 periods passed
     assert lines[1].startswith("0.0 fps") and lines[1] == lines[2]
+
+
+def test_session_drops_messages_over_its_max_message_size(zenoh_endpoint):
+    import zenoh
+
+    from helpers.zenoh_loopback import zenoh_test_config
+    from vpp_service.service.app import zenoh_config
+    from vpp_service.service.config import ZenohSection
+
+    section = ZenohSection(listen=[zenoh_endpoint], max_message_mb=1.0)
+    conf = zenoh_config(section)
+    assert json.loads(conf.get_json("transport/link/rx/max_message_size")) == (1 << 20) + 64 * 1024
+    got: list[int] = []
+    with zenoh.open(conf) as svc, zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as peer:
+        svc.declare_subscriber("t/x", lambda s: got.append(len(s.payload)))
+        time.sleep(0.5)
+        pub = peer.declare_publisher("t/x", congestion_control=zenoh.CongestionControl.BLOCK)
+        pub.put(bytes(4 << 20))  # over the cap: Zenoh never assembles it
+        pub.put(bytes(1000))  # the link survives: the next message arrives
+        deadline = time.monotonic() + 5
+        while not got and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(0.2)
+    assert got == [1000]
+
+
+def test_max_message_mb_is_validated():
+    from vpp_service.service.config import ZenohSection
+
+    with pytest.raises(ValueError, match="max_message_mb"):
+        ZenohSection(max_message_mb=0)

@@ -10,11 +10,11 @@ import zenoh
 
 from helpers.frames import make_frame
 from helpers.zenoh_loopback import zenoh_test_config
-from vpp_service.frame import FusionResult
+from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.fusion import Fusion
 from vpp_service.service.pipeline import Pipeline, StageTimer
 from vpp_service.sinks.base import Sink, SinkContext
-from vpp_service.sources.base import SourceContext, build_source
+from vpp_service.sources.base import Source, SourceContext, build_source
 from vpp_service.transport import wire
 
 
@@ -59,7 +59,7 @@ def sim_source(count: int, rate_hz: float = 0.0, sensor: str = "none"):
             "count": count,
             "rate_hz": rate_hz,
         },
-        SourceContext(rig="t"),
+        SourceContext(rig="rig0"),  # the rig the Pipeline serves by default
     )
 
 
@@ -314,3 +314,55 @@ def test_fps_is_measured_over_a_recent_window(monkeypatch):
     assert st["counters"]["processed"] > 0 and st["uptime_s"] > 0
     assert st["fps"] == 0.0
     pipe.stop(2.0)
+
+
+class ForgedRigSource(Source):
+    """Emits frames of the served rig interleaved with frames whose rig a message could have forged."""
+
+    Options = None
+    RIGS = ("rig0", "../../x/relative", "rig0", "/abs/path", "rig1", ".hidden", "a\x00b", "rig0")
+
+    def run(self, emit, reject):
+        for seq, rig in enumerate(self.RIGS):
+            emit(FRAME.with_(rig=rig, seq=seq))
+
+
+FRAME = StereoFrame(np.zeros((4, 6, 3), np.uint8), np.zeros((4, 6, 3), np.uint8), rig="rig0")
+
+
+def test_frames_of_another_rig_are_rejected_before_any_sink():
+    sink = CollectSink()
+    pipe = Pipeline(
+        ForgedRigSource(None, SourceContext(rig="rig0")),
+        lambda f: FusionResult(f, np.zeros(f.shape, np.float32)),
+        [sink],
+        input_policy="block",
+    )
+    run(pipe)
+    c = pipe.counters
+    assert c["received"] == 8 and c["rejected"] == 5 and c["processed"] == 3
+    assert [r.frame.seq for r in sink.results] == [0, 2, 7]
+    assert {r.frame.rig for r in sink.results} == {"rig0"}
+
+
+class StampSource(Source):
+    """Emits served-rig frames whose sender stamps are hostile (far past, zero, far future)."""
+
+    Options = None
+
+    def run(self, emit, reject):
+        for seq, stamp in enumerate((1, 0, (1 << 63) - 1, 5)):
+            emit(FRAME.with_(seq=seq, stamp_ns=stamp))
+
+
+def test_latency_is_measured_from_receive_time_not_the_senders_stamp():
+    pipe = Pipeline(
+        StampSource(None, SourceContext(rig="rig0")),
+        lambda f: FusionResult(f, np.zeros(f.shape, np.float32)),
+        [CollectSink()],
+        input_policy="block",
+    )
+    run(pipe)
+    lat = pipe.status()["timing_ms"]["latency"]
+    assert lat["n"] == 4
+    assert 0 <= lat["p99"] < 60_000  # the stamps would say 56 years, 0 or minus 236 years

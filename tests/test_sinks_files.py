@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -252,3 +253,24 @@ def test_encode_png16_errors(bad, exc):
 def test_decode_png16_errors(bad):
     with pytest.raises(ValueError, match="data"):
         decode_png16(bad)
+
+
+@pytest.mark.parametrize("rig", ["../../x/relative", "/abs/path", "../sibling", ".hidden", "a\x00b", "..", "r/x"])
+def test_hostile_rig_writes_nothing_and_is_counted(tmp_path, result, rig):
+    sink_dir = tmp_path / "a" / "b" / "sink"
+    sink = make_sink(tmp_path, dir=str(sink_dir), create_dir=True, formats=["png16", "npy"], depth=True, painted=True)
+    sink.write(with_rig(result, rig))
+    assert sink.stats()["errors"] == 1 and sink.stats()["written"] == 0
+    assert [p for p in tmp_path.rglob("*") if p.is_file()] == []
+    assert not Path("/abs/path").exists()
+
+
+def with_rig(result: FusionResult, rig: str) -> FusionResult:
+    """``result`` with its frame's rig replaced (as a message could set it)."""
+    return FusionResult(
+        result.frame.with_(rig=rig),
+        result.disparity,
+        depth=result.depth,
+        left_vpp=result.left_vpp,
+        right_vpp=result.right_vpp,
+    )

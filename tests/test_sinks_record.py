@@ -487,3 +487,12 @@ def test_example_config_documents_the_record_sink():
     assert data["sinks"][0]["type"] == "record"
     cfg = validate_config({"zenoh": {"enabled": False}, "sinks": data["sinks"]})
     assert cfg.sinks[0].options == RecordSinkOptions(dir="vpp-run/recording")  # every value shown is the default
+
+
+@pytest.mark.parametrize("rig", ["../../x/relative", "/abs/path", "../sibling", ".hidden", "a\x00b", "..", "r/x"])
+def test_hostile_rig_records_nothing_and_is_counted(tmp_path, rig):
+    sink_dir = tmp_path / "a" / "b" / "rec"
+    sink = make_sink(tmp_path, dir=str(sink_dir), create_dir=True, enc="raw")
+    sink.write(as_result(metric_frame().with_(rig=rig)))
+    assert sink.stats()["errors"] == 1 and sink.stats()["written"] == 0
+    assert [p for p in tmp_path.rglob("*") if p.is_file()] == []

@@ -281,3 +281,36 @@ def test_block_policy_stop_releases_a_waiting_callback(sessions):
     t0 = time.monotonic()
     src.stop(2.0)
     assert time.monotonic() - t0 < 1.5
+
+
+def test_oversized_message_is_rejected_in_the_callback_before_buffering(sessions):
+    svc, cam = sessions
+    # opened, not started: nothing drains the ring, so only the callback can reject and count
+    src = build_source("zenoh", {"max_message_mb": 0.5}, SourceContext(rig="z", session=svc))
+    src.open()
+    try:
+        time.sleep(0.3)
+        cam.put("vpp/z/in/frame", bytes(600 * 1024))
+        cam.put("vpp/z/in/frame", wire.encode_frame(make_frame()))
+        assert wait_for(lambda: src.stats()["received"] == 1)
+        st = src.stats()
+        assert st["rejected"] == 1 and st["ring_dropped"] == 0
+    finally:
+        src.close()
+
+
+@pytest.mark.parametrize("opts", [{"max_pixels": 0}, {"max_pixels": True}, {"max_pixels": 1 << 29}])
+def test_bad_max_pixels(opts):
+    with pytest.raises(ValueError, match="max_pixels"):
+        build_source("zenoh", opts, SourceContext(rig="z"))
+
+
+def test_max_pixels_option_is_applied(sessions):
+    svc, cam = sessions
+    src, frames, rejects = started(svc, max_pixels=6 * 8 - 1)
+    try:
+        cam.put("vpp/z/in/frame", wire.encode_frame(make_frame(h=6, w=8)))
+        assert wait_for(lambda: len(rejects) == 1)
+        assert "exceeds the limit of 47" in rejects[0] and frames == []
+    finally:
+        src.stop(2.0)

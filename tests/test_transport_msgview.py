@@ -171,3 +171,50 @@ def test_huge_declared_length_fails_fast():
 def test_non_contiguous_buffer_is_rejected():
     with pytest.raises(MsgViewError, match="contiguous"):
         loads(memoryview(bytes(range(20)))[::2], BIG)
+
+
+# ------------------------------------------------ total element count, skipped keys
+def _limits(max_elements: int) -> Limits:
+    return Limits(1 << 20, 1 << 20, 1 << 16, 1 << 12, max_elements=max_elements)
+
+
+def test_total_element_count_is_capped_across_nesting():
+    # 100 small arrays of 15 empty maps: every container is short, the total (1 + 100 * 16) is not
+    obj = [[{}] * 15] * 100
+    payload = msgpack.packb(obj)
+    assert loads(payload, _limits(1601)) == obj
+    with pytest.raises(MsgViewError, match="exceeds the element limit"):
+        loads(payload, _limits(1600))
+
+
+def test_a_container_header_cannot_claim_more_than_the_budget():
+    payload = b"\xdd\x00\x00\xea\x60" + b"\x80" * 60000  # an array of 60000 empty maps
+    with pytest.raises(MsgViewError, match="exceeds the element limit"):
+        loads(payload, _limits(4096))
+
+
+def test_keep_skips_unknown_top_level_values_unbuilt():
+    msg = {"v": 1, "x-ext": {"a": [1, 2.5, "s", b"b", None, True, {"n": -3}] * 3}, "rig": "r"}
+    payload = msgpack.packb(msg, use_bin_type=True)
+    assert loads(payload, _limits(100), keep=frozenset({"v", "rig"})) == {"v": 1, "rig": "r"}
+    assert loads(payload, _limits(100)) == msg
+
+
+@pytest.mark.parametrize(
+    ("junk", "match"),
+    [
+        (b"\xdd\x00\x00\x00\x02\xc0", "truncated"),  # the skipped array is short of one element
+        (b"\xc1", "0xc1"),
+        (b"\xd4\x01\x00", "extension type"),
+        (b"\x91" * 40 + b"\xc0", "nesting deeper"),
+        (b"\xdc\x01\x00" + b"\x80" * 256, "exceeds the element limit"),
+        (
+            b"\x9f" + (b"\x9f" + b"\x80" * 15) * 15,
+            "element limit|more than 100 objects",
+        ),  # short containers, many objects
+    ],
+)
+def test_skipped_values_are_still_checked(junk, match):
+    payload = b"\x82\xa1v\x01\xa4junk" + junk
+    with pytest.raises(MsgViewError, match=match):
+        loads(payload, _limits(100), keep=frozenset({"v"}))

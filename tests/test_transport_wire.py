@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import math
 import re
+import subprocess
+import sys
+from pathlib import Path
 
 import msgpack
 import numpy as np
 import pytest
 
+from helpers import hostile
 from helpers.frames import make_frame
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
 from vpp_service.transport import wire
@@ -410,3 +414,82 @@ def test_sparse_output_round_trip_and_errors():
     ]:
         with pytest.raises(wire.WireError, match=field):
             wire.decode_output_points(msgpack.packb({**msg, key: value}, use_bin_type=True))
+
+
+# ------------------------------------------------ hostile messages: caps before work
+@pytest.mark.parametrize("kind", [k for k in hostile.KINDS if hostile.stage(k) in ("wire", "size")])
+def test_every_hostile_kind_is_rejected_by_the_decoder(kind):
+    cap = 4 << 20
+    with pytest.raises(wire.WireError):
+        wire.decode_frame(hostile.hostile_message(kind, 3, cap), wire.WireLimits(max_message_bytes=cap))
+
+
+@pytest.mark.parametrize("kind", [k for k in hostile.KINDS if hostile.stage(k) == "rig"])
+def test_hostile_rig_kinds_decode_with_the_forged_rig(kind):
+    # well-formed frames: the pipeline rejects them by their rig (test_service_pipeline)
+    assert wire.decode_frame(hostile.hostile_message(kind, 3)).rig != "rig0"
+
+
+@pytest.mark.parametrize(
+    ("kind", "match"),
+    [
+        ("nested_empty_maps", "element limit"),
+        ("unknown_key_nested", "element limit"),
+        ("many_small_containers", "element limit|more than 4096 objects"),
+        ("png_bomb", r"h\*w = 67108864 exceeds the limit of 8388608"),
+        ("raw_declared_huge", "exceeds the limit of 8388608"),
+        ("jpeg_marker_flood", "no JPEG frame header within 1024 markers"),
+        ("png_bad_crc", "bad CRC"),
+        ("png_corrupt_data", "truncated PNG stream"),
+    ],
+)
+def test_caps_stop_hostile_messages_before_the_work(kind, match):
+    cap = 16 << 20
+    with pytest.raises(wire.WireError, match=match):
+        wire.decode_frame(hostile.hostile_message(kind, 0, cap), wire.WireLimits(max_message_bytes=cap))
+
+
+def test_default_pixel_cap_admits_full_resolution_middlebury():
+    h, w = 1988, 2964
+    img = wire.decode_image({"h": h, "w": w, "c": 3, "dtype": "u8", "enc": "raw", "data": bytes(h * w * 3)})
+    assert img.shape == (h, w, 3)
+    assert wire.DEFAULT_LIMITS.max_pixels >= h * w and wire.DEFAULT_LIMITS.max_message_bytes > 2 * h * w * 3
+
+
+def test_depth_part_size_is_capped_before_allocating():
+    msg = {"v": 1, "rig": "rig0", "seq": 0, "stamp_ns": 0, "h": 16384, "w": 16384}
+    msg["depth"] = {"kind": "points", "n": 0, "uv": b"", "z": b""}
+    with pytest.raises(wire.WireError, match="exceeds the limit of 8388608"):
+        wire.decode_part(msgpack.packb(msg, use_bin_type=True), "depth")
+
+
+def test_unknown_top_level_keys_are_skipped_not_built():
+    good = msgpack.unpackb(wire.encode_frame(make_frame()), raw=False)
+    msg = {**good, "x-future": {"a": list(range(100))}}
+    frame = wire.decode_frame(msgpack.packb(msg, use_bin_type=True))
+    assert frame.seq == 7
+    too_many = {**good, "x-future": [[0] * 15] * 300}  # 4800 objects: over the element cap even unbuilt
+    with pytest.raises(wire.WireError, match=r"element limit|more than 4096 objects"):
+        wire.decode_frame(msgpack.packb(too_many, use_bin_type=True))
+
+
+_QUIET_PROBE = r"""
+import sys
+sys.path.insert(0, "tests")
+from helpers import hostile
+from vpp_service.transport import wire
+for kind in ("png_corrupt_data", "png_bad_crc", "jpeg_corrupt", "png_header_lies", "jpeg_marker_flood"):
+    try:
+        wire.decode_frame(hostile.hostile_message(kind, 1, 4 << 20), wire.WireLimits(max_message_bytes=4 << 20))
+    except wire.WireError:
+        pass
+"""
+
+
+def test_corrupt_images_are_rejected_without_decoder_noise_on_stderr():
+    # libpng reports a corrupt stream on stderr itself, past any log rate limit: it must never see one
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run(
+        [sys.executable, "-c", _QUIET_PROBE], capture_output=True, text=True, timeout=60, check=True, cwd=root
+    )
+    assert out.stderr == ""

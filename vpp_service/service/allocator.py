@@ -10,6 +10,11 @@ the resident size then stays at the peak of a steady stream (a few frames in
 flight) instead of going up and down every frame.
 
 Only glibc has ``mallopt``; elsewhere this is a no-op that says so.
+
+The price of keeping freed memory is that a one-off spike (a hostile message
+as large as the caps allow, copied and rejected) would stay resident for good:
+:func:`trim_freed_memory` (glibc ``malloc_trim``) hands free heap pages back to
+the kernel, and the service calls it shortly after rejecting input.
 """
 
 from __future__ import annotations
@@ -22,6 +27,31 @@ log = logging.getLogger(__name__)
 
 _M_TRIM_THRESHOLD = -1
 _M_MMAP_THRESHOLD = -3
+
+
+def _libc() -> ctypes.CDLL | None:
+    name = ctypes.util.find_library("c")
+    try:
+        return ctypes.CDLL(name) if name else None
+    except OSError:
+        return None
+
+
+def trim_freed_memory() -> bool:
+    """Return the free pages of every heap to the kernel now (glibc ``malloc_trim(0)``).
+
+    Returns
+    -------
+    bool
+        True when this C library has ``malloc_trim`` (whether or not it found
+        pages to release), False elsewhere.
+    """
+    libc = _libc()
+    trim = getattr(libc, "malloc_trim", None) if libc is not None else None
+    if trim is None:
+        return False
+    trim(0)
+    return True
 
 
 def reuse_freed_memory(mmap_threshold_mb: int = 512) -> bool:
@@ -65,4 +95,4 @@ def reuse_freed_memory(mmap_threshold_mb: int = 512) -> bool:
     return ok
 
 
-__all__ = ["reuse_freed_memory"]
+__all__ = ["reuse_freed_memory", "trim_freed_memory"]

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from vpp_service.errors import StartupError
 from vpp_service.fusion import Fusion
-from vpp_service.service.allocator import reuse_freed_memory
+from vpp_service.service.allocator import reuse_freed_memory, trim_freed_memory
 from vpp_service.service.config import ServiceConfig, ZenohSection
 from vpp_service.service.pipeline import Pipeline, PipelineStatus
 
@@ -51,10 +51,19 @@ class ServiceSummary(PipelineStatus):
 #: Reconnection to the configured endpoints (Zenoh's ``connect/retry``): first retry after 0.5 s, then at most
 #: every 2 s, so outputs flow again within a few seconds after a router returns.
 CONNECT_RETRY = {"period_init_ms": 500, "period_max_ms": 2000, "period_increase_factor": 2}
+#: Room for Zenoh's own headers on top of ``[zenoh] max_message_mb`` of payload.
+_ZENOH_HEADER_SLACK = 64 * 1024
 
 
 def zenoh_config(section: ZenohSection) -> zenoh.Config:
-    """A ``zenoh.Config`` from the ``[zenoh]`` section (multicast scouting off unless enabled)."""
+    """A ``zenoh.Config`` from the ``[zenoh]`` section (multicast scouting off unless enabled).
+
+    The largest message the session assembles is capped at ``max_message_mb``
+    (``transport/link/rx/max_message_size``): Zenoh drops a larger one unread.
+    Without a ``config_file``, the transmit queues give a ``DROP`` message
+    16 batches of room, 10 ms to find one, and 250 ms for the rest of its
+    fragments once it started.
+    """
     import zenoh
 
     conf = zenoh.Config.from_file(section.config_file) if section.config_file else zenoh.Config()
@@ -62,11 +71,18 @@ def zenoh_config(section: ZenohSection) -> zenoh.Config:
     conf.insert_json5("listen/endpoints", json.dumps(list(section.listen)))
     conf.insert_json5("connect/endpoints", json.dumps(list(section.connect)))
     conf.insert_json5("scouting/multicast/enabled", "true" if section.multicast_scouting else "false")
+    max_bytes = int(section.max_message_mb * 1024 * 1024) + _ZENOH_HEADER_SLACK
+    conf.insert_json5("transport/link/rx/max_message_size", str(max_bytes))
     if not section.config_file:  # a config file decides these itself
         # keep retrying unreachable endpoints in the background instead of failing the open
         conf.insert_json5("connect/timeout_ms", json.dumps({"router": -1, "peer": -1, "client": 0}))
         conf.insert_json5("connect/exit_on_failure", json.dumps({"router": False, "peer": False, "client": True}))
         conf.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
+        # outputs go out with DROP (sinks.zenoh): give a busy but healthy link room and time before a
+        # multi-MB map is dropped on it, while a consumer that never reads costs each put at most 10 ms
+        conf.insert_json5("transport/link/tx/queue/size/data", "16")
+        conf.insert_json5("transport/link/tx/queue/congestion_control/drop/wait_before_drop", "10000")
+        conf.insert_json5("transport/link/tx/queue/congestion_control/drop/max_wait_before_drop_fragments", "250000")
     return conf
 
 
@@ -190,6 +206,7 @@ def run_service(
     if s.reuse_memory:
         reuse_freed_memory()
     write_errors = [0]
+    _quiet_opencv()
     with open_session(cfg.zenoh, stop) as session:
         if session is None and cfg.zenoh.enabled:  # stopped while waiting for the router: nothing ran
             return _not_started(cfg)
@@ -204,11 +221,13 @@ def run_service(
         last_counters: dict[str, int] | None = None
         try:
             next_report = time.monotonic() + s.summary_period_s
+            trim = _TrimAfterRejects()
             while not stop.is_set() and not pipe.done.is_set():
                 stop.wait(0.1)
                 link = pipe.connectivity() if cfg.zenoh.connect else None
                 if link is not None:
                     linked = _log_link(link, linked, cfg.zenoh.connect)
+                trim.poll(pipe.counters["rejected"])
                 if time.monotonic() >= next_report:
                     next_report += s.summary_period_s
                     counters = pipe.status()["counters"]
@@ -236,6 +255,43 @@ def run_service(
             if s.summary and stream is not None:
                 print(("\r" if tty else "") + pipe.summary_line(), file=stream, flush=True)
     return status
+
+
+class _TrimAfterRejects:
+    """Hand freed memory back after rejected input (which may have been large): :func:`trim_freed_memory`.
+
+    Polled with the ``rejected`` counter: trims once the counter has been still
+    for ``quiet_s`` (the rejected message is freed by then), and at most every
+    ``period_s`` while rejects keep coming.
+    """
+
+    def __init__(self, quiet_s: float = 0.3, period_s: float = 1.0) -> None:
+        self.quiet_s, self.period_s = quiet_s, period_s
+        self._seen = 0
+        self._due = False
+        self._changed = self._next = 0.0
+
+    def poll(self, rejected: int) -> None:
+        """Look at the ``rejected`` counter; trim when due."""
+        now = time.monotonic()
+        if rejected != self._seen:
+            self._seen, self._due, self._changed = rejected, True, now
+        if self._due and (now - self._changed >= self.quiet_s or now >= self._next):
+            self._due, self._next = False, now + self.period_s
+            trim_freed_memory()
+
+
+def _quiet_opencv() -> None:
+    """Keep OpenCV's own warnings (e.g. about a stream it cannot decode) out of the log.
+
+    A bad image in a message is rejected with its reason through the pipeline's
+    rate-limited reject log; a line per hostile message from OpenCV would bypass it.
+    """
+    import cv2
+
+    logging_mod = getattr(getattr(cv2, "utils", None), "logging", None)
+    if logging_mod is not None:
+        logging_mod.setLogLevel(logging_mod.LOG_LEVEL_ERROR)
 
 
 def _write_json(path: Path, data: Mapping[str, object], errors: list[int]) -> bool:

@@ -135,6 +135,12 @@ class ZenohSection:
         Multicast peer discovery; off by default (explicit endpoints only).
     config_file : str
         Optional Zenoh JSON5 config loaded first (the keys above override it).
+    max_message_mb : float
+        Largest message the session accepts from the network (Zenoh's
+        ``transport/link/rx/max_message_size``, plus 64 KiB for Zenoh's own
+        headers): Zenoh drops a larger message before assembling it, so it
+        never costs memory here. Keep it at least the zenoh source's
+        ``max_message_mb`` (which rejects and counts what lies between).
     """
 
     enabled: bool = True
@@ -143,6 +149,7 @@ class ZenohSection:
     connect: list[str] = field(default_factory=list)
     multicast_scouting: bool = False
     config_file: str = ""
+    max_message_mb: float = 64.0
 
     def __post_init__(self) -> None:
         for key in ("listen", "connect"):
@@ -153,6 +160,8 @@ class ZenohSection:
             raise ValueError("connect: client mode needs at least one endpoint")
         if self.config_file and not Path(self.config_file).is_file():
             raise ValueError(f"config_file: no such file: {self.config_file}")
+        if not 0 < self.max_message_mb <= 4096:
+            raise ValueError(f"max_message_mb must be in (0, 4096], got {self.max_message_mb}")
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,11 @@ one, but ``status()["source_error"]`` names the exception (the service exits 1).
 
 Bad input never stops the pipeline: a rejected message is counted and logged
 (at most once per ``reject_log_period_s``); a frame the process step raises
-on is counted as rejected and dropped.
+on is counted as rejected and dropped. The ``latency`` statistic runs from
+when the frame was received (``meta["recv_ns"]``), never from the sender's
+``stamp_ns``, which any peer can set. A frame whose ``rig`` (it comes from
+the message) is not the rig the pipeline serves is rejected before it is queued,
+so sinks never see a foreign or forged rig name.
 """
 
 from __future__ import annotations
@@ -231,6 +235,10 @@ class Pipeline:
 
     def _emit(self, frame: StereoFrame) -> bool:
         self._inc("received")
+        if frame.rig != self.rig:  # the rig comes from the message: only the served rig's frames go on
+            self._reject(f"frame seq={frame.seq}: rig {frame.rig[:64]!r} is not the served rig {self.rig!r}")
+            return False
+        frame.meta.setdefault("recv_ns", time.time_ns())  # sources that receive stamp it earlier
         ok = False
         if self.input.policy == "block":
             while not (self._stop.is_set() or self._enough.is_set()):
@@ -310,10 +318,10 @@ class Pipeline:
             except Exception as exc:  # noqa: BLE001 - a broken sink must not stop the others
                 self._inc("errors")
                 log.warning("sink %s: %s", type(sink).__name__, exc)
-        fr = result.frame
-        now_ns = time.time_ns()
-        if fr.stamp_ns > 0:
-            self.timer.add("latency", (now_ns - fr.stamp_ns) / 1e6)
+        # latency from when this service received the frame, never from the sender's stamp_ns (a peer sets it)
+        recv_ns = result.frame.meta.get("recv_ns")
+        if isinstance(recv_ns, int):
+            self.timer.add("latency", (time.time_ns() - recv_ns) / 1e6)
         self._inc("published")
 
     def _sinks_done(self) -> None:

@@ -44,7 +44,7 @@ from vpp_service.datasets.pfm import write_pfm
 from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import SINKS, SinkContext
 from vpp_service.sinks.colorize import colorize_disparity
-from vpp_service.sinks.folder import FolderSink, check_pattern, write_atomic
+from vpp_service.sinks.folder import FolderSink, check_pattern, path_inside, write_atomic
 
 log = logging.getLogger(__name__)
 
@@ -225,17 +225,19 @@ class FilesSink(FolderSink):
         ------
         TypeError
             If ``result`` is not a FusionResult.
+        ValueError
+            A file name would not be safe or would leave ``dir`` (see :meth:`frame_stem`).
         """
         stem = self.frame_stem(result)
-        paths = {f: self._dir / f"{stem}_disparity{_EXT[f]}" for f in self.options.formats}
+        names = {f: f"{stem}_disparity{_EXT[f]}" for f in self.options.formats}
         if self.options.preview:
-            paths["preview"] = self._dir / f"{stem}_disparity_preview.png"
+            names["preview"] = f"{stem}_disparity_preview.png"
         if self.options.depth:
-            paths["depth"] = self._dir / f"{stem}_depth.npy"
+            names["depth"] = f"{stem}_depth.npy"
         if self.options.painted:
-            paths["left_vpp"] = self._dir / f"{stem}_left_vpp.png"
-            paths["right_vpp"] = self._dir / f"{stem}_right_vpp.png"
-        return paths
+            names["left_vpp"] = f"{stem}_left_vpp.png"
+            names["right_vpp"] = f"{stem}_right_vpp.png"
+        return {kind: path_inside(self._dir, name) for kind, name in names.items()}
 
     def write(self, result: FusionResult) -> None:
         """Write the files for one result (synchronously, each atomically).
@@ -249,7 +251,12 @@ class FilesSink(FolderSink):
         """
         if not self._open:
             raise RuntimeError("files sink: write() before open() or after close()")
-        paths = self.output_paths(result)
+        try:
+            paths = self.output_paths(result)
+        except ValueError as exc:  # an unsafe name: nothing is written, counted
+            self._counters["errors"] += 1
+            log.warning("files sink: not writing frame seq=%s: %s", result.frame.seq, exc)
+            return
         failures = 0
         for kind, path in paths.items():
             try:

@@ -1,24 +1,67 @@
 """What the sinks that write files into a folder share (``files``, ``record``).
 
 :class:`FolderSink` checks (or creates) the folder at open time; file names
-come from a ``str.format`` pattern (:func:`check_pattern`, :func:`frame_stem`);
-:func:`write_atomic` writes a file to a temporary name in its destination
+come from a ``str.format`` pattern (:func:`check_pattern`, :meth:`FolderSink.frame_stem`)
+over validated parts only (:func:`check_name`: a frame's ``rig`` comes from the
+network), and every path is checked to stay inside the folder after resolution
+(:func:`path_inside`); :func:`write_atomic` writes a file to a temporary name in its destination
 folder and renames it into place, so readers never see a partial file.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Protocol
+
+import numpy as np
 
 from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import Sink, SinkContext
 
 #: Fields a file-name pattern may use, with the sample values used to check it.
 PATTERN_FIELDS = {"rig": "rig0", "seq": 0, "stamp_ns": 0, "name": "scene"}
+
+
+#: What a name part (``rig``, ``name``) and a whole file-name stem may look like: no path separators,
+#: no NUL or control characters, no leading dot (hidden files, ``.`` and ``..``), at most 200 characters.
+_SAFE_NAME = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]{0,199}")
+
+
+def check_name(value: object, what: str) -> str:
+    """``value`` when it is a safe file-name part, else ValueError.
+
+    Safe: 1 to 200 characters from ``A-Z a-z 0-9 _ - .``, not starting with ``.``
+    (so no path separators, NUL, ``..`` or hidden names).
+
+    Raises
+    ------
+    ValueError
+        Naming ``what``: not a string, or not a safe name.
+    """
+    if not isinstance(value, str) or _SAFE_NAME.fullmatch(value) is None:
+        raise ValueError(f"{what}: {value!r} is not a safe file name (1-200 of A-Z a-z 0-9 _ - ., no leading dot)")
+    return value
+
+
+def path_inside(folder: Path, name: str) -> Path:
+    """``folder / name`` after checking that it resolves to a file directly inside ``folder``.
+
+    Raises
+    ------
+    ValueError
+        ``name`` is not a safe name, or the resolved path (symbolic links
+        followed) leaves ``folder``.
+    """
+    check_name(name, "file name")
+    base = folder.resolve()
+    path = (base / name).resolve()
+    if path.parent != base:
+        raise ValueError(f"file name: {name!r} resolves to {str(path)!r}, outside {str(base)!r}")
+    return folder / name
 
 
 def check_pattern(pattern: str) -> None:
@@ -186,19 +229,38 @@ class FolderSink(Sink):
         self._open = False
 
     def frame_stem(self, result: FusionResult) -> str:
-        """File-name stem of ``result`` from ``options.pattern``.
+        """File-name stem of ``result`` from ``options.pattern``, built from validated parts only.
+
+        ``rig`` (it comes from the network) must be a safe name (:func:`check_name`),
+        ``seq`` and ``stamp_ns`` non-negative integers, and the stem itself a safe name.
 
         Raises
         ------
         TypeError
             If ``result`` is not a FusionResult.
+        ValueError
+            A part or the stem is not a safe file name (e.g. a ``rig`` of ``"../x"``).
         """
         if not isinstance(result, FusionResult):
             raise TypeError(f"result: must be a FusionResult, got {type(result).__name__}")
         fr = result.frame
-        return self.options.pattern.format(
-            rig=fr.rig or self.context.rig, seq=fr.seq, stamp_ns=fr.stamp_ns, name=fr.name or "frame"
+        rig = check_name(fr.rig or self.context.rig, "frame.rig")
+        seq, stamp = fr.seq, fr.stamp_ns
+        for what, v in (("frame.seq", seq), ("frame.stamp_ns", stamp)):
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+                raise ValueError(f"{what}: must be a non-negative integer, got {v!r}")
+        return check_name(
+            self.options.pattern.format(rig=rig, seq=int(seq), stamp_ns=int(stamp), name=fr.name or "frame"), "stem"
         )
 
 
-__all__ = ["PATTERN_FIELDS", "FolderOptions", "FolderSink", "check_pattern", "prepare_dir", "write_atomic"]
+__all__ = [
+    "PATTERN_FIELDS",
+    "FolderOptions",
+    "FolderSink",
+    "check_name",
+    "check_pattern",
+    "path_inside",
+    "prepare_dir",
+    "write_atomic",
+]

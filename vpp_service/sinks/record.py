@@ -52,7 +52,7 @@ from typing import Literal
 
 from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import SINKS, SinkContext
-from vpp_service.sinks.folder import FolderSink, check_pattern, write_atomic
+from vpp_service.sinks.folder import FolderSink, check_pattern, path_inside, write_atomic
 from vpp_service.transport import wire
 
 log = logging.getLogger(__name__)
@@ -163,9 +163,10 @@ class RecordSink(FolderSink):
         ------
         TypeError
             If ``result`` is not a FusionResult.
+        ValueError
+            The file name would not be safe or would leave ``dir`` (see :meth:`frame_stem`).
         """
-        stem = self.frame_stem(result)
-        return self._dir / f"{stem}{EXTENSION}"
+        return path_inside(self._dir, f"{self.frame_stem(result)}{EXTENSION}")
 
     def _stop(self, reason: str, detail: str) -> None:
         self._stopped = reason
@@ -183,9 +184,14 @@ class RecordSink(FolderSink):
         """
         if not self._open:
             raise RuntimeError("record sink: write() before open() or after close()")
-        path = self.output_path(result)
         if self._stopped is not None:
             self._counters["skipped"] += 1
+            return
+        try:
+            path = self.output_path(result)
+        except ValueError as exc:  # an unsafe name: nothing is written, counted
+            self._counters["errors"] += 1
+            log.warning("record sink: not recording frame seq=%s: %s", result.frame.seq, exc)
             return
         o = self.options
         try:

@@ -1,15 +1,20 @@
 """Zenoh sink: publish results on ``<prefix>/<rig>/out/<name>`` (wire format v1).
 
-Outputs (``outputs`` option, lazy: only the listed ones are serialized):
+Outputs (``outputs`` option, lazy: only the listed ones are serialized).
 ``on_request`` lists outputs that are published only while someone subscribes
 to them (Zenoh's matching status; default: the painted pair and the sparse
 points, which ``vpp-service view`` shows), so they cost nothing otherwise.
-``sparse`` carries the sparse input points. ``disparity`` and ``depth``
-(float32 maps) are published with
-``CongestionControl.BLOCK`` at ``Priority.DATA`` on purpose: Zenoh's default
-``DROP`` can silently lose large fragmented messages, and these are the
-product. ``left_vpp`` / ``right_vpp`` (visualization images) go at
-``Priority.DATA_LOW`` with ``CongestionControl.DROP``: under load they give way.
+``sparse`` carries the sparse input points.
+
+``disparity`` and ``depth`` (float32 maps) are published at ``Priority.DATA``
+with ``CongestionControl.DROP`` by default (``congestion_control`` option):
+Zenoh's ``BLOCK`` would make the publisher wait for the slowest subscriber, so
+one consumer that stops reading would slow every other consumer down to its
+pace. With ``DROP`` such a consumer loses messages instead (Zenoh drops them
+on that link, unseen by the publisher; a consumer counts its losses as gaps
+in ``seq``). ``"block"`` suits a deployment whose consumers are all trusted
+to keep up and must not lose a map. ``left_vpp`` / ``right_vpp`` and
+``sparse`` (for viewing) always go at ``Priority.DATA_LOW`` with ``DROP``.
 
 ``write`` never blocks the pipeline: results go through a
 :class:`~vpp_service.queueing.QueueWorker` (``queue_size``, oldest dropped and
@@ -57,6 +62,10 @@ class ZenohSinkOptions:
     shm_pool_mb : int
         Shared-memory pool the large outputs are published from
         (:mod:`vpp_service.transport.shm`); 0 = plain puts only.
+    congestion_control : {"drop", "block"}
+        Zenoh congestion control of ``disparity`` / ``depth``: ``drop`` (a
+        consumer that does not read loses messages, the others keep their
+        rate) or ``block`` (lossless, at the pace of the slowest consumer).
     """
 
     outputs: list[str] = field(default_factory=lambda: ["disparity", "depth"])
@@ -64,6 +73,7 @@ class ZenohSinkOptions:
     image_enc: Literal["raw", "png", "jpeg"] = "png"
     queue_size: int = 4
     shm_pool_mb: int = 64
+    congestion_control: Literal["drop", "block"] = "drop"
 
     def __post_init__(self) -> None:
         if not self.outputs:
@@ -128,12 +138,13 @@ class ZenohSink(Sink):
         if session is None:
             raise ValueError("sinks.zenoh: needs an open zenoh session (service.zenoh section)")
         o = self.options
+        product = zenoh.CongestionControl.BLOCK if o.congestion_control == "block" else zenoh.CongestionControl.DROP
         self._on_request = [n for n in o.on_request if n not in o.outputs]
         for name in [*o.outputs, *self._on_request]:
             visual = name in ("left_vpp", "right_vpp", "sparse")
             self._pubs[name] = session.declare_publisher(
                 wire.topic(self.context.prefix, self.context.rig, f"out/{name}"),
-                congestion_control=zenoh.CongestionControl.DROP if visual else zenoh.CongestionControl.BLOCK,
+                congestion_control=zenoh.CongestionControl.DROP if visual else product,
                 priority=zenoh.Priority.DATA_LOW if visual else zenoh.Priority.DATA,
             )
         self._worker.start()

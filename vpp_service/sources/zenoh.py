@@ -72,7 +72,14 @@ class ZenohSourceOptions:
         Per-topic overrides of ``ring_size`` in separate-topics mode, e.g.
         ``{depth = 16}`` for a sensor that runs ahead of the cameras.
     max_message_mb : float
-        Messages larger than this are rejected before unpacking.
+        Messages larger than this are rejected (and counted) in the Zenoh
+        callback, before the payload is copied out or buffered; keep the
+        session's ``[zenoh] max_message_mb`` at least as large.
+    max_pixels : int
+        Largest image / depth map (``h * w``) accepted, checked before
+        anything that size is allocated or decoded (PNG/JPEG sizes are read
+        from the stream's header); the default admits full-resolution
+        Middlebury (2964 x 1988).
     poll_s : float
         Longest idle sleep of the receive thread between checks for a stop
         request; arriving samples wake it at once.
@@ -85,7 +92,8 @@ class ZenohSourceOptions:
     sync_threshold_ms: float = 20.0
     ring_size: int = 4
     ring_sizes: dict[str, int] = field(default_factory=dict)
-    max_message_mb: float = 256.0
+    max_message_mb: float = 64.0
+    max_pixels: int = wire.DEFAULT_LIMITS.max_pixels
     poll_s: float = 0.05
 
     def __post_init__(self) -> None:
@@ -104,6 +112,8 @@ class ZenohSourceOptions:
             raise ValueError('ring_sizes: only for topics = "separate" (use ring_size)')
         if not 0 < self.max_message_mb <= 4096:
             raise ValueError(f"max_message_mb must be in (0, 4096], got {self.max_message_mb}")
+        if isinstance(self.max_pixels, bool) or not 1 <= self.max_pixels <= 1 << 28:
+            raise ValueError(f"max_pixels must be in [1, {1 << 28}], got {self.max_pixels}")
         if not 0 < self.poll_s <= 1:
             raise ValueError(f"poll_s must be in (0, 1], got {self.poll_s}")
 
@@ -129,7 +139,9 @@ class ZenohSource(Source):
     def __init__(self, options: ZenohSourceOptions, context: SourceContext) -> None:
         super().__init__(options, context)
         self._subs: dict[str, zenoh.Subscriber[None]] = {}
-        self._limits = wire.WireLimits(max_message_bytes=int(options.max_message_mb * 1024 * 1024))
+        self._limits = wire.WireLimits(
+            max_message_bytes=int(options.max_message_mb * 1024 * 1024), max_pixels=options.max_pixels
+        )
         self._rings: dict[str, deque[_Received]] = {}
         self._ring_sizes: dict[str, int] = {}
         self._ring_lock = threading.Condition()
@@ -172,11 +184,22 @@ class ZenohSource(Source):
     def _on_sample(self, part: str, sample: zenoh.Sample) -> None:
         """Subscriber callback: decode and validate, buffer what is valid, wake the receive thread.
 
-        Under the ``block`` input policy it runs on Zenoh's receive thread and a
+        An oversized message is rejected by its length before its payload is
+        copied. Under the ``block`` input policy it runs on Zenoh's receive thread and a
         full ring makes it wait for room (back-pressure through Zenoh); under
         ``latest`` it runs on Zenoh's Python callback thread and never waits.
         """
         recv_ns = time.time_ns()
+        n = len(sample.payload)
+        if n > self._limits.max_message_bytes:  # by its length, before the payload is copied out of Zenoh
+            with self._ring_lock:
+                self._counters["received"] += 1
+                self._counters["rejected"] += 1
+            if self._reject is not None:
+                self._reject(
+                    f"{sample.key_expr}: message: {n} bytes exceeds the limit of {self._limits.max_message_bytes}"
+                )
+            return
         t0 = time.perf_counter()
         try:
             payload = sample.payload.to_bytes()

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import struct
+import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -56,19 +57,28 @@ class WireLimits:
     Attributes
     ----------
     max_message_bytes : int
-        Largest accepted message (checked before unpacking).
+        Largest accepted message (checked before unpacking). The default,
+        64 MiB, holds a raw full-resolution Middlebury pair (2964 x 1988 RGB,
+        35 MB) with its sparse depth and float32 ground truth.
     max_side : int
         Largest accepted image height or width.
     max_pixels : int
-        Largest accepted ``h * w``.
+        Largest accepted ``h * w`` of an image or depth map, checked before
+        anything of that size is allocated or decoded. The default, 8 Mi
+        pixels, admits full-resolution Middlebury (2964 x 1988 = 5.9 M) with
+        room to spare; a hostile header cannot make a decoder allocate more.
     max_points : int
         Largest accepted number of sparse depth points.
+    max_elements : int
+        Largest number of msgpack objects in one message, however nested (a
+        frame has fewer than 100): bounds the parsing work of any message.
     """
 
-    max_message_bytes: int = 256 * 1024 * 1024
+    max_message_bytes: int = 64 * 1024 * 1024
     max_side: int = 16384
-    max_pixels: int = 64 * 1024 * 1024
+    max_pixels: int = 8 * 1024 * 1024
     max_points: int = 16 * 1024 * 1024
+    max_elements: int = 4096
 
 
 DEFAULT_LIMITS = WireLimits()
@@ -153,11 +163,15 @@ def _f32(data: Binary, count: int, field: str) -> np.ndarray:
     return np.frombuffer(data, dtype="<f4", count=count)
 
 
-def unpack(payload: bytes | bytearray | memoryview, limits: WireLimits = DEFAULT_LIMITS) -> dict[str, object]:
-    """Unpack one msgpack message with hard container limits.
+def unpack(
+    payload: bytes | bytearray | memoryview, limits: WireLimits = DEFAULT_LIMITS, keep: frozenset[str] | None = None
+) -> dict[str, object]:
+    """Unpack one msgpack message with hard container and total-element limits.
 
     ``bin`` fields come back as read-only ``memoryview`` slices of ``payload``
     (:mod:`vpp_service.transport.msgview`: no second copy of the images).
+    With ``keep``, top-level keys outside it are skipped without being built
+    (an unknown key cannot cost more than walking past it).
 
     Raises
     ------
@@ -175,8 +189,13 @@ def unpack(payload: bytes | bytearray | memoryview, limits: WireLimits = DEFAULT
         msg = msgview.loads(
             payload,
             msgview.Limits(
-                max_bin_len=n, max_str_len=min(n, 1 << 20), max_array_len=min(n, 1 << 16), max_map_len=min(n, 1 << 12)
+                max_bin_len=n,
+                max_str_len=min(n, 1 << 20),
+                max_array_len=min(n, 1 << 16),
+                max_map_len=min(n, 1 << 12),
+                max_elements=limits.max_elements,
             ),
+            keep,
         )
     except msgview.MsgViewError as exc:
         raise WireError(f"message: not valid msgpack ({exc})") from None
@@ -192,6 +211,10 @@ def _check_version(msg: Mapping[str, object]) -> None:
 
 
 # ------------------------------------------------------------------- images
+#: Chunks a PNG stream may have (bounds the structure walk of a hostile stream; OpenCV writes 8 KiB IDAT chunks).
+_PNG_MAX_CHUNKS = 1 << 16
+
+
 def _png_size(data: Binary) -> tuple[int, int]:
     if len(data) < 24 or data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR":
         raise WireError("data: not a PNG stream")
@@ -199,11 +222,46 @@ def _png_size(data: Binary) -> tuple[int, int]:
     return h, w
 
 
+def _png_check(data: Binary) -> None:
+    """Walk the PNG chunks: every CRC right, IDAT present, IEND last (before libpng sees the stream).
+
+    A truncated or corrupted stream is rejected here, quietly, instead of by
+    libpng, which reports it on stderr past any log rate limit.
+    """
+    mv = memoryview(data)
+    i, n, idat = 8, len(mv), False
+    for _ in range(_PNG_MAX_CHUNKS):
+        if i + 12 > n:
+            raise WireError("data: truncated PNG stream")
+        length = int.from_bytes(mv[i : i + 4], "big")
+        end = i + 12 + length
+        if end > n:
+            raise WireError("data: truncated PNG stream")
+        kind = bytes(mv[i + 4 : i + 8])
+        if zlib.crc32(mv[i + 4 : i + 8 + length]) != int.from_bytes(mv[i + 8 + length : end], "big"):
+            raise WireError(f"data: corrupt PNG stream (bad CRC of chunk {kind!r})")
+        idat = idat or kind == b"IDAT"
+        if kind == b"IEND":
+            if end != n or not idat:
+                raise WireError("data: PNG stream without image data or with bytes after IEND")
+            return
+        i = end
+    raise WireError(f"data: PNG stream of more than {_PNG_MAX_CHUNKS} chunks")
+
+
+#: Markers scanned for a JPEG frame header before giving up (bounds the header scan of a hostile stream).
+_JPEG_MAX_MARKERS = 1024
+
+
 def _jpeg_size(data: Binary) -> tuple[int, int]:
     if len(data) < 4 or data[:2] != b"\xff\xd8":
         raise WireError("data: not a JPEG stream")
     i = 2
+    steps = 0
     while i + 4 <= len(data):
+        steps += 1
+        if steps > _JPEG_MAX_MARKERS:  # real streams reach their frame header within a few dozen
+            raise WireError(f"data: no JPEG frame header within {_JPEG_MAX_MARKERS} markers")
         if data[i] != 0xFF:
             raise WireError("data: corrupt JPEG marker")
         marker = data[i + 1]
@@ -295,6 +353,11 @@ def decode_image(m: object, path: str = "image", limits: WireLimits = DEFAULT_LI
         raise WireError(f"{p}{exc}") from None
     if (hh, ww) != (h, w):
         raise WireError(f"{p}data: encoded image is {hh}x{ww}, declared {h}x{w}")
+    if enc == "png":
+        try:
+            _png_check(data)
+        except WireError as exc:
+            raise WireError(f"{p}{exc}") from None
     flag = cv2.IMREAD_GRAYSCALE if c == 1 else cv2.IMREAD_COLOR
     decoded = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), flag)
     if decoded is None or decoded.shape[:2] != (h, w):
@@ -445,6 +508,8 @@ def decode_depth(
     """
     m = _map(m, path)
     p = path + "."
+    if h * w > limits.max_pixels:
+        raise WireError(f"{p}h: h*w = {h * w} exceeds the limit of {limits.max_pixels}")
     kind = _str(m, "kind", p, ("points", "disparity_points", "map"))
     if kind == "map":
         mh = _int(m, "h", p, 1, limits.max_side)
@@ -508,6 +573,11 @@ def _header(msg: Mapping[str, object]) -> tuple[str, int, int]:
 
 
 # ------------------------------------------------------------------- frames
+#: Top-level keys an ``in/frame`` / separate-topics decoder reads (others are skipped unbuilt).
+_FRAME_KEYS = frozenset({"v", "rig", "seq", "stamp_ns", "left", "right", "calib", "depth", "gt"})
+_PART_KEYS = frozenset({"v", "rig", "seq", "stamp_ns", "image", "calib", "gt", "depth", "h", "w"})
+
+
 def encode_frame(frame: StereoFrame, enc: str = "raw", depth_kind: str = "auto", include_gt: bool = True) -> bytes:
     """Serialize a :class:`StereoFrame` as a v1 ``in/frame`` message.
 
@@ -562,7 +632,7 @@ def decode_frame(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> StereoF
     WireError
         Anything wrong, naming the field.
     """
-    msg = unpack(payload, limits)
+    msg = unpack(payload, limits, _FRAME_KEYS)
     rig, seq, stamp = _header(msg)
     left = decode_image(_req(msg, "left", ""), "left", limits)
     right = decode_image(_req(msg, "right", ""), "right", limits)
@@ -640,7 +710,7 @@ def decode_part(payload: bytes, part: str, limits: WireLimits = DEFAULT_LIMITS) 
     """
     if part not in ("left", "right", "depth"):
         raise ValueError(f"part must be 'left', 'right' or 'depth', got {part!r}")
-    msg = unpack(payload, limits)
+    msg = unpack(payload, limits, _PART_KEYS)
     rig, seq, stamp = _header(msg)
     out = Part(part=part, rig=rig, seq=seq, stamp_ns=stamp)
     if part in ("left", "right"):
@@ -652,6 +722,8 @@ def decode_part(payload: bytes, part: str, limits: WireLimits = DEFAULT_LIMITS) 
     else:
         h = _int(msg, "h", "", 1, limits.max_side)
         w = _int(msg, "w", "", 1, limits.max_side)
+        if h * w > limits.max_pixels:
+            raise WireError(f"h: h*w = {h * w} exceeds the limit of {limits.max_pixels}")
         out.sensor_depth, out.sparse_disparity = decode_depth(_req(msg, "depth", ""), h, w, "depth", limits=limits)
     return out
 

@@ -1,0 +1,60 @@
+"""File names of the folder sinks: only validated parts, and every path stays inside the sink's folder."""
+
+from __future__ import annotations
+
+import pytest
+
+from vpp_service.sinks.folder import check_name, path_inside
+
+HOSTILE_NAMES = [
+    "../../x/relative",
+    "..",
+    ".",
+    "/abs/path",
+    "/tmp/x",
+    ".hidden",
+    "a\x00b",
+    "a/b",
+    "a\\b",
+    "",
+    "x" * 201,
+    "rig\n0",
+]
+
+
+@pytest.mark.parametrize("name", HOSTILE_NAMES)
+def test_check_name_refuses_hostile_names(name):
+    with pytest.raises(ValueError, match="is not a safe file name"):
+        check_name(name, "frame.rig")
+
+
+@pytest.mark.parametrize("name", ["rig0", "rig-A_1", "r1.left", "0", "x" * 200])
+def test_check_name_accepts_plain_names(name):
+    assert check_name(name, "frame.rig") == name
+
+
+def test_check_name_refuses_non_strings():
+    with pytest.raises(ValueError, match=r"frame\.rig: 3 is not a safe file name"):
+        check_name(3, "frame.rig")
+
+
+@pytest.mark.parametrize("name", HOSTILE_NAMES)
+def test_path_inside_refuses_hostile_names(tmp_path, name):
+    with pytest.raises(ValueError, match="not a safe file name"):
+        path_inside(tmp_path, name)
+
+
+def test_path_inside_refuses_a_symlink_that_leaves_the_folder(tmp_path):
+    folder = tmp_path / "out"
+    folder.mkdir()
+    (tmp_path / "secret").write_text("x")
+    (folder / "link.png").symlink_to(tmp_path / "secret")
+    with pytest.raises(ValueError, match="outside"):
+        path_inside(folder, "link.png")
+
+
+def test_path_inside_follows_a_symlinked_folder(tmp_path):
+    real = tmp_path / "real"
+    real.mkdir()
+    (tmp_path / "alias").symlink_to(real)
+    assert path_inside(tmp_path / "alias", "rig0_000001.png") == tmp_path / "alias" / "rig0_000001.png"
