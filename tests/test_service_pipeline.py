@@ -285,7 +285,7 @@ def test_block_end_to_end_through_zenoh_loses_nothing(zenoh_endpoint):
         )
         try:
             time.sleep(0.3)  # let the subscription propagate
-            base = make_frame()
+            base = make_frame().with_(rig="z")  # the served rig (others are rejected)
             for seq in range(n):
                 pub.put(wire.encode_frame(base.with_(seq=seq)))
                 time.sleep(0.005)

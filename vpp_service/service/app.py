@@ -121,6 +121,11 @@ def open_session(
 
     An open that fails because no endpoint answers (a client whose router is
     down) is retried every ``retry_s`` seconds until it succeeds or ``stop`` is set.
+
+    Raises
+    ------
+    StartupError
+        Any other failure to open (e.g. a listen endpoint already in use), in one line.
     """
     import zenoh
 
@@ -135,7 +140,7 @@ def open_session(
             session = zenoh.open(zenoh_config(section))
         except zenoh.ZError as exc:
             if "Unable to connect" not in str(exc):
-                raise
+                raise StartupError(f"zenoh: {zenoh_message(exc)}") from None
             log.warning("zenoh: %s; retrying every %.0f s", str(exc).split(" at ", 1)[0], retry_s)
             if stop.wait(retry_s):
                 yield None
