@@ -138,7 +138,9 @@ def test_bad_frames_are_rejected_and_service_keeps_running():
         return FusionResult(frame, np.zeros(frame.shape, np.float32))
 
     sink = CollectSink()
-    pipe = Pipeline(sim_source(15), process, [sink], input_policy="block")
+    # both queues block: this test is about rejects and errors, not about the output queue dropping the oldest
+    # result when the sink thread is late (it was, on a loaded machine)
+    pipe = Pipeline(sim_source(15), process, [sink], input_policy="block", output_policy="block")
     run(pipe)
     c = pipe.counters
     assert c["rejected"] == 5  # 0, 3, 6, 9, 12
