@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING
 
 import pytest
@@ -42,3 +42,15 @@ def build(request, monkeypatch):
         pytest.skip("no AVX2 build for this CPU / platform")
     monkeypatch.setattr(backend, "sweep", mod)
     return mod
+
+
+@pytest.fixture
+def sessions(zenoh_endpoint: str) -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
+    """Two Zenoh sessions on loopback: ``(listener, peer)`` (the service's and a camera's or client's)."""
+    import zenoh
+
+    with (
+        zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as listener,
+        zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as peer,
+    ):
+        yield listener, peer

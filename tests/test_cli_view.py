@@ -8,16 +8,15 @@ import signal
 import subprocess
 import sys
 import time
-from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
 import pytest
 import zenoh
 from rerun.chunk import RrdReader
 
 from helpers.frames import make_frame
+from helpers.rerun_rrd import read_rrd
 from helpers.zenoh_loopback import zenoh_test_config
 from vpp_service.cli.view import decode_part, rig_path
 from vpp_service.frame import FusionResult
@@ -39,24 +38,6 @@ def vpp(*argv: str, **kw) -> subprocess.Popen:
         text=True,
         **kw,
     )
-
-
-def read_rrd(path) -> dict[str, dict[str, list]]:
-    """Entity path -> column -> values, over all non-static chunks, rows sorted by seq."""
-    rows: dict[str, list[dict]] = defaultdict(list)
-    for chunk in RrdReader(path).stream().to_chunks():
-        if chunk.is_static:
-            continue
-        rb = chunk.to_record_batch()
-        cols = {}
-        for i, field in enumerate(rb.schema):
-            col = rb.column(i)
-            if pa.types.is_timestamp(field.type) or pa.types.is_duration(field.type):
-                col = col.cast(pa.int64())
-            cols[field.name] = col.to_pylist()
-        for r in range(rb.num_rows):
-            rows[chunk.entity_path].append({n: v[r] for n, v in cols.items()})
-    return {ent: {n: [r.get(n) for r in sorted(rs, key=lambda r: r["seq"])] for n in rs[0]} for ent, rs in rows.items()}
 
 
 def finish(proc: subprocess.Popen, timeout: float) -> tuple[int, str, str]:

@@ -7,16 +7,15 @@ import math
 import socket
 import subprocess
 import time
-from collections import defaultdict
 
 import cv2
 import numpy as np
 import psutil
-import pyarrow as pa
 import pytest
 import rerun as rr
 from rerun.chunk import RrdReader
 
+from helpers.rerun_rrd import read_rrd
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
 from vpp_service.settings import SettingsError
 from vpp_service.sinks import SINKS, build_sink
@@ -53,28 +52,6 @@ def make_result(seq: int, *, painted: bool = True, calib: bool = True) -> Fusion
         right_vpp=(255 - right) if painted else None,
         timing_ms={"vpp": 1.5, "total": 9.0},
     )
-
-
-def read_rrd(path) -> dict[str, dict[str, list]]:
-    """Entity path -> column name -> values (rows of all chunks, sorted by seq)."""
-    rows: dict[str, list[dict]] = defaultdict(list)
-    for chunk in RrdReader(path).stream().to_chunks():
-        if chunk.is_static:
-            continue
-        rb = chunk.to_record_batch()
-        cols = {}
-        for i, field in enumerate(rb.schema):
-            col = rb.column(i)
-            if pa.types.is_timestamp(field.type) or pa.types.is_duration(field.type):
-                col = col.cast(pa.int64())  # nanoseconds, without pandas
-            cols[field.name] = col.to_pylist()
-        for r in range(rb.num_rows):
-            rows[chunk.entity_path].append({n: v[r] for n, v in cols.items()})
-    out = {}
-    for ent, rs in rows.items():
-        rs.sort(key=lambda r: r["seq"])
-        out[ent] = {n: [r[n] for r in rs] for n in rs[0]}
-    return out
 
 
 def save_sink(tmp_path, **opts) -> RerunSink:

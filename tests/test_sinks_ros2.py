@@ -9,19 +9,10 @@ import pytest
 import zenoh
 
 from helpers.ros2_robot import TS, key
-from helpers.zenoh_loopback import collect, zenoh_test_config
+from helpers.zenoh_loopback import collect
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
 from vpp_service.settings import SettingsError
 from vpp_service.sinks.base import SinkContext, build_sink, parse_sink_options
-
-
-@pytest.fixture
-def sessions(zenoh_endpoint):
-    with (
-        zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as svc,
-        zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as bot,
-    ):
-        yield svc, bot
 
 
 def result() -> FusionResult:

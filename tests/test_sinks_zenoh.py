@@ -9,19 +9,10 @@ import pytest
 import zenoh
 
 from helpers.frames import make_frame
-from helpers.zenoh_loopback import collect, zenoh_test_config
+from helpers.zenoh_loopback import collect
 from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import SinkContext, build_sink
 from vpp_service.transport import wire
-
-
-@pytest.fixture
-def sessions(zenoh_endpoint):
-    with (
-        zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as svc,
-        zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as client,
-    ):
-        yield svc, client
 
 
 def result(seq):

@@ -6,25 +6,14 @@ import time
 
 import numpy as np
 import pytest
-import zenoh
 
 from helpers.ros2_robot import Robot, StereoRig, image_msg
-from helpers.zenoh_loopback import zenoh_test_config
 from vpp_service.sources.base import SourceContext, build_source
 
 LEGACY = (
     b"\x0fsequence_number" + (1).to_bytes(8, "little") + b"\x10source_timestamp" + (5).to_bytes(8, "little")
     + b"\x0asource_gid\x10" + bytes(16)
 )  # fmt: skip
-
-
-@pytest.fixture
-def sessions(zenoh_endpoint):
-    with (
-        zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as svc,
-        zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as bot,
-    ):
-        yield svc, bot
 
 
 def tiny_rig() -> StereoRig:

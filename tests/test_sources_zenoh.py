@@ -11,18 +11,8 @@ import pytest
 import zenoh
 
 from helpers.frames import make_frame
-from helpers.zenoh_loopback import zenoh_test_config
 from vpp_service.sources.base import SourceContext, build_source
 from vpp_service.transport import wire
-
-
-@pytest.fixture
-def sessions(zenoh_endpoint):
-    with (
-        zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as svc,
-        zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as cam,
-    ):
-        yield svc, cam
 
 
 def started(session, **opts):
