@@ -69,3 +69,21 @@ def test_publish_send_anyway_sends_without_subscriber(shared_endpoint, keep_sign
     )
     assert rc == 0
     assert '"sent": 1' in capsys.readouterr().out
+
+
+def test_a_replay_into_the_service_loses_nothing(tmp_path, shared_endpoint, keep_signal_handlers):
+    """``publish`` as fast as it can into ``run --source zenoh``'s default (block): every frame is processed."""
+    data = {
+        "service": {"out": str(tmp_path / "run"), "max_frames": 12, "summary": False},
+        "source": {"type": "zenoh", "ring_size": 2},
+        "matcher": {"name": "sgbm", "max_disparity": 32},
+        "queues": {"input_policy": "block", "input_size": 2},  # what `run --source zenoh` chooses
+        "sinks": [],
+    }
+    with service_in_thread(data) as (thread, result):
+        rc = main(["publish", "--scale", "0.5", "--count", "12", "--rate", "0", "--wait-subscriber", "30"])
+        assert rc == 0
+        thread.join(60)
+        assert not thread.is_alive()  # with the latest policy frames are dropped and max_frames is never reached
+    status = result["status"]
+    assert status["counters"]["processed"] == 12 and status["counters"]["dropped"] == 0, status["dropped"]
