@@ -16,6 +16,7 @@ default to the system's temporary folder: nothing under the repository).
 
     python benchmarks/overload.py --seconds 120          # the issue's 2-minute run
     python benchmarks/overload.py --seconds 10 --json /tmp/overload.json
+    python benchmarks/overload.py --junk-only --seconds 20   # valid frames at 10 Hz under a junk flood, both policies
 """
 
 from __future__ import annotations
