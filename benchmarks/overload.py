@@ -16,6 +16,7 @@ default to the system's temporary folder: nothing under the repository).
 
     python benchmarks/overload.py --seconds 120          # the issue's 2-minute run
     python benchmarks/overload.py --seconds 10 --json /tmp/overload.json
+    python benchmarks/overload.py --junk-only --seconds 20   # valid frames at 10 Hz under a junk flood, both policies
 """
 
 from __future__ import annotations
@@ -282,6 +283,7 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--policies", nargs="+", default=["latest", "block"], choices=["latest", "block"])
     p.add_argument("--junk", action="store_true", help="also: valid frames at --junk-valid-hz under a junk flood")
     p.add_argument("--junk-valid-hz", type=float, default=10.0)
+    p.add_argument("--junk-only", action="store_true", help="only the junk-flood runs (no calibration, no overload)")
     p.add_argument(
         "--json", default=str(Path(tempfile.gettempdir()) / "vpp-overload.json"), help="report path (not committed)"
     )
@@ -292,23 +294,30 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Calibrate, run each policy, print the table and write the JSON report."""
     a = _parse_args(argv)
     payloads = _frames(a)
+    cal: dict[str, object] | None = None
+    fps = rate = float("nan")
+    rows: list[dict[str, object]] = []
     with tempfile.TemporaryDirectory() as d:
-        # the service's own rate: lossless and unpaced, the camera is held back to exactly what it processes
-        cal = _run(a, "block", payloads, rate_hz=0.0, tmp=Path(d), seconds=a.calibrate_s)
-        fps = float(cal["processed"]) / float(cal["elapsed_s"])  # frames buffered at the end count, with their time
-        rate = a.factor * fps
-        print(f"service processes {fps:.1f} fps (unpaced block run, {a.calibrate_s:g} s) -> offering {rate:.1f} Hz")
-        rows = [_run(a, p, payloads, rate_hz=rate, tmp=Path(d), seconds=a.seconds) for p in a.policies]
-        if a.junk:
+        if not a.junk_only:
+            # the service's own rate: lossless and unpaced, the camera is held back to exactly what it processes
+            cal = _run(a, "block", payloads, rate_hz=0.0, tmp=Path(d), seconds=a.calibrate_s)
+            fps = float(cal["processed"]) / float(cal["elapsed_s"])  # frames buffered at the end count, with their time
+            rate = a.factor * fps
+            print(f"service processes {fps:.1f} fps (unpaced block run, {a.calibrate_s:g} s) -> offering {rate:.1f} Hz")
+            rows += [_run(a, p, payloads, rate_hz=rate, tmp=Path(d), seconds=a.seconds) for p in a.policies]
+        if a.junk or a.junk_only:
             junk = _junk_messages(payloads[0])
-            rows.append(_run(a, "latest", payloads, rate_hz=a.junk_valid_hz, tmp=Path(d), seconds=a.seconds, junk=junk))
-    head = f"{'policy':7} {'sent':>6} {'proc':>6} {'lost':>6} {'dropped':>7} {'counted':>7} {'pub Hz':>7} " + (
+            rows += [
+                _run(a, p, payloads, rate_hz=a.junk_valid_hz, tmp=Path(d), seconds=a.seconds, junk=junk)
+                for p in a.policies
+            ]
+    head = f"{'policy':11} {'sent':>6} {'proc':>6} {'lost':>6} {'dropped':>7} {'counted':>7} {'pub Hz':>7} " + (
         f"{'lat p50':>8} {'lat p99':>8} {'RSS warm':>8} {'peak':>6} {'end':>6} {'growth':>7}  causes"
     )
     print(head)
     for r in rows:
         print(
-            f"{r['policy']:7} {r['sent']:6d} {r['processed']:6d} {r['lost']:6d} {r['dropped']:7d} "
+            f"{r['policy']:11} {r['sent']:6d} {r['processed']:6d} {r['lost']:6d} {r['dropped']:7d} "
             f"{'yes' if r['all_losses_counted'] else 'NO':>7} {r['achieved_publish_hz']:7.1f} "
             f"{r['latency_p50_ms'] or float('nan'):8.0f} {r['latency_p99_ms'] or float('nan'):8.0f} "
             f"{r['rss_warm_mb']:8.0f} {r['rss_peak_mb']:6.0f} {r['rss_end_mb']:6.0f} {r['rss_growth_pct']:6.1f}%  "
@@ -320,7 +329,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     for r in rows:
         if r["junk_sent"]:
             print(
-                f"junk flood: {r['junk_sent']} junk messages sent, {r['rejected']} rejected; valid frames at "
+                f"junk flood ({r['policy']}): {r['junk_sent']} junk messages sent, {r['rejected']} rejected; "
+                f"valid frames at "
                 f"{a.junk_valid_hz:g} Hz: {r['processed']}/{r['sent']} processed "
                 f"({100.0 * int(r['processed']) / max(1, int(r['sent'])):.1f} %)"
             )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import threading
 import time
 
 import msgpack
@@ -140,6 +141,30 @@ def test_ring_keeps_newest_and_counts_drops(sessions):
         assert [f.seq for f in frames] == [7, 8, 9]
         st = src.stats()
         assert st["received"] == 3 and st["ring_dropped"] == 7
+    finally:
+        src.stop(2.0)
+
+
+@pytest.mark.parametrize("policy", ["latest", "block"])
+def test_messages_are_checked_on_zenohs_receive_thread(sessions, policy):
+    """Under both policies the callback runs on Zenoh's own receive thread, not a Python thread fed by a channel.
+
+    A channel would queue a junk flood ahead of valid frames (and its busy Python thread would starve the
+    processing thread); on the receive thread a flood faster than the checks is held back on its own link.
+    """
+    svc, cam = sessions
+    src = build_source("zenoh", {}, SourceContext(rig="z", session=svc))
+    src.input_policy = policy
+    threads: list[threading.Thread] = []
+    src.open()
+    src.start(lambda f: True, lambda r: threads.append(threading.current_thread()))
+    try:
+        time.sleep(0.3)  # let the subscription propagate
+        cam.put("vpp/z/in/frame", b"\xc1", congestion_control=zenoh.CongestionControl.BLOCK)
+        assert wait_for(lambda: len(threads) == 1)
+        # a thread Python did not start: Zenoh's receive thread calling in (an indirect callback's is a Thread)
+        assert isinstance(threads[0], threading._DummyThread), threads[0]
+        assert src.stats()["rejected"] == 1
     finally:
         src.stop(2.0)
 

@@ -8,15 +8,19 @@ valid frames; the source keeps serving. This source's thread wakes on the event
 (no polling delay), drains the rings, joins separate-topics parts and emits
 frames.
 
+The callback runs directly on Zenoh's receive thread under both input
+policies (no channel in between: an indirect callback's channel would buffer
+seconds of frames, and under a junk flood its Python thread, always busy,
+starves the processing thread of the interpreter while valid frames queue
+behind the junk). A peer sending faster than messages are checked is held back
+by the link, where a publisher using ``DROP`` loses its own surplus.
+
 When the ring is full, the pipeline's input policy (:attr:`Source.input_policy`)
-decides: ``latest`` drops the oldest sample (counted in ``ring_dropped``; the
-callback runs on a Python thread Zenoh feeds, never on its network thread);
-``block`` makes the callback, run directly on Zenoh's receive thread, wait for
-room, which holds the link back and with it the publisher (no queue in between
-to fill: an indirect callback's channel would buffer seconds of frames). With
-reliable transport and ``CongestionControl.BLOCK`` on the publisher nothing is
-lost end to end (a publisher using ``DROP`` loses samples in its own session,
-where no counter of this service can see them). While the link is held back,
+decides: ``latest`` drops the oldest sample (counted in ``ring_dropped``);
+``block`` makes the callback wait for room, which holds the link back and with
+it the publisher. With reliable transport and ``CongestionControl.BLOCK`` on
+the publisher nothing is lost end to end (a publisher using ``DROP`` loses
+samples in its own session, where no counter of this service can see them). While the link is held back,
 other traffic on it waits too (``@status`` answers within about a frame time).
 
 Topics: ``<prefix>/<rig>/in/frame`` (default), or with ``topics = "separate"``
@@ -171,9 +175,9 @@ class ZenohSource(Source):
             )
         for part in parts:
             key = wire.topic(self.context.prefix, self.context.rig, f"in/{part}")
-            # block: run on Zenoh's receive thread, so the wait for room holds the link back with no queue in
-            # between (an indirect callback's channel buffers hundreds of frames: seconds of latency)
-            handler = zenoh.handlers.Callback(partial(self._on_sample, part), indirect=self.input_policy != "block")
+            # on Zenoh's receive thread (see the module docstring): block's wait for room holds the link back with
+            # no queue in between, and a junk flood is held back at the link instead of queueing ahead of frames
+            handler = zenoh.handlers.Callback(partial(self._on_sample, part), indirect=False)
             self._subs[part] = session.declare_subscriber(key, handler)
 
     def start(self, emit: Emit, reject: Reject | None = None, on_finished: Callable[[], None] | None = None) -> None:
@@ -185,9 +189,9 @@ class ZenohSource(Source):
         """Subscriber callback: decode and validate, buffer what is valid, wake the receive thread.
 
         An oversized message is rejected by its length before its payload is
-        copied. Under the ``block`` input policy it runs on Zenoh's receive thread and a
+        copied. It runs on Zenoh's receive thread; under the ``block`` input policy a
         full ring makes it wait for room (back-pressure through Zenoh); under
-        ``latest`` it runs on Zenoh's Python callback thread and never waits.
+        ``latest`` it never waits (the oldest sample is dropped and counted).
         """
         recv_ns = time.time_ns()
         n = len(sample.payload)

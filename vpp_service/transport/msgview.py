@@ -39,6 +39,8 @@ _I32 = struct.Struct(">i").unpack_from
 _I64 = struct.Struct(">q").unpack_from
 _F32 = struct.Struct(">f").unpack_from
 _F64 = struct.Struct(">d").unpack_from
+#: Reader and size of each integer type byte 0xcc..0xd3 (uint8..uint64, int8..int64).
+_INTS = ((_U8, 1), (_U16, 2), (_U32, 4), (_U64, 8), (_I8, 1), (_I16, 2), (_I32, 4), (_I64, 8))
 
 
 class MsgViewError(ValueError):
@@ -58,13 +60,14 @@ class Limits:
 
 
 class _Reader:
-    __slots__ = ("left", "lim", "mv", "pos")
+    __slots__ = ("left", "lim", "max_depth", "max_str_len", "mv", "pos")
 
     def __init__(self, buf: bytes | bytearray | memoryview, lim: Limits) -> None:
         self.mv = memoryview(buf).cast("B") if not isinstance(buf, bytes) else memoryview(buf)
         self.pos = 0
         self.lim = lim
         self.left = lim.max_elements  # objects still allowed in this message
+        self.max_depth, self.max_str_len = lim.max_depth, lim.max_str_len  # read once per object: kept at hand
 
     def _need(self, n: int, what: str) -> int:
         p = self.pos
@@ -82,8 +85,12 @@ class _Reader:
         return n
 
     def _str(self, n: int) -> str:
-        self._check(n, self.lim.max_str_len, "string length")
-        p = self._need(n, "string")
+        if n > self.max_str_len:
+            self._check(n, self.max_str_len, "string length")
+        p = self.pos
+        if p + n > len(self.mv):
+            self._need(n, "string")
+        self.pos = p + n
         try:
             return str(self.mv[p : p + n], "utf-8")
         except UnicodeDecodeError as exc:
@@ -169,18 +176,22 @@ class _Reader:
             depths.extend([d + 1] * n)
 
     def value(self, depth: int = 0, keep: frozenset[str] | None = None) -> Any:  # noqa: PLR0911, PLR0912 - one branch per type byte
-        if depth > self.lim.max_depth:
-            raise MsgViewError(f"nesting deeper than {self.lim.max_depth} at byte {self.pos}")
+        if depth > self.max_depth:
+            raise MsgViewError(f"nesting deeper than {self.max_depth} at byte {self.pos}")
         self.left -= 1
         if self.left < 0:
             raise MsgViewError(f"more than {self.lim.max_elements} objects (at byte {self.pos})")
-        b = self.mv[self._need(1, "type byte")]
+        p = self.pos  # the type byte, read inline: this runs once per object (the hot path of every message)
+        if p >= len(self.mv):
+            self._need(1, "type byte")
+        self.pos = p + 1
+        b = self.mv[p]
         if b <= 0x7F:
             return b
+        if 0xA0 <= b <= 0xBF:  # fixstr (map keys): before the rarer negative fixint
+            return self._str(b & 0x1F)
         if b >= 0xE0:
             return b - 0x100
-        if 0xA0 <= b <= 0xBF:
-            return self._str(b & 0x1F)
         if 0x80 <= b <= 0x8F:
             return self._map(b & 0x0F, depth, keep)
         if 0x90 <= b <= 0x9F:
@@ -202,7 +213,7 @@ class _Reader:
         if b == 0xCB:
             return _F64(self.mv, self._need(8, "float64"))[0]
         if 0xCC <= b <= 0xD3:
-            fmt, size = ((_U8, 1), (_U16, 2), (_U32, 4), (_U64, 8), (_I8, 1), (_I16, 2), (_I32, 4), (_I64, 8))[b - 0xCC]
+            fmt, size = _INTS[b - 0xCC]
             return fmt(self.mv, self._need(size, "integer"))[0]
         if b == 0xD9:
             return self._str(self._len(_U8, 1, "string"))
