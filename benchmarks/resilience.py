@@ -33,7 +33,6 @@ import argparse
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -47,73 +46,24 @@ from _harness import SCRATCH, write_report
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "tests"))  # the router process and loopback configs are shared with the tests
 
 import msgpack  # noqa: E402
 import zenoh  # noqa: E402
 
+from helpers.zenoh_loopback import free_port, zenoh_test_config  # noqa: E402
+from helpers.zenoh_router import RouterProcess  # noqa: E402
 from vpp_service.service.app import CONNECT_RETRY  # noqa: E402
 from vpp_service.sources.base import SourceContext, build_source  # noqa: E402
 from vpp_service.sources.sim import SimSource  # noqa: E402
 from vpp_service.transport import wire  # noqa: E402
 
 RIG = "res"
-#: The router process: a session in router mode on the given endpoint; prints "ready" once open.
-ROUTER_CODE = (
-    "import json, sys, time, zenoh\n"
-    "c = zenoh.Config()\n"
-    "c.insert_json5('mode', '\"router\"')\n"
-    "c.insert_json5('listen/endpoints', json.dumps([sys.argv[1]]))\n"
-    "c.insert_json5('scouting/multicast/enabled', 'false')\n"
-    "s = zenoh.open(c)\n"
-    "print('ready', flush=True)\n"
-    "while True:\n"
-    "    time.sleep(3600)\n"
-)
-
-
-def _port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
-
-
-class Router:
-    """A Zenoh router in its own process on ``endpoint``: :meth:`start`, :meth:`kill` (SIGKILL)."""
-
-    def __init__(self, endpoint: str) -> None:
-        self.endpoint = endpoint
-        self.proc: subprocess.Popen[str] | None = None
-
-    def start(self, timeout: float = 30.0) -> float:
-        """Start it; return the monotonic time its session was open (it printed ``ready``)."""
-        self.proc = subprocess.Popen(
-            [sys.executable, "-c", ROUTER_CODE, self.endpoint], stdout=subprocess.PIPE, text=True
-        )
-        assert self.proc.stdout is not None
-        box: list[str] = []
-        reader = threading.Thread(target=lambda: box.append(self.proc.stdout.readline()), daemon=True)  # type: ignore[union-attr]
-        reader.start()
-        reader.join(timeout)
-        if not box or box[0].strip() != "ready":
-            self.kill()
-            raise RuntimeError(f"the router on {self.endpoint} did not start")
-        return time.monotonic()
-
-    def kill(self) -> None:
-        """SIGKILL it and reap it."""
-        if self.proc is not None and self.proc.poll() is None:
-            self.proc.kill()
-        if self.proc is not None:
-            self.proc.wait()
 
 
 def _client_config(endpoint: str) -> zenoh.Config:
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
-    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
+    conf = zenoh_test_config(connect=[endpoint], mode="client")
+    conf.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))  # reconnect at the service's pace
     return conf
 
 
@@ -199,8 +149,8 @@ class Outputs:
 
 
 def _run(a: argparse.Namespace, tmp: Path) -> dict[str, object]:  # noqa: PLR0915 - the scenario, step by step
-    endpoint = f"tcp/127.0.0.1:{_port()}"
-    router = Router(endpoint)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = RouterProcess(endpoint)
     router.start()
     out = tmp / "out"
     cfg = tmp / "service.toml"
@@ -227,7 +177,8 @@ def _run(a: argparse.Namespace, tmp: Path) -> dict[str, object]:  # noqa: PLR091
                 router.kill()
                 killed = time.monotonic()
                 time.sleep(a.down_s)
-                back = router.start()
+                router.start()
+                back = time.monotonic()  # its session is open
                 first = outputs.first_after(back, a.resume_timeout_s)
                 restarts.append({"down_s": back - killed, "resume_s": None if first is None else first - back})
             stop.set()
