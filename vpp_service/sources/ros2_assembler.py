@@ -105,9 +105,9 @@ class StereoTopics:
     sync_tolerance_ms: float = 10.0
     depth_tolerance_ms: float = 50.0
     depth_wait_ms: float = 100.0
-    max_message_mb: float = 256.0
-    max_pixels: int = 50_000_000
-    max_points: int = 10_000_000
+    max_message_mb: float = rm.Limits.max_bytes / (1024 * 1024)
+    max_pixels: int = rm.Limits.max_pixels
+    max_points: int = rm.Limits.max_points
 
     def __post_init__(self) -> None:
         for role in ROLES:

@@ -31,6 +31,7 @@ import numpy as np
 from vpp_service.frame import Calibration
 from vpp_service.transport.ros2.errors import Ros2Error
 from vpp_service.transport.ros2.keys import CAMERA_INFO, DISPARITY_IMAGE, IMAGE, POINT_CLOUD2
+from vpp_service.transport.wire import DEFAULT_LIMITS
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
@@ -80,16 +81,18 @@ class Limits:
     Attributes
     ----------
     max_bytes : int
-        Largest serialized message accepted (checked before CDR parsing).
+        Largest serialized message accepted (checked before CDR parsing); the
+        msgpack wire format's cap by default.
     max_pixels : int
-        Largest ``width * height`` of an image.
+        Largest ``width * height`` of an image; the wire format's cap by default.
     max_points : int
-        Largest ``width * height`` of a point cloud.
+        Largest ``width * height`` of a point cloud (4 Mi: 16-byte x/y/z points
+        then fill the byte cap).
     """
 
-    max_bytes: int = 256 * 1024 * 1024
-    max_pixels: int = 50_000_000
-    max_points: int = 10_000_000
+    max_bytes: int = DEFAULT_LIMITS.max_message_bytes
+    max_pixels: int = DEFAULT_LIMITS.max_pixels
+    max_points: int = 4 * 1024 * 1024
 
     def __post_init__(self) -> None:
         for name in ("max_bytes", "max_pixels", "max_points"):
