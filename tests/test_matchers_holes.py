@@ -1,4 +1,4 @@
-"""fill_holes (background interpolation) vs a python reference and hand cases."""
+"""fill_holes (background interpolation) and fill_short_gaps vs python references and hand cases."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from vpp_service.matchers import fill_holes
+from vpp_service.matchers.holes import fill_short_gaps
 
 N = np.nan
 
@@ -79,3 +80,89 @@ def test_non_contiguous_input_accepted():
 def test_bad_input(arg, exc, match):
     with pytest.raises(exc, match=match):
         fill_holes(arg)
+
+
+def ref_short_gaps(a, max_gap, max_step):
+    """Plain-python fill_short_gaps: interior NaN runs <= max_gap, linear if the ends are close, else the smaller."""
+    out = a.astype(np.float32).copy()
+    h, w = a.shape
+    for y in range(h):
+        x = 0
+        while x < w:
+            if not np.isnan(a[y, x]):
+                x += 1
+                continue
+            end = x
+            while end < w and np.isnan(a[y, end]):
+                end += 1
+            n = end - x
+            if x > 0 and end < w and n <= max_gap:
+                lo, hi = float(a[y, x - 1]), float(a[y, end])
+                for j in range(n):
+                    if abs(lo - hi) <= max_step:
+                        out[y, x + j] = np.float32(lo + (hi - lo) * (j + 1) / (n + 1))
+                    else:
+                        out[y, x + j] = min(lo, hi)
+            x = end
+    return out
+
+
+@pytest.mark.parametrize(
+    ("row", "max_gap", "expected"),
+    [
+        ([1, N, 3], 4, [1, 2, 3]),  # one surface: linear
+        ([1, N, N, N, 3], 4, [1, 1.5, 2, 2.5, 3]),
+        ([1, N, 9], 4, [1, 1, 9]),  # step > max_step: background (smaller end)
+        ([9, N, N, 1], 4, [9, 1, 1, 1]),
+        ([1, N, N, 3], 1, [1, N, N, 3]),  # longer than max_gap: untouched
+        ([N, 2, N, 4, N], 4, [N, 2, 3, 4, N]),  # runs at the borders stay holes
+        ([N, N, N], 4, [N, N, N]),
+        ([1, N, 3], 0, [1, N, 3]),  # 0 = off
+        ([7, 8, 9], 4, [7, 8, 9]),
+    ],
+)
+def test_short_gaps_hand_cases(row, max_gap, expected):
+    got = fill_short_gaps(np.array([row], np.float32), max_gap=max_gap)
+    np.testing.assert_array_equal(got, np.array([expected], np.float32))
+
+
+def test_short_gaps_max_step():
+    a = np.array([[1, N, 4]], np.float32)
+    np.testing.assert_array_equal(fill_short_gaps(a, max_step=3.0), [[1, 2.5, 4]])
+    np.testing.assert_array_equal(fill_short_gaps(a, max_step=2.9), [[1, 1, 4]])
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize(("max_gap", "max_step"), [(1, 2.0), (4, 2.0), (6, 0.5), (50, 100.0)])
+def test_short_gaps_match_reference(seed, max_gap, max_step):
+    rng = np.random.default_rng(seed)
+    a = rng.uniform(0, 8, (12, 40)).astype(np.float64)
+    a[rng.random(a.shape) < 0.45] = np.nan
+    a[3] = np.nan
+    before = a.copy()
+    got = fill_short_gaps(a, max_gap=max_gap, max_step=max_step, threads=2)
+    assert got.dtype == np.float32
+    np.testing.assert_array_equal(got, ref_short_gaps(a.astype(np.float32), max_gap, max_step))
+    np.testing.assert_array_equal(a, before)  # input untouched
+    np.testing.assert_array_equal(got, fill_short_gaps(a, max_gap=max_gap, max_step=max_step, threads=1))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "exc", "match"),
+    [
+        ({"disparity": [[1.0, N]]}, TypeError, "numpy"),
+        ({"disparity": np.zeros((2, 2), np.int32)}, TypeError, "float"),
+        ({"disparity": np.zeros(4, np.float32)}, ValueError, "2-D"),
+        ({"disparity": np.array([[1, np.inf]], np.float32)}, ValueError, "inf"),
+        ({"max_gap": -1}, ValueError, "max_gap"),
+        ({"max_gap": 2.5}, ValueError, "max_gap"),
+        ({"max_gap": True}, ValueError, "max_gap"),
+        ({"max_step": -0.5}, ValueError, "max_step"),
+        ({"max_step": float("nan")}, ValueError, "max_step"),
+        ({"max_step": "2"}, ValueError, "max_step"),
+    ],
+)
+def test_short_gaps_bad_input(kwargs, exc, match):
+    args = {"disparity": np.array([[1, N, 3]], np.float32), **kwargs}
+    with pytest.raises(exc, match=match):
+        fill_short_gaps(**args)

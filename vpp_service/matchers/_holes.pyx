@@ -1,6 +1,6 @@
-"""Row-wise background hole filling kernel (unchecked; see ``holes.fill_holes``)."""
+"""Row-wise hole filling kernels (unchecked; see ``holes.fill_holes`` and ``holes.fill_short_gaps``)."""
 from cython.parallel cimport prange
-from libc.math cimport isnan
+from libc.math cimport isnan, fabs
 
 
 cdef inline void fill_row(const float* src, float* dst, int W, float empty) noexcept nogil:
@@ -37,3 +37,42 @@ def fill_rows(const float[:, ::1] src, float[:, ::1] dst, float empty, int nthre
     with nogil:
         for y in prange(H, schedule="static", num_threads=nthreads):
             fill_row(&src[y, 0], &dst[y, 0], W, empty)
+
+
+cdef inline void gap_row(const float* src, float* dst, int W, int max_gap,
+                         double max_step) noexcept nogil:
+    cdef int x, right, j, n
+    cdef float a, b
+    for x in range(W):
+        dst[x] = src[x]
+    x = 0
+    while x < W:
+        if not isnan(src[x]):
+            x += 1
+            continue
+        right = x
+        while right < W and isnan(src[right]):
+            right += 1
+        # gap spans [x, right); interior only, at most max_gap long
+        n = right - x
+        if x > 0 and right < W and n <= max_gap:
+            a = src[x - 1]
+            b = src[right]
+            if fabs(<double>a - <double>b) <= max_step:
+                for j in range(n):
+                    dst[x + j] = <float>(<double>a + (<double>b - <double>a) * (j + 1) / (n + 1))
+            else:
+                for j in range(x, right):
+                    dst[j] = a if a < b else b
+        x = right
+
+
+def fill_gap_rows(const float[:, ::1] src, float[:, ::1] dst, int max_gap, double max_step,
+                  int nthreads):
+    """Interior NaN runs of <= max_gap pixels: linear between the ends if they differ
+    by <= max_step, else the smaller end; everything else copied."""
+    cdef int H = src.shape[0], W = src.shape[1]
+    cdef int y
+    with nogil:
+        for y in prange(H, schedule="static", num_threads=nthreads):
+            gap_row(&src[y, 0], &dst[y, 0], W, max_gap, max_step)
