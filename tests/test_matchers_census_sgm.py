@@ -276,3 +276,40 @@ def test_median_removes_isolated_outlier():
 def test_kernel_bad_input(call, exc, match):
     with pytest.raises(exc, match=match):
         call()
+
+
+@pytest.mark.parametrize(
+    "opts",
+    [
+        {},
+        {"border_margin": 0, "gap_size": 0},
+        {"border_margin": 5, "gap_size": 1},
+        {"lr_check": False, "median": False},
+    ],
+)
+def test_matcher_chains_the_public_steps(rng, opts):
+    """CensusSGM.compute == census -> Hamming -> SGM -> WTA -> LR -> border -> short gaps -> median -> speckles."""
+    from vpp_service.matchers import build_matcher
+    from vpp_service.matchers.border import reject_border_matches
+    from vpp_service.matchers.holes import fill_short_gaps
+    from vpp_service.matchers.speckle import remove_speckles
+
+    tex = rng.integers(0, 256, (30, 70)).astype(np.uint8)
+    left, right = np.ascontiguousarray(tex[:, 8:]), np.ascontiguousarray(tex[:, :-8])
+    right[:, 20:24] = 128  # a flat stripe: rejected pixels and short gaps
+    m = build_matcher("census-sgm", {"max_disparity": 16, **opts})
+    o = m.options
+    cost = cs.hamming_cost_volume(cs.census_transform(left), cs.census_transform(right), 16)
+    agg = cs.aggregate_costs(cost, left)
+    want = cs.select_disparity(agg, o.uniqueness, o.subpixel)
+    if o.lr_check:
+        want = cs.left_right_check(want, cs.right_disparity(agg), o.lr_tolerance)
+    if o.border_margin:
+        want = reject_border_matches(want, o.border_margin)
+    if o.gap_size:
+        want = fill_short_gaps(want, o.gap_size)
+    if o.median:
+        want = cs.median_filter3x3(want)
+    want = remove_speckles(want, o.speckle_size, o.speckle_diff)
+    got = m.compute(left, right)
+    np.testing.assert_array_equal(got, want)

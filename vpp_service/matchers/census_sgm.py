@@ -21,9 +21,15 @@ reused; the :class:`CensusSGM` matcher chains them):
 6. :func:`right_disparity` + :func:`left_right_check` -- the right view's WTA
    from the same aggregated volume, ``d_R(x) = argmin_d S(x + d, d)``; a left
    disparity survives if ``|d_L(x) - d_R(x - round(d_L(x)))| <= tolerance``.
-7. :func:`median_filter3x3` -- 3 x 3 median over the valid neighbours.
-8. :func:`~vpp_service.matchers.speckle.remove_speckles` -- invalidate small
-   blobs (rSGM's speckle filter; ``speckle_size`` 0 turns it off).
+7. :func:`~vpp_service.matchers.border.reject_border_matches` -- invalidate
+   matches landing within ``border_margin`` columns of the right image's
+   border (clamped census, truncated search; 0 turns it off).
+8. :func:`~vpp_service.matchers.holes.fill_short_gaps` -- close row gaps of
+   at most ``gap_size`` pixels (linear inside a surface, else background; 0
+   turns it off), so the median and speckle filter see whole surfaces.
+9. :func:`median_filter3x3` -- 3 x 3 median over the valid neighbours.
+10. :func:`~vpp_service.matchers.speckle.remove_speckles` -- invalidate small
+    blobs (rSGM's speckle filter; ``speckle_size`` 0 turns it off).
 
 Everything invalid is NaN. Threads: every function takes ``threads``
 (None = the project's default, :func:`vpp_service.threads.default_threads`);
@@ -55,7 +61,9 @@ from vpp_service.matchers.base import (
     check_pair,
     to_gray,
 )
+from vpp_service.matchers.border import reject_border_matches
 from vpp_service.matchers.guided import modulate_cost
+from vpp_service.matchers.holes import fill_short_gaps
 from vpp_service.matchers.speckle import remove_speckles
 from vpp_service.threads import resolve_threads
 
@@ -307,6 +315,14 @@ class CensusSGMOptions(MatcherOptions):
         Left-right consistency check (default True).
     lr_tolerance : float
         Allowed left-right difference in pixels (default 1).
+    border_margin : int
+        Matches whose right pixel lies within this many columns of the right
+        image's border are rejected (default 2, the census radius; 0 = off),
+        see :func:`~vpp_service.matchers.border.reject_border_matches`.
+    gap_size : int
+        Row gaps of at most this many invalid pixels between two valid ones are
+        closed before the median (default 4; 0 = off), see
+        :func:`~vpp_service.matchers.holes.fill_short_gaps`.
     median : bool
         3 x 3 median of the result (default True).
     speckle_size, speckle_diff : int, float
@@ -333,6 +349,8 @@ class CensusSGMOptions(MatcherOptions):
     subpixel: bool = True
     lr_check: bool = True
     lr_tolerance: float = 1.0
+    border_margin: int = 2
+    gap_size: int = 4
     median: bool = True
     speckle_size: int = 200
     speckle_diff: float = 2.0
@@ -349,6 +367,10 @@ class CensusSGMOptions(MatcherOptions):
             raise ValueError(f"uniqueness must be in (0, 1], got {self.uniqueness}")
         if not (math.isfinite(self.lr_tolerance) and self.lr_tolerance >= 0):
             raise ValueError(f"lr_tolerance must be a finite number >= 0, got {self.lr_tolerance}")
+        for name in ("border_margin", "gap_size"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
         if isinstance(self.speckle_size, bool) or self.speckle_size < 0:
             raise ValueError(f"speckle_size must be an integer >= 0, got {self.speckle_size!r}")
         if not (math.isfinite(self.speckle_diff) and self.speckle_diff >= 0):
@@ -385,7 +407,7 @@ class CensusSGM(Matcher):
         )
 
     def compute_from_cost(self, cost: np.ndarray, left_gray: np.ndarray, hints: np.ndarray | None = None) -> np.ndarray:
-        """Disparity from a cost volume (steps 3-7; ``fill`` is not applied here).
+        """Disparity from a cost volume (steps 3-10; ``fill`` is not applied here).
 
         Parameters
         ----------
@@ -417,6 +439,10 @@ class CensusSGM(Matcher):
         disp = select_disparity(agg, o.uniqueness, o.subpixel, t)
         if o.lr_check:
             disp = left_right_check(disp, right_disparity(agg, t), o.lr_tolerance, t)
+        if o.border_margin:
+            disp = reject_border_matches(disp, o.border_margin)
+        if o.gap_size:
+            disp = fill_short_gaps(disp, o.gap_size, threads=t)
         if o.median:
             disp = median_filter3x3(disp, t)
         if o.speckle_size:
