@@ -53,11 +53,12 @@ def reject_border_matches(disparity: np.ndarray, margin: int = 2) -> np.ndarray:
     if isinstance(margin, bool) or not isinstance(margin, (int, np.integer)) or margin < 0:
         raise ValueError(f"margin must be an integer >= 0, got {margin!r}")
     w = src.shape[1]
-    x = np.arange(w, dtype=np.float64)[None, :]
-    with np.errstate(invalid="ignore"):
-        xr = x - np.floor(src.astype(np.float64) + 0.5)
-        keep = (xr >= margin) & (xr <= w - 1 - margin)
-    return np.where(keep, src, np.float32(np.nan)).astype(np.float32, copy=False)
+    x = np.arange(w, dtype=np.float32)
+    # floor(d + 0.5) <= x - margin  <=>  d + 0.5 < x - margin + 1 (and likewise for the right
+    # border); d + 0.5 is exact in float32 for |d| < 2**22, and NaN fails both comparisons
+    v = src + np.float32(0.5)
+    keep = (v < x - margin + 1) & (v >= x - (w - 1 - margin))
+    return np.where(keep, src, np.float32(np.nan))
 
 
 __all__ = ["reject_border_matches"]
