@@ -169,10 +169,10 @@ class MatcherCache:
     template : Matcher
         Its type and options (``max_disparity`` replaced) build each instance.
     size : int
-        Instances kept (>= 1; default 3).
+        Instances kept (>= 1; default 2: the range in use and the one before, each may hold large buffers).
     """
 
-    def __init__(self, template: Matcher, size: int = 3) -> None:
+    def __init__(self, template: Matcher, size: int = 2) -> None:
         if size < 1:
             raise ValueError(f"size must be >= 1, got {size}")
         self.template = template
