@@ -110,3 +110,31 @@ def test_service_fusion_rejects_bad_arguments(matcher):
         Fusion(object())
     with pytest.raises(TypeError, match="VPPConfig"):
         Fusion(matcher, {"alpha": 0.4})
+
+
+def test_service_fusion_auto_range_follows_the_scene():
+    from vpp_service.matchers.disparity_range import AutoRangeOptions
+
+    sensor = build_sensor("uniform", {"density": 0.05})
+    near = sensor.simulate(make_scene(64, 240, seed=3, max_disparity=70), seed=1)
+    far = sensor.simulate(make_scene(64, 240, seed=3, max_disparity=12), seed=1)
+    template = build_matcher("sgbm", {"max_disparity": 16})
+    d = {}
+    for name, fr in (("near", near), ("far", far)):
+        fusion = Fusion(template, VPPConfig(), disparity_range=AutoRangeOptions())
+        res = fusion(fr)
+        d[name] = fusion.max_disparity
+        top = float(np.nanmax(sparse_disparity(fr)))
+        assert d[name] == 16 * int(np.ceil((top + 16) / 16))  # largest point + margin, rounded up to 16
+        fixed = fuse(fr, build_matcher("sgbm", {"max_disparity": d[name]}), VPPConfig(), seed=fr.seq)
+        np.testing.assert_array_equal(res.disparity, fixed.disparity)  # the matcher ran with that range
+    assert d["near"] > d["far"] and d["near"] >= 80
+    # the metric-depth-only frame gives the same range (converted with its calibration)
+    depth_only = near.with_(sparse_disparity=None)
+    fusion = Fusion(template, VPPConfig(), disparity_range=AutoRangeOptions())
+    fusion(depth_only)
+    assert fusion.max_disparity == d["near"]
+    # a fixed integer is honoured: no auto range, the matcher as given
+    plain = Fusion(template, VPPConfig())
+    plain(near)
+    assert plain.max_disparity == 16 and plain.range is None

@@ -52,6 +52,21 @@ def test_overrides_merge():
     assert merge({"a": {"b": 1, "c": 2}}, {"a": {"b": 3}}) == {"a": {"b": 3, "c": 2}}
 
 
+def test_max_disparity_auto_is_the_default_and_a_fixed_integer_is_honoured():
+    from vpp_service.matchers.disparity_range import AutoRangeOptions
+
+    cfg = load_config(None)
+    assert cfg.matcher.raw["max_disparity"] == "auto" and cfg.disparity_range == AutoRangeOptions()
+    bare = validate_config({"matcher": {"name": "bm"}})  # no max_disparity key: auto too
+    assert bare.disparity_range == AutoRangeOptions()
+    tuned = load_config(None, {"matcher": {"auto_range": {"min_depth_m": 0.5, "limit": 192}}})
+    assert tuned.disparity_range == AutoRangeOptions(min_depth_m=0.5, limit=192)
+    assert validate_config(tuned.to_dict()).disparity_range == tuned.disparity_range
+    fixed = load_config(None, {"matcher": {"max_disparity": 96}})
+    assert fixed.disparity_range is None and fixed.matcher.options.max_disparity == 96
+    assert fixed.to_dict()["matcher"] == {"name": "sgbm", "max_disparity": 96}
+
+
 def test_vpp_disabled():
     assert load_config(None, {"vpp": {"enabled": False}}).vpp is None
 
@@ -78,6 +93,16 @@ def test_vpp_disabled():
         ({"source": {"rate_hz": 3}}, "source.type"),
         ({"matcher": {"name": "deep"}}, "matcher.name"),
         ({"matcher": {"name": "sgbm", "max_disp": 3}}, "matcher.max_disp"),
+        ({"matcher": {"max_disparity": "wide"}}, "matcher.max_disparity"),
+        ({"matcher": {"max_disparity": True}}, "matcher.max_disparity"),
+        ({"matcher": {"max_disparity": 0}}, "matcher"),
+        ({"matcher": {"max_disparity": 64, "auto_range": {"margin": 8}}}, "matcher.auto_range"),
+        ({"matcher": {"auto_range": {"min_depth_m": -1.0}}}, "matcher.auto_range"),
+        ({"matcher": {"auto_range": {"limit": 100}}}, "matcher.auto_range"),
+        ({"matcher": {"auto_range": {"limit": 0}}}, "matcher.auto_range"),
+        ({"matcher": {"auto_range": {"shrink_after": 0}}}, "matcher.auto_range"),
+        ({"matcher": {"auto_range": {"lmit": 64}}}, "matcher.auto_range.lmit"),
+        ({"matcher": {"auto_range": 5}}, "matcher.auto_range"),
         ({"vpp": {"alpah": 0.3}}, "vpp"),
         ({"vpp": {"enabled": "yes"}}, "vpp.enabled"),
         ({"queues": {"input_policy": "newest"}}, "queues.input_policy"),
@@ -142,6 +167,15 @@ def test_file_config_and_cli_overrides(tmp_path):
     cfg = validate_config(overrides_from_args(read_toml(p), args))
     assert [s.name for s in cfg.sinks] == ["files", "record"]
     assert [s.options.dir for s in cfg.sinks] == [str(tmp_path / "o" / "frames"), str(tmp_path / "o" / "recording")]
+    args.max_disparity = "auto"  # --max-disparity replaces the file's fixed range
+    cfg = validate_config(overrides_from_args(read_toml(p), args))
+    assert cfg.disparity_range is not None and cfg.matcher.raw["max_disparity"] == "auto"
+    args.max_disparity = "48"
+    cfg = validate_config(overrides_from_args(read_toml(p), args))
+    assert cfg.disparity_range is None and cfg.matcher.options.max_disparity == 48
+    args.max_disparity = "lots"
+    with pytest.raises(SettingsError, match=r"matcher\.max_disparity"):
+        validate_config(overrides_from_args(read_toml(p), args))
 
 
 def test_cli_check_reports_bad_key(tmp_path, capsys):

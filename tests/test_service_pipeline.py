@@ -10,9 +10,10 @@ import zenoh
 
 from helpers.frames import make_frame
 from helpers.zenoh_loopback import zenoh_test_config
+from vpp_service.evaluation.metrics import compute_metrics
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.fusion import Fusion
-from vpp_service.service.pipeline import Pipeline, StageTimer
+from vpp_service.service.pipeline import Pipeline, StageTimer, answered_metrics
 from vpp_service.sinks.base import Sink, SinkContext
 from vpp_service.sources.base import Source, SourceContext, build_source
 from vpp_service.transport import wire
@@ -167,6 +168,46 @@ def test_real_fusion_counts_no_depth_and_scores_against_gt():
         assert r.disparity.shape == r.frame.shape and "bad2" in r.metrics
         assert (r.left_vpp is None) == (r.frame.seq % 2 == 0)
         assert r.depth is not None and r.depth.dtype == np.float32
+
+
+def test_answered_metrics_split_bad2_from_density():
+    gt = np.full((10, 20), 10.0, np.float32)
+    disp = gt.copy()
+    disp[:, :5] = np.nan  # 25 % of the pixels with ground truth get no value
+    disp[:3, 5:10] += 5.0  # 15 of the 150 answered pixels are off by more than 2 px
+    m = compute_metrics(disp, gt)
+    split = answered_metrics(m)
+    assert split["density"] == pytest.approx(75.0)
+    assert split["bad2_answered"] == pytest.approx(10.0)
+    assert m["bad2"] == pytest.approx(32.5)  # the mixed number: 25 % missing + 7.5 % wrong
+    assert answered_metrics({"bad2": 1.0}) == {}
+    none = answered_metrics(compute_metrics(np.full_like(gt, np.nan), gt))
+    assert none["density"] == 0.0 and np.isnan(none["bad2_answered"])
+
+
+def test_status_and_summary_report_bad2_of_answered_pixels_and_density():
+    def process(frame: StereoFrame) -> FusionResult:
+        gt = frame.gt_disparity
+        disp = gt.copy()
+        disp[:, : gt.shape[1] // 4] = np.nan
+        disp[::10, gt.shape[1] // 2 :] += 5.0
+        return FusionResult(frame=frame, disparity=disp, metrics=compute_metrics(disp, gt), timing_ms={"match": 1.0})
+
+    pipe = Pipeline(sim_source(3), process, [CollectSink()], input_policy="block")
+    assert pipe.status()["metrics"]["density_mean"] is None and "density" not in pipe.summary_line()
+    run(pipe)
+    m = pipe.status()["metrics"]
+    last = m["last"]
+    gt_ok = last["n"]
+    assert m["density_mean"] == pytest.approx(last["density"]) and last["density"] == pytest.approx(
+        100.0 - last["invalid"]
+    )
+    assert 70.0 < m["density_mean"] < 80.0
+    assert 6.0 < m["bad2_answered_mean"] < 7.5  # every 10th row of 2/3 of the answered columns: 6.7 %
+    assert m["bad2_mean"] == pytest.approx(last["bad2"]) and m["bad2_mean"] > m["bad2_answered_mean"] + 20.0
+    assert gt_ok > 0
+    line = pipe.summary_line()
+    assert f"bad-2 {m['bad2_answered_mean']:.2f} %" in line and f"density {m['density_mean']:.1f} %" in line
 
 
 def test_pipeline_bad_args():

@@ -38,6 +38,7 @@ import numpy as np
 from vpp_service.evaluation.metrics import compute_metrics
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.matchers.base import Matcher
+from vpp_service.matchers.disparity_range import AutoRangeOptions, DisparityRange, MatcherCache
 from vpp_service.vpp import VPPConfig, depth_to_disparity, disparity_to_depth, project
 
 
@@ -92,6 +93,7 @@ def fuse(
     guide: bool = False,
     depth: bool = True,
     protocol: bool = False,
+    sparse: np.ndarray | None = None,
 ) -> FusionResult:
     """Process one frame: VPP (or guidance) on its sparse points, the matcher, depth and metrics.
 
@@ -111,6 +113,9 @@ def fuse(
         Compute metric depth when the frame is calibrated (skip it when unused).
     protocol : bool
         Score as the evaluation protocol (see :func:`score`).
+    sparse : ndarray or None
+        The frame's :func:`sparse_disparity` when the caller already has it
+        (None: derived here when needed).
 
     Returns
     -------
@@ -126,7 +131,8 @@ def fuse(
     timing: dict[str, float] = dict(frame.meta.get("timing_ms", {}))
     t_start = time.perf_counter()
     left, right = np.ascontiguousarray(frame.left), np.ascontiguousarray(frame.right)
-    sparse = sparse_disparity(frame) if vpp_config is not None or guide else None
+    if sparse is None and (vpp_config is not None or guide):
+        sparse = sparse_disparity(frame)
     left_vpp = right_vpp = occluded = None
     stats: dict[str, int] = {}
     m_left, m_right = left, right
@@ -179,6 +185,11 @@ class Fusion:
         Pattern seed; the frame's ``seq`` is added so every frame differs.
     depth : bool
         Compute metric depth (skip it when no sink uses it).
+    disparity_range : AutoRangeOptions or None
+        ``max_disparity = "auto"``: the range is derived per frame
+        (:class:`~vpp_service.matchers.disparity_range.DisparityRange`) and the
+        matcher for it is taken from a small cache built from ``matcher``'s type
+        and options. None: ``matcher`` as given.
 
     Attributes
     ----------
@@ -189,7 +200,12 @@ class Fusion:
     """
 
     def __init__(
-        self, matcher: Matcher, vpp_config: VPPConfig | None = None, seed: int = 0, depth: bool = True
+        self,
+        matcher: Matcher,
+        vpp_config: VPPConfig | None = None,
+        seed: int = 0,
+        depth: bool = True,
+        disparity_range: AutoRangeOptions | None = None,
     ) -> None:
         if not isinstance(matcher, Matcher):
             raise TypeError(
@@ -202,6 +218,13 @@ class Fusion:
         self.seed = int(seed)
         self.depth = bool(depth)
         self.counters = {"vpp": 0, "no_depth": 0}
+        self.range = DisparityRange(disparity_range) if disparity_range is not None else None
+        self._matchers = MatcherCache(matcher)
+
+    @property
+    def max_disparity(self) -> int | None:
+        """The disparity range in use (the fixed one, or the last auto range; None before the first auto frame)."""
+        return self.matcher.options.max_disparity if self.range is None else self.range.current
 
     def prepare_next(self, frame: StereoFrame) -> None:
         """Build the random-pattern table the next frame (``seq + 1``) will use.
@@ -229,10 +252,15 @@ class Fusion:
             Invalid frame for the matcher/VPP (e.g. image narrower than the
             disparity range); the pipeline counts it as rejected.
         """
-        result = fuse(frame, self.matcher, self.vpp_config, seed=self.seed + int(frame.seq), depth=self.depth)
+        matcher, sparse = self.matcher, None
+        if self.range is not None:
+            sparse = sparse_disparity(frame)
+            matcher = self._matchers.get(self.range.update(sparse, frame.calib, frame.left.shape[1]))
+        seed = self.seed + int(frame.seq)
+        result = fuse(frame, matcher, self.vpp_config, seed=seed, depth=self.depth, sparse=sparse)
         if result.left_vpp is not None:
             self.counters["vpp"] += 1
-        elif self.vpp_config is not None or not _has_points(sparse_disparity(frame)):
+        elif self.vpp_config is not None or not _has_points(sparse if sparse is not None else sparse_disparity(frame)):
             self.counters["no_depth"] += 1
         return result
 

@@ -45,6 +45,13 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--sink", action="append", help="sink type (repeatable; replaces the config's sinks)")
     p.add_argument("--matcher", help="matcher name: sgbm, bm, census-sgm (default: the config's, sgbm)")
     p.add_argument(
+        "--max-disparity",
+        metavar="D",
+        help='matcher disparity range: "auto" (per frame from the calibration and [matcher.auto_range] '
+        "min_depth_m, else the frame's sparse points plus a margin, rounded up to 16) or an integer "
+        "(default: the config's, auto)",
+    )
+    p.add_argument(
         "--input-policy",
         choices=["latest", "block"],
         help="input queue when full: drop the oldest (live camera) or wait (lossless replay); "
@@ -108,6 +115,14 @@ def _sinks_from_flag(names: list[str], configured: list[object]) -> list[dict[st
     return [old[t] if t in old else {"type": t, **_SINK_DEFAULTS.get(t, {})} for t in names]
 
 
+def _int_or_text(value: str) -> int | str:
+    """``value`` as an int when it is one (the config check names anything else)."""
+    try:
+        return int(value)
+    except ValueError:
+        return value
+
+
 def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
     """Apply the CLI flags to a raw config mapping (returns a new mapping)."""
     d = copy.deepcopy(data)
@@ -128,6 +143,12 @@ def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[
         d.setdefault("queues", {})["input_policy"] = args.input_policy
     if args.matcher and d.get("matcher", {}).get("name") != args.matcher:
         d["matcher"] = {"name": args.matcher}
+    max_disparity = getattr(args, "max_disparity", None)
+    if max_disparity is not None:
+        m = d.setdefault("matcher", {"name": "sgbm"})
+        m["max_disparity"] = _int_or_text(max_disparity)
+        if m["max_disparity"] != "auto":
+            m.pop("auto_range", None)
     zen = d.setdefault("zenoh", {})
     if args.zenoh_listen:
         zen["listen"] = list(args.zenoh_listen)

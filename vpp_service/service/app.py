@@ -151,7 +151,7 @@ def open_session(
 
 def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> Pipeline:
     """Build (not start) the pipeline described by ``cfg`` on ``session``."""
-    from vpp_service.matchers import build_matcher
+    from vpp_service.matchers import MATCHERS, MatcherOptions
     from vpp_service.sinks.base import SINKS, SinkContext
     from vpp_service.sources.base import SOURCES, SourceContext
 
@@ -161,10 +161,13 @@ def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> 
     )
     sink_ctx = SinkContext(rig=s.rig, prefix=s.prefix, session=session)
     sinks = [SINKS.get(sp.name)(sp.options, sink_ctx) for sp in cfg.sinks]
-    matcher = build_matcher(cfg.matcher.name, cfg.matcher.raw)
+    options = cfg.matcher.options  # validated, with max_disparity "auto" taken off (cfg.disparity_range)
+    if not isinstance(options, MatcherOptions):
+        raise TypeError(f"matcher options must be MatcherOptions, got {type(options).__name__}")
+    matcher = MATCHERS.get(cfg.matcher.name)(options)
     # metric depth is computed only when a sink reads it (each sink says so)
     needs_depth = any(SINKS.get(sp.name).needs_depth(sp.options) for sp in cfg.sinks)
-    fusion = Fusion(matcher, cfg.vpp, seed=s.seed, depth=needs_depth)
+    fusion = Fusion(matcher, cfg.vpp, seed=s.seed, depth=needs_depth, disparity_range=cfg.disparity_range)
     q = cfg.queues
     return Pipeline(
         source,
@@ -340,7 +343,7 @@ def _not_started(cfg: ServiceConfig) -> ServiceSummary:
         "timing_ms": {},
         "source": {},
         "sinks": {},
-        "metrics": {"last": {}, "bad2_mean": None},
+        "metrics": {"last": {}, "bad2_mean": None, "bad2_answered_mean": None, "density_mean": None},
         "shutdown_s": 0.0,
         "summary_write_errors": 0,
         "config": cfg.to_dict(),

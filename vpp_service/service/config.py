@@ -6,7 +6,8 @@ Sections (every key is documented in ``deploy/config.example.toml``)::
     [zenoh]     enabled, mode, listen, connect, multicast_scouting, config_file
     [source]    type = "sim" | "files" | "zenoh", plus that source's options
     [vpp]       enabled, plus VPPConfig fields
-    [matcher]   name = "sgbm" | "bm" | "census-sgm", plus that matcher's options
+    [matcher]   name = "sgbm" | "bm" | "census-sgm", plus that matcher's options;
+                max_disparity = "auto" (default) | int, [matcher.auto_range] -> AutoRangeOptions
     [queues]    input_size, input_policy, output_size, output_policy
     [[sinks]]   type = "zenoh" | "rerun" | "files", plus that sink's options
 
@@ -34,6 +35,7 @@ from vpp_service.registry import Registry
 from vpp_service.settings import SettingsError, from_mapping
 
 if TYPE_CHECKING:
+    from vpp_service.matchers.disparity_range import AutoRangeOptions
     from vpp_service.vpp import VPPConfig
 
 T = TypeVar("T")
@@ -220,6 +222,8 @@ class ServiceConfig:
     matcher: PluginSpec
     queues: QueuesSection
     sinks: tuple[PluginSpec, ...]
+    #: ``matcher.max_disparity = "auto"``: how the range is derived per frame (None: the fixed integer).
+    disparity_range: AutoRangeOptions | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain mapping (the form :func:`validate_config` accepts)."""
@@ -249,7 +253,7 @@ DEFAULT_CONFIG: dict[str, Any] = {
         "rate_hz": 10.0,
     },
     "vpp": {"enabled": True},
-    "matcher": {"name": "sgbm", "max_disparity": 128},
+    "matcher": {"name": "sgbm", "max_disparity": "auto"},
     # no [queues]: the section's defaults (latest), which `run --source zenoh` turns into a lossless block
     "sinks": [
         {"type": "zenoh", "outputs": ["disparity", "depth"]},
@@ -298,6 +302,30 @@ def _parse_vpp(d: Mapping[str, Any]) -> VPPConfig | None:
     return cfg if enabled else None
 
 
+def _parse_matcher_range(raw: Mapping[str, Any], sec: str) -> tuple[dict[str, Any], AutoRangeOptions | None]:
+    """Split ``max_disparity`` / ``auto_range`` off a ``[matcher]`` table.
+
+    Returns the matcher's own options (with the fixed ``max_disparity`` when
+    one is given) and the :class:`AutoRangeOptions` when the range is
+    ``"auto"`` (the default when the key is missing).
+    """
+    from vpp_service.matchers.disparity_range import AutoRangeOptions
+
+    options = dict(raw)
+    md = options.pop("max_disparity", "auto")
+    auto_raw = options.pop("auto_range", None)
+    if md == "auto":
+        if auto_raw is not None and not isinstance(auto_raw, Mapping):
+            raise SettingsError(f"{sec}.auto_range: must be a table, got {type(auto_raw).__name__}")
+        return options, from_mapping(AutoRangeOptions, auto_raw or {}, f"{sec}.auto_range")
+    if isinstance(md, bool) or not isinstance(md, int):
+        raise SettingsError(f'{sec}.max_disparity: must be "auto" or an integer, got {md!r}')
+    if auto_raw is not None:
+        raise SettingsError(f'{sec}.auto_range: only used with max_disparity = "auto" (max_disparity is {md})')
+    options["max_disparity"] = md
+    return options, None
+
+
 def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceConfig:
     """Validate a whole config mapping (as read from TOML) into a :class:`ServiceConfig`.
 
@@ -324,8 +352,13 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
     zen = from_mapping(ZenohSection, _table(data, "zenoh"), "zenoh")
     source = _plugin(data.get("source", {"type": "sim"}), "source", "type", SOURCES, parse_source_options)
 
+    ranges: list[AutoRangeOptions] = []
+
     def parse_matcher(name: str, raw: Mapping[str, Any], sec: str) -> object:
-        return from_mapping(MATCHERS.get(name).Options, raw, sec)
+        options, auto = _parse_matcher_range(raw, sec)
+        if auto is not None:
+            ranges.append(auto)
+        return from_mapping(MATCHERS.get(name).Options, options, sec)
 
     matcher = _plugin(data.get("matcher", {"name": "sgbm"}), "matcher", "name", MATCHERS, parse_matcher)
     vpp_raw = dict(_table(data, "vpp"))
@@ -354,6 +387,7 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
         matcher=matcher,
         queues=queues,
         sinks=tuple(sinks),
+        disparity_range=ranges[0] if ranges else None,
     )
 
 

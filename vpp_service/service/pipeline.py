@@ -71,10 +71,37 @@ class QueueStatus(TypedDict):
 
 
 class MetricsStatus(TypedDict):
-    """Accuracy against ground truth: the last frame's metrics and the mean bad-2 over the timing window."""
+    """Accuracy against ground truth (frames that carry it), means over the timing window.
+
+    ``last`` is the last frame's :func:`~vpp_service.evaluation.metrics.compute_metrics`
+    plus its ``bad2_answered`` and ``density``. The two honest numbers are
+    reported apart: ``bad2_answered_mean`` is bad-2 (percent) over the pixels
+    with ground truth that got a value, ``density_mean`` the percentage of
+    pixels with ground truth that got one. ``bad2_mean`` mixes both (a pixel
+    without a value counts as bad), as the evaluation protocol's raw score does.
+    None until a frame with ground truth was processed.
+    """
 
     last: dict[str, float]
     bad2_mean: float | None
+    bad2_answered_mean: float | None
+    density_mean: float | None
+
+
+def answered_metrics(metrics: Mapping[str, float]) -> dict[str, float]:
+    """``density`` and ``bad2_answered`` (percent) from one frame's ``bad2`` and ``invalid``.
+
+    ``compute_metrics`` counts a pixel without a value as bad, so
+    ``bad2 = bad_answered + invalid`` (percent of the pixels with ground
+    truth); this splits the two. ``{}`` when the metrics lack either key or
+    nothing was scored; ``bad2_answered`` is NaN when no pixel got a value.
+    """
+    bad2, invalid = metrics.get("bad2"), metrics.get("invalid")
+    if bad2 is None or invalid is None or not (np.isfinite(bad2) and np.isfinite(invalid)):
+        return {}
+    density = 100.0 - invalid
+    bad = max(0.0, (bad2 - invalid) / density * 100.0) if density > 0 else float("nan")
+    return {"density": density, "bad2_answered": bad}
 
 
 #: Seconds over which ``fps`` is measured (a recent window: it falls to 0 when frames stop coming).
@@ -217,6 +244,8 @@ class Pipeline:
         self._started = 0.0
         self._last_metrics: dict[str, float] = {}
         self._bad2: deque[float] = deque(maxlen=timing_window)
+        self._bad2_answered: deque[float] = deque(maxlen=timing_window)
+        self._density: deque[float] = deque(maxlen=timing_window)
         self._done_at: deque[float] = deque(maxlen=10000)  # monotonic time of each processed frame (for fps)
         self._queryable: zenoh.Queryable[None] | None = None
         self._token: zenoh.LivelinessToken | None = None
@@ -275,9 +304,14 @@ class Pipeline:
         for stage, ms in result.timing_ms.items():
             self.timer.add(stage, ms)
         if result.metrics:
-            self._last_metrics = dict(result.metrics)
+            split = answered_metrics(result.metrics)
+            self._last_metrics = {**result.metrics, **split}
             if "bad2" in result.metrics:
                 self._bad2.append(result.metrics["bad2"])
+            if split:
+                self._density.append(split["density"])
+                if np.isfinite(split["bad2_answered"]):
+                    self._bad2_answered.append(split["bad2_answered"])
         if result.frame.sparse_disparity is None and result.frame.sensor_depth is None:
             self._inc("no_depth")
         self._inc("processed")
@@ -443,7 +477,12 @@ class Pipeline:
             "timing_ms": self.timer.summary(),
             "source": self.source.stats(),
             "sinks": sinks,
-            "metrics": {"last": self._last_metrics, "bad2_mean": float(np.mean(self._bad2)) if self._bad2 else None},
+            "metrics": {
+                "last": self._last_metrics,
+                "bad2_mean": _mean(self._bad2),
+                "bad2_answered_mean": _mean(self._bad2_answered),
+                "density_mean": _mean(self._density),
+            },
         }
 
     def connectivity(self) -> dict[str, int] | None:
@@ -488,16 +527,29 @@ class Pipeline:
         c = st["counters"]
         lat = st["timing_ms"].get("latency")
         lat_s = f"lat p50 {lat['p50']:.0f} ms p99 {lat['p99']:.0f} ms" if lat else "lat -"
-        bad2 = st["metrics"]["bad2_mean"]
+        m = st["metrics"]
         bad_s = ""
-        if bad2 is not None:
-            # NaN (no estimate) counts as bad in bad-2; say how much of it that is.
-            invalid = (st["metrics"]["last"] or {}).get("invalid")
-            bad_s = f" | bad-2 {bad2:.2f} %" + (f" (no-estimate {invalid:.1f} %)" if invalid is not None else "")
+        if m["density_mean"] is not None:
+            # two numbers, never mixed: accuracy of the values given, and how many pixels got one
+            bad2 = m["bad2_answered_mean"]
+            bad_s = (" | bad-2 -" if bad2 is None else f" | bad-2 {bad2:.2f} %") + f" density {m['density_mean']:.1f} %"
         return (
             f"{st['fps']:.1f} fps | {lat_s}{bad_s} | recv {c['received']} proc {c['processed']} "
             f"pub {c['published']} drop {c['dropped']} rej {c['rejected']} no-depth {c['no_depth']}"
         )
 
 
-__all__ = ["FPS_WINDOW_S", "MetricsStatus", "Pipeline", "PipelineStatus", "QueueStatus", "StageTimer"]
+def _mean(values: deque[float]) -> float | None:
+    """Mean of a window, None when empty."""
+    return float(np.mean(values)) if values else None
+
+
+__all__ = [
+    "FPS_WINDOW_S",
+    "MetricsStatus",
+    "Pipeline",
+    "PipelineStatus",
+    "QueueStatus",
+    "StageTimer",
+    "answered_metrics",
+]
