@@ -44,16 +44,18 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, TypedDict
+from typing import TYPE_CHECKING, NotRequired, TypedDict
 
 import numpy as np
 
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.queueing import Policy, QueueWorker
+from vpp_service.service.pool import PoolStatus
 
 if TYPE_CHECKING:  # zenoh, sources and sinks are imported where they are used
     import zenoh
 
+    from vpp_service.service.pool import WorkerPool
     from vpp_service.sinks.base import Sink
     from vpp_service.sources.base import Source
 
@@ -97,6 +99,7 @@ class PipelineStatus(TypedDict):
     source: Mapping[str, object]
     sinks: dict[str, Mapping[str, object]]
     metrics: MetricsStatus
+    pool: NotRequired[PoolStatus]
 
 
 class StageTimer:
@@ -155,6 +158,10 @@ class Pipeline:
         Window of the timing statistics.
     reject_log_period_s : float
         Rate limit of the rejected-input log line.
+    pool : WorkerPool or None
+        Run as one worker of the rig's pool (:mod:`vpp_service.service.pool`):
+        only the frames the pool admits are processed, answers are announced,
+        and ``@status`` is served on ``<prefix>/<rig>/@status/<worker-id>``.
     """
 
     def __init__(
@@ -173,6 +180,7 @@ class Pipeline:
         rig: str = "rig0",
         timing_window: int = 200,
         reject_log_period_s: float = 5.0,
+        pool: WorkerPool | None = None,
     ) -> None:
         if not callable(process):
             raise TypeError("process must be callable")
@@ -199,6 +207,7 @@ class Pipeline:
         self.prefix, self.rig = prefix, rig
         self.timer = StageTimer(timing_window)
         self.reject_log_period_s = reject_log_period_s
+        self.pool = pool
         self._counts = {
             "received": 0,
             "rejected": 0,
@@ -239,6 +248,12 @@ class Pipeline:
             self._reject(f"frame seq={frame.seq}: rig {frame.rig[:64]!r} is not the served rig {self.rig!r}")
             return False
         frame.meta.setdefault("recv_ns", time.time_ns())  # sources that receive stamp it earlier
+        if self.pool is not None and not self.pool.admit(frame):
+            return True  # another worker's share (the pool holds it for a takeover)
+        return self._enqueue(frame)
+
+    def _enqueue(self, frame: StereoFrame) -> bool:
+        """Queue ``frame`` for processing (the input policy decides how); whether it was queued."""
         ok = False
         if self.input.policy == "block":
             while not (self._stop.is_set() or self._enough.is_set()):
@@ -323,6 +338,8 @@ class Pipeline:
         if isinstance(recv_ns, int):
             self.timer.add("latency", (time.time_ns() - recv_ns) / 1e6)
         self._inc("published")
+        if self.pool is not None and self.pool.answer_on_publish:
+            self.pool.answered(result.frame.seq)
 
     def _sinks_done(self) -> None:
         self.done.set()
@@ -349,20 +366,28 @@ class Pipeline:
         if self.session is not None:
             from vpp_service.transport.wire import topic
 
-            self._queryable = self.session.declare_queryable(topic(self.prefix, self.rig, "@status"), self._on_query)
+            self._queryable = self.session.declare_queryable(self.status_key, self._on_query)
             self._token = self.session.liveliness().declare_token(topic(self.prefix, self.rig, "@alive"))
+        if self.pool is not None:
+            self.pool.start(self._enqueue)
         self._started = time.monotonic()
         self.output.start()
         self.input.start()
         self.source.start(self._emit, self._source_reject, on_finished=self.input.finish)
 
-    def _on_query(self, query: zenoh.Query) -> None:
+    @property
+    def status_key(self) -> str:
+        """Where ``@status`` is served: ``<prefix>/<rig>/@status``, plus ``/<worker-id>`` in a pool."""
         from vpp_service.transport.wire import topic
 
+        key = topic(self.prefix, self.rig, "@status")
+        return key if self.pool is None else f"{key}/{self.pool.worker_id}"
+
+    def _on_query(self, query: zenoh.Query) -> None:
         # runs on a Zenoh thread: build a small JSON reply, never block
         try:
-            # the service's own key, not the query's: a wildcard query gets one entry per rig
-            query.reply(topic(self.prefix, self.rig, "@status"), json.dumps(self.status()))
+            # the service's own key, not the query's: a wildcard query gets one entry per rig (and worker)
+            query.reply(self.status_key, json.dumps(self.status()))
         except Exception as exc:  # noqa: BLE001 - session closing; nothing may raise into Zenoh's thread
             log.debug("@status reply failed: %s", exc)
 
@@ -399,6 +424,8 @@ class Pipeline:
                     obj.undeclare()
         self._queryable = None
         self._token = None
+        if self.pool is not None:
+            self.pool.stop()  # after the sinks: every drained frame has been announced
         self.done.set()
 
     # -------------------------------------------------------------- status
@@ -415,7 +442,7 @@ class Pipeline:
                 sinks[type(s).__name__] = {}
         dropped = self._losses(sinks)
         counters["dropped"] = sum(dropped.values())  # derived: every cause in one count
-        return {
+        status: PipelineStatus = {
             "rig": self.rig,
             "prefix": self.prefix,
             "uptime_s": elapsed,
@@ -445,6 +472,9 @@ class Pipeline:
             "sinks": sinks,
             "metrics": {"last": self._last_metrics, "bad2_mean": float(np.mean(self._bad2)) if self._bad2 else None},
         }
+        if self.pool is not None:
+            status["pool"] = self.pool.status()
+        return status
 
     def connectivity(self) -> dict[str, int] | None:
         """Routers and peers the session reaches now (None without a session)."""
