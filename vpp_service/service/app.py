@@ -165,12 +165,10 @@ def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> 
             raise StartupError("service.pool: needs a zenoh session")
         from vpp_service.service.pool import WorkerPool, default_worker_id
 
-        pool = WorkerPool(
-            session, s.prefix, s.rig, s.worker_id or default_worker_id(), deadline_ms=s.pool_deadline_ms
-        )
+        pool = WorkerPool(session, s.prefix, s.rig, s.worker_id or default_worker_id(), deadline_ms=s.pool_deadline_ms)
     extra: dict[str, object] = {}
     if pool is not None:
-        extra["pool"] = pool  # ordered sinks count as gaps only the frames no other worker answered
+        extra["seq_expected"] = pool.state.expects  # ordered sinks: another worker's frame is never a gap
         if any(sp.name == "zenoh" for sp in cfg.sinks):
             pool.answer_on_publish = False  # the zenoh sink announces each frame once its outputs are out
             extra["on_written"] = pool.answered

@@ -206,6 +206,7 @@ class PoolState:
         self._records: OrderedDict[int, _Record] = OrderedDict()  # by arrival
         self._held: deque[int] = deque()  # seqs whose record still holds the frame, by arrival
         self._answers: OrderedDict[int, set[str]] = OrderedDict()
+        self._mine: OrderedDict[int, None] = OrderedDict()  # seqs this worker took (own and taken over)
         self._dup_counted: set[int] = set()
         self._counts = {
             "seen": 0,
@@ -235,6 +236,7 @@ class PoolState:
             who = owner(seq, self._members)
             if who == self.me:
                 self._counts["own"] += 1
+                self._take(seq)
                 return True
             assert who is not None
             self._records[seq] = _Record(who, now, frame)
@@ -271,6 +273,17 @@ class PoolState:
             if self.me in who and self.me != min(who) and seq not in self._dup_counted:
                 self._dup_counted.add(seq)
                 self._counts["duplicates"] += 1
+
+    def _take(self, seq: int) -> None:
+        """Remember that this worker processes ``seq`` (lock held)."""
+        self._mine[seq] = None
+        while len(self._mine) > self.answers_kept:
+            self._mine.popitem(last=False)
+
+    def expects(self, seq: int) -> bool:
+        """Whether ``seq`` is this worker's to answer (own or taken over): a hole in its outputs is a gap."""
+        with self._lock:
+            return seq in self._mine
 
     def bad_answer(self) -> None:
         """Count an ``@answered`` message that could not be read."""
@@ -310,6 +323,7 @@ class PoolState:
                 del self._records[seq]
                 if rec.frame is not None and now - rec.t <= self.deadline_s:
                     take.append(rec.frame)
+                    self._take(seq)
                     self._counts["taken_over"] += 1
                 else:
                     self._counts["lost"] += 1
