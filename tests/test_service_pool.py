@@ -192,6 +192,19 @@ def test_held_frames_are_bounded_and_past_the_bound_count_as_lost():
     assert a.status()["lost"] == 6 and a.status()["taken_over"] == 4
 
 
+def test_old_records_are_forgotten():
+    clock = Clock()
+    a = PoolState("a", deadline_s=0.5, clock=clock)
+    a.joined("b")
+    theirs = [s for s in range(100) if owner(s, ["a", "b"]) == "b"][:3]
+    a.admit(frame(theirs[0]))
+    clock.t = 11.0  # past max(10 s, 10 deadlines): b dropped it or is that far behind
+    a.admit(frame(theirs[1]))
+    clock.t = 11.2
+    assert [f.seq for f in a.left("b")] == [theirs[1]]
+    assert a.status()["lost"] == 0
+
+
 @pytest.mark.parametrize("answering", [["a", "b"], ["b", "a"], ["a", "b", "c"], ["c", "a", "b"]])
 def test_duplicates_are_counted_once_per_extra_answer(answering):
     clock = Clock()

@@ -62,9 +62,9 @@ output_policy = "block"
     return cfg
 
 
-def start_worker(cfg: Path, log: Path | None = None) -> subprocess.Popen[bytes]:
-    """Start one worker from ``cfg`` (stderr to ``log``, else discarded)."""
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+def start_worker(cfg: Path, log: Path | None = None, env: dict[str, str] | None = None) -> subprocess.Popen[bytes]:
+    """Start one worker from ``cfg`` (stderr to ``log``, else discarded; ``env`` added to the environment)."""
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})}
     err = open(log, "wb") if log is not None else subprocess.DEVNULL  # noqa: SIM115 - the child owns it
     return subprocess.Popen(
         [*vpp_service_module_command(), "run", "--config", str(cfg)],

@@ -178,7 +178,9 @@ class PoolState:
     hold_frames : int
         At most this many frames of other members kept for a takeover (the oldest first lose their image).
     record_frames : int
-        At most this many records (seq, owner, arrival) of other members' unanswered frames.
+        At most this many records (seq, owner, arrival) of other members' unanswered frames; a record
+        is also forgotten after ``max(10 s, 10 * deadline_s)`` (its owner dropped it, counted there,
+        or is that far behind).
     answers_kept : int
         How many recent answered ``seq`` values are remembered (duplicate detection).
     clock : callable
@@ -255,7 +257,10 @@ class PoolState:
                 self._held.popleft()
             else:
                 break
-        while len(self._records) > self.record_frames:
+        horizon = max(10.0, 10 * self.deadline_s)
+        while self._records and (
+            len(self._records) > self.record_frames or now - next(iter(self._records.values())).t > horizon
+        ):
             self._records.popitem(last=False)
 
     def answered(self, seq: int, worker: str) -> None:
