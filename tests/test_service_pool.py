@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from helpers.cli import vpp_service_module_command
+from helpers.netns import NetnsHosts, netns_available
 from helpers.pool import ROOT, publish, start_worker, stop_all, wait_members, worker_config
 from helpers.zenoh_loopback import free_port, zenoh_test_config
 from helpers.zenoh_router import RouterProcess
@@ -345,3 +346,42 @@ def test_a_sigkilled_workers_fresh_frames_are_answered_by_the_successor(tmp_path
         assert st["taken_over"] == 0 and st["lost"] >= 1
         missing = [s for s in range(count) if s not in answered]
         assert len(missing) == st["lost"] and set(missing) <= set(owned_by_a)
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.skipif(not netns_available(), reason="needs root and ip netns (network namespaces)")
+def test_workers_on_other_hosts_share_a_stream_through_the_router(tmp_path: Path):
+    """Two workers, each in its own network namespace (a host), reach the camera only through the router."""
+    import zenoh
+
+    port, rig, count = free_port(), "hosts", 16
+    with NetnsHosts(2) as hosts:
+        listen = [f"tcp/{gw}:{port}" for gw in hosts.gateway]
+        with RouterProcess(f"tcp/127.0.0.1:{port}", *listen) as router:
+            router.start()
+            ids = ["east", "west"]
+            procs = [
+                start_worker(
+                    worker_config(tmp_path, listen[k], rig, w),
+                    tmp_path / f"{w}.log",
+                    wrap=lambda argv, k=k: hosts.wrap(k, argv),
+                )
+                for k, w in enumerate(ids)
+            ]
+            try:
+                local = f"tcp/127.0.0.1:{port}"
+                with zenoh.open(zenoh_test_config(connect=[local], mode="client")) as session:
+                    wait_members(session, rig, 2, procs)
+                    sub = session.declare_subscriber(f"vpp/{rig}/out/disparity", zenoh.handlers.FifoChannel(64))
+                    time.sleep(0.3)
+                    assert publish(local, rig, count, rate=20).returncode == 0
+                    outs = collect_outputs(sub, count, timeout=60)
+                    st = status_cli(local, rig)
+            finally:
+                codes = stop_all(procs)
+    assert sorted(o.seq for o in outs) == list(range(count))
+    assert {o.extra["worker"] for o in outs} == set(ids)
+    assert sorted(st[f"vpp/{rig}/@pool"]["members"]) == ids
+    for w in ids:  # each worker's only link is its namespace's veth to the router
+        assert st[f"vpp/{rig}/@status/{w}"]["zenoh"] == {"routers": 1, "peers": 0}
+    assert codes == [0, 0]

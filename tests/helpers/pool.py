@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import subprocess
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -62,12 +63,21 @@ output_policy = "block"
     return cfg
 
 
-def start_worker(cfg: Path, log: Path | None = None, env: dict[str, str] | None = None) -> subprocess.Popen[bytes]:
-    """Start one worker from ``cfg`` (stderr to ``log``, else discarded; ``env`` added to the environment)."""
+def start_worker(
+    cfg: Path,
+    log: Path | None = None,
+    env: dict[str, str] | None = None,
+    wrap: Callable[[list[str]], list[str]] | None = None,
+) -> subprocess.Popen[bytes]:
+    """Start one worker from ``cfg`` (stderr to ``log``, else discarded; ``env`` added to the environment).
+
+    ``wrap`` turns the command into the one to run (e.g. inside a network namespace).
+    """
     env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})}
     err = open(log, "wb") if log is not None else subprocess.DEVNULL  # noqa: SIM115 - the child owns it
+    argv = [*vpp_service_module_command(), "run", "--config", str(cfg)]
     return subprocess.Popen(
-        [*vpp_service_module_command(), "run", "--config", str(cfg)],
+        wrap(argv) if wrap is not None else argv,
         cwd=ROOT,
         env=env,
         stdout=subprocess.DEVNULL,
