@@ -251,7 +251,12 @@ def collect_outputs(sub, n: int, timeout: float, quiet_s: float | None = None) -
     return out
 
 
-def status_cli(endpoint: str, rig: str) -> dict:
+def status_cli(endpoint: str, rig: str, cli: bool = True) -> dict:
+    """``vpp-service status --rig RIG`` as JSON: the command in a process, or (``cli=False``) its query here."""
+    if not cli:
+        from vpp_service.cli.status import query_status
+
+        return query_status([endpoint], rig=rig, timeout=2.0)
     out = subprocess.run(
         [*vpp_service_module_command(), "status", "--rig", rig, "--connect", endpoint, "--timeout", "2"],
         cwd=ROOT,
@@ -283,7 +288,7 @@ def test_workers_share_a_stream_exactly_once_and_status_lists_them(tmp_path: Pat
                 outs = collect_outputs(sub, count, timeout=60)
                 time.sleep(0.5)  # a duplicate would come now
                 outs += collect_outputs(sub, 1, timeout=0.2)
-            st = status_cli(endpoint, rig)
+            st = status_cli(endpoint, rig, cli=n == 3)  # the command itself once, its query in-process otherwise
             seqs = sorted(o.seq for o in outs)
             assert seqs == list(range(count)), st  # every frame once
             by = {o.seq: o.extra["worker"] for o in outs}
@@ -333,7 +338,7 @@ def test_a_sigkilled_workers_fresh_frames_are_answered_by_the_successor(tmp_path
                 publisher.join()
                 assert results[0].returncode == 0, results[0].stderr
                 outs += collect_outputs(sub, 64, timeout=20, quiet_s=2.0)
-                st = status_cli(endpoint, rig)[f"vpp/{rig}/@status/b"]["pool"]
+                st = status_cli(endpoint, rig, cli=False)[f"vpp/{rig}/@status/b"]["pool"]
         finally:
             stop_all(procs)
     assert st["members"] == ["b"] and st["leaves"] == 1
@@ -376,7 +381,7 @@ def test_workers_on_other_hosts_share_a_stream_through_the_router(tmp_path: Path
                     time.sleep(0.3)
                     assert publish(local, rig, count, rate=20).returncode == 0
                     outs = collect_outputs(sub, count, timeout=60)
-                    st = status_cli(local, rig)
+                    st = status_cli(local, rig, cli=False)
             finally:
                 codes = stop_all(procs)
     assert sorted(o.seq for o in outs) == list(range(count))
