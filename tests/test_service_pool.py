@@ -306,11 +306,18 @@ def test_workers_share_a_stream_exactly_once_and_status_lists_them(tmp_path: Pat
 
 
 @pytest.mark.timeout(120)
-@pytest.mark.parametrize("deadline_ms", [30000.0, 1.0])
-def test_a_sigkilled_workers_fresh_frames_are_answered_by_the_successor(tmp_path: Path, deadline_ms: float):
+@pytest.mark.parametrize(
+    ("sig", "deadline_ms"),
+    [
+        pytest.param(signal.SIGKILL, 30000.0, id="sigkill-fresh"),
+        pytest.param(signal.SIGKILL, 1.0, id="sigkill-past-deadline"),
+        pytest.param(signal.SIGTERM, 30000.0, id="sigterm-hands-over"),
+    ],
+)
+def test_a_stopped_workers_fresh_frames_are_answered_by_the_successor(tmp_path: Path, sig, deadline_ms: float):
     import zenoh
 
-    endpoint, rig, count = f"tcp/127.0.0.1:{free_port()}", f"kill{int(deadline_ms)}", 36
+    endpoint, rig, count = f"tcp/127.0.0.1:{free_port()}", f"kill{int(sig)}x{int(deadline_ms)}", 36
     results: list[subprocess.CompletedProcess[str]] = []
     ids = ["a", "b"]
     slow = 'name = "census-sgm"\nmax_disparity = 64\nthreads = 1'  # ~0.15 s a frame: the victim keeps a backlog
@@ -333,8 +340,8 @@ def test_a_sigkilled_workers_fresh_frames_are_answered_by_the_successor(tmp_path
                     got = collect_outputs(sub, 1, timeout=30)
                     assert got, "no output from the pool"
                     outs += got
-                procs[0].send_signal(signal.SIGKILL)  # mid-stream, with frames of its share still queued
-                procs[0].wait()
+                procs[0].send_signal(sig)  # mid-stream, with frames of its share still queued
+                assert procs[0].wait(30) == (0 if sig == signal.SIGTERM else -signal.SIGKILL)
                 publisher.join()
                 assert results[0].returncode == 0, results[0].stderr
                 outs += collect_outputs(sub, 64, timeout=20, quiet_s=2.0)
@@ -344,7 +351,12 @@ def test_a_sigkilled_workers_fresh_frames_are_answered_by_the_successor(tmp_path
     assert st["members"] == ["b"] and st["leaves"] == 1
     answered = Counter(o.seq for o in outs)
     owned_by_a = [s for s in range(count) if owner(s, ids) == "a"]
-    if deadline_ms > 1000:  # nothing is older than the deadline: every frame is answered
+    if sig == signal.SIGTERM:  # a clean stop leaves first: what it had queued is handed over, nothing lost
+        summary = json.loads((tmp_path / "a" / "summary.json").read_text())
+        assert summary["pool"]["handed_over"] >= 1 and summary["dropped"]["shutdown"] == 0
+        assert st["lost"] == 0 and st["taken_over"] >= summary["pool"]["handed_over"]
+        assert set(answered) == set(range(count))
+    elif deadline_ms > 1000:  # nothing is older than the deadline: every frame is answered
         assert st["lost"] == 0 and st["taken_over"] >= 1
         assert set(answered) == set(range(count))
     else:  # every frame "a" left is too old: counted lost, none processed

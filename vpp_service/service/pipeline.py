@@ -396,9 +396,18 @@ class Pipeline:
         return self.done.wait(timeout)
 
     def stop(self, timeout: float = 5.0) -> None:
-        """Stop the source, drain the queues, close sinks; every step bounded by ``timeout``."""
+        """Stop the source, drain the queues, close sinks; every step bounded by ``timeout``.
+
+        A pool worker leaves the pool first: the other workers take the frames
+        queued here over (they are still fresh; not counted as losses here) and
+        every new one, while this worker finishes the frame in hand.
+        """
+        if self.pool is not None:
+            self.pool.leave()
         self.source.stop(timeout)
         self.source.finished.set()
+        if self.pool is not None:
+            self.pool.state.handed_over(self.input.queue.discard())
         deadline = time.monotonic() + timeout
         self.input.finish()
         drained = self.input.join(max(0.05, deadline - time.monotonic()))
@@ -492,7 +501,9 @@ class Pipeline:
             "input_queue": self.input.dropped,
             "output_queue": self.output.dropped,
             # frames left queued when max_frames is reached were not wanted: only a stop's discards are losses
-            "shutdown": (0 if self._enough.is_set() else self.input.discarded) + self.output.discarded + self._refused,
+            "shutdown": (0 if self._enough.is_set() else self.input.discarded - self._handed_over())
+            + self.output.discarded
+            + self._refused,
         }
         try:
             out.update({k: int(v) for k, v in self.source.losses().items()})
@@ -502,6 +513,10 @@ class Pipeline:
             n = st.get("dropped", 0)
             out[f"sink.{name}"] = n if isinstance(n, int) else 0
         return out
+
+    def _handed_over(self) -> int:
+        """Frames a leaving pool worker left to the others (not a loss)."""
+        return 0 if self.pool is None else self.pool.state.status()["handed_over"]
 
     def _recent_fps(self, elapsed: float) -> float:
         """Frames processed per second over the last :data:`FPS_WINDOW_S` (0 when input stopped that long ago)."""

@@ -152,6 +152,7 @@ class PoolStatus(TypedDict):
     lost: int
     duplicates: int
     held: int
+    handed_over: int
     joins: int
     leaves: int
     bad_answers: int
@@ -210,12 +211,14 @@ class PoolState:
         self._answers: OrderedDict[int, set[str]] = OrderedDict()
         self._mine: OrderedDict[int, None] = OrderedDict()  # seqs this worker took (own and taken over)
         self._dup_counted: set[int] = set()
+        self._leaving = False
         self._counts = {
             "seen": 0,
             "own": 0,
             "taken_over": 0,
             "lost": 0,
             "duplicates": 0,
+            "handed_over": 0,
             "joins": 0,
             "leaves": 0,
             "bad_answers": 0,
@@ -231,6 +234,8 @@ class PoolState:
         """Whether this worker processes ``frame``; otherwise it is recorded (and held while fresh)."""
         now = self.clock()
         with self._lock:
+            if self._leaving:
+                return False  # the others own every frame now
             self._counts["seen"] += 1
             seq = frame.seq
             if seq in self._answers or seq in self._records:
@@ -289,6 +294,16 @@ class PoolState:
         """Whether ``seq`` is this worker's to answer (own or taken over): a hole in its outputs is a gap."""
         with self._lock:
             return seq in self._mine
+
+    def leave(self) -> None:
+        """Stop taking frames: this worker is leaving the pool."""
+        with self._lock:
+            self._leaving = True
+
+    def handed_over(self, n: int) -> None:
+        """Count ``n`` queued frames a leaving worker left to its successors."""
+        with self._lock:
+            self._counts["handed_over"] += n
 
     def bad_answer(self) -> None:
         """Count an ``@answered`` message that could not be read."""
@@ -353,6 +368,7 @@ class PoolState:
             "lost": c["lost"],
             "duplicates": c["duplicates"],
             "held": held,
+            "handed_over": c["handed_over"],
             "joins": c["joins"],
             "leaves": c["leaves"],
             "bad_answers": c["bad_answers"],
@@ -503,6 +519,18 @@ class WorkerPool:
         """See :meth:`PoolState.status`."""
         return self.state.status()
 
+    def leave(self) -> None:
+        """Leave the pool (a clean stop): take no frame any more and withdraw the token.
+
+        The others see the token go and take over this worker's unanswered
+        frames; answers of the frames it still finishes keep going out until :meth:`stop`.
+        """
+        self.state.leave()
+        token, self._token = self._token, None
+        if token is not None:
+            with contextlib.suppress(Exception):  # the session may be closed already
+                token.undeclare()
+
     def stop(self) -> None:
         """Leave the pool: undeclare everything, stop the takeover thread."""
         with self._wake:
@@ -510,6 +538,7 @@ class WorkerPool:
             self._wake.notify_all()
         if self._thread is not None:
             self._thread.join(2.0)
+        self.state.leave()
         for obj in (self._token, self._members_sub, self._answers_sub, self._publisher):
             if obj is not None:
                 with contextlib.suppress(Exception):  # the session may be closed already
