@@ -157,3 +157,22 @@ def test_decode_part_rejects_a_foreign_rig():
 def test_rig_path():
     assert rig_path("x/w.rrd", "r1", wildcard=False) == "x/w.rrd"
     assert rig_path("x/w.rrd", "r1", wildcard=True) == str(Path("x/w-r1.rrd"))
+
+
+def test_viewer_logs_each_output_in_seq_order_once(tmp_path):
+    """A pool's outputs arrive out of order and one twice: the viewer logs them in order, once, counting a gap."""
+    from vpp_service.cli.view import Viewer
+
+    viewer = Viewer({"mode": "save", "path": str(tmp_path / "v.rrd"), "max_hz": 0, "queue_size": 64}, False, 60000)
+    logged: list[int] = []
+    submit = viewer.sink("r1").submit
+    viewer.sinks["r1"].submit = lambda parts: (logged.append(parts.seq), submit(parts))  # type: ignore[method-assign]
+    for seq in (1, 0, 3, 2, 2, 5, 4, 7):  # 6 never comes
+        fr = make_frame().with_(rig="r1", seq=seq)
+        payload = wire.encode_output(FusionResult(fr, np.full(fr.shape, float(seq), np.float32)), "disparity")
+        assert viewer.handle("vpp/r1/out/disparity", payload) == "disparity"
+    summary = viewer.close()
+    assert logged == [0, 1, 2, 3, 4, 5, 7]
+    order = summary["rigs"]["r1"]["order"]["disparity"]  # type: ignore[index]
+    assert order["duplicates"] == 1 and order["gaps"] == 1 and order["late"] == 0
+    assert read_rrd(tmp_path / "v.rrd")["/r1/disparity"]["seq"] == [0, 1, 2, 3, 4, 5, 7]

@@ -25,3 +25,13 @@ def vpp_service_command() -> list[str]:
     if found is None:
         raise FileNotFoundError("the vpp-service console script is not installed: run pip install -e '.[test]'")
     return [found]
+
+
+def vpp_service_module_command() -> list[str]:
+    """Argument list that runs ``vpp-service`` from the imported checkout: ``python -m vpp_service``.
+
+    Run it with the repository root as the working directory (``-m`` puts the
+    working directory first on ``sys.path``), so a worktree's own code runs even
+    where the editable install points at another checkout.
+    """
+    return [sys.executable, "-m", "vpp_service"]

@@ -6,12 +6,12 @@ import subprocess
 import sys
 import threading
 
-#: The router process: a session in router mode on ``argv[1]``, multicast scouting off; prints "ready" once open.
+#: The router process: a session in router mode on ``argv[1:]``, multicast scouting off; prints "ready" once open.
 ROUTER_CODE = (
     "import json, sys, time, zenoh\n"
     "c = zenoh.Config()\n"
     "c.insert_json5('mode', '\"router\"')\n"
-    "c.insert_json5('listen/endpoints', json.dumps([sys.argv[1]]))\n"
+    "c.insert_json5('listen/endpoints', json.dumps(sys.argv[1:]))\n"
     "c.insert_json5('scouting/multicast/enabled', 'false')\n"
     "s = zenoh.open(c)\n"
     "print('ready', flush=True)\n"
@@ -26,8 +26,9 @@ class RouterProcess:
     Use as a context manager to be sure it is killed.
     """
 
-    def __init__(self, endpoint: str) -> None:
+    def __init__(self, endpoint: str, *more: str) -> None:
         self.endpoint = endpoint
+        self.more = more  # further listen endpoints
         self.proc: subprocess.Popen[str] | None = None
 
     def start(self, timeout: float = 30.0) -> None:
@@ -38,7 +39,9 @@ class RouterProcess:
         RuntimeError
             It did not report ready within ``timeout`` seconds.
         """
-        proc = subprocess.Popen([sys.executable, "-c", ROUTER_CODE, self.endpoint], stdout=subprocess.PIPE, text=True)
+        proc = subprocess.Popen(
+            [sys.executable, "-c", ROUTER_CODE, self.endpoint, *self.more], stdout=subprocess.PIPE, text=True
+        )
         self.proc = proc
         lines: list[str] = []
         reader = threading.Thread(target=lambda: lines.append(proc.stdout.readline() if proc.stdout else ""))

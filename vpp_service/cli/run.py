@@ -39,6 +39,12 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--config", help="TOML config file (default: the embedded default)")
     p.add_argument("--rig", help="rig name (service.rig; default: the config's, rig0)")
     p.add_argument(
+        "--pool",
+        action="store_true",
+        help="run as one worker of the rig's pool (service.pool): workers on the same Zenoh network share its frames",
+    )
+    p.add_argument("--worker-id", help="this worker's id in the pool (service.worker_id; default <host>-<pid>)")
+    p.add_argument(
         "--source",
         help="source type: sim, files, zenoh, ros2, rosbag2 (options from the config; default: the config's, sim)",
     )
@@ -129,6 +135,10 @@ def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[
     svc = d.setdefault("service", {})
     if args.rig:
         svc["rig"] = args.rig
+    if getattr(args, "pool", False):
+        svc["pool"] = True
+    if getattr(args, "worker_id", None):
+        svc["worker_id"] = args.worker_id
     if args.max_frames is not None:
         svc["max_frames"] = args.max_frames
     if args.out:
@@ -253,9 +263,11 @@ def startup_line(cfg: ServiceConfig) -> str:
     src = f"in {topic(s.prefix, s.rig, 'in/*')}" if cfg.source.name == "zenoh" else f"source {cfg.source.name}"
     sinks = ", ".join(_sink_text(sp.name, sp.raw) for sp in cfg.sinks) or "none"
     outputs = f" | out {topic(s.prefix, s.rig, 'out/*')}" if any(sp.name == "zenoh" for sp in cfg.sinks) else ""
+    pool = f" | pool {topic(s.prefix, s.rig, '@pool/*')}" if s.pool else ""
+    status = topic(s.prefix, s.rig, "@status/<worker>" if s.pool else "@status")
     return (
-        f"vpp-service run: rig {s.rig} | {zenoh_s} | {src}{outputs} | sinks {sinks} | "
-        f"status {topic(s.prefix, s.rig, '@status')} | stop with Ctrl-C"
+        f"vpp-service run: rig {s.rig}{pool} | {zenoh_s} | {src}{outputs} | sinks {sinks} | "
+        f"status {status} | stop with Ctrl-C"
     )
 
 

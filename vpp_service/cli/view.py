@@ -9,7 +9,12 @@ or ``.rrd`` files (``--save PATH``; with ``--rig '*'`` one file per rig,
 ``PATH`` with ``-<rig>`` before the suffix). Stops on Ctrl-C / SIGTERM, after
 ``--max-frames`` disparity maps or after ``--duration`` seconds, and prints a
 JSON summary (messages received per rig and output, rejected messages, the
-Rerun sinks' counters, the files written).
+Rerun sinks' counters, the files written, and per output how it was put in order).
+
+Each output stream is logged in ``seq`` order: the workers of a pool (``run
+--pool``) answer frames in parallel, so their outputs arrive out of order; the
+viewer holds up to 16 messages for at most ``--reorder-ms`` to fill a hole, then
+counts it as a gap. A frame answered twice is shown once (counted as a duplicate).
 
 Example (the service on the robot, the viewer on a laptop)::
 
@@ -31,6 +36,8 @@ from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING
 
+from vpp_service.transport.reorder import ReorderBuffer
+
 if TYPE_CHECKING:
     from vpp_service.sinks.rerun import RerunSink
     from vpp_service.sinks.rerun_log import RerunParts
@@ -39,6 +46,8 @@ log = logging.getLogger(__name__)
 
 #: The outputs the viewer shows.
 VIEWED = ("disparity", "depth", "left_vpp", "right_vpp", "sparse")
+#: Messages of one output held at most to put them in ``seq`` order.
+REORDER_WINDOW = 16
 
 
 def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -64,6 +73,12 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     where.add_argument("--rerun-connect", metavar="URL", help="stream to a running viewer (rerun+http://H:P/proxy)")
     p.add_argument("--max-frames", type=int, default=0, help="stop after N disparity maps (0 = no limit)")
     p.add_argument("--duration", type=float, default=0.0, help="stop after S seconds (0 = no limit)")
+    p.add_argument(
+        "--reorder-ms",
+        type=float,
+        default=300.0,
+        help="longest a message waits for the ones before it (seq order) before their gap is counted",
+    )
     p.set_defaults(func=main)
 
 
@@ -121,9 +136,11 @@ class Viewer:
         Watching ``'*'``: one ``.rrd`` per rig.
     """
 
-    def __init__(self, options: dict[str, object], wildcard: bool) -> None:
+    def __init__(self, options: dict[str, object], wildcard: bool, reorder_ms: float = 300.0) -> None:
         self.options = options
         self.wildcard = wildcard
+        self.reorder_s = reorder_ms / 1e3
+        self.order: dict[tuple[str, str], ReorderBuffer[RerunParts]] = {}
         self.sinks: dict[str, RerunSink] = {}
         self.received: dict[str, Counter[str]] = defaultdict(Counter)
         self.rejected = 0
@@ -160,16 +177,34 @@ class Viewer:
             log.warning("view: %s rejected: %s", key, exc)
             return None
         self.received[rig][name] += 1
-        self.sink(rig).submit(parts)
+        buf = self.order.get((rig, name))
+        if buf is None:
+            buf = self.order[rig, name] = ReorderBuffer(REORDER_WINDOW, self.reorder_s)
+        self._submit(rig, buf.push(parts.seq, parts))
         return name
 
+    def _submit(self, rig: str, released: list[tuple[int, RerunParts]]) -> None:
+        for _, parts in released:
+            self.sink(rig).submit(parts)
+
+    def poll(self) -> None:
+        """Log the messages whose wait for the ones before them expired."""
+        for (rig, _), buf in self.order.items():
+            self._submit(rig, buf.poll())
+
     def close(self, timeout: float = 5.0) -> dict[str, object]:
-        """Close every sink; the summary of what was received and logged."""
+        """Close every sink; the summary of what was received, put in order and logged."""
+        for (rig, _), buf in self.order.items():
+            self._submit(rig, buf.flush())
         for sink in self.sinks.values():
             sink.close(timeout)
+        order: dict[str, dict[str, object]] = defaultdict(dict)
+        for (rig, name), buf in self.order.items():
+            order[rig][name] = buf.stats()
         return {
             "rigs": {
-                rig: {"received": dict(self.received[rig]), "rerun": sink.stats()} for rig, sink in self.sinks.items()
+                rig: {"received": dict(self.received[rig]), "order": order[rig], "rerun": sink.stats()}
+                for rig, sink in self.sinks.items()
             },
             "rejected": self.rejected,
             "saved": [str(s.options.path) for s in self.sinks.values() if s.options.mode == "save"],
@@ -197,7 +232,9 @@ def main(args: argparse.Namespace) -> int:
         options.update(mode="connect", url=args.rerun_connect)
     else:
         options.update(mode="spawn")
-    viewer = Viewer(options, wildcard=args.rig == "*")
+    if not 0 < args.reorder_ms <= 60000:
+        raise ValueError(f"--reorder-ms must be in (0, 60000], got {args.reorder_ms}")
+    viewer = Viewer(options, wildcard=args.rig == "*", reorder_ms=args.reorder_ms)
     inbox: queue.Queue[tuple[str, bytes]] = queue.Queue(maxsize=256)
     lost = [0]
 
@@ -225,8 +262,9 @@ def main(args: argparse.Namespace) -> int:
             sub = session.declare_subscriber(f"{args.prefix}/{args.rig}/out/*", on_sample)
             print(f"view: watching {args.prefix}/{args.rig}/out/* via {', '.join(zsec.connect)}", flush=True)
             while not stop.is_set() and time.monotonic() < t_end:
+                viewer.poll()
                 try:
-                    key, payload = inbox.get(timeout=0.2)
+                    key, payload = inbox.get(timeout=0.1)
                 except queue.Empty:
                     continue
                 if viewer.handle(key, payload) == "disparity":

@@ -44,16 +44,18 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, TypedDict
+from typing import TYPE_CHECKING, NotRequired, TypedDict
 
 import numpy as np
 
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.queueing import Policy, QueueWorker
+from vpp_service.service.pool import PoolStatus
 
 if TYPE_CHECKING:  # zenoh, sources and sinks are imported where they are used
     import zenoh
 
+    from vpp_service.service.pool import WorkerPool
     from vpp_service.sinks.base import Sink
     from vpp_service.sources.base import Source
 
@@ -124,6 +126,7 @@ class PipelineStatus(TypedDict):
     source: Mapping[str, object]
     sinks: dict[str, Mapping[str, object]]
     metrics: MetricsStatus
+    pool: NotRequired[PoolStatus]
 
 
 class StageTimer:
@@ -182,6 +185,10 @@ class Pipeline:
         Window of the timing statistics.
     reject_log_period_s : float
         Rate limit of the rejected-input log line.
+    pool : WorkerPool or None
+        Run as one worker of the rig's pool (:mod:`vpp_service.service.pool`):
+        only the frames the pool admits are processed, answers are announced,
+        and ``@status`` is served on ``<prefix>/<rig>/@status/<worker-id>``.
     """
 
     def __init__(
@@ -200,6 +207,7 @@ class Pipeline:
         rig: str = "rig0",
         timing_window: int = 200,
         reject_log_period_s: float = 5.0,
+        pool: WorkerPool | None = None,
     ) -> None:
         if not callable(process):
             raise TypeError("process must be callable")
@@ -226,6 +234,7 @@ class Pipeline:
         self.prefix, self.rig = prefix, rig
         self.timer = StageTimer(timing_window)
         self.reject_log_period_s = reject_log_period_s
+        self.pool = pool
         self._counts = {
             "received": 0,
             "rejected": 0,
@@ -268,6 +277,12 @@ class Pipeline:
             self._reject(f"frame seq={frame.seq}: rig {frame.rig[:64]!r} is not the served rig {self.rig!r}")
             return False
         frame.meta.setdefault("recv_ns", time.time_ns())  # sources that receive stamp it earlier
+        if self.pool is not None and not self.pool.admit(frame):
+            return True  # another worker's share (the pool holds it for a takeover)
+        return self._enqueue(frame)
+
+    def _enqueue(self, frame: StereoFrame) -> bool:
+        """Queue ``frame`` for processing (the input policy decides how); whether it was queued."""
         ok = False
         if self.input.policy == "block":
             while not (self._stop.is_set() or self._enough.is_set()):
@@ -357,6 +372,8 @@ class Pipeline:
         if isinstance(recv_ns, int):
             self.timer.add("latency", (time.time_ns() - recv_ns) / 1e6)
         self._inc("published")
+        if self.pool is not None and self.pool.answer_on_publish:
+            self.pool.answered(result.frame.seq)
 
     def _sinks_done(self) -> None:
         self.done.set()
@@ -383,20 +400,28 @@ class Pipeline:
         if self.session is not None:
             from vpp_service.transport.wire import topic
 
-            self._queryable = self.session.declare_queryable(topic(self.prefix, self.rig, "@status"), self._on_query)
+            self._queryable = self.session.declare_queryable(self.status_key, self._on_query)
             self._token = self.session.liveliness().declare_token(topic(self.prefix, self.rig, "@alive"))
+        if self.pool is not None:
+            self.pool.start(self._enqueue)
         self._started = time.monotonic()
         self.output.start()
         self.input.start()
         self.source.start(self._emit, self._source_reject, on_finished=self.input.finish)
 
-    def _on_query(self, query: zenoh.Query) -> None:
+    @property
+    def status_key(self) -> str:
+        """Where ``@status`` is served: ``<prefix>/<rig>/@status``, plus ``/<worker-id>`` in a pool."""
         from vpp_service.transport.wire import topic
 
+        key = topic(self.prefix, self.rig, "@status")
+        return key if self.pool is None else f"{key}/{self.pool.worker_id}"
+
+    def _on_query(self, query: zenoh.Query) -> None:
         # runs on a Zenoh thread: build a small JSON reply, never block
         try:
-            # the service's own key, not the query's: a wildcard query gets one entry per rig
-            query.reply(topic(self.prefix, self.rig, "@status"), json.dumps(self.status()))
+            # the service's own key, not the query's: a wildcard query gets one entry per rig (and worker)
+            query.reply(self.status_key, json.dumps(self.status()))
         except Exception as exc:  # noqa: BLE001 - session closing; nothing may raise into Zenoh's thread
             log.debug("@status reply failed: %s", exc)
 
@@ -405,9 +430,18 @@ class Pipeline:
         return self.done.wait(timeout)
 
     def stop(self, timeout: float = 5.0) -> None:
-        """Stop the source, drain the queues, close sinks; every step bounded by ``timeout``."""
+        """Stop the source, drain the queues, close sinks; every step bounded by ``timeout``.
+
+        A pool worker leaves the pool first: the other workers take the frames
+        queued here over (they are still fresh; not counted as losses here) and
+        every new one, while this worker finishes the frame in hand.
+        """
+        if self.pool is not None:
+            self.pool.leave()
         self.source.stop(timeout)
         self.source.finished.set()
+        if self.pool is not None:
+            self.pool.state.handed_over(self.input.queue.discard())
         deadline = time.monotonic() + timeout
         self.input.finish()
         drained = self.input.join(max(0.05, deadline - time.monotonic()))
@@ -433,6 +467,8 @@ class Pipeline:
                     obj.undeclare()
         self._queryable = None
         self._token = None
+        if self.pool is not None:
+            self.pool.stop()  # after the sinks: every drained frame has been announced
         self.done.set()
 
     # -------------------------------------------------------------- status
@@ -449,7 +485,7 @@ class Pipeline:
                 sinks[type(s).__name__] = {}
         dropped = self._losses(sinks)
         counters["dropped"] = sum(dropped.values())  # derived: every cause in one count
-        return {
+        status: PipelineStatus = {
             "rig": self.rig,
             "prefix": self.prefix,
             "uptime_s": elapsed,
@@ -484,6 +520,9 @@ class Pipeline:
                 "density_mean": _mean(self._density),
             },
         }
+        if self.pool is not None:
+            status["pool"] = self.pool.status()
+        return status
 
     def connectivity(self) -> dict[str, int] | None:
         """Routers and peers the session reaches now (None without a session)."""
@@ -501,7 +540,9 @@ class Pipeline:
             "input_queue": self.input.dropped,
             "output_queue": self.output.dropped,
             # frames left queued when max_frames is reached were not wanted: only a stop's discards are losses
-            "shutdown": (0 if self._enough.is_set() else self.input.discarded) + self.output.discarded + self._refused,
+            "shutdown": (0 if self._enough.is_set() else self.input.discarded - self._handed_over())
+            + self.output.discarded
+            + self._refused,
         }
         try:
             out.update({k: int(v) for k, v in self.source.losses().items()})
@@ -511,6 +552,10 @@ class Pipeline:
             n = st.get("dropped", 0)
             out[f"sink.{name}"] = n if isinstance(n, int) else 0
         return out
+
+    def _handed_over(self) -> int:
+        """Frames a leaving pool worker left to the others (not a loss)."""
+        return 0 if self.pool is None else self.pool.state.status()["handed_over"]
 
     def _recent_fps(self, elapsed: float) -> float:
         """Frames processed per second over the last :data:`FPS_WINDOW_S` (0 when input stopped that long ago)."""

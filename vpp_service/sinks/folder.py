@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import re
 import tempfile
+from abc import abstractmethod
 from collections.abc import Callable
 from pathlib import Path
 from typing import Protocol
@@ -21,6 +22,7 @@ import numpy as np
 
 from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import Sink, SinkContext
+from vpp_service.sinks.ordered import OrderedWrites
 
 #: Fields a file-name pattern may use, with the sample values used to check it.
 PATTERN_FIELDS = {"rig": "rig0", "seq": 0, "stamp_ns": 0, "name": "scene"}
@@ -175,6 +177,14 @@ class FolderOptions(Protocol):
         """Create the folder (with parents) when it is missing."""
 
     @property
+    def reorder_window(self) -> int:
+        """Results held to write them in ``seq`` order (:mod:`vpp_service.sinks.ordered`)."""
+
+    @property
+    def reorder_wait_ms(self) -> float:
+        """The longest a result waits for the ones before it."""
+
+    @property
     def pattern(self) -> str:
         """File-name stem pattern over :data:`PATTERN_FIELDS`."""
 
@@ -183,12 +193,14 @@ class FolderSink(Sink):
     """Base of the sinks that write files into one folder (``options.dir``).
 
     Subclasses set ``Options`` (a dataclass with ``dir``, ``create_dir`` and
-    ``pattern``, see :class:`FolderOptions`) and ``DIR_KEY`` / ``DIR_WHAT`` for error messages.
+    ``pattern``, see :class:`FolderOptions`), ``NAME``, ``DIR_KEY`` / ``DIR_WHAT`` for error messages,
+    and :meth:`write_one`; :meth:`write` calls it in ``seq`` order when ``reorder_window`` asks for it.
     """
 
     options: FolderOptions
     DIR_KEY = "sinks.dir"
     DIR_WHAT = "output folder"
+    NAME = "folder"
 
     def __init__(self, options: FolderOptions, context: SinkContext | None = None) -> None:
         if not isinstance(options, self.Options):
@@ -196,6 +208,7 @@ class FolderSink(Sink):
         super().__init__(options, context or SinkContext())
         self._dir = Path(options.dir).expanduser()
         self._open = False
+        self._ordered = OrderedWrites(options.reorder_window, options.reorder_wait_ms, self.context, self._write_one)
 
     @classmethod
     def check_paths(cls, options: FolderOptions, section: str, created_dirs: frozenset[Path] = frozenset()) -> None:
@@ -224,9 +237,38 @@ class FolderSink(Sink):
         prepare_dir(self._dir, self.options.create_dir, self.DIR_KEY, self.DIR_WHAT)
         self._open = True
 
+    def write(self, result: FusionResult) -> None:
+        """Write ``result`` (synchronously), in ``seq`` order when reordering is on (:meth:`write_one` writes).
+
+        Raises
+        ------
+        TypeError
+            If ``result`` is not a FusionResult.
+        RuntimeError
+            If the sink is not open.
+        """
+        if not self._open:
+            raise RuntimeError(f"{self.NAME} sink: write() before open() or after close()")
+        if not isinstance(result, FusionResult):
+            raise TypeError(f"result: must be a FusionResult, got {type(result).__name__}")
+        self._ordered.write(result)
+
+    def _write_one(self, result: FusionResult) -> None:
+        self.write_one(result)  # looked up per call: a subclass's (or an instrumented) write_one
+
+    @abstractmethod
+    def write_one(self, result: FusionResult) -> None:
+        """Write the files of one result."""
+
     def close(self, timeout: float = 5.0) -> None:
-        """Nothing is buffered (writes are synchronous); marks the sink closed."""
+        """Write the results held for reordering (writes are otherwise synchronous); marks the sink closed."""
+        if self._open:
+            self._ordered.flush()
         self._open = False
+
+    def stats(self) -> dict[str, int]:
+        """The counters, plus ``order_*`` when reordering is on."""
+        return {**super().stats(), **self._ordered.stats()}
 
     def frame_stem(self, result: FusionResult) -> str:
         """File-name stem of ``result`` from ``options.pattern``, built from validated parts only.

@@ -53,6 +53,7 @@ from typing import Literal
 from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import SINKS, SinkContext
 from vpp_service.sinks.folder import FolderSink, check_pattern, path_inside, write_atomic
+from vpp_service.sinks.ordered import check_reorder_options
 from vpp_service.transport import wire
 
 log = logging.getLogger(__name__)
@@ -88,6 +89,11 @@ class RecordSinkOptions:
         ``rig``, ``seq``, ``stamp_ns``, ``name``; must not contain path
         separators. Replay order is name order, so keep it sortable in time,
         e.g. ``"{rig}_{stamp_ns}"`` to record several runs into one folder.
+    reorder_window : int
+        In a worker pool, frames held to record them in ``seq`` order
+        (:mod:`vpp_service.sinks.ordered`); 0 = off. Outside a pool results come in order.
+    reorder_wait_ms : float
+        The longest a frame waits for the ones before it.
     """
 
     dir: str
@@ -97,8 +103,11 @@ class RecordSinkOptions:
     max_bytes: int = 0
     overwrite: bool = False
     pattern: str = "{rig}_{seq:09d}"
+    reorder_window: int = 16
+    reorder_wait_ms: float = 500.0
 
     def __post_init__(self) -> None:
+        check_reorder_options(self.reorder_window, self.reorder_wait_ms)
         if not self.dir.strip():
             raise ValueError("dir: must not be empty")
         if self.enc not in ENCODINGS:
@@ -143,6 +152,7 @@ class RecordSink(FolderSink):
 
     DIR_KEY = "sinks.record.dir"
     DIR_WHAT = "recording folder"
+    NAME = "record"
 
     def __init__(self, options: RecordSinkOptions, context: SinkContext | None = None) -> None:
         super().__init__(options, context)
@@ -172,18 +182,8 @@ class RecordSink(FolderSink):
         self._stopped = reason
         log.warning("record sink: %s reached (%s); recording to %s stopped", reason, detail, self._dir)
 
-    def write(self, result: FusionResult) -> None:
-        """Record ``result.frame`` (synchronously, atomically).
-
-        Raises
-        ------
-        TypeError
-            If ``result`` is not a FusionResult.
-        RuntimeError
-            If the sink is not open.
-        """
-        if not self._open:
-            raise RuntimeError("record sink: write() before open() or after close()")
+    def write_one(self, result: FusionResult) -> None:
+        """Record ``result.frame`` (synchronously, atomically; errors counted and logged)."""
         if self._stopped is not None:
             self._counters["skipped"] += 1
             return

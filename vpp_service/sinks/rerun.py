@@ -80,6 +80,7 @@ from urllib.parse import urlsplit
 from vpp_service.frame import FusionResult
 from vpp_service.queueing import QueueWorker
 from vpp_service.sinks.base import SINKS, Sink, SinkContext
+from vpp_service.sinks.ordered import OrderedWrites, check_reorder_options
 from vpp_service.sinks.rerun_log import ENTITY_RE, RerunLayout, RerunParts, depth_stride, parts_from_result
 
 if TYPE_CHECKING:
@@ -169,6 +170,11 @@ class RerunSinkOptions:
     analytics : bool
         Leave the spawned viewer's usage analytics as configured (true) or
         opt out before spawning (false, default).
+    reorder_window : int
+        In a worker pool, results held to log them in ``seq`` order
+        (:mod:`vpp_service.sinks.ordered`); 0 = off. Outside a pool results come in order.
+    reorder_wait_ms : float
+        The longest a result waits for the ones before it.
     """
 
     mode: Literal["save", "spawn", "connect", "serve"] = "save"
@@ -193,6 +199,8 @@ class RerunSinkOptions:
     application_id: str | None = None
     recording_id: str | None = None
     analytics: bool = False
+    reorder_window: int = 16
+    reorder_wait_ms: float = 500.0
 
     def __post_init__(self) -> None:
         if not self.path.strip():
@@ -220,6 +228,7 @@ class RerunSinkOptions:
             raise ValueError("application_id: must not be empty when given")
         if self.recording_id is not None and not self.recording_id.strip():
             raise ValueError("recording_id: must not be empty when given")
+        check_reorder_options(self.reorder_window, self.reorder_wait_ms)
 
     def _check_network(self) -> None:
         if self.url is not None and not _URL_RE.match(self.url):
@@ -297,6 +306,7 @@ class RerunSink(Sink):
             raise ValueError(f"context.rig: must be letters, digits, '_', '-', '.', got {context.rig!r}")
         super().__init__(options, context)
         self._counters.update({"throttled": 0, "queue_dropped": 0, "undelivered": 0, "reconnects": 0, "rotations": 0})
+        self._ordered = OrderedWrites(options.reorder_window, options.reorder_wait_ms, context, self._accept)
         self._worker: QueueWorker[FusionResult | RerunParts] = QueueWorker(
             self._log_one,
             size=options.queue_size,
@@ -471,6 +481,10 @@ class RerunSink(Sink):
         if not isinstance(result, FusionResult):
             raise TypeError(f"result: must be a FusionResult, got {type(result).__name__}")
         self._check_open()
+        self._ordered.write(result)
+
+    def _accept(self, result: FusionResult) -> None:
+        """Throttle (``max_hz``) and queue one result, in order when reordering is on."""
         now = time.monotonic()
         if self.options.max_hz > 0 and now - self._last_accept < 1.0 / self.options.max_hz:
             self._counters["throttled"] += 1
@@ -512,6 +526,7 @@ class RerunSink(Sink):
         """
         if not self._worker.started or self._worker.closed:
             return
+        self._ordered.flush()
         self._close_deadline = time.monotonic() + max(0.0, float(timeout))
         if not self._worker.close(timeout):
             log.warning("rerun sink: close() timed out after %.1f s; abandoning the logging thread", timeout)
@@ -542,6 +557,7 @@ class RerunSink(Sink):
         Also ``reconnects`` (network modes) and ``rotations`` (``save`` with ``max_mb``).
         """
         out = dict(self._counters)
+        out.update(self._ordered.stats())
         out["queue_dropped"] = self._worker.dropped + self._worker.discarded
         out["dropped"] = out["throttled"] + out["queue_dropped"] + out["undelivered"]
         return out

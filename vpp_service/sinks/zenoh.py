@@ -22,6 +22,10 @@ counted) to this sink's own thread, which serializes and publishes.
 ``close(timeout)`` flushes what is queued within the timeout (results still
 queued then are dropped and counted), then undeclares the publishers (the
 session belongs to the service).
+
+A callable ``context.extra["on_written"]`` is called with each result's ``seq``
+once its outputs have been put (a pool worker announces the frame as answered
+then, never before its outputs are on their way).
 """
 
 from __future__ import annotations
@@ -170,6 +174,9 @@ class ZenohSink(Sink):
         self._encode_ms.append(enc_s * 1e3)
         self._put_ms.append(put_s * 1e3)
         self._counters["written"] += 1
+        on_written = self.context.extra.get("on_written")
+        if callable(on_written):
+            on_written(result.frame.seq)
 
     def _failed(self, result: FusionResult, exc: Exception) -> None:
         # a closed session, a bad result: count, keep going
