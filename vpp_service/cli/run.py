@@ -132,19 +132,7 @@ def _int_or_text(value: str) -> int | str:
 def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
     """Apply the CLI flags to a raw config mapping (returns a new mapping)."""
     d = copy.deepcopy(data)
-    svc = d.setdefault("service", {})
-    if args.rig:
-        svc["rig"] = args.rig
-    if getattr(args, "pool", False):
-        svc["pool"] = True
-    if getattr(args, "worker_id", None):
-        svc["worker_id"] = args.worker_id
-    if args.max_frames is not None:
-        svc["max_frames"] = args.max_frames
-    if args.out:
-        svc["out"] = args.out
-    if args.no_summary:
-        svc["summary"] = False
+    _service_overrides(d.setdefault("service", {}), args)
     if args.source and d.get("source", {}).get("type") != args.source:
         d["source"] = {"type": args.source}
         if args.source == "zenoh" and "input_policy" not in d.get("queues", {}):
@@ -177,6 +165,22 @@ def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[
         d["sinks"] = sinks
     _ros_overrides(d, args)
     return d
+
+
+def _service_overrides(svc: dict[str, Any], args: argparse.Namespace) -> None:
+    """Apply the ``[service]`` flags (--rig, --pool, --worker-id, --max-frames, --out, --no-summary)."""
+    if args.rig:
+        svc["rig"] = args.rig
+    if getattr(args, "pool", False):
+        svc["pool"] = True
+    if getattr(args, "worker_id", None):
+        svc["worker_id"] = args.worker_id
+    if args.max_frames is not None:
+        svc["max_frames"] = args.max_frames
+    if args.out:
+        svc["out"] = args.out
+    if args.no_summary:
+        svc["summary"] = False
 
 
 def _rerun_flag(args: argparse.Namespace) -> dict[str, object] | None:
