@@ -10,7 +10,7 @@ import pytest
 
 from helpers.service_thread import service_in_thread
 from helpers.zenoh_loopback import free_port
-from vpp_service.cli import EXIT_FAILURE, main
+from vpp_service.cli import EXIT_FAILURE, EXIT_STARTUP, main
 from vpp_service.cli.status import query_status
 from vpp_service.service.config import ENDPOINT_ENV
 
@@ -68,11 +68,20 @@ def test_publish_send_anyway_sends_without_subscriber(shared_endpoint, keep_sign
         ["publish", "--scale", "0.25", "--count", "1", "--rate", "0", "--wait-subscriber", "0.2", "--send-anyway"]
     )
     assert rc == 0
-    assert '"sent": 1' in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert '"sent": 1' in out and '"confirmed": false' in out  # no service answered the delivery check
 
 
-def test_a_replay_into_the_service_loses_nothing(tmp_path, shared_endpoint, keep_signal_handlers):
-    """``publish`` as fast as it can into ``run --source zenoh``'s default (block): every frame is processed."""
+def test_publish_rejects_a_negative_confirm_timeout(capsys):
+    assert main(["publish", "--count", "1", "--confirm-timeout", "-1"]) == EXIT_STARTUP
+    assert "--confirm-timeout: must be >= 0" in capsys.readouterr().err
+
+
+def test_a_replay_into_the_service_loses_nothing(tmp_path, shared_endpoint, keep_signal_handlers, capsys):
+    """``publish`` as fast as it can into ``run --source zenoh``'s default (block): every frame is processed.
+
+    Fails when publish closes its session with frames still queued (before its @status delivery check).
+    """
     data = {
         "service": {"out": str(tmp_path / "run"), "max_frames": 12, "summary": False},
         "source": {"type": "zenoh", "ring_size": 2},
@@ -83,6 +92,7 @@ def test_a_replay_into_the_service_loses_nothing(tmp_path, shared_endpoint, keep
     with service_in_thread(data) as (thread, result):
         rc = main(["publish", "--scale", "0.5", "--count", "12", "--rate", "0", "--wait-subscriber", "30"])
         assert rc == 0
+        assert '"confirmed": true' in capsys.readouterr().out
         thread.join(60)
         assert not thread.is_alive()  # with the latest policy frames are dropped and max_frames is never reached
     status = result["status"]

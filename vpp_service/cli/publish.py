@@ -6,7 +6,9 @@ in/left, in/right and in/depth. It connects to the same default endpoint that
 vpp-service run listens on, waits for a matching subscriber (a service started
 with --source zenoh) and exits 1 with a message when none appears, unless
 --send-anyway. Publishing uses reliable CongestionControl.BLOCK, so frames are
-never silently dropped on the way.
+never silently dropped on the way; after the last frame it waits (--confirm-timeout)
+for the service's @status reply, which travels behind the frames, before closing the
+session (closing drops what is still queued).
 """
 
 from __future__ import annotations
@@ -91,6 +93,14 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         action="store_true",
         help="send even when no subscriber matched within --wait-subscriber (else exit 1)",
     )
+    p.add_argument(
+        "--confirm-timeout",
+        type=float,
+        default=60.0,
+        metavar="S",
+        help="after the last frame, wait up to S seconds for the service's @status reply, which comes only "
+        "after every frame sent before it has reached the service (0 = exit at once)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the simulated depth sensor")
     p.add_argument(
         "--shm-pool-mb",
@@ -120,6 +130,38 @@ def _wait_for_subscribers(pubs: Iterable[zenoh.Publisher], seconds: float, stop:
             return False
         time.sleep(0.02)
     return False
+
+
+def _confirm_delivery(session: zenoh.Session, prefix: str, rig: str, seconds: float) -> bool:
+    """Wait until the frames already put have reached the rig's service; True when one confirmed it.
+
+    Closing the session drops what its queues still hold (a service using the ``block``
+    input policy pushes back, so a backlog builds up). A query for
+    ``<prefix>/<rig>/@status`` travels behind the frames on the same link at the same
+    priority, and the service reads its link in order, so its reply means every frame
+    sent before the query has been handed to its subscriber.
+    """
+    from vpp_service.transport import wire
+
+    replies = session.get(wire.topic(prefix, rig, "@status/**"), timeout=seconds)
+    if any(reply.ok is not None for reply in replies):
+        return True
+    log.warning(
+        "no @status reply from a service of rig %r within %g s: frames still queued may be lost when publish exits",
+        rig,
+        seconds,
+    )
+    return False
+
+
+def _check_args(args: argparse.Namespace) -> None:
+    """Reject bad numeric flags before anything starts."""
+    if not 0 < args.scale <= 1:
+        raise ValueError(f"--scale: must be in (0, 1], got {args.scale}")
+    if args.rate < 0 or args.count < 0:
+        raise ValueError("--rate and --count must be >= 0")
+    if not args.confirm_timeout >= 0:
+        raise ValueError(f"--confirm-timeout: must be >= 0, got {args.confirm_timeout}")
 
 
 def _send(frame: StereoFrame, args: argparse.Namespace, pubs: dict[str, zenoh.Publisher], putter: ShmPutter) -> None:
@@ -196,10 +238,7 @@ def main(args: argparse.Namespace) -> int:
     from vpp_service.transport import wire
     from vpp_service.transport.shm import ShmPutter
 
-    if not 0 < args.scale <= 1:
-        raise ValueError(f"--scale: must be in (0, 1], got {args.scale}")
-    if args.rate < 0 or args.count < 0:
-        raise ValueError("--rate and --count must be >= 0")
+    _check_args(args)
     putter = ShmPutter(args.shm_pool_mb)  # validates the pool size before anything starts
     connect = list(args.connect) or ([] if args.listen else [default_endpoint()])
     zsec = ZenohSection(
@@ -261,7 +300,11 @@ def main(args: argparse.Namespace) -> int:
             sent += 1
         src.stop(2.0)
         elapsed = time.monotonic() - t0
+        confirmed = None
+        if sent and args.confirm_timeout > 0 and not stop.is_set():
+            confirmed = _confirm_delivery(session, args.prefix, args.rig, args.confirm_timeout)
         for pub in pubs.values():
             pub.undeclare()
-    print(json.dumps({"sent": sent, "seconds": round(elapsed, 3), "shm": putter.stats()}), file=sys.stdout)
+    report = {"sent": sent, "seconds": round(elapsed, 3), "confirmed": confirmed, "shm": putter.stats()}
+    print(json.dumps(report), file=sys.stdout)
     return 0
