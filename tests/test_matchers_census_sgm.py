@@ -99,12 +99,14 @@ def test_wta_hand_cases():
 
 
 def test_wta_left_band_uses_existing_disparities():
-    # column x only has d <= x: the minimum at d = 4 is out of reach for x < 4
+    # column x only has d <= x: the minimum at d = 4 is out of reach for x < 4; a minimum at d = x < D - 1
+    # (x = 0, 1 here) is rejected: the cost may keep falling beyond the right image's edge
     S = np.tile(np.array([30, 20, 25, 40, 1], np.uint16), (1, 6, 1))
     d = cs.select_disparity(S, 1.0, False)
-    np.testing.assert_array_equal(d[0], [0, 1, 1, 1, 4, 4])
+    np.testing.assert_array_equal(d[0], [np.nan, np.nan, 1, 1, 4, 4])
     assert cs.select_disparity(S, 1.0, True)[0, 2] == pytest.approx(1 + (30 - 25) / (2 * (30 - 40 + 25)))
-    assert cs.select_disparity(S, 1.0, True)[0, 1] == 1.0  # d = 2 does not exist at x = 1: no parabola
+    S[0, 1] = [10, 20, 0, 0, 0]  # x = 1: minimum at d = 0 < x, kept; d = 2 does not exist: no parabola
+    assert cs.select_disparity(S, 1.0, True)[0, 1] == 0.0
 
 
 def test_aggregate_marks_absent_disparities():

@@ -81,13 +81,18 @@ def ref_aggregate(
 
 
 def ref_wta(S: np.ndarray, uniqueness: float, subpixel: bool) -> np.ndarray:
-    """Left WTA over ``d <= min(x, D - 1)``: first minimum, uniqueness vs ``|d - best| > 1``, parabola."""
+    """Left WTA over ``d <= min(x, D - 1)``: first minimum, uniqueness vs ``|d - best| > 1``, parabola.
+
+    For ``x < D - 1`` a minimum at ``d = x`` is rejected (NaN).
+    """
     H, W, D = S.shape
     out = np.full((H, W), np.nan, np.float32)
     for y in range(H):
         for x in range(W):
             c = [int(v) for v in S[y, x, : min(x + 1, D)]]
             best = int(np.argmin(c))
+            if len(c) < D and best == len(c) - 1:  # left band: the minimum at d = x may lie beyond the image
+                continue
             others = [c[d] for d in range(len(c)) if abs(d - best) > 1]
             if others and not c[best] < uniqueness * min(others):
                 continue

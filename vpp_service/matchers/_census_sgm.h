@@ -117,8 +117,30 @@ static void csgm_hamming_row(const uint32_t* CSGM_RESTRICT cl, const uint32_t* C
         const uint32_t a = cl[x];
         const uint32_t* CSGM_RESTRICT q = rev + (W - 1 - x); /* q[d] == cr[x - d] */
         const int n = x + 1 < D ? x + 1 : D;
-        for (int d = 0; d < n; d++) p[d] = csgm_popcount24(a ^ q[d]);
-        for (int d = n; d < D; d++) p[d] = invalid_cost;
+        int d = 0;
+#if defined(__AVX2__)
+        {
+            /* popcount of 16 codes: nibble counts by table lookup, summed per 32-bit lane, packed to 16 bits */
+            const __m256i nib = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2, 1, 2, 2,
+                                                 3, 1, 2, 2, 3, 2, 3, 3, 4);
+            const __m256i low = _mm256_set1_epi8(0x0F), ones = _mm256_set1_epi8(1);
+            const __m256i va = _mm256_set1_epi32((int)a);
+            for (; d + 16 <= n; d += 16) {
+                __m256i u = _mm256_xor_si256(_mm256_loadu_si256((const __m256i*)(q + d)), va);
+                __m256i v = _mm256_xor_si256(_mm256_loadu_si256((const __m256i*)(q + d + 8)), va);
+                u = _mm256_add_epi8(_mm256_shuffle_epi8(nib, _mm256_and_si256(u, low)),
+                                    _mm256_shuffle_epi8(nib, _mm256_and_si256(_mm256_srli_epi16(u, 4), low)));
+                v = _mm256_add_epi8(_mm256_shuffle_epi8(nib, _mm256_and_si256(v, low)),
+                                    _mm256_shuffle_epi8(nib, _mm256_and_si256(_mm256_srli_epi16(v, 4), low)));
+                u = _mm256_maddubs_epi16(u, ones); /* byte pairs -> 16 bits */
+                v = _mm256_maddubs_epi16(v, ones);
+                __m256i h = _mm256_hadd_epi16(u, v); /* 32-bit lanes, in-lane order u0-3 v0-3 | u4-7 v4-7 */
+                _mm256_storeu_si256((__m256i*)(p + d), _mm256_permute4x64_epi64(h, 0xD8));
+            }
+        }
+#endif
+        for (; d < n; d++) p[d] = csgm_popcount24(a ^ q[d]);
+        for (d = n; d < D; d++) p[d] = invalid_cost;
     }
 }
 
@@ -185,6 +207,79 @@ CSGM_INLINE void csgm_step2(const uint16_t* CSGM_RESTRICT C, const int16_t* CSGM
 }
 
 CSGM_INLINE int csgm_absdiff(int a, int b) { return a > b ? a - b : b - a; }
+
+#if defined(__AVX2__)
+CSGM_INLINE int16_t csgm_hmin16(__m256i v) {
+    /* path costs are >= 0, so the unsigned minpos gives the signed minimum */
+    __m128i h = _mm_min_epi16(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+    return (int16_t)_mm_cvtsi128_si32(_mm_minpos_epu16(h));
+}
+
+/* csgm_step4 for D a multiple of 16 (the same integers, 16 disparities per instruction): lanes d >= n get
+ * the sentinel before they are stored or enter the minimum; acc there is left undefined (never read). */
+CSGM_INLINE void csgm_step4_avx2(const uint16_t* CSGM_RESTRICT C, const int16_t* CSGM_RESTRICT p0,
+                                 const int16_t* CSGM_RESTRICT p1, const int16_t* CSGM_RESTRICT p2,
+                                 const int16_t* CSGM_RESTRICT p3, int16_t* CSGM_RESTRICT c0,
+                                 int16_t* CSGM_RESTRICT c1, int16_t* CSGM_RESTRICT c2, int16_t* CSGM_RESTRICT c3,
+                                 const int16_t* pm, const int16_t* P2, int16_t* m, uint16_t* CSGM_RESTRICT acc,
+                                 int n, int D, int16_t P1) {
+    const __m256i vp1 = _mm256_set1_epi16(P1);
+    const __m256i pm0 = _mm256_set1_epi16(pm[0]), pm1 = _mm256_set1_epi16(pm[1]);
+    const __m256i pm2 = _mm256_set1_epi16(pm[2]), pm3 = _mm256_set1_epi16(pm[3]);
+    const __m256i j0 = _mm256_set1_epi16((int16_t)(pm[0] + P2[0])), j1 = _mm256_set1_epi16((int16_t)(pm[1] + P2[1]));
+    const __m256i j2 = _mm256_set1_epi16((int16_t)(pm[2] + P2[2])), j3 = _mm256_set1_epi16((int16_t)(pm[3] + P2[3]));
+    const __m256i sent = _mm256_set1_epi16(CSGM_SENT);
+    __m256i m0 = sent, m1 = m0, m2 = m0, m3 = m0;
+#define CSGM_LD(p) _mm256_loadu_si256((const __m256i*)(p))
+#define CSGM_VPATH(p, c, pmk, jk, mk, Lk)                                                              \
+    __m256i Lk = _mm256_add_epi16(_mm256_min_epi16(CSGM_LD(p + d - 1), CSGM_LD(p + d + 1)), vp1);      \
+    Lk = _mm256_min_epi16(_mm256_min_epi16(Lk, CSGM_LD(p + d)), jk);                                   \
+    Lk = _mm256_add_epi16(Lk, _mm256_sub_epi16(cd, pmk));                                              \
+    _mm256_storeu_si256((__m256i*)(c + d), Lk);                                                        \
+    mk = _mm256_min_epi16(mk, Lk);
+    int d = 0;
+    for (; d + 16 <= n; d += 16) {
+        const __m256i cd = CSGM_LD(C + d);
+        CSGM_VPATH(p0, c0, pm0, j0, m0, L0)
+        CSGM_VPATH(p1, c1, pm1, j1, m1, L1)
+        CSGM_VPATH(p2, c2, pm2, j2, m2, L2)
+        CSGM_VPATH(p3, c3, pm3, j3, m3, L3)
+        _mm256_storeu_si256((__m256i*)(acc + d),
+                            _mm256_add_epi16(_mm256_add_epi16(L0, L1), _mm256_add_epi16(L2, L3)));
+    }
+#undef CSGM_VPATH
+    if (d < n) { /* the last, partial block of the left band: lanes d >= n are absent */
+        const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+        const __m256i keep = _mm256_cmpgt_epi16(_mm256_set1_epi16((int16_t)(n - d)), lane);
+        const __m256i cd = CSGM_LD(C + d);
+#define CSGM_VPATH(p, c, pmk, jk, mk, Lk)                                                              \
+    __m256i Lk = _mm256_add_epi16(_mm256_min_epi16(CSGM_LD(p + d - 1), CSGM_LD(p + d + 1)), vp1);      \
+    Lk = _mm256_min_epi16(_mm256_min_epi16(Lk, CSGM_LD(p + d)), jk);                                   \
+    Lk = _mm256_blendv_epi8(sent, _mm256_add_epi16(Lk, _mm256_sub_epi16(cd, pmk)), keep);              \
+    _mm256_storeu_si256((__m256i*)(c + d), Lk);                                                        \
+    mk = _mm256_min_epi16(mk, Lk);
+        CSGM_VPATH(p0, c0, pm0, j0, m0, L0)
+        CSGM_VPATH(p1, c1, pm1, j1, m1, L1)
+        CSGM_VPATH(p2, c2, pm2, j2, m2, L2)
+        CSGM_VPATH(p3, c3, pm3, j3, m3, L3)
+#undef CSGM_VPATH
+        _mm256_storeu_si256((__m256i*)(acc + d),
+                            _mm256_add_epi16(_mm256_add_epi16(L0, L1), _mm256_add_epi16(L2, L3)));
+        d += 16;
+    }
+    for (; d < D; d += 16) {
+        _mm256_storeu_si256((__m256i*)(c0 + d), sent);
+        _mm256_storeu_si256((__m256i*)(c1 + d), sent);
+        _mm256_storeu_si256((__m256i*)(c2 + d), sent);
+        _mm256_storeu_si256((__m256i*)(c3 + d), sent);
+    }
+#undef CSGM_LD
+    m[0] = csgm_hmin16(m0);
+    m[1] = csgm_hmin16(m1);
+    m[2] = csgm_hmin16(m2);
+    m[3] = csgm_hmin16(m3);
+}
+#endif
 
 typedef struct {
     int H, W, D, paths, P1;
@@ -265,11 +360,37 @@ static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT co
     int16_t* hp = t->hA + 1;
     int16_t* hc = t->hB + 1;
     int16_t hm = 0;
+    const ptrdiff_t plane = (ptrdiff_t)W * st;
     for (int i = 0; i < W; i++) {
         const int x = s > 0 ? i : W - 1 - i;
         const int n = x + 1 < D ? x + 1 : D;
         const int gx = grow[x];
         int16_t pm[4], P2[4], m[4];
+#if defined(__AVX2__)
+        if (eight && !first && i > 0 && i < W - 1 && (D & 15) == 0) { /* interior pixel: every path continues */
+            const int xa = x - s, xb = x + s;
+            int16_t* c1 = t->rowC + (ptrdiff_t)x * st + 1;
+            pm[0] = hm;
+            pm[1] = t->minP[xa];
+            pm[2] = t->minP[W + x];
+            pm[3] = t->minP[2 * W + xb];
+            P2[0] = lut[csgm_absdiff(gx, grow[xa])];
+            P2[1] = lut[csgm_absdiff(gx, gprev[xa])];
+            P2[2] = lut[csgm_absdiff(gx, gprev[x])];
+            P2[3] = lut[csgm_absdiff(gx, gprev[xb])];
+            csgm_step4_avx2(crow + (ptrdiff_t)x * D, hp, t->rowP + (ptrdiff_t)xa * st + 1,
+                            t->rowP + plane + (ptrdiff_t)x * st + 1, t->rowP + 2 * plane + (ptrdiff_t)xb * st + 1, hc,
+                            c1, c1 + plane, c1 + 2 * plane, pm, P2, m, t->part + (ptrdiff_t)x * D, n, D, P1);
+            t->minC[x] = m[1];
+            t->minC[W + x] = m[2];
+            t->minC[2 * W + x] = m[3];
+            hm = m[0];
+            int16_t* tmp = hp;
+            hp = hc;
+            hc = tmp;
+            continue;
+        }
+#endif
         const int16_t* pv[4];
         int16_t* cv[4];
         /* path 0: horizontal from x - s; paths 1..3: from (y - s, x - s * dk), dk = 1, 0, -1 (8 paths)
@@ -302,7 +423,12 @@ static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT co
         const uint16_t* C = crow + (ptrdiff_t)x * D;
         uint16_t* acc = t->part + (ptrdiff_t)x * D;
         if (eight) {
-            csgm_step4(C, pv[0], pv[1], pv[2], pv[3], cv[0], cv[1], cv[2], cv[3], pm, P2, m, acc, n, D, P1);
+#if defined(__AVX2__)
+            if ((D & 15) == 0)
+                csgm_step4_avx2(C, pv[0], pv[1], pv[2], pv[3], cv[0], cv[1], cv[2], cv[3], pm, P2, m, acc, n, D, P1);
+            else
+#endif
+                csgm_step4(C, pv[0], pv[1], pv[2], pv[3], cv[0], cv[1], cv[2], cv[3], pm, P2, m, acc, n, D, P1);
             t->minC[x] = m[1];
             t->minC[W + x] = m[2];
             t->minC[2 * W + x] = m[3];
@@ -346,15 +472,48 @@ CSGM_INLINE int csgm_first_eq(const uint16_t* CSGM_RESTRICT c, int n, uint16_t v
     return 0;
 }
 
-/* Left WTA of one pixel over its n valid disparities (lowest d on ties), uniqueness, parabola. */
-CSGM_INLINE float csgm_wta_pixel(const uint16_t* CSGM_RESTRICT c, int n, double uniqueness, int subpixel) {
+/* Left WTA of one pixel over its n valid disparities (lowest d on ties), uniqueness, parabola.  In the left
+ * band (n < D) a minimum at the largest existing d = n - 1 is rejected: the match may lie beyond the image. */
+CSGM_INLINE float csgm_wta_pixel(const uint16_t* CSGM_RESTRICT c, int n, int D, double uniqueness, int subpixel) {
     uint16_t bv = 0xFFFFu;
-    for (int d = 0; d < n; d++) bv = c[d] < bv ? c[d] : bv;
+    int d = 0;
+#if defined(__AVX2__)
+    __m256i vmin = _mm256_set1_epi16(-1);
+    for (; d + 16 <= n; d += 16) vmin = _mm256_min_epu16(vmin, _mm256_loadu_si256((const __m256i*)(c + d)));
+    {
+        __m128i h = _mm_min_epu16(_mm256_castsi256_si128(vmin), _mm256_extracti128_si256(vmin, 1));
+        bv = (uint16_t)_mm_cvtsi128_si32(_mm_minpos_epu16(h));
+    }
+#endif
+    for (; d < n; d++) bv = c[d] < bv ? c[d] : bv;
     const int b = csgm_first_eq(c, n, bv);
+    if (n < D && b == n - 1) return NAN;
     if (b >= 2 || b + 2 <= n - 1) { /* some d with |d - best| > 1 */
         uint16_t second = 0xFFFFu;
-        for (int d = 0; d < b - 1; d++) second = c[d] < second ? c[d] : second;
-        for (int d = b + 2; d < n; d++) second = c[d] < second ? c[d] : second;
+        d = 0;
+#if defined(__AVX2__)
+        {
+            /* lanes with d - (b - 1) in [0, 2] (unsigned) are left out */
+            const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+            const __m256i bias = _mm256_set1_epi16((int16_t)0x8000);
+            const __m256i two = _mm256_set1_epi16((int16_t)(2 ^ 0x8000));
+            __m256i vs = _mm256_set1_epi16(-1);
+            for (; d + 16 <= n; d += 16) {
+                __m256i rel = _mm256_sub_epi16(_mm256_add_epi16(lane, _mm256_set1_epi16((int16_t)d)),
+                                               _mm256_set1_epi16((int16_t)(b - 1)));
+                __m256i out = _mm256_cmpgt_epi16(_mm256_xor_si256(rel, bias), two); /* rel > 2 unsigned */
+                __m256i v = _mm256_or_si256(_mm256_loadu_si256((const __m256i*)(c + d)),
+                                            _mm256_andnot_si256(out, _mm256_set1_epi16(-1)));
+                vs = _mm256_min_epu16(vs, v);
+            }
+            __m128i h = _mm_min_epu16(_mm256_castsi256_si128(vs), _mm256_extracti128_si256(vs, 1));
+            second = (uint16_t)_mm_cvtsi128_si32(_mm_minpos_epu16(h));
+        }
+#endif
+        for (; d < n; d++) {
+            uint16_t v = (d < b - 1 || d > b + 1) ? c[d] : (uint16_t)0xFFFFu;
+            second = v < second ? v : second;
+        }
         if (!((double)bv < uniqueness * (double)second)) return NAN;
     }
     if (subpixel && b > 0 && b < n - 1) {
@@ -369,7 +528,7 @@ static void csgm_wta_row(const uint16_t* CSGM_RESTRICT S, float* CSGM_RESTRICT o
                          double uniqueness, int subpixel) {
     for (int x = 0; x < W; x++) {
         const int n = x + 1 < D ? x + 1 : D;
-        out[x] = csgm_wta_pixel(S + (ptrdiff_t)x * D, n, uniqueness, subpixel);
+        out[x] = csgm_wta_pixel(S + (ptrdiff_t)x * D, n, D, uniqueness, subpixel);
     }
 }
 
@@ -386,7 +545,23 @@ static void csgm_right_row(const uint16_t* CSGM_RESTRICT S, float* CSGM_RESTRICT
         const int n = x + 1 < D ? x + 1 : D;
         uint16_t* CSGM_RESTRICT bc = rbc + (W - 1 - x); /* bc[d] is right pixel x - d (reversed) */
         uint16_t* CSGM_RESTRICT bd = rbd + (W - 1 - x);
-        for (int d = 0; d < n; d++) {
+        int d = 0;
+#if defined(__AVX2__)
+        {
+            const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+            const __m256i bias = _mm256_set1_epi16((int16_t)0x8000);
+            for (; d + 16 <= n; d += 16) {
+                const __m256i v = _mm256_loadu_si256((const __m256i*)(c + d));
+                const __m256i o = _mm256_loadu_si256((const __m256i*)(bc + d));
+                const __m256i lt = _mm256_cmpgt_epi16(_mm256_xor_si256(o, bias), _mm256_xor_si256(v, bias));
+                const __m256i dv = _mm256_add_epi16(lane, _mm256_set1_epi16((int16_t)d));
+                _mm256_storeu_si256((__m256i*)(bd + d),
+                                    _mm256_blendv_epi8(_mm256_loadu_si256((const __m256i*)(bd + d)), dv, lt));
+                _mm256_storeu_si256((__m256i*)(bc + d), _mm256_min_epu16(v, o));
+            }
+        }
+#endif
+        for (; d < n; d++) {
             const uint16_t v = c[d], o = bc[d];
             bd[d] = v < o ? (uint16_t)d : bd[d];
             bc[d] = v < o ? v : o;

@@ -33,7 +33,11 @@ like every other pixel whose match can lie inside the right image (there is
 no empty band of width ``D``). The aggregation treats the other entries as
 absent (an infinite path cost: never a minimum, never a neighbour); their
 aggregated cost is 65535; the WTA, its uniqueness test and the sub-pixel
-parabola (which needs ``d_best + 1 <= x``) look only at the valid ones.
+parabola (which needs ``d_best + 1 <= x``) look only at the valid ones. For
+``x < D - 1`` a minimum at ``d = x`` itself, the largest disparity that exists
+there, is rejected (NaN): the cost was still falling where the right image
+ends, so the match most likely lies outside it (on the 26 Middlebury scenes
+keeping those minima costs 0.8 point of bad-2 after hole filling).
 
 Everything invalid is NaN. Threads: every function takes ``threads``
 (None = the project's default, :func:`vpp_service.threads.default_threads`);
@@ -257,7 +261,8 @@ def select_disparity(
 ) -> np.ndarray:
     """Winner-takes-all with uniqueness test and parabola sub-pixel refinement.
 
-    At column ``x`` only ``d <= min(x, D - 1)`` takes part (the left band, see the module docstring).
+    At column ``x`` only ``d <= min(x, D - 1)`` takes part, and for ``x < D - 1`` a minimum at ``d = x``
+    gives NaN (the left band, see the module docstring).
 
     Parameters
     ----------
