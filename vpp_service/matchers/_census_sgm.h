@@ -287,6 +287,8 @@ typedef struct {
     double uniqueness;
     int subpixel, lr_check, median;
     double tolerance;
+    const uint32_t* cl; /* census codes (H x W): with cost == NULL the passes compute each cost row from them */
+    const uint32_t* cr;
 } csgm_params;
 
 /* Per-thread scratch (bytes), see csgm_scratch_bytes. */
@@ -300,6 +302,8 @@ typedef struct {
     int16_t* zero; /* D + 2 zeros: the "previous pixel" of a path's first pixel */
     uint16_t* part; /* W x D: this pass's partial sum of the row */
     uint16_t* sum;  /* W x D: the row's full sum (finishing) */
+    uint16_t* crow; /* W x D: the row's Hamming costs (computed in the pass) */
+    uint32_t* rev;  /* W: right census codes reversed */
     uint16_t* rbc;  /* W: right WTA best cost (reversed x) */
     uint16_t* rbd;  /* W: right WTA best d */
 } csgm_thread;
@@ -312,7 +316,8 @@ static size_t csgm_scratch_bytes(int W, int D) {
     b += 2 * csgm_align(3 * (size_t)W * s * 2);
     b += 2 * csgm_align(3 * (size_t)W * 2);
     b += 3 * csgm_align(s * 2);
-    b += 2 * csgm_align((size_t)W * D * 2);
+    b += 3 * csgm_align((size_t)W * D * 2);
+    b += csgm_align((size_t)W * 4);
     b += 2 * csgm_align((size_t)W * 2);
     return b + 64;
 }
@@ -332,6 +337,8 @@ static void csgm_thread_init(csgm_thread* t, uint8_t* base, int W, int D) {
     CSGM_TAKE(zero, int16_t, s)
     CSGM_TAKE(part, uint16_t, (size_t)W * D)
     CSGM_TAKE(sum, uint16_t, (size_t)W * D)
+    CSGM_TAKE(crow, uint16_t, (size_t)W * D)
+    CSGM_TAKE(rev, uint32_t, W)
     CSGM_TAKE(rbc, uint16_t, W)
     CSGM_TAKE(rbd, uint16_t, W)
 #undef CSGM_TAKE
@@ -345,15 +352,21 @@ static void csgm_thread_init(csgm_thread* t, uint8_t* base, int W, int D) {
 }
 
 /* Row y of one pass (s = +1 forward: x ascending, predecessors in row y - 1 and x - 1; s = -1 backward).
- * Writes the row's partial sum (4 or 2 paths) to t->part; rowP/minP must hold row y - s (unless first). */
+ * Writes the row's partial sum (4 or 2 paths) to part (W x D); rowP/minP must hold row y - s (unless first). */
 static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT cost, const uint8_t* CSGM_RESTRICT g,
-                          csgm_thread* t, int y, int s, int first) {
+                          csgm_thread* t, int y, int s, int first, uint16_t* CSGM_RESTRICT part) {
     const int W = p->W, D = p->D;
     const ptrdiff_t st = (ptrdiff_t)D + 2;
     const int16_t P1 = (int16_t)p->P1;
     const int16_t* lut = p->p2lut;
     const int eight = p->paths == 8;
-    const uint16_t* crow = cost + (ptrdiff_t)y * W * D;
+    const uint16_t* crow;
+    if (cost) {
+        crow = cost + (ptrdiff_t)y * W * D;
+    } else {
+        csgm_hamming_row(p->cl + (ptrdiff_t)y * W, p->cr + (ptrdiff_t)y * W, t->rev, t->crow, W, D, 0);
+        crow = t->crow;
+    }
     const uint8_t* grow = g + (ptrdiff_t)y * W;
     const uint8_t* gprev = first ? grow : g + (ptrdiff_t)(y - s) * W;
     const int16_t* zero = t->zero + 1;
@@ -380,7 +393,7 @@ static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT co
             P2[3] = lut[csgm_absdiff(gx, gprev[xb])];
             csgm_step4_avx2(crow + (ptrdiff_t)x * D, hp, t->rowP + (ptrdiff_t)xa * st + 1,
                             t->rowP + plane + (ptrdiff_t)x * st + 1, t->rowP + 2 * plane + (ptrdiff_t)xb * st + 1, hc,
-                            c1, c1 + plane, c1 + 2 * plane, pm, P2, m, t->part + (ptrdiff_t)x * D, n, D, P1);
+                            c1, c1 + plane, c1 + 2 * plane, pm, P2, m, part + (ptrdiff_t)x * D, n, D, P1);
             t->minC[x] = m[1];
             t->minC[W + x] = m[2];
             t->minC[2 * W + x] = m[3];
@@ -421,7 +434,7 @@ static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT co
             }
         }
         const uint16_t* C = crow + (ptrdiff_t)x * D;
-        uint16_t* acc = t->part + (ptrdiff_t)x * D;
+        uint16_t* acc = part + (ptrdiff_t)x * D;
         if (eight) {
 #if defined(__AVX2__)
             if ((D & 15) == 0)
@@ -731,6 +744,7 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const uint16_t
             for (int d = x + 1; d < D; d++) S[(ptrdiff_t)x * D + d] = CSGM_NOCOST;
         return;
     }
+    if (!dl) return; /* aggregation only (timing) */
     float* l = dl + (ptrdiff_t)y * W;
     csgm_wta_row(S, l, W, D, p->uniqueness, p->subpixel);
     if (!p->lr_check) {
@@ -742,8 +756,9 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const uint16_t
     csgm_lr_row(l, r, lr + (ptrdiff_t)y * W, W, p->tolerance);
 }
 
-/* One pass over all rows (s = +1 top-down, -1 bottom-up).  After a row, the pass stores its partial sum
- * in own[y] unless the other pass already stored the row (counter), in which case it finishes the row. */
+/* One pass over all rows (s = +1 top-down, -1 bottom-up).  The pass writes a row's partial sum to own[y]
+ * (to its scratch row when own is NULL: the one-thread backward pass, always second) and counts the row;
+ * when the other pass had counted it already, this one finishes the row with other[y]. */
 static void csgm_pass(const csgm_params* p, const uint16_t* cost, const uint8_t* g, csgm_thread* t, int s,
                       uint16_t* own, const uint16_t* other, int* rowcnt, uint16_t* sout, float* dl, float* dr,
                       float* lr) {
@@ -751,15 +766,11 @@ static void csgm_pass(const csgm_params* p, const uint16_t* cost, const uint8_t*
     const ptrdiff_t n = (ptrdiff_t)p->W * p->D;
     for (int i = 0; i < H; i++) {
         const int y = s > 0 ? i : H - 1 - i;
-        csgm_pass_row(p, cost, g, t, y, s, i == 0);
+        uint16_t* part = own ? own + (ptrdiff_t)y * n : t->part;
+        csgm_pass_row(p, cost, g, t, y, s, i == 0, part);
         /* store first, then count: the pass that counts second sees the other's row */
-        int seen = __atomic_load_n(&rowcnt[y], __ATOMIC_ACQUIRE);
-        if (seen == 0) {
-            memcpy(own + (ptrdiff_t)y * n, t->part, (size_t)n * sizeof(uint16_t));
-            seen = __atomic_fetch_add(&rowcnt[y], 1, __ATOMIC_ACQ_REL);
-            if (seen == 0) continue;
-        }
-        csgm_finish_row(p, t, t->part, other + (ptrdiff_t)y * n, y, sout, dl, dr, lr);
+        if (__atomic_fetch_add(&rowcnt[y], 1, __ATOMIC_ACQ_REL) == 0) continue;
+        csgm_finish_row(p, t, part, other + (ptrdiff_t)y * n, y, sout, dl, dr, lr);
     }
 }
 
@@ -788,13 +799,13 @@ static void csgm_sgm(const csgm_params* p, const uint16_t* cost, const uint8_t* 
         if (tid < 2) csgm_thread_init(&t, scratch + (size_t)tid * sb, W, p->D);
         if (team == 1) {
             csgm_pass(p, cost, g, &t, 1, vf, vf, rowcnt, sout, dl, dr, lr);
-            csgm_pass(p, cost, g, &t, -1, vf, vf, rowcnt, sout, dl, dr, lr);
+            csgm_pass(p, cost, g, &t, -1, NULL, vf, rowcnt, sout, dl, dr, lr);
         } else if (tid == 0) {
             csgm_pass(p, cost, g, &t, 1, vf, vb, rowcnt, sout, dl, dr, lr);
         } else if (tid == 1) {
             csgm_pass(p, cost, g, &t, -1, vb, vf, rowcnt, sout, dl, dr, lr);
         }
-        if (!sout && p->median) {
+        if (!sout && dl && p->median) {
 #ifdef _OPENMP
 #pragma omp barrier
 #endif

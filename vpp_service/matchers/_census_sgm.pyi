@@ -27,12 +27,16 @@ def cost_stage(
     cost: npt.NDArray[np.uint16],
     invalid_cost: int,
     work: npt.NDArray[np.uint8],
+    volume: bool,
     nthreads: int,
 ) -> None:
-    """Census of both gray images and their Hamming volume ``cost`` in one parallel region."""
+    """Census of both gray images and (with ``volume``) their Hamming volume ``cost``, one parallel region."""
 
 def sgm_stage(
     C: npt.NDArray[np.uint16],
+    cl: npt.NDArray[np.uint32],
+    cr: npt.NDArray[np.uint32],
+    D: int,
     g: npt.NDArray[np.uint8],
     paths: int,
     P1: int,
@@ -51,9 +55,11 @@ def sgm_stage(
     lr: npt.NDArray[np.float32],
     pad: npt.NDArray[np.float32],
     disp: npt.NDArray[np.float32],
+    volume: bool,
     nthreads: int,
+    wta: bool = True,
 ) -> None:
-    """Aggregation, both WTAs, left-right check and median in one parallel region (result in ``lr`` / ``disp``)."""
+    """SGM (costs from ``C`` with ``volume``, else from ``cl``/``cr``), WTAs, left-right check, median."""
 
 def census5x5(img: npt.NDArray[np.uint8], out: npt.NDArray[np.uint32], nthreads: int) -> None:
     """24-bit 5x5 census of ``img`` (H x W) into ``out`` (H x W)."""

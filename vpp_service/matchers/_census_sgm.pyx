@@ -40,6 +40,8 @@ cdef extern from "_census_sgm.h" nogil:
         int lr_check
         int median
         double tolerance
+        const uint32_t* cl
+        const uint32_t* cr
     int csgm_build_avx2()
     size_t csgm_scratch_bytes(int W, int D)
     size_t csgm_cost_work_bytes(int W)
@@ -108,15 +110,16 @@ def hamming_volume(const uint32_t[:, ::1] cl, const uint32_t[:, ::1] cr,
 
 def cost_stage(const uint8_t[:, ::1] gl, const uint8_t[:, ::1] gr, uint8_t[:, ::1] padl,
                uint8_t[:, ::1] padr, uint32_t[:, ::1] cl, uint32_t[:, ::1] cr, uint16_t[:, :, ::1] cost,
-               uint16_t invalid_cost, uint8_t[::1] work, int nthreads):
-    """Census of both gray images (``cl``, ``cr``) and their Hamming volume ``cost``, one parallel region.
+               uint16_t invalid_cost, uint8_t[::1] work, bint volume, int nthreads):
+    """Census of both gray images (``cl``, ``cr``) and, with ``volume``, their Hamming volume ``cost``.
 
-    ``padl``, ``padr``: (H + 4) x (W + 4) scratch; ``work``: :func:`cost_work_bytes` bytes.
+    One parallel region. ``padl``, ``padr``: (H + 4) x (W + 4) scratch; ``work``: :func:`cost_work_bytes`
+    bytes; ``cost`` is not touched (any shape) without ``volume``.
     """
     cdef int H = gl.shape[0], W = gl.shape[1], D = cost.shape[2]
     with nogil:
         csgm_cost(&gl[0, 0], &gr[0, 0], H, W, D, &padl[0, 0], &padr[0, 0], &cl[0, 0], &cr[0, 0],
-                  &cost[0, 0, 0], invalid_cost, &work[0], nthreads)
+                  &cost[0, 0, 0] if volume else NULL, invalid_cost, &work[0], nthreads)
 
 
 # ------------------------------------------------------------------- SGM ----
@@ -134,6 +137,8 @@ cdef csgm_params make_params(int H, int W, int D, int paths, int P1, const int16
     p.lr_check = 1 if lr_check else 0
     p.median = 1 if median else 0
     p.tolerance = tolerance
+    p.cl = NULL
+    p.cr = NULL
     return p
 
 
@@ -153,23 +158,31 @@ def aggregate(const uint16_t[:, :, ::1] C, const uint8_t[:, ::1] g,
                  &S[0, 0, 0], NULL, NULL, NULL, NULL, NULL)
 
 
-def sgm_stage(const uint16_t[:, :, ::1] C, const uint8_t[:, ::1] g, int paths, int P1,
+def sgm_stage(const uint16_t[:, :, ::1] C, const uint32_t[:, ::1] cl, const uint32_t[:, ::1] cr, int D,
+              const uint8_t[:, ::1] g, int paths, int P1,
               const int16_t[::1] p2lut, double uniqueness, bint subpixel, bint lr_check, double tolerance,
               bint median, uint16_t[:, :, ::1] vf, uint16_t[:, :, ::1] vb, int[::1] rowcnt,
               uint8_t[::1] scratch, float[:, ::1] dl, float[:, ::1] dr, float[:, ::1] lr,
-              float[:, ::1] pad, float[:, ::1] disp, int nthreads):
+              float[:, ::1] pad, float[:, ::1] disp, bint volume, int nthreads, bint wta=True):
     """Aggregation, left and right WTA, left-right check and median in one parallel region.
 
-    ``vf``, ``vb``: H x W x D partial sums (``vb`` only read with >= 2 threads); ``rowcnt``: H ints;
-    ``scratch``: 2 x :func:`scratch_bytes` + 64 bytes; ``pad``: (H + 2) x (W + 2). The result is ``lr``
-    (``disp`` after the median when ``median``); ``lr`` may be ``dl`` when ``lr_check`` is off.
+    The costs are the volume ``C`` (H x W x D) with ``volume``, else each pass computes them row by row
+    from the census codes ``cl``, ``cr`` (H x W; ``C`` is not read). ``vf``, ``vb``: H x W x D partial
+    sums (``vb`` only read with >= 2 threads); ``rowcnt``: H ints; ``scratch``: 2 x :func:`scratch_bytes`
+    + 64 bytes; ``pad``: (H + 2) x (W + 2). The result is ``lr`` (``disp`` after the median when
+    ``median``); ``lr`` may be ``dl`` when ``lr_check`` is off. ``wta`` False stops after the aggregation
+    (benchmarks time the stage so).
     """
-    cdef int H = C.shape[0], W = C.shape[1], D = C.shape[2]
+    cdef int H = g.shape[0], W = g.shape[1]
     cdef csgm_params p = make_params(H, W, D, paths, P1, p2lut, uniqueness, subpixel, lr_check, tolerance,
                                      median)
+    if not volume:
+        p.cl = &cl[0, 0]
+        p.cr = &cr[0, 0]
     with nogil:
-        csgm_sgm(&p, &C[0, 0, 0], &g[0, 0], &vf[0, 0, 0], &vb[0, 0, 0], &rowcnt[0], &scratch[0], nthreads,
-                 NULL, &dl[0, 0], &dr[0, 0], &lr[0, 0], &pad[0, 0], &disp[0, 0])
+        csgm_sgm(&p, &C[0, 0, 0] if volume else NULL, &g[0, 0], &vf[0, 0, 0], &vb[0, 0, 0], &rowcnt[0],
+                 &scratch[0], nthreads, NULL, &dl[0, 0] if wta else NULL, &dr[0, 0], &lr[0, 0], &pad[0, 0],
+                 &disp[0, 0])
 
 
 # ------------------------------------------------------------------- WTA ----

@@ -416,6 +416,10 @@ class CensusSGMOptions(MatcherOptions):
             raise ValueError(f"threads must be an integer >= 0, got {self.threads!r}")
 
 
+#: Stand-in for the cost volume where the kernels do not read it.
+_NO_VOLUME = np.zeros((1, 1, 1), np.uint16)
+
+
 class _Workspace:
     """The buffers of one :class:`CensusSGM` for one (H, W, D, threads), kept between calls."""
 
@@ -425,7 +429,7 @@ class _Workspace:
         self.padr = np.empty((h + 4, w + 4), np.uint8)
         self.cl = np.empty((h, w), np.uint32)
         self.cr = np.empty((h, w), np.uint32)
-        self.cost = np.empty((h, w, d), np.uint16)
+        self._cost: np.ndarray | None = None  # the Hamming volume, only for guided stereo
         self.work = np.empty(_k.cost_work_bytes(w, threads), np.uint8)
         self.vf = np.empty((h, w, d), np.uint16)
         self.vb = np.empty((h, w, d) if threads > 1 else (1, 1, 1), np.uint16)  # backward pass, 2nd thread
@@ -435,6 +439,13 @@ class _Workspace:
         self.dr = np.empty((h, w), np.float32)
         self.lr = np.empty((h, w), np.float32)
         self.mpad = np.empty((h + 2, w + 2), np.float32)
+
+    @property
+    def cost(self) -> np.ndarray:
+        """The H x W x D uint16 cost volume (allocated at first use)."""
+        if self._cost is None:
+            self._cost = np.empty(self.key[:3], np.uint16)
+        return self._cost
 
 
 @MATCHERS.register("census-sgm")
@@ -468,11 +479,13 @@ class CensusSGM(Matcher):
         check_max_disparity(self.options.max_disparity, left.shape[1])
         gl, gr = to_gray(left), to_gray(right)
         ws = _Workspace(gl.shape[0], gl.shape[1], self.options.max_disparity, self._threads())
-        self._cost_into(gl, gr, ws)
+        self._census(gl, gr, ws, volume=True)
         return ws.cost
 
-    def _cost_into(self, gl: np.ndarray, gr: np.ndarray, ws: _Workspace) -> None:
-        _k.cost_stage(gl, gr, ws.padl, ws.padr, ws.cl, ws.cr, ws.cost, INVALID_COST, ws.work, ws.key[3])
+    def _census(self, gl: np.ndarray, gr: np.ndarray, ws: _Workspace, *, volume: bool) -> None:
+        """Census codes of the pair into ``ws`` and, with ``volume``, the Hamming volume ``ws.cost``."""
+        cost = ws.cost if volume else _NO_VOLUME
+        _k.cost_stage(gl, gr, ws.padl, ws.padr, ws.cl, ws.cr, cost, INVALID_COST, ws.work, volume, ws.key[3])
 
     def compute_from_cost(self, cost: np.ndarray, left_gray: np.ndarray, hints: np.ndarray | None = None) -> np.ndarray:
         """Disparity from a cost volume (steps 3-7; ``fill`` is not applied here).
@@ -502,21 +515,28 @@ class CensusSGM(Matcher):
         return self._sgm(cost, gray, hints, _Workspace(h, w, d, self._threads()), own_cost=False)
 
     def _sgm(
-        self, cost: np.ndarray, gray: np.ndarray, hints: np.ndarray | None, ws: _Workspace, *, own_cost: bool
+        self, cost: np.ndarray | None, gray: np.ndarray, hints: np.ndarray | None, ws: _Workspace, *, own_cost: bool
     ) -> np.ndarray:
-        """Steps 3-8 on ``cost`` (modified in place only when ``own_cost``: the workspace's volume)."""
+        """Steps 3-8 on ``cost`` (modified in place only when ``own_cost``: the workspace's volume).
+
+        ``cost`` None: the SGM passes compute the Hamming costs row by row from ``ws.cl``, ``ws.cr`` (no hints).
+        """
         o = self.options
         t = ws.key[3]
-        if hints is not None:
-            cost = modulate_cost(cost, hints, o.guided_k, o.guided_c, inplace=own_cost, threads=t)
-            own_cost = True
-        if cost.max(initial=0) > COST_CAP:
-            cost = np.minimum(cost, COST_CAP, out=cost if own_cost else None)
-        out = np.empty(cost.shape[:2], np.float32)
+        if cost is not None:
+            if hints is not None:
+                cost = modulate_cost(cost, hints, o.guided_k, o.guided_c, inplace=own_cost, threads=t)
+                own_cost = True
+            if cost.max(initial=0) > COST_CAP:
+                cost = np.minimum(cost, COST_CAP, out=cost if own_cost else None)
+        out = np.empty(gray.shape, np.float32)
         lr = ws.lr if o.median else out
         dl = ws.dl if (o.median or o.lr_check) else out
         _k.sgm_stage(
-            cost,
+            _NO_VOLUME if cost is None else cost,
+            ws.cl,
+            ws.cr,
+            ws.key[2],
             gray,
             int(o.paths),
             int(o.p1),
@@ -535,6 +555,7 @@ class CensusSGM(Matcher):
             lr,
             ws.mpad,
             out,
+            cost is not None,
             t,
         )
         if o.speckle_size:
@@ -552,15 +573,17 @@ class CensusSGM(Matcher):
         gl, gr = to_gray(left), to_gray(right)
         h, w = gl.shape
         if not self._ws_lock.acquire(blocking=False):  # another thread is using the kept buffers
-            ws = _Workspace(h, w, self.options.max_disparity, self._threads())
-            self._cost_into(gl, gr, ws)
-            return self._sgm(ws.cost, gl, hints, ws, own_cost=True)
+            return self._match(gl, gr, hints, _Workspace(h, w, self.options.max_disparity, self._threads()))
         try:
-            ws = self._workspace(h, w)
-            self._cost_into(gl, gr, ws)
-            return self._sgm(ws.cost, gl, hints, ws, own_cost=True)
+            return self._match(gl, gr, hints, self._workspace(h, w))
         finally:
             self._ws_lock.release()
+
+    def _match(self, gl: np.ndarray, gr: np.ndarray, hints: np.ndarray | None, ws: _Workspace) -> np.ndarray:
+        """Census (+ the cost volume for guided stereo only) then the SGM stage."""
+        guided = hints is not None
+        self._census(gl, gr, ws, volume=guided)
+        return self._sgm(ws.cost if guided else None, gl, hints, ws, own_cost=True)
 
 
 __all__ = [
