@@ -48,14 +48,18 @@ Kernels: the C in ``_census_sgm.h`` is compiled twice, portable and for
 x86-64-v3 (AVX2); the AVX2 build runs exactly when :mod:`vpp_service.vpp.backend`
 runs the AVX2 build of the VPP kernel (a CPU with AVX2, and ``VPP_NO_AVX2``
 not set to 1). :meth:`CensusSGM.compute` runs two parallel regions per call:
-census of both images + Hamming volume (rows in blocks), then the SGM: the
-forward pass (left-to-right plus the three paths from the row above) and the
-backward pass (the four mirrored paths) on two threads at once, each row
-finished (sum, left and right WTA, left-right check) by whichever pass
-reaches it second, then the median on row blocks. So the aggregation uses at
-most two threads. The matcher keeps its buffers (census images, cost volume,
-partial sums) between calls and reallocates them only when the image size,
-``max_disparity`` or the thread count changes.
+the census of both images (rows in blocks), then the SGM: the forward pass
+(left-to-right plus the three paths from the row above) and the backward
+pass (the four mirrored paths) on two threads at once, each computing the
+Hamming costs of a row as it goes (the cost volume is built only for guided
+stereo) and handling 8 rows at a time as a wavefront (a row reads the path
+costs of the row above from a few columns kept in cache); each row is
+finished (sum of the two passes, left and right WTA, left-right check) by
+whichever pass reaches it second; then the median on row blocks. So the
+aggregation uses at most two threads. The matcher keeps its buffers (census
+codes, partial sums, the cost volume once guided stereo needed it) between
+calls and reallocates them only when the image size, ``max_disparity`` or
+the thread count changes.
 
 Speed: ``benchmarks/bench_matchers.py`` times the matcher and each of its
 stages; the latest numbers are in ``benchmarks/results/bench_matchers.json``.
@@ -372,11 +376,12 @@ class CensusSGMOptions(MatcherOptions):
     guided_k, guided_c : float
         Guided-stereo modulation height and width (10 and 1) used with ``hints``.
     threads : int
-        OpenMP threads (default 1; 0 = :func:`~vpp_service.threads.default_threads`). One thread is the
-        default because the row-to-row SGM passes synchronise once per image
-        row: on an oversubscribed machine (evaluation running several scenes
-        in parallel, shared CI) more threads are *slower*; set 0 or N on a
-        dedicated machine.
+        OpenMP threads (default 1; 0 = :func:`~vpp_service.threads.default_threads`). Two threads run
+        the forward and the backward SGM pass at once (they meet only through a
+        per-row counter, no barrier per row); threads beyond two only share the
+        census and the median. One thread is the default: on an oversubscribed
+        machine (evaluation running several scenes in parallel, shared CI) a
+        second thread gains little; set 2 (or 0) on a dedicated machine.
     """
 
     paths: int = 8
