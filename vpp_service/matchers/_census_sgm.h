@@ -891,14 +891,75 @@ static void csgm_pass(const csgm_params* p, const uint16_t* cost, const uint8_t*
     }
 }
 
-/* SGM + WTA (+ right WTA, left-right check, median) of a cost volume.
- * vf, vb: H x W x D partial-sum volumes (vb unused with one thread); rowcnt: H ints; scratch: nthreads blocks
+/* Census of both images and (cost != NULL) the Hamming volume, by thread tid of a team (called inside a
+ * parallel region: every thread of the team must call it).  padl, padr: (H + 4) x (W + 4) bytes; cl, cr: H x W
+ * codes; work: team x csgm_cost_work_bytes(W) bytes (+ 64 for alignment). */
+static size_t csgm_cost_work_bytes(int W) { return csgm_align((size_t)W * 4) + 3 * csgm_align((size_t)W); }
+
+static void csgm_cost_team(const uint8_t* gl, const uint8_t* gr, int H, int W, int D, uint8_t* padl, uint8_t* padr,
+                           uint32_t* cl, uint32_t* cr, uint16_t* cost, uint16_t invalid_cost, uint8_t* work, int tid,
+                           int team) {
+    const size_t wb = csgm_cost_work_bytes(W);
+    uint8_t* w = (uint8_t*)(((uintptr_t)work + 63) & ~(uintptr_t)63) + (size_t)tid * wb;
+    uint32_t* rev = (uint32_t*)w;
+    uint8_t* b0 = w + csgm_align((size_t)W * 4);
+    uint8_t* b1 = b0 + csgm_align((size_t)W);
+    uint8_t* b2 = b1 + csgm_align((size_t)W);
+    int p0 = (int)((int64_t)(H + 4) * tid / team), p1 = (int)((int64_t)(H + 4) * (tid + 1) / team);
+    csgm_pad_rows(gl, H, W, padl, p0, p1);
+    csgm_pad_rows(gr, H, W, padr, p0, p1);
+#ifdef _OPENMP
+#pragma omp barrier
+#endif
+    int y0 = (int)((int64_t)H * tid / team), y1 = (int)((int64_t)H * (tid + 1) / team);
+    csgm_census_rows(padl, H, W, cl, y0, y1, b0, b1, b2);
+    csgm_census_rows(padr, H, W, cr, y0, y1, b0, b1, b2);
+    if (cost) {
+#ifdef _OPENMP
+#pragma omp barrier
+#endif
+        for (int y = y0; y < y1; y++)
+            csgm_hamming_row(cl + (ptrdiff_t)y * W, cr + (ptrdiff_t)y * W, rev, cost + (ptrdiff_t)y * W * D, W, D,
+                             invalid_cost);
+    }
+}
+
+/* csgm_cost_team in a parallel region of its own. */
+static void csgm_cost(const uint8_t* gl, const uint8_t* gr, int H, int W, int D, uint8_t* padl, uint8_t* padr,
+                      uint32_t* cl, uint32_t* cr, uint16_t* cost, uint16_t invalid_cost, uint8_t* work,
+                      int nthreads) {
+    int nt = nthreads < 1 ? 1 : nthreads;
+#ifdef _OPENMP
+#pragma omp parallel num_threads(nt)
+#endif
+    {
+        int tid = 0, team = 1;
+#ifdef _OPENMP
+        tid = omp_get_thread_num();
+        team = omp_get_num_threads();
+#endif
+        csgm_cost_team(gl, gr, H, W, D, padl, padr, cl, cr, cost, invalid_cost, work, tid, team);
+    }
+}
+
+/* The census inputs of csgm_sgm when it starts with the census (else gl == NULL). */
+typedef struct {
+    const uint8_t* gl;
+    const uint8_t* gr;
+    uint8_t* padl;
+    uint8_t* padr;
+    uint8_t* work; /* nthreads x csgm_cost_work_bytes(W) + 64 */
+} csgm_census_io;
+
+/* SGM + WTA (+ right WTA, left-right check, median) of a cost volume (cost == NULL: of the Hamming costs of
+ * p->cl, p->cr, computed row by row; with census, those codes are computed first, in the same region).
+ * vf, vb: H x W x D partial-sum volumes (vb unused with one thread); rowcnt: H ints; scratch: blocks
  * of csgm_scratch_bytes(W, D); pad: (H + 2) x (W + 2) floats for the median.  With sout, writes the
  * aggregated volume there instead (no WTA).  Output: disp (H x W) = final disparity; dl, dr: left / right
- * WTA (dl may be disp when neither check nor median runs). */
+ * WTA (dl may be disp when neither check nor median runs).  Only threads 0 and 1 use scratch (2 blocks). */
 static void csgm_sgm(const csgm_params* p, const uint16_t* cost, const uint8_t* g, uint16_t* vf, uint16_t* vb,
                      int* rowcnt, uint8_t* scratch, int nthreads, uint16_t* sout, float* dl, float* dr,
-                     float* lr, float* pad, float* disp) {
+                     float* lr, float* pad, float* disp, const csgm_census_io* census) {
     const int H = p->H, W = p->W;
     const size_t sb = csgm_scratch_bytes(W, p->D);
     int nt = nthreads < 1 ? 1 : nthreads;
@@ -912,6 +973,13 @@ static void csgm_sgm(const csgm_params* p, const uint16_t* cost, const uint8_t* 
         tid = omp_get_thread_num();
         team = omp_get_num_threads();
 #endif
+        if (census) { /* the census codes p->cl, p->cr first (all threads), then the passes read them */
+            csgm_cost_team(census->gl, census->gr, H, W, p->D, census->padl, census->padr, (uint32_t*)p->cl,
+                           (uint32_t*)p->cr, NULL, 0, census->work, tid, team);
+#ifdef _OPENMP
+#pragma omp barrier
+#endif
+        }
         csgm_thread t;
         if (tid < 2) csgm_thread_init(&t, scratch + (size_t)tid * sb, W, p->D);
         if (team == 1) {
@@ -933,49 +1001,6 @@ static void csgm_sgm(const csgm_params* p, const uint16_t* cost, const uint8_t* 
 #endif
             const int z0 = (int)((int64_t)H * tid / team), z1 = (int)((int64_t)H * (tid + 1) / team);
             for (int y = z0; y < z1; y++) csgm_median_row(pad, W, disp, y);
-        }
-    }
-}
-
-/* Census of both images and the Hamming volume, one parallel region.  padl, padr: (H + 4) x (W + 4) bytes;
- * cl, cr: H x W codes; work: nthreads x (W * 4 + 3 * W) bytes (64-aligned blocks of csgm_cost_work_bytes). */
-static size_t csgm_cost_work_bytes(int W) { return csgm_align((size_t)W * 4) + 3 * csgm_align((size_t)W); }
-
-static void csgm_cost(const uint8_t* gl, const uint8_t* gr, int H, int W, int D, uint8_t* padl, uint8_t* padr,
-                      uint32_t* cl, uint32_t* cr, uint16_t* cost, uint16_t invalid_cost, uint8_t* work,
-                      int nthreads) {
-    int nt = nthreads < 1 ? 1 : nthreads;
-    const size_t wb = csgm_cost_work_bytes(W);
-#ifdef _OPENMP
-#pragma omp parallel num_threads(nt)
-#endif
-    {
-        int tid = 0, team = 1;
-#ifdef _OPENMP
-        tid = omp_get_thread_num();
-        team = omp_get_num_threads();
-#endif
-        uint8_t* w = (uint8_t*)(((uintptr_t)work + 63) & ~(uintptr_t)63) + (size_t)tid * wb;
-        uint32_t* rev = (uint32_t*)w;
-        uint8_t* b0 = w + csgm_align((size_t)W * 4);
-        uint8_t* b1 = b0 + csgm_align((size_t)W);
-        uint8_t* b2 = b1 + csgm_align((size_t)W);
-        int p0 = (int)((int64_t)(H + 4) * tid / team), p1 = (int)((int64_t)(H + 4) * (tid + 1) / team);
-        csgm_pad_rows(gl, H, W, padl, p0, p1);
-        csgm_pad_rows(gr, H, W, padr, p0, p1);
-#ifdef _OPENMP
-#pragma omp barrier
-#endif
-        int y0 = (int)((int64_t)H * tid / team), y1 = (int)((int64_t)H * (tid + 1) / team);
-        csgm_census_rows(padl, H, W, cl, y0, y1, b0, b1, b2);
-        csgm_census_rows(padr, H, W, cr, y0, y1, b0, b1, b2);
-        if (cost) {
-#ifdef _OPENMP
-#pragma omp barrier
-#endif
-            for (int y = y0; y < y1; y++)
-                csgm_hamming_row(cl + (ptrdiff_t)y * W, cr + (ptrdiff_t)y * W, rev, cost + (ptrdiff_t)y * W * D, W,
-                                 D, invalid_cost);
         }
     }
 }

@@ -38,6 +38,11 @@ def sgm_stage(
     cr: npt.NDArray[np.uint32],
     D: int,
     g: npt.NDArray[np.uint8],
+    gr: npt.NDArray[np.uint8],
+    padl: npt.NDArray[np.uint8],
+    padr: npt.NDArray[np.uint8],
+    work: npt.NDArray[np.uint8],
+    census: bool,
     paths: int,
     P1: int,
     p2lut: npt.NDArray[np.int16],
@@ -59,7 +64,7 @@ def sgm_stage(
     nthreads: int,
     wta: bool = True,
 ) -> None:
-    """SGM (costs from ``C`` with ``volume``, else from ``cl``/``cr``), WTAs, left-right check, median."""
+    """(Census,) SGM (costs from ``C`` with ``volume``, else ``cl``/``cr``), WTAs, LR check, median."""
 
 def census5x5(img: npt.NDArray[np.uint8], out: npt.NDArray[np.uint32], nthreads: int) -> None:
     """24-bit 5x5 census of ``img`` (H x W) into ``out`` (H x W)."""

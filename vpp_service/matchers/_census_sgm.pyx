@@ -55,9 +55,15 @@ cdef extern from "_census_sgm.h" nogil:
     void csgm_lr_row(const float* dl, const float* dr, float* out, int W, double tol)
     void csgm_median_pad_row(const float* src, int H, int W, float* pad, int py)
     void csgm_median_row(const float* pad, int W, float* out, int y)
+    ctypedef struct csgm_census_io:
+        const uint8_t* gl
+        const uint8_t* gr
+        uint8_t* padl
+        uint8_t* padr
+        uint8_t* work
     void csgm_sgm(const csgm_params* p, const uint16_t* cost, const uint8_t* g, uint16_t* vf, uint16_t* vb,
                   int* rowcnt, uint8_t* scratch, int nthreads, uint16_t* sout, float* dl, float* dr,
-                  float* lr, float* pad, float* disp)
+                  float* lr, float* pad, float* disp, const csgm_census_io* census)
     void csgm_cost(const uint8_t* gl, const uint8_t* gr, int H, int W, int D, uint8_t* padl, uint8_t* padr,
                    uint32_t* cl, uint32_t* cr, uint16_t* cost, uint16_t invalid_cost, uint8_t* work,
                    int nthreads)
@@ -155,11 +161,12 @@ def aggregate(const uint16_t[:, :, ::1] C, const uint8_t[:, ::1] g,
     cdef uint8_t[::1] scratch = np.empty(2 * csgm_scratch_bytes(W, D) + 64, np.uint8)
     with nogil:
         csgm_sgm(&p, &C[0, 0, 0], &g[0, 0], &vf[0, 0, 0], &vb[0, 0, 0], &rowcnt[0], &scratch[0], nthreads,
-                 &S[0, 0, 0], NULL, NULL, NULL, NULL, NULL)
+                 &S[0, 0, 0], NULL, NULL, NULL, NULL, NULL, NULL)
 
 
-def sgm_stage(const uint16_t[:, :, ::1] C, const uint32_t[:, ::1] cl, const uint32_t[:, ::1] cr, int D,
-              const uint8_t[:, ::1] g, int paths, int P1,
+def sgm_stage(const uint16_t[:, :, ::1] C, uint32_t[:, ::1] cl, uint32_t[:, ::1] cr, int D,
+              const uint8_t[:, ::1] g, const uint8_t[:, ::1] gr, uint8_t[:, ::1] padl, uint8_t[:, ::1] padr,
+              uint8_t[::1] work, bint census, int paths, int P1,
               const int16_t[::1] p2lut, double uniqueness, bint subpixel, bint lr_check, double tolerance,
               bint median, uint16_t[:, :, ::1] vf, uint16_t[:, :, ::1] vb, int[::1] rowcnt,
               uint8_t[::1] scratch, float[:, ::1] dl, float[:, ::1] dr, float[:, ::1] lr,
@@ -167,7 +174,9 @@ def sgm_stage(const uint16_t[:, :, ::1] C, const uint32_t[:, ::1] cl, const uint
     """Aggregation, left and right WTA, left-right check and median in one parallel region.
 
     The costs are the volume ``C`` (H x W x D) with ``volume``, else each pass computes them row by row
-    from the census codes ``cl``, ``cr`` (H x W; ``C`` is not read). ``vf``, ``vb``: H x W x D partial
+    from the census codes ``cl``, ``cr`` (H x W; ``C`` is not read). With ``census`` the region first
+    computes those codes of ``g`` and ``gr`` (the left and right gray images; ``padl``, ``padr``, ``work``
+    as for :func:`cost_stage`), so a call without guided stereo is one parallel region. ``vf``, ``vb``: H x W x D partial
     sums (``vb`` only read with >= 2 threads); ``rowcnt``: H ints; ``scratch``: 2 x :func:`scratch_bytes`
     + 64 bytes; ``pad``: (H + 2) x (W + 2). The result is ``lr`` (``disp`` after the median when
     ``median``); ``lr`` may be ``dl`` when ``lr_check`` is off. ``wta`` False stops after the aggregation
@@ -176,13 +185,20 @@ def sgm_stage(const uint16_t[:, :, ::1] C, const uint32_t[:, ::1] cl, const uint
     cdef int H = g.shape[0], W = g.shape[1]
     cdef csgm_params p = make_params(H, W, D, paths, P1, p2lut, uniqueness, subpixel, lr_check, tolerance,
                                      median)
+    cdef csgm_census_io io
     if not volume:
         p.cl = &cl[0, 0]
         p.cr = &cr[0, 0]
+    if census:
+        io.gl = &g[0, 0]
+        io.gr = &gr[0, 0]
+        io.padl = &padl[0, 0]
+        io.padr = &padr[0, 0]
+        io.work = &work[0]
     with nogil:
         csgm_sgm(&p, &C[0, 0, 0] if volume else NULL, &g[0, 0], &vf[0, 0, 0], &vb[0, 0, 0], &rowcnt[0],
                  &scratch[0], nthreads, NULL, &dl[0, 0] if wta else NULL, &dr[0, 0], &lr[0, 0], &pad[0, 0],
-                 &disp[0, 0])
+                 &disp[0, 0], &io if census else NULL)
 
 
 # ------------------------------------------------------------------- WTA ----

@@ -47,7 +47,8 @@ Results do not depend on the thread count nor on the build.
 Kernels: the C in ``_census_sgm.h`` is compiled twice, portable and for
 x86-64-v3 (AVX2); the AVX2 build runs exactly when :mod:`vpp_service.vpp.backend`
 runs the AVX2 build of the VPP kernel (a CPU with AVX2, and ``VPP_NO_AVX2``
-not set to 1). :meth:`CensusSGM.compute` runs two parallel regions per call:
+not set to 1). :meth:`CensusSGM.compute` runs one parallel region per call
+(three with guided stereo: census and cost volume, the modulation, the rest):
 the census of both images (rows in blocks), then the SGM: the forward pass
 (left-to-right plus the three paths from the row above) and the backward
 pass (the four mirrored paths) on two threads at once, each computing the
@@ -520,11 +521,19 @@ class CensusSGM(Matcher):
         return self._sgm(cost, gray, hints, _Workspace(h, w, d, self._threads()), own_cost=False)
 
     def _sgm(
-        self, cost: np.ndarray | None, gray: np.ndarray, hints: np.ndarray | None, ws: _Workspace, *, own_cost: bool
+        self,
+        cost: np.ndarray | None,
+        gray: np.ndarray,
+        hints: np.ndarray | None,
+        ws: _Workspace,
+        *,
+        own_cost: bool,
+        right_gray: np.ndarray | None = None,
     ) -> np.ndarray:
         """Steps 3-8 on ``cost`` (modified in place only when ``own_cost``: the workspace's volume).
 
-        ``cost`` None: the SGM passes compute the Hamming costs row by row from ``ws.cl``, ``ws.cr`` (no hints).
+        ``cost`` None: the SGM passes compute the Hamming costs row by row from ``ws.cl``, ``ws.cr`` (no
+        hints), which the same parallel region computes first from ``gray`` and ``right_gray`` when given.
         """
         o = self.options
         t = ws.key[3]
@@ -543,6 +552,11 @@ class CensusSGM(Matcher):
             ws.cr,
             ws.key[2],
             gray,
+            gray if right_gray is None else right_gray,
+            ws.padl,
+            ws.padr,
+            ws.work,
+            right_gray is not None,
             int(o.paths),
             int(o.p1),
             p2_table(o.p1, o.p2_min, o.p2_alpha, o.p2_gamma),
@@ -585,10 +599,11 @@ class CensusSGM(Matcher):
             self._ws_lock.release()
 
     def _match(self, gl: np.ndarray, gr: np.ndarray, hints: np.ndarray | None, ws: _Workspace) -> np.ndarray:
-        """Census (+ the cost volume for guided stereo only) then the SGM stage."""
-        guided = hints is not None
-        self._census(gl, gr, ws, volume=guided)
-        return self._sgm(ws.cost if guided else None, gl, hints, ws, own_cost=True)
+        """Census and SGM in one parallel region; with hints, the census and cost volume first, then the SGM."""
+        if hints is None:
+            return self._sgm(None, gl, None, ws, own_cost=True, right_gray=gr)
+        self._census(gl, gr, ws, volume=True)
+        return self._sgm(ws.cost, gl, hints, ws, own_cost=True)
 
 
 __all__ = [
