@@ -171,16 +171,17 @@ def sgm_stage(const uint16_t[:, :, ::1] C, uint32_t[:, ::1] cl, uint32_t[:, ::1]
               bint median, uint16_t[:, :, ::1] vf, uint16_t[:, :, ::1] vb, int[::1] rowcnt,
               uint8_t[::1] scratch, float[:, ::1] dl, float[:, ::1] dr, float[:, ::1] lr,
               float[:, ::1] pad, float[:, ::1] disp, bint volume, int nthreads, bint wta=True):
-    """Aggregation, left and right WTA, left-right check and median in one parallel region.
+    """(Census,) aggregation, left and right WTA, left-right check and median in one parallel region.
 
     The costs are the volume ``C`` (H x W x D) with ``volume``, else each pass computes them row by row
     from the census codes ``cl``, ``cr`` (H x W; ``C`` is not read). With ``census`` the region first
     computes those codes of ``g`` and ``gr`` (the left and right gray images; ``padl``, ``padr``, ``work``
-    as for :func:`cost_stage`), so a call without guided stereo is one parallel region. ``vf``, ``vb``: H x W x D partial
-    sums (``vb`` only read with >= 2 threads); ``rowcnt``: H ints; ``scratch``: 2 x :func:`scratch_bytes`
-    + 64 bytes; ``pad``: (H + 2) x (W + 2). The result is ``lr`` (``disp`` after the median when
-    ``median``); ``lr`` may be ``dl`` when ``lr_check`` is off. ``wta`` False stops after the aggregation
-    (benchmarks time the stage so).
+    as for :func:`cost_stage`), so a call without guided stereo is one parallel region.
+
+    ``vf``, ``vb``: H x W x D partial sums (``vb`` only read with >= 2 threads); ``rowcnt``: H ints;
+    ``scratch``: 2 x :func:`scratch_bytes` + 64 bytes; ``pad``: (H + 2) x (W + 2). The result is ``lr``
+    (``disp`` after the median when ``median``); ``lr`` may be ``dl`` when ``lr_check`` is off. ``wta``
+    False stops after the aggregation (benchmarks time the stage so).
     """
     cdef int H = g.shape[0], W = g.shape[1]
     cdef csgm_params p = make_params(H, W, D, paths, P1, p2lut, uniqueness, subpixel, lr_check, tolerance,
