@@ -106,35 +106,6 @@ CSGM_INLINE uint16_t csgm_popcount24(uint32_t v) {
     return (uint16_t)(v & 0x3F);
 }
 
-/* One pixel's Hamming costs p[d] = popcount(a ^ q[d]) for d < n, invalid_cost for n <= d < D. */
-CSGM_INLINE void csgm_hamming_pixel(uint32_t a, const uint32_t* CSGM_RESTRICT q, uint16_t* CSGM_RESTRICT p, int n,
-                                    int D, uint16_t invalid_cost) {
-    int d = 0;
-#if defined(__AVX2__)
-    {
-        /* popcount of 16 codes: nibble counts by table lookup, summed per 32-bit lane, packed to 16 bits */
-        const __m256i nib = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2, 1, 2, 2, 3,
-                                             1, 2, 2, 3, 2, 3, 3, 4);
-        const __m256i low = _mm256_set1_epi8(0x0F), ones = _mm256_set1_epi8(1);
-        const __m256i va = _mm256_set1_epi32((int)a);
-        for (; d + 16 <= n; d += 16) {
-            __m256i u = _mm256_xor_si256(_mm256_loadu_si256((const __m256i*)(q + d)), va);
-            __m256i v = _mm256_xor_si256(_mm256_loadu_si256((const __m256i*)(q + d + 8)), va);
-            u = _mm256_add_epi8(_mm256_shuffle_epi8(nib, _mm256_and_si256(u, low)),
-                                _mm256_shuffle_epi8(nib, _mm256_and_si256(_mm256_srli_epi16(u, 4), low)));
-            v = _mm256_add_epi8(_mm256_shuffle_epi8(nib, _mm256_and_si256(v, low)),
-                                _mm256_shuffle_epi8(nib, _mm256_and_si256(_mm256_srli_epi16(v, 4), low)));
-            u = _mm256_maddubs_epi16(u, ones); /* byte pairs -> 16 bits */
-            v = _mm256_maddubs_epi16(v, ones);
-            __m256i h = _mm256_hadd_epi16(u, v); /* 32-bit lanes, in-lane order u0-3 v0-3 | u4-7 v4-7 */
-            _mm256_storeu_si256((__m256i*)(p + d), _mm256_permute4x64_epi64(h, 0xD8));
-        }
-    }
-#endif
-    for (; d < n; d++) p[d] = csgm_popcount24(a ^ q[d]);
-    for (d = n; d < D; d++) p[d] = invalid_cost;
-}
-
 /* Row y of the Hamming volume: out[x][d] = popcount(cl[x] ^ cr[x - d]) for d <= x, invalid_cost above.
  * rev: W scratch entries (cr reversed, so the d loop reads forwards). */
 static void csgm_hamming_row(const uint32_t* CSGM_RESTRICT cl, const uint32_t* CSGM_RESTRICT cr,
@@ -142,8 +113,34 @@ static void csgm_hamming_row(const uint32_t* CSGM_RESTRICT cl, const uint32_t* C
                              uint16_t invalid_cost) {
     for (int x = 0; x < W; x++) rev[x] = cr[W - 1 - x];
     for (int x = 0; x < W; x++) {
+        uint16_t* CSGM_RESTRICT p = out + (ptrdiff_t)x * D;
+        const uint32_t a = cl[x];
+        const uint32_t* CSGM_RESTRICT q = rev + (W - 1 - x); /* q[d] == cr[x - d] */
         const int n = x + 1 < D ? x + 1 : D;
-        csgm_hamming_pixel(cl[x], rev + (W - 1 - x), out + (ptrdiff_t)x * D, n, D, invalid_cost); /* q[d] = cr[x-d] */
+        int d = 0;
+#if defined(__AVX2__)
+        {
+            /* popcount of 16 codes: nibble counts by table lookup, summed per 32-bit lane, packed to 16 bits */
+            const __m256i nib = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2, 1, 2, 2,
+                                                 3, 1, 2, 2, 3, 2, 3, 3, 4);
+            const __m256i low = _mm256_set1_epi8(0x0F), ones = _mm256_set1_epi8(1);
+            const __m256i va = _mm256_set1_epi32((int)a);
+            for (; d + 16 <= n; d += 16) {
+                __m256i u = _mm256_xor_si256(_mm256_loadu_si256((const __m256i*)(q + d)), va);
+                __m256i v = _mm256_xor_si256(_mm256_loadu_si256((const __m256i*)(q + d + 8)), va);
+                u = _mm256_add_epi8(_mm256_shuffle_epi8(nib, _mm256_and_si256(u, low)),
+                                    _mm256_shuffle_epi8(nib, _mm256_and_si256(_mm256_srli_epi16(u, 4), low)));
+                v = _mm256_add_epi8(_mm256_shuffle_epi8(nib, _mm256_and_si256(v, low)),
+                                    _mm256_shuffle_epi8(nib, _mm256_and_si256(_mm256_srli_epi16(v, 4), low)));
+                u = _mm256_maddubs_epi16(u, ones); /* byte pairs -> 16 bits */
+                v = _mm256_maddubs_epi16(v, ones);
+                __m256i h = _mm256_hadd_epi16(u, v); /* 32-bit lanes, in-lane order u0-3 v0-3 | u4-7 v4-7 */
+                _mm256_storeu_si256((__m256i*)(p + d), _mm256_permute4x64_epi64(h, 0xD8));
+            }
+        }
+#endif
+        for (; d < n; d++) p[d] = csgm_popcount24(a ^ q[d]);
+        for (d = n; d < D; d++) p[d] = invalid_cost;
     }
 }
 
@@ -300,35 +297,27 @@ typedef struct {
     int16_t* rowC; /* same, current row */
     int16_t* minP; /* 3 x W */
     int16_t* minC;
-    int16_t* hA; /* CSGM_BLOCK x (D + 2): horizontal path costs, per row of a block */
+    int16_t* hA; /* D + 2 */
     int16_t* hB;
     int16_t* zero; /* D + 2 zeros: the "previous pixel" of a path's first pixel */
-    int16_t* ring; /* CSGM_BLOCK x 8 columns x 3 planes x (D + 2): path costs inside a block of rows */
-    int16_t* ringmin; /* CSGM_BLOCK x 8 x 3 */
-    uint16_t* part; /* CSGM_BLOCK x W x D: partial sums when the pass has no volume of its own */
+    uint16_t* part; /* W x D: this pass's partial sum of the row */
     uint16_t* sum;  /* W x D: the row's full sum (finishing) */
-    uint16_t* cbuf; /* D: a pixel's Hamming costs (computed in the pass) */
-    uint32_t* rev;  /* CSGM_BLOCK x W: right census codes reversed */
+    uint16_t* crow; /* W x D: the row's Hamming costs (computed in the pass) */
+    uint32_t* rev;  /* W: right census codes reversed */
     uint16_t* rbc;  /* W: right WTA best cost (reversed x) */
     uint16_t* rbd;  /* W: right WTA best d */
 } csgm_thread;
 
 static size_t csgm_align(size_t n) { return (n + 63) & ~(size_t)63; }
 
-/* Rows a pass processes together, staggered by 2 columns (a wavefront): inside a block, a row reads the
- * path costs of the row before it from a ring of 8 columns (in cache) instead of a full row buffer. */
-#define CSGM_BLOCK 8
-#define CSGM_RING 8
-
 static size_t csgm_scratch_bytes(int W, int D) {
     size_t s = (size_t)D + 2;
     size_t b = 0;
     b += 2 * csgm_align(3 * (size_t)W * s * 2);
     b += 2 * csgm_align(3 * (size_t)W * 2);
-    b += 2 * csgm_align(CSGM_BLOCK * s * 2) + csgm_align(s * 2);
-    b += csgm_align((size_t)CSGM_BLOCK * CSGM_RING * 3 * s * 2) + csgm_align(CSGM_BLOCK * CSGM_RING * 3 * 2);
-    b += csgm_align((size_t)CSGM_BLOCK * W * D * 2) + csgm_align((size_t)W * D * 2) + csgm_align((size_t)D * 2);
-    b += csgm_align((size_t)CSGM_BLOCK * W * 4);
+    b += 3 * csgm_align(s * 2);
+    b += 3 * csgm_align((size_t)W * D * 2);
+    b += csgm_align((size_t)W * 4);
     b += 2 * csgm_align((size_t)W * 2);
     return b + 64;
 }
@@ -343,15 +332,13 @@ static void csgm_thread_init(csgm_thread* t, uint8_t* base, int W, int D) {
     CSGM_TAKE(rowC, int16_t, 3 * (size_t)W * s)
     CSGM_TAKE(minP, int16_t, 3 * (size_t)W)
     CSGM_TAKE(minC, int16_t, 3 * (size_t)W)
-    CSGM_TAKE(hA, int16_t, CSGM_BLOCK * s)
-    CSGM_TAKE(hB, int16_t, CSGM_BLOCK * s)
+    CSGM_TAKE(hA, int16_t, s)
+    CSGM_TAKE(hB, int16_t, s)
     CSGM_TAKE(zero, int16_t, s)
-    CSGM_TAKE(ring, int16_t, (size_t)CSGM_BLOCK * CSGM_RING * 3 * s)
-    CSGM_TAKE(ringmin, int16_t, CSGM_BLOCK * CSGM_RING * 3)
-    CSGM_TAKE(part, uint16_t, (size_t)CSGM_BLOCK * W * D)
+    CSGM_TAKE(part, uint16_t, (size_t)W * D)
     CSGM_TAKE(sum, uint16_t, (size_t)W * D)
-    CSGM_TAKE(cbuf, uint16_t, D)
-    CSGM_TAKE(rev, uint32_t, (size_t)CSGM_BLOCK * W)
+    CSGM_TAKE(crow, uint16_t, (size_t)W * D)
+    CSGM_TAKE(rev, uint32_t, W)
     CSGM_TAKE(rbc, uint16_t, W)
     CSGM_TAKE(rbd, uint16_t, W)
 #undef CSGM_TAKE
@@ -360,208 +347,112 @@ static void csgm_thread_init(csgm_thread* t, uint8_t* base, int W, int D) {
         t->rowP[i * s] = t->rowP[i * s + s - 1] = CSGM_SENT;
         t->rowC[i * s] = t->rowC[i * s + s - 1] = CSGM_SENT;
     }
-    for (size_t i = 0; i < CSGM_BLOCK; i++) {
-        t->hA[i * s] = t->hA[i * s + s - 1] = t->hB[i * s] = t->hB[i * s + s - 1] = CSGM_SENT;
-    }
-    for (size_t i = 0; i < (size_t)CSGM_BLOCK * CSGM_RING * 3; i++) t->ring[i * s] = t->ring[i * s + s - 1] = CSGM_SENT;
+    t->hA[0] = t->hA[s - 1] = t->hB[0] = t->hB[s - 1] = CSGM_SENT;
     memset(t->zero, 0, s * sizeof(int16_t));
 }
 
-/* Where a row's path costs for the row-to-row paths go: the full row buffer (plane j, column x at
- * buf + (j W + x) st) or a ring of CSGM_RING columns (buf + ((x % CSGM_RING) 3 + j) st). */
-typedef struct {
-    int16_t* buf;
-    int16_t* mins;
-    int ring;
-} csgm_rows;
-
-CSGM_INLINE int16_t* csgm_rows_at(const csgm_rows* r, int j, int x, int W, ptrdiff_t st) {
-    return r->ring ? r->buf + (ptrdiff_t)((x & (CSGM_RING - 1)) * 3 + j) * st + 1
-                   : r->buf + ((ptrdiff_t)j * W + x) * st + 1;
-}
-
-CSGM_INLINE int16_t* csgm_rows_min(const csgm_rows* r, int j, int x, int W) {
-    return r->ring ? r->mins + (x & (CSGM_RING - 1)) * 3 + j : r->mins + (ptrdiff_t)j * W + x;
-}
-
-/* Pixel i (in pass order) of one row of a pass (s = +1 forward: x ascending, predecessors in row y - s and
- * column x - s): the 4 (or 2) paths from src (row y - s) into dst, their sum into part (W x D). */
-CSGM_INLINE void csgm_pass_pixel(const csgm_params* p, const uint16_t* CSGM_RESTRICT crow, const uint32_t* rev,
-                                 const uint8_t* grow, const uint8_t* gprev, const csgm_rows* src,
-                                 const csgm_rows* dst, int16_t** hp, int16_t** hc, int16_t* hm, csgm_thread* t,
-                                 int y, int i, int s, int first, uint16_t* CSGM_RESTRICT part) {
+/* Row y of one pass (s = +1 forward: x ascending, predecessors in row y - 1 and x - 1; s = -1 backward).
+ * Writes the row's partial sum (4 or 2 paths) to part (W x D); rowP/minP must hold row y - s (unless first). */
+static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT cost, const uint8_t* CSGM_RESTRICT g,
+                          csgm_thread* t, int y, int s, int first, uint16_t* CSGM_RESTRICT part) {
     const int W = p->W, D = p->D;
     const ptrdiff_t st = (ptrdiff_t)D + 2;
+    const int16_t P1 = (int16_t)p->P1;
     const int16_t* lut = p->p2lut;
     const int eight = p->paths == 8;
-    const int x = s > 0 ? i : W - 1 - i;
-    const int n = x + 1 < D ? x + 1 : D;
-    const int gx = grow[x];
+    const uint16_t* crow;
+    if (cost) {
+        crow = cost + (ptrdiff_t)y * W * D;
+    } else {
+        csgm_hamming_row(p->cl + (ptrdiff_t)y * W, p->cr + (ptrdiff_t)y * W, t->rev, t->crow, W, D, 0);
+        crow = t->crow;
+    }
+    const uint8_t* grow = g + (ptrdiff_t)y * W;
+    const uint8_t* gprev = first ? grow : g + (ptrdiff_t)(y - s) * W;
     const int16_t* zero = t->zero + 1;
-    int16_t pm[4], P2[4], m[4];
-    const int16_t* pv[4];
-    int16_t* cv[4];
-    const uint16_t* C;
-    if (crow) {
-        C = crow + (ptrdiff_t)x * D;
-    } else {
-        csgm_hamming_pixel(p->cl[(ptrdiff_t)y * W + x], rev + (W - 1 - x), t->cbuf, n, D, 0);
-        C = t->cbuf;
-    }
+    int16_t* hp = t->hA + 1;
+    int16_t* hc = t->hB + 1;
+    int16_t hm = 0;
+    const ptrdiff_t plane = (ptrdiff_t)W * st;
+    for (int i = 0; i < W; i++) {
+        const int x = s > 0 ? i : W - 1 - i;
+        const int n = x + 1 < D ? x + 1 : D;
+        const int gx = grow[x];
+        int16_t pm[4], P2[4], m[4];
 #if defined(__AVX2__)
-    if (eight && !first && i > 0 && i < W - 1 && (D & 15) == 0) { /* interior pixel: every path continues */
-        const int xa = x - s, xb = x + s;
-        int16_t *c1, *c2, *c3, *m1, *m2, *m3;
-        const int16_t *q1, *q2, *q3;
-        if (src->ring) {
-            q1 = src->buf + (ptrdiff_t)((xa & (CSGM_RING - 1)) * 3) * st + 1;
-            q2 = src->buf + (ptrdiff_t)((x & (CSGM_RING - 1)) * 3 + 1) * st + 1;
-            q3 = src->buf + (ptrdiff_t)((xb & (CSGM_RING - 1)) * 3 + 2) * st + 1;
-            pm[1] = src->mins[(xa & (CSGM_RING - 1)) * 3];
-            pm[2] = src->mins[(x & (CSGM_RING - 1)) * 3 + 1];
-            pm[3] = src->mins[(xb & (CSGM_RING - 1)) * 3 + 2];
-        } else {
-            q1 = src->buf + (ptrdiff_t)xa * st + 1;
-            q2 = src->buf + ((ptrdiff_t)W + x) * st + 1;
-            q3 = src->buf + ((ptrdiff_t)2 * W + xb) * st + 1;
-            pm[1] = src->mins[xa];
-            pm[2] = src->mins[W + x];
-            pm[3] = src->mins[2 * W + xb];
+        if (eight && !first && i > 0 && i < W - 1 && (D & 15) == 0) { /* interior pixel: every path continues */
+            const int xa = x - s, xb = x + s;
+            int16_t* c1 = t->rowC + (ptrdiff_t)x * st + 1;
+            pm[0] = hm;
+            pm[1] = t->minP[xa];
+            pm[2] = t->minP[W + x];
+            pm[3] = t->minP[2 * W + xb];
+            P2[0] = lut[csgm_absdiff(gx, grow[xa])];
+            P2[1] = lut[csgm_absdiff(gx, gprev[xa])];
+            P2[2] = lut[csgm_absdiff(gx, gprev[x])];
+            P2[3] = lut[csgm_absdiff(gx, gprev[xb])];
+            csgm_step4_avx2(crow + (ptrdiff_t)x * D, hp, t->rowP + (ptrdiff_t)xa * st + 1,
+                            t->rowP + plane + (ptrdiff_t)x * st + 1, t->rowP + 2 * plane + (ptrdiff_t)xb * st + 1, hc,
+                            c1, c1 + plane, c1 + 2 * plane, pm, P2, m, part + (ptrdiff_t)x * D, n, D, P1);
+            t->minC[x] = m[1];
+            t->minC[W + x] = m[2];
+            t->minC[2 * W + x] = m[3];
+            hm = m[0];
+            int16_t* tmp = hp;
+            hp = hc;
+            hc = tmp;
+            continue;
         }
-        if (dst->ring) {
-            c1 = dst->buf + (ptrdiff_t)((x & (CSGM_RING - 1)) * 3) * st + 1;
-            c2 = c1 + st;
-            c3 = c2 + st;
-            m1 = dst->mins + (x & (CSGM_RING - 1)) * 3;
-            m2 = m1 + 1;
-            m3 = m1 + 2;
-        } else {
-            c1 = dst->buf + (ptrdiff_t)x * st + 1;
-            c2 = c1 + (ptrdiff_t)W * st;
-            c3 = c2 + (ptrdiff_t)W * st;
-            m1 = dst->mins + x;
-            m2 = m1 + W;
-            m3 = m2 + W;
-        }
-        pm[0] = *hm;
-        P2[0] = lut[csgm_absdiff(gx, grow[xa])];
-        P2[1] = lut[csgm_absdiff(gx, gprev[xa])];
-        P2[2] = lut[csgm_absdiff(gx, gprev[x])];
-        P2[3] = lut[csgm_absdiff(gx, gprev[xb])];
-        csgm_step4_avx2(C, *hp, q1, q2, q3, *hc, c1, c2, c3, pm, P2, m, part + (ptrdiff_t)x * D, n, D,
-                        (int16_t)p->P1);
-        *m1 = m[1];
-        *m2 = m[2];
-        *m3 = m[3];
-        *hm = m[0];
-        int16_t* tmp = *hp;
-        *hp = *hc;
-        *hc = tmp;
-        return;
-    }
 #endif
-    /* path 0: horizontal from x - s; paths 1..3: from (y - s, x - s * dk), dk = 1, 0, -1 (8 paths)
-     * or path 1: from (y - s, x) (4 paths) */
-    if (i == 0) {
-        pv[0] = zero;
-        pm[0] = 0;
-        P2[0] = 0;
-    } else {
-        pv[0] = *hp;
-        pm[0] = *hm;
-        P2[0] = lut[csgm_absdiff(gx, grow[x - s])];
-    }
-    cv[0] = *hc;
-    const int nk = eight ? 3 : 1;
-    for (int k = 0; k < nk; k++) {
-        const int dk = eight ? 1 - k : 0;
-        const int xp = x - s * dk;
-        cv[k + 1] = csgm_rows_at(dst, k, x, W, st);
-        if (first || xp < 0 || xp >= W) {
-            pv[k + 1] = zero;
-            pm[k + 1] = 0;
-            P2[k + 1] = 0;
+        const int16_t* pv[4];
+        int16_t* cv[4];
+        /* path 0: horizontal from x - s; paths 1..3: from (y - s, x - s * dk), dk = 1, 0, -1 (8 paths)
+         * or path 1: from (y - s, x) (4 paths) */
+        if (i == 0) {
+            pv[0] = zero;
+            pm[0] = 0;
+            P2[0] = 0;
         } else {
-            pv[k + 1] = csgm_rows_at(src, k, xp, W, st);
-            pm[k + 1] = *csgm_rows_min(src, k, xp, W);
-            P2[k + 1] = lut[csgm_absdiff(gx, gprev[xp])];
+            pv[0] = hp;
+            pm[0] = hm;
+            P2[0] = lut[csgm_absdiff(gx, grow[x - s])];
         }
-    }
-    uint16_t* acc = part + (ptrdiff_t)x * D;
-    const int16_t P1 = (int16_t)p->P1;
-    if (eight) {
+        cv[0] = hc;
+        const int nk = eight ? 3 : 1;
+        for (int k = 0; k < nk; k++) {
+            const int dk = eight ? 1 - k : 0;
+            const int xp = x - s * dk;
+            cv[k + 1] = t->rowC + ((ptrdiff_t)k * W + x) * st + 1;
+            if (first || xp < 0 || xp >= W) {
+                pv[k + 1] = zero;
+                pm[k + 1] = 0;
+                P2[k + 1] = 0;
+            } else {
+                pv[k + 1] = t->rowP + ((ptrdiff_t)k * W + xp) * st + 1;
+                pm[k + 1] = t->minP[k * W + xp];
+                P2[k + 1] = lut[csgm_absdiff(gx, gprev[xp])];
+            }
+        }
+        const uint16_t* C = crow + (ptrdiff_t)x * D;
+        uint16_t* acc = part + (ptrdiff_t)x * D;
+        if (eight) {
 #if defined(__AVX2__)
-        if ((D & 15) == 0)
-            csgm_step4_avx2(C, pv[0], pv[1], pv[2], pv[3], cv[0], cv[1], cv[2], cv[3], pm, P2, m, acc, n, D, P1);
-        else
+            if ((D & 15) == 0)
+                csgm_step4_avx2(C, pv[0], pv[1], pv[2], pv[3], cv[0], cv[1], cv[2], cv[3], pm, P2, m, acc, n, D, P1);
+            else
 #endif
-            csgm_step4(C, pv[0], pv[1], pv[2], pv[3], cv[0], cv[1], cv[2], cv[3], pm, P2, m, acc, n, D, P1);
-        for (int k = 0; k < 3; k++) *csgm_rows_min(dst, k, x, W) = m[k + 1];
-    } else {
-        csgm_step2(C, pv[0], pv[1], cv[0], cv[1], pm, P2, m, acc, n, D, P1);
-        *csgm_rows_min(dst, 0, x, W) = m[1];
-    }
-    *hm = m[0];
-    int16_t* tmp = *hp;
-    *hp = *hc;
-    *hc = tmp;
-}
-
-/* Rows i0 .. i0 + kb - 1 (pass order) of one pass as a wavefront: row k handles column index i at step
- * i + 2 k, after row k - 1 has handled i + 1 (its predecessors i - 1, i, i + 1 are then in row k - 1's ring).
- * Row 0 reads t->rowP (the previous block's last row), row kb - 1 writes t->rowC. parts[k]: row k's
- * partial sums (W x D). */
-static void csgm_pass_block(const csgm_params* p, const uint16_t* cost, const uint8_t* g, csgm_thread* t, int s,
-                            int i0, int kb, uint16_t** parts) {
-    const int W = p->W, H = p->H, D = p->D;
-    const ptrdiff_t st = (ptrdiff_t)D + 2;
-    const uint16_t* crow[CSGM_BLOCK];
-    const uint32_t* rev[CSGM_BLOCK];
-    const uint8_t* grow[CSGM_BLOCK];
-    const uint8_t* gprev[CSGM_BLOCK];
-    int16_t* hp[CSGM_BLOCK];
-    int16_t* hc[CSGM_BLOCK];
-    int16_t hm[CSGM_BLOCK];
-    int ys[CSGM_BLOCK];
-    csgm_rows rows[CSGM_BLOCK + 1]; /* rows[k]: where row k - 1's path costs are (rows[0]: previous block) */
-    rows[0].buf = t->rowP;
-    rows[0].mins = t->minP;
-    rows[0].ring = 0;
-    for (int k = 0; k < kb; k++) {
-        const int y = s > 0 ? i0 + k : H - 1 - (i0 + k);
-        ys[k] = y;
-        if (cost) {
-            crow[k] = cost + (ptrdiff_t)y * W * D;
-            rev[k] = NULL;
+                csgm_step4(C, pv[0], pv[1], pv[2], pv[3], cv[0], cv[1], cv[2], cv[3], pm, P2, m, acc, n, D, P1);
+            t->minC[x] = m[1];
+            t->minC[W + x] = m[2];
+            t->minC[2 * W + x] = m[3];
         } else {
-            uint32_t* r = t->rev + (ptrdiff_t)k * W;
-            const uint32_t* cr = p->cr + (ptrdiff_t)y * W;
-            for (int x = 0; x < W; x++) r[x] = cr[W - 1 - x];
-            crow[k] = NULL;
-            rev[k] = r;
+            csgm_step2(C, pv[0], pv[1], cv[0], cv[1], pm, P2, m, acc, n, D, P1);
+            t->minC[x] = m[1];
         }
-        grow[k] = g + (ptrdiff_t)y * W;
-        gprev[k] = i0 + k == 0 ? grow[k] : g + (ptrdiff_t)(y - s) * W;
-        hp[k] = t->hA + k * st + 1;
-        hc[k] = t->hB + k * st + 1;
-        hm[k] = 0;
-        if (k == kb - 1) {
-            rows[k + 1].buf = t->rowC;
-            rows[k + 1].mins = t->minC;
-            rows[k + 1].ring = 0;
-        } else {
-            rows[k + 1].buf = t->ring + (ptrdiff_t)k * CSGM_RING * 3 * st;
-            rows[k + 1].mins = t->ringmin + k * CSGM_RING * 3;
-            rows[k + 1].ring = 1;
-        }
-    }
-    for (int step = 0; step < W + 2 * (kb - 1); step++) {
-        for (int k = 0; k < kb; k++) {
-            const int i = step - 2 * k;
-            if (i < 0 || i >= W) continue;
-            csgm_pass_pixel(p, crow[k], rev[k], grow[k], gprev[k], &rows[k], &rows[k + 1], &hp[k], &hc[k], &hm[k],
-                            t, ys[k], i, s, i0 + k == 0, parts[k]);
-        }
+        hm = m[0];
+        int16_t* tmp = hp;
+        hp = hc;
+        hc = tmp;
     }
     int16_t* tmp = t->rowP;
     t->rowP = t->rowC;
@@ -865,29 +756,21 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const uint16_t
     csgm_lr_row(l, r, lr + (ptrdiff_t)y * W, W, p->tolerance);
 }
 
-/* One pass over all rows (s = +1 top-down, -1 bottom-up), in blocks of CSGM_BLOCK rows.  The pass writes a
- * row's partial sum to own[y] (to its scratch rows when own is NULL: the one-thread backward pass, always
- * second) and counts the row; when the other pass had counted it already, this one finishes the row with
- * other[y]. */
+/* One pass over all rows (s = +1 top-down, -1 bottom-up).  The pass writes a row's partial sum to own[y]
+ * (to its scratch row when own is NULL: the one-thread backward pass, always second) and counts the row;
+ * when the other pass had counted it already, this one finishes the row with other[y]. */
 static void csgm_pass(const csgm_params* p, const uint16_t* cost, const uint8_t* g, csgm_thread* t, int s,
                       uint16_t* own, const uint16_t* other, int* rowcnt, uint16_t* sout, float* dl, float* dr,
                       float* lr) {
     const int H = p->H;
     const ptrdiff_t n = (ptrdiff_t)p->W * p->D;
-    uint16_t* parts[CSGM_BLOCK];
-    for (int i0 = 0; i0 < H; i0 += CSGM_BLOCK) {
-        const int kb = H - i0 < CSGM_BLOCK ? H - i0 : CSGM_BLOCK;
-        for (int k = 0; k < kb; k++) {
-            const int y = s > 0 ? i0 + k : H - 1 - (i0 + k);
-            parts[k] = own ? own + (ptrdiff_t)y * n : t->part + (ptrdiff_t)k * n;
-        }
-        csgm_pass_block(p, cost, g, t, s, i0, kb, parts);
-        for (int k = 0; k < kb; k++) {
-            const int y = s > 0 ? i0 + k : H - 1 - (i0 + k);
-            /* store first, then count: the pass that counts second sees the other's row */
-            if (__atomic_fetch_add(&rowcnt[y], 1, __ATOMIC_ACQ_REL) == 0) continue;
-            csgm_finish_row(p, t, parts[k], other + (ptrdiff_t)y * n, y, sout, dl, dr, lr);
-        }
+    for (int i = 0; i < H; i++) {
+        const int y = s > 0 ? i : H - 1 - i;
+        uint16_t* part = own ? own + (ptrdiff_t)y * n : t->part;
+        csgm_pass_row(p, cost, g, t, y, s, i == 0, part);
+        /* store first, then count: the pass that counts second sees the other's row */
+        if (__atomic_fetch_add(&rowcnt[y], 1, __ATOMIC_ACQ_REL) == 0) continue;
+        csgm_finish_row(p, t, part, other + (ptrdiff_t)y * n, y, sout, dl, dr, lr);
     }
 }
 

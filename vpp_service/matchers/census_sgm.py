@@ -53,14 +53,12 @@ the census of both images (rows in blocks), then the SGM: the forward pass
 (left-to-right plus the three paths from the row above) and the backward
 pass (the four mirrored paths) on two threads at once, each computing the
 Hamming costs of a row as it goes (the cost volume is built only for guided
-stereo) and handling 8 rows at a time as a wavefront (a row reads the path
-costs of the row above from a few columns kept in cache); each row is
-finished (sum of the two passes, left and right WTA, left-right check) by
-whichever pass reaches it second; then the median on row blocks. So the
-aggregation uses at most two threads. The matcher keeps its buffers (census
-codes, partial sums, the cost volume once guided stereo needed it) between
-calls and reallocates them only when the image size, ``max_disparity`` or
-the thread count changes.
+stereo); each row is finished (sum of the two passes, left and right WTA,
+left-right check) by whichever pass reaches it second; then the median on
+row blocks. So the aggregation uses at most two threads. The matcher keeps
+its buffers (census codes, partial sums, the cost volume once guided stereo
+needed it) between calls and reallocates them only when the image size,
+``max_disparity`` or the thread count changes.
 
 Speed: ``benchmarks/bench_matchers.py`` times the matcher and each of its
 stages; the latest numbers are in ``benchmarks/results/bench_matchers.json``.
