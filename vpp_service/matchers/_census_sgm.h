@@ -293,13 +293,13 @@ typedef struct {
 
 /* Per-thread scratch (bytes), see csgm_scratch_bytes. */
 typedef struct {
-    int16_t* rowP; /* 3 planes x W x (D + 2): path costs of the previous row */
+    int16_t* rowP; /* 3 planes x W x csgm_stride(D): path costs of the previous row */
     int16_t* rowC; /* same, current row */
     int16_t* minP; /* 3 x W */
     int16_t* minC;
-    int16_t* hA; /* D + 2 */
+    int16_t* hA; /* csgm_stride(D) */
     int16_t* hB;
-    int16_t* zero; /* D + 2 zeros: the "previous pixel" of a path's first pixel */
+    int16_t* zero; /* csgm_stride(D) zeros: the "previous pixel" of a path's first pixel */
     uint16_t* part; /* W x D: this pass's partial sum of the row */
     uint16_t* sum;  /* W x D: the row's full sum (finishing) */
     uint16_t* crow; /* W x D: the row's Hamming costs (computed in the pass) */
@@ -310,8 +310,13 @@ typedef struct {
 
 static size_t csgm_align(size_t n) { return (n + 63) & ~(size_t)63; }
 
+/* A pixel's path costs in a buffer: CSGM_OFF int16 of which the last is the sentinel left of d = 0, the D
+ * costs (32-byte aligned when D is a multiple of 16), the sentinel right of d = D - 1, padding. */
+#define CSGM_OFF 16
+static size_t csgm_stride(int D) { return ((size_t)D + CSGM_OFF + 1 + 15) & ~(size_t)15; }
+
 static size_t csgm_scratch_bytes(int W, int D) {
-    size_t s = (size_t)D + 2;
+    size_t s = csgm_stride(D);
     size_t b = 0;
     b += 2 * csgm_align(3 * (size_t)W * s * 2);
     b += 2 * csgm_align(3 * (size_t)W * 2);
@@ -323,7 +328,7 @@ static size_t csgm_scratch_bytes(int W, int D) {
 }
 
 static void csgm_thread_init(csgm_thread* t, uint8_t* base, int W, int D) {
-    size_t s = (size_t)D + 2;
+    size_t s = csgm_stride(D);
     uint8_t* p = (uint8_t*)(((uintptr_t)base + 63) & ~(uintptr_t)63);
 #define CSGM_TAKE(field, type, count)        \
     t->field = (type*)p;                     \
@@ -344,10 +349,10 @@ static void csgm_thread_init(csgm_thread* t, uint8_t* base, int W, int D) {
 #undef CSGM_TAKE
     /* sentinels left of d = 0 and right of d = D - 1 (never overwritten) */
     for (size_t i = 0; i < 3 * (size_t)W; i++) {
-        t->rowP[i * s] = t->rowP[i * s + s - 1] = CSGM_SENT;
-        t->rowC[i * s] = t->rowC[i * s + s - 1] = CSGM_SENT;
+        t->rowP[i * s + CSGM_OFF - 1] = t->rowP[i * s + CSGM_OFF + D] = CSGM_SENT;
+        t->rowC[i * s + CSGM_OFF - 1] = t->rowC[i * s + CSGM_OFF + D] = CSGM_SENT;
     }
-    t->hA[0] = t->hA[s - 1] = t->hB[0] = t->hB[s - 1] = CSGM_SENT;
+    t->hA[CSGM_OFF - 1] = t->hA[CSGM_OFF + D] = t->hB[CSGM_OFF - 1] = t->hB[CSGM_OFF + D] = CSGM_SENT;
     memset(t->zero, 0, s * sizeof(int16_t));
 }
 
@@ -356,7 +361,7 @@ static void csgm_thread_init(csgm_thread* t, uint8_t* base, int W, int D) {
 static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT cost, const uint8_t* CSGM_RESTRICT g,
                           csgm_thread* t, int y, int s, int first, uint16_t* CSGM_RESTRICT part) {
     const int W = p->W, D = p->D;
-    const ptrdiff_t st = (ptrdiff_t)D + 2;
+    const ptrdiff_t st = (ptrdiff_t)csgm_stride(D);
     const int16_t P1 = (int16_t)p->P1;
     const int16_t* lut = p->p2lut;
     const int eight = p->paths == 8;
@@ -369,9 +374,9 @@ static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT co
     }
     const uint8_t* grow = g + (ptrdiff_t)y * W;
     const uint8_t* gprev = first ? grow : g + (ptrdiff_t)(y - s) * W;
-    const int16_t* zero = t->zero + 1;
-    int16_t* hp = t->hA + 1;
-    int16_t* hc = t->hB + 1;
+    const int16_t* zero = t->zero + CSGM_OFF;
+    int16_t* hp = t->hA + CSGM_OFF;
+    int16_t* hc = t->hB + CSGM_OFF;
     int16_t hm = 0;
     const ptrdiff_t plane = (ptrdiff_t)W * st;
     for (int i = 0; i < W; i++) {
@@ -382,7 +387,7 @@ static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT co
 #if defined(__AVX2__)
         if (eight && !first && i > 0 && i < W - 1 && (D & 15) == 0) { /* interior pixel: every path continues */
             const int xa = x - s, xb = x + s;
-            int16_t* c1 = t->rowC + (ptrdiff_t)x * st + 1;
+            int16_t* c1 = t->rowC + (ptrdiff_t)x * st + CSGM_OFF;
             pm[0] = hm;
             pm[1] = t->minP[xa];
             pm[2] = t->minP[W + x];
@@ -391,8 +396,9 @@ static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT co
             P2[1] = lut[csgm_absdiff(gx, gprev[xa])];
             P2[2] = lut[csgm_absdiff(gx, gprev[x])];
             P2[3] = lut[csgm_absdiff(gx, gprev[xb])];
-            csgm_step4_avx2(crow + (ptrdiff_t)x * D, hp, t->rowP + (ptrdiff_t)xa * st + 1,
-                            t->rowP + plane + (ptrdiff_t)x * st + 1, t->rowP + 2 * plane + (ptrdiff_t)xb * st + 1, hc,
+            csgm_step4_avx2(crow + (ptrdiff_t)x * D, hp, t->rowP + (ptrdiff_t)xa * st + CSGM_OFF,
+                            t->rowP + plane + (ptrdiff_t)x * st + CSGM_OFF,
+                            t->rowP + 2 * plane + (ptrdiff_t)xb * st + CSGM_OFF, hc,
                             c1, c1 + plane, c1 + 2 * plane, pm, P2, m, part + (ptrdiff_t)x * D, n, D, P1);
             t->minC[x] = m[1];
             t->minC[W + x] = m[2];
@@ -422,13 +428,13 @@ static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT co
         for (int k = 0; k < nk; k++) {
             const int dk = eight ? 1 - k : 0;
             const int xp = x - s * dk;
-            cv[k + 1] = t->rowC + ((ptrdiff_t)k * W + x) * st + 1;
+            cv[k + 1] = t->rowC + ((ptrdiff_t)k * W + x) * st + CSGM_OFF;
             if (first || xp < 0 || xp >= W) {
                 pv[k + 1] = zero;
                 pm[k + 1] = 0;
                 P2[k + 1] = 0;
             } else {
-                pv[k + 1] = t->rowP + ((ptrdiff_t)k * W + xp) * st + 1;
+                pv[k + 1] = t->rowP + ((ptrdiff_t)k * W + xp) * st + CSGM_OFF;
                 pm[k + 1] = t->minP[k * W + xp];
                 P2[k + 1] = lut[csgm_absdiff(gx, gprev[xp])];
             }
