@@ -301,7 +301,7 @@ typedef struct {
     int16_t* hB;
     int16_t* zero; /* csgm_stride(D) zeros: the "previous pixel" of a path's first pixel */
     uint16_t* part; /* W x D: this pass's partial sum of the row */
-    uint16_t* sum;  /* W x D: the row's full sum (finishing) */
+    uint16_t* sum;  /* D: a pixel's full sum (finishing a row) */
     uint16_t* crow; /* W x D: the row's Hamming costs (computed in the pass) */
     uint32_t* rev;  /* W: right census codes reversed */
     uint16_t* rbc;  /* W: right WTA best cost (reversed x) */
@@ -321,7 +321,7 @@ static size_t csgm_scratch_bytes(int W, int D) {
     b += 2 * csgm_align(3 * (size_t)W * s * 2);
     b += 2 * csgm_align(3 * (size_t)W * 2);
     b += 3 * csgm_align(s * 2);
-    b += 3 * csgm_align((size_t)W * D * 2);
+    b += 2 * csgm_align((size_t)W * D * 2) + csgm_align((size_t)D * 2); /* part, crow; sum */
     b += csgm_align((size_t)W * 4);
     b += 2 * csgm_align((size_t)W * 2);
     return b + 64;
@@ -341,7 +341,7 @@ static void csgm_thread_init(csgm_thread* t, uint8_t* base, int W, int D) {
     CSGM_TAKE(hB, int16_t, s)
     CSGM_TAKE(zero, int16_t, s)
     CSGM_TAKE(part, uint16_t, (size_t)W * D)
-    CSGM_TAKE(sum, uint16_t, (size_t)W * D)
+    CSGM_TAKE(sum, uint16_t, D)
     CSGM_TAKE(crow, uint16_t, (size_t)W * D)
     CSGM_TAKE(rev, uint32_t, W)
     CSGM_TAKE(rbc, uint16_t, W)
@@ -517,12 +517,15 @@ CSGM_INLINE float csgm_wta_pixel(const uint16_t* CSGM_RESTRICT c, int n, int D, 
             const __m256i bias = _mm256_set1_epi16((int16_t)0x8000);
             const __m256i two = _mm256_set1_epi16((int16_t)(2 ^ 0x8000));
             __m256i vs = _mm256_set1_epi16(-1);
+            const int blo = (b > 0 ? b - 1 : 0) >> 4, bhi = (b + 1) >> 4; /* the blocks holding b - 1 .. b + 1 */
             for (; d + 16 <= n; d += 16) {
-                __m256i rel = _mm256_sub_epi16(_mm256_add_epi16(lane, _mm256_set1_epi16((int16_t)d)),
-                                               _mm256_set1_epi16((int16_t)(b - 1)));
-                __m256i out = _mm256_cmpgt_epi16(_mm256_xor_si256(rel, bias), two); /* rel > 2 unsigned */
-                __m256i v = _mm256_or_si256(_mm256_loadu_si256((const __m256i*)(c + d)),
-                                            _mm256_andnot_si256(out, _mm256_set1_epi16(-1)));
+                __m256i v = _mm256_loadu_si256((const __m256i*)(c + d));
+                if ((d >> 4) == blo || (d >> 4) == bhi) {
+                    __m256i rel = _mm256_sub_epi16(_mm256_add_epi16(lane, _mm256_set1_epi16((int16_t)d)),
+                                                   _mm256_set1_epi16((int16_t)(b - 1)));
+                    __m256i out = _mm256_cmpgt_epi16(_mm256_xor_si256(rel, bias), two); /* rel > 2 unsigned */
+                    v = _mm256_or_si256(v, _mm256_andnot_si256(out, _mm256_set1_epi16(-1)));
+                }
                 vs = _mm256_min_epu16(vs, v);
             }
             __m128i h = _mm_min_epu16(_mm256_castsi256_si128(vs), _mm256_extracti128_si256(vs, 1));
@@ -553,6 +556,33 @@ static void csgm_wta_row(const uint16_t* CSGM_RESTRICT S, float* CSGM_RESTRICT o
 
 /* Right WTA of one row: out[xr] = argmin_d S[xr + d][d] (lowest d on ties), as a running minimum along
  * the diagonals while x ascends.  rbc, rbd: W scratch entries. */
+/* Right WTA, one left pixel x (costs c, n valid): bc[d], bd[d] (right pixel x - d, reversed) keep the lowest
+ * cost and its d; x ascends, so the strict < keeps the lowest d on ties. */
+CSGM_INLINE void csgm_right_pixel(const uint16_t* CSGM_RESTRICT c, int n, uint16_t* CSGM_RESTRICT bc,
+                                  uint16_t* CSGM_RESTRICT bd) {
+    int d = 0;
+#if defined(__AVX2__)
+    {
+        const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+        const __m256i bias = _mm256_set1_epi16((int16_t)0x8000);
+        for (; d + 16 <= n; d += 16) {
+            const __m256i v = _mm256_loadu_si256((const __m256i*)(c + d));
+            const __m256i o = _mm256_loadu_si256((const __m256i*)(bc + d));
+            const __m256i lt = _mm256_cmpgt_epi16(_mm256_xor_si256(o, bias), _mm256_xor_si256(v, bias));
+            const __m256i dv = _mm256_add_epi16(lane, _mm256_set1_epi16((int16_t)d));
+            _mm256_storeu_si256((__m256i*)(bd + d),
+                                _mm256_blendv_epi8(_mm256_loadu_si256((const __m256i*)(bd + d)), dv, lt));
+            _mm256_storeu_si256((__m256i*)(bc + d), _mm256_min_epu16(v, o));
+        }
+    }
+#endif
+    for (; d < n; d++) {
+        const uint16_t v = c[d], o = bc[d];
+        bd[d] = v < o ? (uint16_t)d : bd[d];
+        bc[d] = v < o ? v : o;
+    }
+}
+
 static void csgm_right_row(const uint16_t* CSGM_RESTRICT S, float* CSGM_RESTRICT out, int W, int D,
                            uint16_t* CSGM_RESTRICT rbc, uint16_t* CSGM_RESTRICT rbd) {
     for (int i = 0; i < W; i++) {
@@ -560,31 +590,8 @@ static void csgm_right_row(const uint16_t* CSGM_RESTRICT S, float* CSGM_RESTRICT
         rbd[i] = 0;
     }
     for (int x = 0; x < W; x++) {
-        const uint16_t* CSGM_RESTRICT c = S + (ptrdiff_t)x * D;
         const int n = x + 1 < D ? x + 1 : D;
-        uint16_t* CSGM_RESTRICT bc = rbc + (W - 1 - x); /* bc[d] is right pixel x - d (reversed) */
-        uint16_t* CSGM_RESTRICT bd = rbd + (W - 1 - x);
-        int d = 0;
-#if defined(__AVX2__)
-        {
-            const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-            const __m256i bias = _mm256_set1_epi16((int16_t)0x8000);
-            for (; d + 16 <= n; d += 16) {
-                const __m256i v = _mm256_loadu_si256((const __m256i*)(c + d));
-                const __m256i o = _mm256_loadu_si256((const __m256i*)(bc + d));
-                const __m256i lt = _mm256_cmpgt_epi16(_mm256_xor_si256(o, bias), _mm256_xor_si256(v, bias));
-                const __m256i dv = _mm256_add_epi16(lane, _mm256_set1_epi16((int16_t)d));
-                _mm256_storeu_si256((__m256i*)(bd + d),
-                                    _mm256_blendv_epi8(_mm256_loadu_si256((const __m256i*)(bd + d)), dv, lt));
-                _mm256_storeu_si256((__m256i*)(bc + d), _mm256_min_epu16(v, o));
-            }
-        }
-#endif
-        for (; d < n; d++) {
-            const uint16_t v = c[d], o = bc[d];
-            bd[d] = v < o ? (uint16_t)d : bd[d];
-            bc[d] = v < o ? v : o;
-        }
+        csgm_right_pixel(S + (ptrdiff_t)x * D, n, rbc + (W - 1 - x), rbd + (W - 1 - x));
     }
     for (int xr = 0; xr < W; xr++) out[xr] = (float)rbd[W - 1 - xr];
 }
@@ -743,22 +750,39 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const uint16_t
                             float* lr) {
     const int W = p->W, D = p->D;
     const ptrdiff_t n = (ptrdiff_t)W * D;
-    uint16_t* CSGM_RESTRICT S = sout ? sout + (ptrdiff_t)y * n : t->sum;
-    for (ptrdiff_t i = 0; i < n; i++) S[i] = (uint16_t)(a[i] + b[i]);
     if (sout) {
+        uint16_t* CSGM_RESTRICT S = sout + (ptrdiff_t)y * n;
+        for (ptrdiff_t i = 0; i < n; i++) S[i] = (uint16_t)(a[i] + b[i]);
         for (int x = 0; x < W && x < D - 1; x++)
             for (int d = x + 1; d < D; d++) S[(ptrdiff_t)x * D + d] = CSGM_NOCOST;
         return;
     }
-    if (!dl) return; /* aggregation only (timing) */
-    float* l = dl + (ptrdiff_t)y * W;
-    csgm_wta_row(S, l, W, D, p->uniqueness, p->subpixel);
-    if (!p->lr_check) {
+    /* pixel by pixel: its sum S (D entries, in L1), left WTA, right WTA update */
+    uint16_t* CSGM_RESTRICT S = t->sum;
+    float* l = dl ? dl + (ptrdiff_t)y * W : NULL;
+    const int right = l && p->lr_check;
+    if (right) {
+        for (int i = 0; i < W; i++) {
+            t->rbc[i] = 0xFFFFu;
+            t->rbd[i] = 0;
+        }
+    }
+    for (int x = 0; x < W; x++) {
+        const uint16_t* CSGM_RESTRICT ax = a + (ptrdiff_t)x * D;
+        const uint16_t* CSGM_RESTRICT bx = b + (ptrdiff_t)x * D;
+        const int nv = x + 1 < D ? x + 1 : D;
+        for (int d = 0; d < D; d++) S[d] = (uint16_t)(ax[d] + bx[d]);
+        if (!l) continue; /* aggregation only (timing) */
+        l[x] = csgm_wta_pixel(S, nv, D, p->uniqueness, p->subpixel);
+        if (right) csgm_right_pixel(S, nv, t->rbc + (W - 1 - x), t->rbd + (W - 1 - x));
+    }
+    if (!l) return;
+    if (!right) {
         if (lr != l) memcpy(lr + (ptrdiff_t)y * W, l, (size_t)W * sizeof(float));
         return;
     }
     float* r = dr + (ptrdiff_t)y * W;
-    csgm_right_row(S, r, W, D, t->rbc, t->rbd);
+    for (int xr = 0; xr < W; xr++) r[xr] = (float)t->rbd[W - 1 - xr];
     csgm_lr_row(l, r, lr + (ptrdiff_t)y * W, W, p->tolerance);
 }
 
