@@ -541,9 +541,12 @@ class CensusSGM(Matcher):
                 own_cost = True
             if cost.max(initial=0) > COST_CAP:
                 cost = np.minimum(cost, COST_CAP, out=cost if own_cost else None)
+        # The kernel runs the median in its parallel region; a step that must run between the left-right
+        # check and the median sets fused_median False and runs after the kernel, before median_filter3x3.
+        fused_median = o.median
         out = np.empty(gray.shape, np.float32)
-        lr = ws.lr if o.median else out
-        dl = ws.dl if (o.median or o.lr_check) else out
+        lr = ws.lr if fused_median else out
+        dl = ws.dl if (fused_median or o.lr_check) else out
         _k.sgm_stage(
             _NO_VOLUME if cost is None else cost,
             ws.cl,
@@ -562,7 +565,7 @@ class CensusSGM(Matcher):
             bool(o.subpixel),
             bool(o.lr_check),
             float(o.lr_tolerance),
-            bool(o.median),
+            fused_median,
             ws.vf,
             ws.vb,
             ws.rowcnt,
@@ -575,6 +578,8 @@ class CensusSGM(Matcher):
             cost is not None,
             t,
         )
+        if o.median and not fused_median:
+            out = median_filter3x3(out, t)
         if o.speckle_size:
             out = remove_speckles(out, o.speckle_size, o.speckle_diff)
         return out
