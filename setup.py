@@ -42,6 +42,14 @@ x86 = platform.machine().lower() in ("x86_64", "amd64") and sys.platform != "win
 # portable one (and the reference) does.
 avx2_args = ["-mavx2", "-mfma", "-mbmi", "-mbmi2", "-mlzcnt", "-mpopcnt", "-mf16c", "-mmovbe", "-ffp-contract=off"]
 
+
+def sources_text(pyx: Path) -> str:
+    """The text of ``pyx`` and, for an ``_avx2`` module, of the portable source it includes (headers named there)."""
+    text = pyx.read_text(encoding="utf-8")
+    base = pyx.with_name(pyx.name.replace("_avx2", ""))
+    return text + (base.read_text(encoding="utf-8") if base != pyx else "")
+
+
 extensions = []
 for pyx in sorted((ROOT / "vpp_service").rglob("*.pyx")):
     module = ".".join(pyx.relative_to(ROOT).with_suffix("").parts)
@@ -52,7 +60,7 @@ for pyx in sorted((ROOT / "vpp_service").rglob("*.pyx")):
         Extension(
             module,
             [str(pyx.relative_to(ROOT))],
-            depends=[str(h.relative_to(ROOT)) for h in pyx.parent.glob("*.h")]
+            depends=[str(h.relative_to(ROOT)) for h in pyx.parent.glob("*.h") if h.name in sources_text(pyx)]
             + ([str(pyx.with_name(pyx.name.replace("_avx2", "")).relative_to(ROOT))] if avx2 else []),
             include_dirs=[np.get_include()],
             define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],

@@ -1,20 +1,37 @@
 """Benchmark of the stereo matchers: milliseconds per frame.
 
-Frames: a textured RGB pair at Middlebury-third size 450x375 (D = 128) and
-KITTI size 1242x375 (D = 192; 1241x376 in the data, rounded for OpenCV's
-16-multiples it makes no difference). Matchers: ``sgbm`` (3-way), ``bm``,
+Frames: a textured RGB pair at Middlebury-third size 450x375 and KITTI size
+1242x375 (1241x376 in the data, rounded for OpenCV's 16-multiples it makes no
+difference), both with D = 128. Matchers: ``sgbm`` (3-way), ``bm``,
 ``census-sgm`` with 8 and 4 paths, and ``census-sgm`` + guided stereo
 (5 % hints). Census-SGM runs with 1 thread and with all threads; OpenCV uses
-its own threading. Each entry is the median over ``--reps`` runs after one
-warm-up run (the first call also pays page faults for the cost volumes).
-Also reports the census-SGM stages at 1 thread. Prints a table and writes
-JSON (default ``out/benchmarks/bench_matchers.json``; ``--update-committed`` writes
-``benchmarks/results/bench_matchers.json``).
+``cv2.setNumThreads(2)``. Each entry is the median over ``--reps`` runs after
+one warm-up run (the matcher keeps its buffers, so only the warm-up pays the
+page faults).
+
+Head to head (KITTI, 8 paths): census-SGM on 1 and on 2 threads against
+OpenCV SGBM 3-way on 2 threads, interleaved (one run of each per round, so
+all three see the same machine state): medians, the interquartile range and
+the per-round ratios (census-SGM 2 threads / SGBM, 1 thread / 2 threads).
+
+Stages of census-SGM at 1 thread (KITTI), each kernel on buffers allocated
+once, interleaved too: census of both images; the Hamming cost volume (the
+matcher computes the costs inside the SGM passes, row by row, unless guided
+stereo needs the volume); the 8-path aggregation from a stored volume and
+with the costs computed in the passes; the SGM stage with the left
+winner-takes-all, then also the right one and the left-right check, then
+also the median (the steps' times are the per-round differences: the stage
+finishes each row while it is in cache); and the WTA, left-right check and
+median kernels alone on stored volumes / maps.
+
+Prints tables and writes JSON (default ``out/benchmarks/bench_matchers.json``;
+``--update-committed`` writes ``benchmarks/results/bench_matchers.json``).
 """
 
 from __future__ import annotations
 
 import argparse
+import time
 from collections.abc import Callable, Sequence
 from functools import partial
 
@@ -24,7 +41,9 @@ from _harness import add_output_args, median_ms, output_path, write_report
 
 from vpp_service.threads import configure_openmp, resolve_threads
 
-SIZES = {"midd_third": (375, 450, 128), "kitti": (375, 1242, 192)}
+SIZES = {"midd_third": (375, 450, 128), "kitti": (375, 1242, 128)}
+#: OpenCV's threads (the head-to-head compares with 2).
+CV_THREADS = 2
 
 
 #: One result row of the JSON report.
@@ -86,45 +105,162 @@ def matcher_rows(size: str, reps: int, all_threads: int) -> list[Row]:
     return rows
 
 
-def stage_rows(size: str, reps: int) -> list[Row]:
-    """Time the census-SGM stages at 1 thread on the ``size`` scene; print and return the rows."""
+def interleaved_ms(calls: dict[str, Callable[[], object]], reps: int) -> dict[str, np.ndarray]:
+    """Wall times (ms) of each call, ``reps`` rounds of one run each in turn, after one warm-up run each."""
+    for fn in calls.values():
+        fn()
+    out: dict[str, list[float]] = {k: [] for k in calls}
+    for _ in range(reps):
+        for k, fn in calls.items():
+            t = time.perf_counter()
+            fn()
+            out[k].append((time.perf_counter() - t) * 1e3)
+    return {k: np.asarray(v) for k, v in out.items()}
+
+
+def spread(ts: np.ndarray) -> dict[str, float]:
+    """Median, quartiles and extremes of ``ts``."""
+    q1, med, q3 = np.percentile(ts, [25, 50, 75])
+    return {"ms": float(med), "p25": float(q1), "p75": float(q3), "min": float(ts.min()), "max": float(ts.max())}
+
+
+def versus_rows(reps: int) -> list[Row]:
+    """Census-SGM (8 paths) on 1 and 2 threads vs OpenCV SGBM 3-way on 2 threads, KITTI, interleaved."""
+    from vpp_service.matchers import build_matcher
+
+    H, W, D = SIZES["kitti"]
+    left, right, _ = scene(H, W)
+    m1 = build_matcher("census-sgm", {"max_disparity": D, "threads": 1})
+    m2 = build_matcher("census-sgm", {"max_disparity": D, "threads": 2})
+    sgbm = build_matcher("sgbm", {"max_disparity": D})
+    ts = interleaved_ms(
+        {
+            "sgbm 3-way, 2 thr": partial(sgbm.compute, left, right),
+            "census-sgm, 1 thr": partial(m1.compute, left, right),
+            "census-sgm, 2 thr": partial(m2.compute, left, right),
+        },
+        reps,
+    )
+    rows: list[Row] = []
+    print(f"\nKITTI {W}x{H}, D = {D}, 8 paths, interleaved, {reps} rounds")
+    print(f"{'':22s} {'median':>8s} {'p25':>8s} {'p75':>8s} {'min':>8s} {'max':>8s}")
+    for k, v in ts.items():
+        st = spread(v)
+        print(f"{k:22s} {st['ms']:8.1f} {st['p25']:8.1f} {st['p75']:8.1f} {st['min']:8.1f} {st['max']:8.1f}")
+        rows.append({"size": "kitti", "width": W, "height": H, "max_disparity": D, "versus": k, **st})
+    ratio = ts["census-sgm, 2 thr"] / ts["sgbm 3-way, 2 thr"]
+    speedup = ts["census-sgm, 1 thr"] / ts["census-sgm, 2 thr"]
+    for name, r in (("census-sgm 2 thr / sgbm", ratio), ("census-sgm 1 thr / 2 thr", speedup)):
+        q1, med, q3 = np.percentile(r, [25, 50, 75])
+        print(f"{name:26s} median {med:5.2f}  (p25 {q1:5.2f}, p75 {q3:5.2f}), per round")
+        rows.append({"size": "kitti", "ratio": name, "median": float(med), "p25": float(q1), "p75": float(q3)})
+    return rows
+
+
+def stage_rows(reps: int) -> list[Row]:
+    """Time the census-SGM kernels at 1 thread on the KITTI scene, on buffers allocated once; print, return rows."""
     from vpp_service.matchers import census_sgm as cs
     from vpp_service.matchers.base import to_gray
 
-    H, W, D = SIZES[size]
+    k = cs._k  # the build in use
+    H, W, D = SIZES["kitti"]
     left, right, _ = scene(H, W)
     gl, gr = to_gray(left), to_gray(right)
-    cl, cr = cs.census_transform(gl, 1), cs.census_transform(gr, 1)
-    cost = cs.hamming_cost_volume(cl, cr, D, 1)
+    o = cs.CensusSGMOptions(max_disparity=D)
+    lut = cs.p2_table(o.p1, o.p2_min, o.p2_alpha, o.p2_gamma)
+    padl, padr = np.empty((H + 4, W + 4), np.uint8), np.empty((H + 4, W + 4), np.uint8)
+    cl, cr = np.empty((H, W), np.uint32), np.empty((H, W), np.uint32)
+    work = np.empty(k.cost_work_bytes(W, 1), np.uint8)
+    cost = np.empty((H, W, D), np.uint16)
+    k.cost_stage(gl, gr, padl, padr, cl, cr, cost, cs.INVALID_COST, work, True, 1)
+    vf, vb = np.empty((H, W, D), np.uint16), np.empty((1, 1, 1), np.uint16)
+    rowcnt, scratch = np.empty(H, np.intc), np.empty(2 * k.scratch_bytes(W, D) + 64, np.uint8)
+    dl, dr, lr, out = (np.empty((H, W), np.float32) for _ in range(4))
+    mpad = np.empty((H + 2, W + 2), np.float32)
     agg = cs.aggregate_costs(cost, gl, 8, threads=1)
-    dl = cs.select_disparity(agg, threads=1)
-    dr = cs.right_disparity(agg, 1)
+    k.winner_takes_all(agg, dl, o.uniqueness, o.subpixel, 1)
+    k.right_disparity(agg, dr, 1)
+    k.left_right_check(dl, dr, lr, o.lr_tolerance, 1)
+
+    def sgm(*, volume: bool, wta: bool = True, lr_check: bool = True, median: bool = True) -> Callable[[], None]:
+        def run() -> None:
+            k.sgm_stage(
+                cost,
+                cl,
+                cr,
+                D,
+                gl,
+                gr,
+                padl,
+                padr,
+                work,
+                False,
+                8,
+                o.p1,
+                lut,
+                o.uniqueness,
+                o.subpixel,
+                lr_check,
+                o.lr_tolerance,
+                median,
+                vf,
+                vb,
+                rowcnt,
+                scratch,
+                dl,
+                dr,
+                lr,
+                mpad,
+                out,
+                volume,
+                1,
+                wta,
+            )
+
+        return run
+
     stages: dict[str, Callable[[], object]] = {
-        "census x2": lambda: (cs.census_transform(gl, 1), cs.census_transform(gr, 1)),
-        "hamming": lambda: cs.hamming_cost_volume(cl, cr, D, 1),
-        "aggregate 8": lambda: cs.aggregate_costs(cost, gl, 8, threads=1),
-        "aggregate 4": lambda: cs.aggregate_costs(cost, gl, 4, threads=1),
-        "wta": lambda: cs.select_disparity(agg, threads=1),
-        "right wta": lambda: cs.right_disparity(agg, 1),
-        "lr check": lambda: cs.left_right_check(dl, dr, 1.0, 1),
-        "median": lambda: cs.median_filter3x3(dl, 1),
+        "census x2": lambda: k.cost_stage(gl, gr, padl, padr, cl, cr, cost, cs.INVALID_COST, work, False, 1),
+        "cost volume": lambda: k.hamming_volume(cl, cr, cost, cs.INVALID_COST, 1),
+        "aggregation 8": sgm(volume=True, wta=False),
+        "aggregation 8 + costs": sgm(volume=False, wta=False),
+        "+ wta left": sgm(volume=False, lr_check=False, median=False),
+        "+ wta right, lr": sgm(volume=False, median=False),
+        "+ median": sgm(volume=False),
+        "wta left (volume)": lambda: k.winner_takes_all(agg, dl, o.uniqueness, o.subpixel, 1),
+        "wta right (volume)": lambda: k.right_disparity(agg, dr, 1),
+        "lr check": lambda: k.left_right_check(dl, dr, lr, o.lr_tolerance, 1),
+        "median": lambda: k.median3x3(lr, out, 1),
     }
+    ts = interleaved_ms(stages, reps)
+    print(f"\ncensus-sgm stages, KITTI {W}x{H}, D = {D}, 1 thread, {'AVX2' if k.AVX2 else 'portable'} build")
     rows: list[Row] = []
-    for stage, fn in stages.items():
-        ms = median_ms(fn, reps)
-        print(f"{size:11s} {W:4d}x{H:<4d} {D:4d} {'  stage ' + stage:22s} {1:>4d} {ms:9.1f}")
+    for stage, v in ts.items():
+        st = spread(v)
+        print(f"  {stage:28s} {st['ms']:8.1f} ms  (p25 {st['p25']:.1f}, p75 {st['p75']:.1f})")
         rows.append(
             {
-                "size": size,
+                "size": "kitti",
                 "width": W,
                 "height": H,
                 "max_disparity": D,
                 "matcher": "census-sgm",
                 "stage": stage,
                 "threads": 1,
-                "ms": ms,
+                "avx2": bool(k.AVX2),
+                **st,
             }
         )
+    # the SGM stage's steps as it runs them (rows finished in cache): per-round differences
+    steps = {
+        "wta left, in sgm": ts["+ wta left"] - ts["aggregation 8 + costs"],
+        "wta both views + lr, in sgm": ts["+ wta right, lr"] - ts["aggregation 8 + costs"],
+        "median, in sgm": ts["+ median"] - ts["+ wta right, lr"],
+    }
+    for stage, v in steps.items():
+        med = float(np.median(v))
+        print(f"  {stage:28s} {med:8.1f} ms  (difference per round)")
+        rows.append({"size": "kitti", "matcher": "census-sgm", "stage": stage, "threads": 1, "ms": med})
     return rows
 
 
@@ -133,18 +269,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     add_output_args(ap, "bench_matchers")
     ap.add_argument("--reps", type=int, default=5)
-    ap.add_argument("--quick", action="store_true", help="Middlebury size only, 3 reps")
+    ap.add_argument("--versus-reps", type=int, default=15, help="rounds of the interleaved head to head")
+    ap.add_argument("--quick", action="store_true", help="Middlebury size only, 3 reps, no head to head")
+    ap.add_argument(
+        "--part", choices=("all", "versus", "stages"), default="all", help="run only the head to head or the stages"
+    )
     a = ap.parse_args(argv)
     configure_openmp()  # the service's OpenMP wait policy; before the kernels load
+    cv2.setNumThreads(CV_THREADS)
     reps = 3 if a.quick else a.reps
     allt = resolve_threads(None)
     sizes = ["midd_third"] if a.quick else list(SIZES)
     rows: list[Row] = []
     print(f"{'size':11s} {'WxH':>9s} {'D':>4s} {'matcher':22s} {'thr':>4s} {'ms':>9s}")
-    for size in sizes:
-        rows += matcher_rows(size, reps, allt)
-        rows += stage_rows(size, reps)
-    out = write_report(output_path(a, "bench_matchers"), rows, threads_all=allt, opencv=cv2.__version__, reps=reps)
+    if a.part == "all":
+        for size in sizes:
+            rows += matcher_rows(size, reps, allt)
+    if not a.quick and a.part in ("all", "versus"):
+        rows += versus_rows(a.versus_reps)
+    if not a.quick and a.part in ("all", "stages"):
+        rows += stage_rows(max(reps, 7))
+    out = write_report(
+        output_path(a, "bench_matchers"),
+        rows,
+        threads_all=allt,
+        opencv=cv2.__version__,
+        opencv_threads=CV_THREADS,
+        reps=reps,
+    )
     print(f"wrote {out}")
     return 0
 

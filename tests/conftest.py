@@ -44,6 +44,19 @@ def build(request, monkeypatch):
     return mod
 
 
+@pytest.fixture(params=["portable", "avx2"])
+def census_build(request, monkeypatch):
+    """Run the test on each build of the Census-SGM kernels this machine can execute."""
+    from helpers.census_sgm_reference import CENSUS_BUILDS
+    from vpp_service.matchers import census_sgm
+
+    mod = CENSUS_BUILDS[request.param]
+    if mod is None:
+        pytest.skip("no AVX2 build for this CPU / platform")
+    monkeypatch.setattr(census_sgm, "_k", mod)
+    return mod
+
+
 @pytest.fixture
 def sessions(zenoh_endpoint: str) -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
     """Two Zenoh sessions on loopback: ``(listener, peer)`` (the service's and a camera's or client's)."""

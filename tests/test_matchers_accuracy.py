@@ -128,8 +128,10 @@ def test_guided_improves_on_weak_texture(hard_scene):
 @pytest.mark.parametrize(
     ("speckle_size", "min_gain"),
     [
-        (0, 0.01),  # raw SGM output: guidance must remove >= 1 point of bad-2
-        (200, 0.003),  # default rSGM post-filter (speckles) already removes much of the error
+        # raw SGM output: guidance must remove >= 10 % of the bad-2 (the left band is answered now, so the
+        # plain matcher's error there no longer waits for hints to fix it)
+        (0, 0.1),
+        (200, 0.05),  # default rSGM post-filter (speckles) already removes much of the error
     ],
 )
 def test_guided_helps_on_motorcycle(speckle_size, min_gain):
@@ -146,4 +148,4 @@ def test_guided_helps_on_motorcycle(speckle_size, min_gain):
     guided = m.compute(left, right, hints=sample_hints(gt, valid, 0.05, seed=0))
     b_plain, b_guided = bad(plain, gt, valid), bad(guided, gt, valid)
     assert b_plain < 0.35  # sane baseline
-    assert b_guided < b_plain - min_gain
+    assert b_guided < b_plain * (1 - min_gain)

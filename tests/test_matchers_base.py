@@ -178,8 +178,14 @@ def test_cost_volume_api_equals_compute(pair):
 
 
 def test_guidance_pulls_towards_hints(pair):
-    """With a (wrong) dense hint the modulated minimum wins: guided output follows it."""
+    """With a (wrong) dense hint the modulated minimum wins: guided output follows it.
+
+    The right view gets noise: on the exact pair the true match costs 0, which stays 0 after the
+    modulation and ties with the hint.
+    """
     left, right = pair
+    noise = np.random.default_rng(0).integers(-6, 7, right.shape)
+    right = np.clip(right.astype(np.int16) + noise, 0, 255).astype(np.uint8)
     m = build_matcher("census-sgm", {"max_disparity": 16, "lr_check": False})
     hints = np.full(left.shape[:2], 9.0, np.float32)
     disp = m.compute(left, right, hints=hints)

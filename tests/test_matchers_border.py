@@ -2,28 +2,13 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
+from helpers.census_sgm_reference import ref_reject
 from vpp_service.matchers.border import reject_border_matches
 
 N = np.nan
-
-
-def ref_reject(a, margin):
-    out = a.astype(np.float32).copy()
-    h, w = a.shape
-    for y in range(h):
-        for x in range(w):
-            d = float(a[y, x])
-            if math.isnan(d):
-                continue
-            xr = x - math.floor(d + 0.5)
-            if not margin <= xr <= w - 1 - margin:
-                out[y, x] = np.nan
-    return out
 
 
 @pytest.mark.parametrize(

@@ -1,119 +1,22 @@
-"""Census-SGM kernels vs plain reference implementations (exact equality)."""
+"""Census-SGM kernels vs plain reference implementations (exact equality), on both builds of the kernels."""
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 import pytest
 
+from helpers.census_sgm_reference import (
+    ref_aggregate,
+    ref_census,
+    ref_hamming,
+    ref_lr,
+    ref_median,
+    ref_right,
+    ref_wta,
+)
 from vpp_service.matchers import census_sgm as cs
 
-OFFSETS = [(dy, dx) for dy in range(-2, 3) for dx in range(-2, 3) if (dy, dx) != (0, 0)]
-
-
-def ref_census(img: np.ndarray) -> np.ndarray:
-    h, w = img.shape
-    pad = np.pad(img, 2, mode="edge").astype(np.int32)
-    code = np.zeros((h, w), np.uint32)
-    for dy, dx in OFFSETS:
-        nb = pad[2 + dy : 2 + dy + h, 2 + dx : 2 + dx + w]
-        code = (code << np.uint32(1)) | (nb < img).astype(np.uint32)
-    return code
-
-
-def ref_hamming(cl: np.ndarray, cr: np.ndarray, D: int) -> np.ndarray:
-    h, w = cl.shape
-    out = np.full((h, w, D), cs.INVALID_COST, np.uint16)
-    for d in range(D):
-        x = np.bitwise_xor(cl[:, d:], cr[:, : w - d])
-        out[:, d:, d] = np.array([int(v).bit_count() for v in x.ravel()]).reshape(x.shape)
-    return out
-
-
-def ref_aggregate(C, g, paths, p1, p2min, alpha, gamma):
-    H, W, D = C.shape
-    C = np.minimum(C.astype(np.int64), cs.COST_CAP)
-    dirs = [(0, 1), (0, -1), (1, 0), (-1, 0)]
-    if paths == 8:
-        dirs += [(1, 1), (1, -1), (-1, 1), (-1, -1)]
-    S = np.zeros((H, W, D), np.int64)
-    for dy, dx in dirs:
-        L = np.zeros((H, W, D), np.int64)
-        for y in range(H) if dy >= 0 else range(H - 1, -1, -1):
-            for x in range(W) if dx >= 0 else range(W - 1, -1, -1):
-                py, px = y - dy, x - dx
-                if not (0 <= py < H and 0 <= px < W):
-                    L[y, x] = C[y, x]
-                    continue
-                prev = L[py, px]
-                m = prev.min()
-                step = abs(int(g[y, x]) - int(g[py, px]))
-                p2 = max(p2min, p1, math.floor(gamma - alpha * step))
-                for d in range(D):
-                    v = min(prev[d], m + p2)
-                    if d > 0:
-                        v = min(v, prev[d - 1] + p1)
-                    if d < D - 1:
-                        v = min(v, prev[d + 1] + p1)
-                    L[y, x, d] = C[y, x, d] + v - m
-        S += L
-    return S
-
-
-def ref_wta(S, uniqueness, subpixel):
-    H, W, D = S.shape
-    out = np.full((H, W), np.nan, np.float32)
-    for y in range(H):
-        for x in range(W):
-            c = [int(v) for v in S[y, x]]
-            best = int(np.argmin(c))
-            others = [c[d] for d in range(D) if abs(d - best) > 1]
-            if others and not c[best] < uniqueness * min(others):
-                continue
-            val = float(best)
-            if subpixel and 0 < best < D - 1:
-                den = c[best - 1] - 2 * c[best] + c[best + 1]
-                if den > 0:
-                    val = best + (c[best - 1] - c[best + 1]) / (2.0 * den)
-            out[y, x] = val
-    return out
-
-
-def ref_right(S):
-    H, W, D = S.shape
-    out = np.zeros((H, W), np.float32)
-    for y in range(H):
-        for xr in range(W):
-            c = [S[y, xr + d, d] for d in range(D) if xr + d < W]
-            out[y, xr] = int(np.argmin(c))
-    return out
-
-
-def ref_lr(dl, dr, tol):
-    out = np.full_like(dl, np.nan)
-    H, W = dl.shape
-    for y in range(H):
-        for x in range(W):
-            d = dl[y, x]
-            if np.isnan(d):
-                continue
-            xr = x - math.floor(float(d) + 0.5)
-            if 0 <= xr < W and not np.isnan(dr[y, xr]) and abs(float(d) - float(dr[y, xr])) <= tol:
-                out[y, x] = d
-    return out
-
-
-def ref_median(a):
-    H, W = a.shape
-    out = np.full_like(a, np.nan)
-    for y in range(H):
-        for x in range(W):
-            if np.isnan(a[y, x]):
-                continue
-            win = a[max(0, y - 1) : y + 2, max(0, x - 1) : x + 2]
-            out[y, x] = np.median(win[~np.isnan(win)])
-    return out
+pytestmark = pytest.mark.usefixtures("census_build")
 
 
 @pytest.fixture(params=[0, 1, 2])
@@ -162,13 +65,13 @@ def test_aggregate_matches_literal_reference(rng, paths, cmax):
     g[2] = g[2, 0]  # flat row: P2 at its maximum
     got = cs.aggregate_costs(C, g, paths=paths)
     assert got.dtype == np.uint16 and got.shape == C.shape
-    np.testing.assert_array_equal(got, ref_aggregate(C, g, paths, 11, 17, 0.5, 35.0))
+    np.testing.assert_array_equal(got, ref_aggregate(C, g, paths, p1=11, p2min=17, alpha=0.5, gamma=35.0))
 
 
 def test_aggregate_custom_penalties_and_threads(rng):
     C = rng.integers(0, 25, (5, 9, 4)).astype(np.uint16)
     g = rng.integers(0, 256, (5, 9)).astype(np.uint8)
-    ref = ref_aggregate(C, g, 8, 3, 9, 1.25, 60.0)
+    ref = ref_aggregate(C, g, 8, p1=3, p2min=9, alpha=1.25, gamma=60.0)
     for t in (1, 2):
         np.testing.assert_array_equal(
             cs.aggregate_costs(C, g, 8, p1=3, p2_min=9, alpha=1.25, gamma=60.0, threads=t), ref
@@ -184,12 +87,35 @@ def test_wta_matches_reference(rng, uniqueness, subpixel):
 
 
 def test_wta_hand_cases():
+    # columns 0..3 are the left band (fewer disparities); the hand cases sit at x >= D - 1 = 4
+    band = np.full((1, 4, 5), 50, np.uint16)
     S = np.array([[[9, 4, 2, 6, 9], [5, 5, 5, 5, 5], [9, 1, 9, 9, 1]]], np.uint16)
-    d = cs.select_disparity(S, 0.95, True)
+    d = cs.select_disparity(np.ascontiguousarray(np.concatenate([band, S], 1)), 0.95, True)[:, 4:]
     assert d[0, 0] == pytest.approx(2 + (4 - 6) / (2 * (4 - 4 + 6)))
     assert np.isnan(d[0, 1])  # flat: not unique
     assert np.isnan(d[0, 2])  # two separated minima
-    assert cs.select_disparity(S[:, :1], 0.95, False)[0, 0] == 2.0
+    one = np.ascontiguousarray(np.concatenate([band, S[:, :1]], 1))
+    assert cs.select_disparity(one, 0.95, False)[0, 4] == 2.0
+
+
+def test_wta_left_band_uses_existing_disparities():
+    # column x only has d <= x: the minimum at d = 4 is out of reach for x < 4; a minimum at d = x < D - 1
+    # (x = 0, 1 here) is rejected: the cost may keep falling beyond the right image's edge
+    S = np.tile(np.array([30, 20, 25, 40, 1], np.uint16), (1, 6, 1))
+    d = cs.select_disparity(S, 1.0, False)
+    np.testing.assert_array_equal(d[0], [np.nan, np.nan, 1, 1, 4, 4])
+    assert cs.select_disparity(S, 1.0, True)[0, 2] == pytest.approx(1 + (30 - 25) / (2 * (30 - 40 + 25)))
+    S[0, 1] = [10, 20, 0, 0, 0]  # x = 1: minimum at d = 0 < x, kept; d = 2 does not exist: no parabola
+    assert cs.select_disparity(S, 1.0, True)[0, 1] == 0.0
+
+
+def test_aggregate_marks_absent_disparities():
+    C = np.random.default_rng(3).integers(0, 25, (3, 7, 5)).astype(np.uint16)
+    S = cs.aggregate_costs(C, np.zeros((3, 7), np.uint8))
+    for x in range(4):
+        assert (S[:, x, x + 1 :] == cs.NO_COST).all()
+        assert (S[:, x, : x + 1] < cs.NO_COST).all()
+    assert (S[:, 4:] < cs.NO_COST).all()
 
 
 def test_right_and_lr_check_match_reference(rng):

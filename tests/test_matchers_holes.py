@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from helpers.census_sgm_reference import ref_short_gaps
 from vpp_service.matchers import fill_holes
 from vpp_service.matchers.holes import fill_short_gaps
 
@@ -80,31 +81,6 @@ def test_non_contiguous_input_accepted():
 def test_bad_input(arg, exc, match):
     with pytest.raises(exc, match=match):
         fill_holes(arg)
-
-
-def ref_short_gaps(a, max_gap, max_step):
-    """Plain-python fill_short_gaps: interior NaN runs <= max_gap, linear if the ends are close, else the smaller."""
-    out = a.astype(np.float32).copy()
-    h, w = a.shape
-    for y in range(h):
-        x = 0
-        while x < w:
-            if not np.isnan(a[y, x]):
-                x += 1
-                continue
-            end = x
-            while end < w and np.isnan(a[y, end]):
-                end += 1
-            n = end - x
-            if x > 0 and end < w and n <= max_gap:
-                lo, hi = float(a[y, x - 1]), float(a[y, end])
-                for j in range(n):
-                    if abs(lo - hi) <= max_step:
-                        out[y, x + j] = np.float32(lo + (hi - lo) * (j + 1) / (n + 1))
-                    else:
-                        out[y, x + j] = min(lo, hi)
-            x = end
-    return out
 
 
 @pytest.mark.parametrize(

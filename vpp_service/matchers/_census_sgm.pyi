@@ -1,4 +1,4 @@
-"""Type stubs of the compiled Census-SGM kernels (``_census_sgm.pyx``).
+"""Type stubs of the compiled Census-SGM kernels (``_census_sgm.pyx``; ``_census_sgm_avx2`` is the same module).
 
 Unchecked kernels: arrays must be C-contiguous with the dtypes given here and the
 shapes the wrappers in :mod:`vpp_service.matchers.census_sgm` allocate. Outputs are
@@ -7,6 +7,64 @@ written in place. ``nthreads`` >= 1.
 
 import numpy as np
 import numpy.typing as npt
+
+#: True in the build compiled for x86-64-v3.
+AVX2: bool
+
+def scratch_bytes(W: int, D: int) -> int:
+    """Bytes of SGM scratch per pass thread for width ``W`` and ``D`` disparities."""
+
+def cost_work_bytes(W: int, nthreads: int) -> int:
+    """Bytes of census / Hamming scratch for ``nthreads`` threads at width ``W``."""
+
+def cost_stage(
+    gl: npt.NDArray[np.uint8],
+    gr: npt.NDArray[np.uint8],
+    padl: npt.NDArray[np.uint8],
+    padr: npt.NDArray[np.uint8],
+    cl: npt.NDArray[np.uint32],
+    cr: npt.NDArray[np.uint32],
+    cost: npt.NDArray[np.uint16],
+    invalid_cost: int,
+    work: npt.NDArray[np.uint8],
+    volume: bool,
+    nthreads: int,
+) -> None:
+    """Census of both gray images and (with ``volume``) their Hamming volume ``cost``, one parallel region."""
+
+def sgm_stage(
+    C: npt.NDArray[np.uint16],
+    cl: npt.NDArray[np.uint32],
+    cr: npt.NDArray[np.uint32],
+    D: int,
+    g: npt.NDArray[np.uint8],
+    gr: npt.NDArray[np.uint8],
+    padl: npt.NDArray[np.uint8],
+    padr: npt.NDArray[np.uint8],
+    work: npt.NDArray[np.uint8],
+    census: bool,
+    paths: int,
+    P1: int,
+    p2lut: npt.NDArray[np.int16],
+    uniqueness: float,
+    subpixel: bool,
+    lr_check: bool,
+    tolerance: float,
+    median: bool,
+    vf: npt.NDArray[np.uint16],
+    vb: npt.NDArray[np.uint16],
+    rowcnt: npt.NDArray[np.intc],
+    scratch: npt.NDArray[np.uint8],
+    dl: npt.NDArray[np.float32],
+    dr: npt.NDArray[np.float32],
+    lr: npt.NDArray[np.float32],
+    pad: npt.NDArray[np.float32],
+    disp: npt.NDArray[np.float32],
+    volume: bool,
+    nthreads: int,
+    wta: bool = True,
+) -> None:
+    """(Census,) SGM (costs from ``C`` with ``volume``, else ``cl``/``cr``), WTAs, LR check, median."""
 
 def census5x5(img: npt.NDArray[np.uint8], out: npt.NDArray[np.uint32], nthreads: int) -> None:
     """24-bit 5x5 census of ``img`` (H x W) into ``out`` (H x W)."""

@@ -7,7 +7,9 @@ reused; the :class:`CensusSGM` matcher chains them):
    where the neighbour is darker than the centre, window scanned row-major
    (MSB first) skipping the centre, border pixels replicated.
 2. :func:`hamming_cost_volume` -- ``C(y, x, d) = popcount(cL(y, x) ^ cR(y, x - d))``
-   as uint16 H x W x D; ``x < d`` (no match) gets the maximum cost, 24.
+   as uint16 H x W x D. Only ``d <= x`` has a right pixel to match (see
+   "Left band" below); the volume holds :data:`INVALID_COST` (24) elsewhere,
+   which no later step reads.
 3. optional guided stereo (:func:`~vpp_service.matchers.guided.modulate_cost`)
    on the hinted pixels, before aggregation.
 4. :func:`aggregate_costs` -- SGM over 8 paths (or 4: horizontal + vertical)
@@ -31,24 +33,55 @@ reused; the :class:`CensusSGM` matcher chains them):
 10. :func:`~vpp_service.matchers.speckle.remove_speckles` -- invalidate small
     blobs (rSGM's speckle filter; ``speckle_size`` 0 turns it off).
 
+Left band: column ``x`` is matched over the disparities that exist there,
+``0 <= d <= min(x, D - 1)``, so the leftmost ``D`` columns get a disparity
+like every other pixel whose match can lie inside the right image (there is
+no empty band of width ``D``). The aggregation treats the other entries as
+absent (an infinite path cost: never a minimum, never a neighbour); their
+aggregated cost is 65535; the WTA, its uniqueness test and the sub-pixel
+parabola (which needs ``d_best + 1 <= x``) look only at the valid ones. For
+``x < D - 1`` a minimum at ``d = x`` itself, the largest disparity that exists
+there, is rejected (NaN): the cost was still falling where the right image
+ends, so the match most likely lies outside it (on the 26 Middlebury scenes
+keeping those minima costs 0.8 point of bad-2 after hole filling).
+
 Everything invalid is NaN. Threads: every function takes ``threads``
 (None = the project's default, :func:`vpp_service.threads.default_threads`);
 the matcher's ``threads`` option defaults to 1 (see :class:`CensusSGMOptions`).
-Results do not depend on the thread count.
+Results do not depend on the thread count nor on the build.
+
+Kernels: the C in ``_census_sgm.h`` is compiled twice, portable and for
+x86-64-v3 (AVX2); the AVX2 build runs exactly when :mod:`vpp_service.vpp.backend`
+runs the AVX2 build of the VPP kernel (a CPU with AVX2, and ``VPP_NO_AVX2``
+not set to 1). :meth:`CensusSGM.compute` runs one parallel region per call
+(three with guided stereo: census and cost volume, the modulation, the rest):
+the census of both images (rows in blocks), then the SGM: the forward pass
+(left-to-right plus the three paths from the row above) and the backward
+pass (the four mirrored paths) on two threads at once, each computing the
+Hamming costs of a row as it goes (the cost volume is built only for guided
+stereo); each row is finished (sum of the two passes, left and right WTA,
+left-right check) by whichever pass reaches it second; then the median on
+row blocks (with the border and short-gap steps on, the defaults, the median
+runs after them, in its own region). So the aggregation uses at most two threads. The matcher keeps
+its buffers (census codes, partial sums, the cost volume once guided stereo
+needed it) between calls and reallocates them only when the image size,
+``max_disparity`` or the thread count changes.
 
 Speed: ``benchmarks/bench_matchers.py`` times the matcher and each of its
-stages (aggregation is the largest); the latest numbers are in
-``benchmarks/results/bench_matchers.json``.
+stages; the latest numbers are in ``benchmarks/results/bench_matchers.json``.
 """
 
 from __future__ import annotations
 
 import math
+import threading
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
 
-from vpp_service.matchers import _census_sgm as _k
+from vpp_service.matchers import _census_sgm as portable
 from vpp_service.matchers.base import (
     MATCHERS,
     Matcher,
@@ -66,15 +99,36 @@ from vpp_service.matchers.guided import modulate_cost
 from vpp_service.matchers.holes import fill_short_gaps
 from vpp_service.matchers.speckle import remove_speckles
 from vpp_service.threads import resolve_threads
+from vpp_service.vpp import backend
 
 #: Census bits (5 x 5 window minus the centre) = the largest Hamming cost.
 CENSUS_BITS = 24
-#: Cost assigned where ``x < d`` (no right pixel to match).
+#: Cost the Hamming volume holds where ``x < d`` (no right pixel to match; never read by the SGM).
 INVALID_COST = CENSUS_BITS
+#: Aggregated cost of the entries ``x < d`` (absent disparities).
+NO_COST = 65535
 #: Costs are clamped to this before aggregation (keeps the arithmetic exact).
 COST_CAP = 4095
 #: Largest allowed P1 / P2.
 PENALTY_CAP = 4095
+
+
+def avx2_build() -> ModuleType | None:
+    """The AVX2 build of the kernels when it exists and this CPU can run it, else None.
+
+    The CPU check is :func:`vpp_service.vpp.backend.avx2_build`'s (the one place that tests the CPU).
+    """
+    if backend.avx2_build() is None:
+        return None
+    try:
+        from vpp_service.matchers import _census_sgm_avx2
+    except ImportError:  # not built (non-x86 platform or a compiler without -mavx2)
+        return None
+    return _census_sgm_avx2
+
+
+#: The kernel build in use: AVX2 exactly when the VPP kernel's is (``VPP_NO_AVX2=1`` keeps the portable one).
+_k: ModuleType = (avx2_build() or portable) if backend.AVX2 else portable
 
 
 def _check_gray(img: object, name: str) -> np.ndarray:
@@ -179,6 +233,8 @@ def aggregate_costs(
     ``L_r(p, d) = C(p, d) + min(L_r(p-r, d), L_r(p-r, d+-1) + P1, min_k L_r(p-r, k) + P2) - min_k L_r(p-r, k)``
     with ``L_r = C`` at the first pixel of a path and ``P2`` from :func:`p2_table`
     using the gray step between ``p`` and ``p - r``. Returns ``S = sum_r L_r``.
+    Only ``d <= x`` exists at column ``x``: the minima and neighbours above
+    run over the existing entries, and ``S`` holds :data:`NO_COST` elsewhere.
 
     Parameters
     ----------
@@ -196,7 +252,7 @@ def aggregate_costs(
     Returns
     -------
     ndarray
-        H x W x D uint16 aggregated cost.
+        H x W x D uint16 aggregated cost (:data:`NO_COST` where ``x < d``).
     """
     _check_volume(cost, "cost")
     _check_gray(gray, "gray")
@@ -217,6 +273,9 @@ def select_disparity(
 ) -> np.ndarray:
     """Winner-takes-all with uniqueness test and parabola sub-pixel refinement.
 
+    At column ``x`` only ``d <= min(x, D - 1)`` takes part, and for ``x < D - 1`` a minimum at ``d = x``
+    gives NaN (the left band, see the module docstring).
+
     Parameters
     ----------
     aggregated : ndarray
@@ -226,7 +285,7 @@ def select_disparity(
         ``S_second`` being the best cost with ``|d - d_best| > 1`` (no such
         ``d`` -> kept). 1.0 only rejects ties.
     subpixel : bool
-        For ``0 < d < D - 1`` with ``S(d-1) - 2 S(d) + S(d+1) > 0`` add
+        For ``0 < d < min(x, D - 1)`` with ``S(d-1) - 2 S(d) + S(d+1) > 0`` add
         ``(S(d-1) - S(d+1)) / (2 (S(d-1) - 2 S(d) + S(d+1)))``.
 
     Returns
@@ -333,11 +392,12 @@ class CensusSGMOptions(MatcherOptions):
     guided_k, guided_c : float
         Guided-stereo modulation height and width (10 and 1) used with ``hints``.
     threads : int
-        OpenMP threads (default 1; 0 = :func:`~vpp_service.threads.default_threads`). One thread is the
-        default because the row-to-row SGM passes synchronise once per image
-        row: on an oversubscribed machine (evaluation running several scenes
-        in parallel, shared CI) more threads are *slower*; set 0 or N on a
-        dedicated machine.
+        OpenMP threads (default 1; 0 = :func:`~vpp_service.threads.default_threads`). Two threads run
+        the forward and the backward SGM pass at once (they meet only through a
+        per-row counter, no barrier per row); threads beyond two only share the
+        census and the median. One thread is the default: on an oversubscribed
+        machine (evaluation running several scenes in parallel, shared CI) a
+        second thread gains little; set 2 (or 0) on a dedicated machine.
     """
 
     paths: int = 8
@@ -383,13 +443,48 @@ class CensusSGMOptions(MatcherOptions):
             raise ValueError(f"threads must be an integer >= 0, got {self.threads!r}")
 
 
+#: Stand-in for the cost volume where the kernels do not read it.
+_NO_VOLUME = np.zeros((1, 1, 1), np.uint16)
+
+
+class _Workspace:
+    """The buffers of one :class:`CensusSGM` for one (H, W, D, threads), kept between calls."""
+
+    def __init__(self, h: int, w: int, d: int, threads: int) -> None:
+        self.key = (h, w, d, threads)
+        self.padl = np.empty((h + 4, w + 4), np.uint8)
+        self.padr = np.empty((h + 4, w + 4), np.uint8)
+        self.cl = np.empty((h, w), np.uint32)
+        self.cr = np.empty((h, w), np.uint32)
+        self._cost: np.ndarray | None = None  # the Hamming volume, only for guided stereo
+        self.work = np.empty(_k.cost_work_bytes(w, threads), np.uint8)
+        self.vf = np.empty((h, w, d), np.uint16)
+        self.vb = np.empty((h, w, d) if threads > 1 else (1, 1, 1), np.uint16)  # backward pass, 2nd thread
+        self.rowcnt = np.empty(h, np.intc)
+        self.scratch = np.empty(2 * _k.scratch_bytes(w, d) + 64, np.uint8)
+        self.dl = np.empty((h, w), np.float32)
+        self.dr = np.empty((h, w), np.float32)
+        self.lr = np.empty((h, w), np.float32)
+        self.mpad = np.empty((h + 2, w + 2), np.float32)
+
+    @property
+    def cost(self) -> np.ndarray:
+        """The H x W x D uint16 cost volume (allocated at first use)."""
+        if self._cost is None:
+            self._cost = np.empty(self.key[:3], np.uint16)
+        return self._cost
+
+
 @MATCHERS.register("census-sgm")
 class CensusSGM(Matcher):
     """Census 5 x 5 + Hamming + 8-path SGM (rSGM recipe), with guided stereo.
 
     Colour inputs are converted to gray (census needs one channel). The cost
     volume is exposed (:meth:`cost_volume`, :meth:`compute_from_cost`) so
-    guided stereo or other cost manipulations can be inserted.
+    guided stereo or other cost manipulations can be inserted. The instance
+    keeps its work buffers between calls (about ``3 H W D`` uint16 with two or
+    more threads, ``2 H W D`` with one); a call made while another runs on
+    the same instance (another thread) uses fresh buffers.
     """
 
     name = "census-sgm"
@@ -397,14 +492,27 @@ class CensusSGM(Matcher):
     options: CensusSGMOptions
     supports_guidance = True
 
+    def __init__(self, options: CensusSGMOptions | Mapping[str, object] | None = None) -> None:
+        super().__init__(options)
+        self._ws: _Workspace | None = None
+        self._ws_lock = threading.Lock()
+
+    def _threads(self) -> int:
+        return resolve_threads(self.options.threads or None)  # 0: the default policy
+
     def cost_volume(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
-        """H x W x D uint16 Hamming cost of the 5 x 5 census of the gray pair."""
+        """H x W x D uint16 Hamming cost of the 5 x 5 census of the gray pair (a new array)."""
         check_pair(left, right)
         check_max_disparity(self.options.max_disparity, left.shape[1])
-        t = self.options.threads or None  # 0: the default policy
-        return hamming_cost_volume(
-            census_transform(to_gray(left), t), census_transform(to_gray(right), t), self.options.max_disparity, t
-        )
+        gl, gr = to_gray(left), to_gray(right)
+        ws = _Workspace(gl.shape[0], gl.shape[1], self.options.max_disparity, self._threads())
+        self._census(gl, gr, ws, volume=True)
+        return ws.cost
+
+    def _census(self, gl: np.ndarray, gr: np.ndarray, ws: _Workspace, *, volume: bool) -> None:
+        """Census codes of the pair into ``ws`` and, with ``volume``, the Hamming volume ``ws.cost``."""
+        cost = ws.cost if volume else _NO_VOLUME
+        _k.cost_stage(gl, gr, ws.padl, ws.padr, ws.cl, ws.cr, cost, INVALID_COST, ws.work, volume, ws.key[3])
 
     def compute_from_cost(self, cost: np.ndarray, left_gray: np.ndarray, hints: np.ndarray | None = None) -> np.ndarray:
         """Disparity from a cost volume (steps 3-10; ``fill`` is not applied here).
@@ -428,35 +536,111 @@ class CensusSGM(Matcher):
         gray = to_gray(left_gray)
         if gray.shape != cost.shape[:2]:
             raise ValueError(f"left_gray must be {cost.shape[:2]} (H x W), got {left_gray.shape}")
-        o = self.options
-        t = o.threads or None  # 0: the default policy
+        h, w, d = cost.shape
         if hints is not None:
-            hints = check_hints(hints, cost.shape[:2])
-            cost = modulate_cost(cost, hints, o.guided_k, o.guided_c, threads=t)
-        agg = aggregate_costs(
-            cost, gray, o.paths, p1=o.p1, p2_min=o.p2_min, alpha=o.p2_alpha, gamma=o.p2_gamma, threads=t
+            hints = check_hints(hints, (h, w))
+        return self._sgm(cost, gray, hints, _Workspace(h, w, d, self._threads()), own_cost=False)
+
+    def _sgm(
+        self,
+        cost: np.ndarray | None,
+        gray: np.ndarray,
+        hints: np.ndarray | None,
+        ws: _Workspace,
+        *,
+        own_cost: bool,
+        right_gray: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Steps 3-8 on ``cost`` (modified in place only when ``own_cost``: the workspace's volume).
+
+        ``cost`` None: the SGM passes compute the Hamming costs row by row from ``ws.cl``, ``ws.cr`` (no
+        hints), which the same parallel region computes first from ``gray`` and ``right_gray`` when given.
+        """
+        o = self.options
+        t = ws.key[3]
+        if cost is not None:
+            if hints is not None:
+                cost = modulate_cost(cost, hints, o.guided_k, o.guided_c, inplace=own_cost, threads=t)
+                own_cost = True
+            if cost.max(initial=0) > COST_CAP:
+                cost = np.minimum(cost, COST_CAP, out=cost if own_cost else None)
+        # The kernel runs the median in its parallel region; a step that must run between the left-right
+        # check and the median sets fused_median False and runs after the kernel, before median_filter3x3.
+        fused_median = o.median and not (o.border_margin or o.gap_size)
+        out = np.empty(gray.shape, np.float32)
+        lr = ws.lr if fused_median else out
+        dl = ws.dl if (fused_median or o.lr_check) else out
+        _k.sgm_stage(
+            _NO_VOLUME if cost is None else cost,
+            ws.cl,
+            ws.cr,
+            ws.key[2],
+            gray,
+            gray if right_gray is None else right_gray,
+            ws.padl,
+            ws.padr,
+            ws.work,
+            right_gray is not None,
+            int(o.paths),
+            int(o.p1),
+            p2_table(o.p1, o.p2_min, o.p2_alpha, o.p2_gamma),
+            float(o.uniqueness),
+            bool(o.subpixel),
+            bool(o.lr_check),
+            float(o.lr_tolerance),
+            fused_median,
+            ws.vf,
+            ws.vb,
+            ws.rowcnt,
+            ws.scratch,
+            dl,
+            ws.dr,
+            lr,
+            ws.mpad,
+            out,
+            cost is not None,
+            t,
         )
-        disp = select_disparity(agg, o.uniqueness, o.subpixel, t)
-        if o.lr_check:
-            disp = left_right_check(disp, right_disparity(agg, t), o.lr_tolerance, t)
         if o.border_margin:
-            disp = reject_border_matches(disp, o.border_margin)
+            out = reject_border_matches(out, o.border_margin)
         if o.gap_size:
-            disp = fill_short_gaps(disp, o.gap_size, threads=t)
-        if o.median:
-            disp = median_filter3x3(disp, t)
+            out = fill_short_gaps(out, o.gap_size, threads=t)
+        if o.median and not fused_median:
+            out = median_filter3x3(out, t)
         if o.speckle_size:
-            disp = remove_speckles(disp, o.speckle_size, o.speckle_diff)
-        return disp
+            out = remove_speckles(out, o.speckle_size, o.speckle_diff)
+        return out
+
+    def _workspace(self, h: int, w: int) -> _Workspace:
+        key = (h, w, self.options.max_disparity, self._threads())
+        if self._ws is None or self._ws.key != key:
+            self._ws = None  # free the old buffers first
+            self._ws = _Workspace(*key)
+        return self._ws
 
     def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
-        return self.compute_from_cost(self.cost_volume(left, right), left, hints)
+        gl, gr = to_gray(left), to_gray(right)
+        h, w = gl.shape
+        if not self._ws_lock.acquire(blocking=False):  # another thread is using the kept buffers
+            return self._match(gl, gr, hints, _Workspace(h, w, self.options.max_disparity, self._threads()))
+        try:
+            return self._match(gl, gr, hints, self._workspace(h, w))
+        finally:
+            self._ws_lock.release()
+
+    def _match(self, gl: np.ndarray, gr: np.ndarray, hints: np.ndarray | None, ws: _Workspace) -> np.ndarray:
+        """Census and SGM in one parallel region; with hints, the census and cost volume first, then the SGM."""
+        if hints is None:
+            return self._sgm(None, gl, None, ws, own_cost=True, right_gray=gr)
+        self._census(gl, gr, ws, volume=True)
+        return self._sgm(ws.cost, gl, hints, ws, own_cost=True)
 
 
 __all__ = [
     "CENSUS_BITS",
     "COST_CAP",
     "INVALID_COST",
+    "NO_COST",
     "CensusSGM",
     "CensusSGMOptions",
     "aggregate_costs",

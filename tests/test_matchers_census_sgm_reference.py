@@ -1,0 +1,107 @@
+"""The whole ``census-sgm`` matcher vs the plain reference chain (tests/helpers/census_sgm_reference.py).
+
+Exact equality on small images, on both builds of the kernels and with 1, 2 and 3 threads, including
+the left band (columns x < D), guided stereo, 4 paths, the options that switch steps off, and the
+buffers the matcher keeps between calls.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from helpers.census_sgm_reference import ref_census, ref_hamming, ref_match
+from vpp_service.matchers import build_matcher
+from vpp_service.matchers.guided import modulate_cost
+
+pytestmark = pytest.mark.usefixtures("census_build")
+
+H, W, D = 12, 40, 16
+
+
+def pair(seed: int, h: int = H, w: int = W, shift: int = 5) -> tuple[np.ndarray, np.ndarray]:
+    """Smoothed noise and a copy shifted by ``shift`` (right(x - shift) = left(x), plus noise)."""
+    rng = np.random.default_rng(seed)
+    base = rng.integers(0, 256, (h, w + shift)).astype(np.float64)
+    base = (base + np.roll(base, 1, 1) + np.roll(base, 1, 0)) / 3
+    left = np.clip(base[:, :w] + rng.normal(0, 4, (h, w)), 0, 255).astype(np.uint8)
+    right = np.clip(base[:, shift:] + rng.normal(0, 4, (h, w)), 0, 255).astype(np.uint8)
+    return left, right
+
+
+def census_sgm(threads: int, **opts: object):
+    return build_matcher("census-sgm", {"max_disparity": D, "threads": threads, "speckle_size": 0, **opts})
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_matcher_equals_reference(threads, seed):
+    left, right = pair(seed)
+    got = census_sgm(threads).compute(left, right)
+    want = ref_match(left, right, D)
+    np.testing.assert_array_equal(got, want)
+    assert np.isfinite(got[:, 5:D]).mean() > 0.5  # the left band (true match inside the right image) is answered
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize(
+    "opts",
+    [
+        {"paths": 4},
+        {"lr_check": False},
+        {"median": False},
+        {"lr_check": False, "median": False, "subpixel": False},
+        {"uniqueness": 0.7},
+        {"border_margin": 0},
+        {"gap_size": 0},
+        {"border_margin": 1, "gap_size": 2},
+        {"border_margin": 0, "gap_size": 0, "median": False},
+    ],
+)
+def test_matcher_options_equal_reference(threads, opts):
+    left, right = pair(2)
+    got = census_sgm(threads, **opts).compute(left, right)
+    np.testing.assert_array_equal(got, ref_match(left, right, D, **opts))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_guided_equals_reference(threads):
+    left, right = pair(3)
+    rng = np.random.default_rng(3)
+    hints = np.where(rng.random((H, W)) < 0.2, rng.uniform(1, D - 1, (H, W)), np.nan).astype(np.float32)
+    cost = modulate_cost(ref_hamming(ref_census(left), ref_census(right), D), hints, 10.0, 1.0)
+    got = census_sgm(threads).compute(left, right, hints=hints)
+    np.testing.assert_array_equal(got, ref_match(left, right, D, cost=cost))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_compute_from_cost_equals_reference(threads):
+    left, right = pair(4)
+    rng = np.random.default_rng(4)
+    cost = rng.integers(0, 6000, (H, W, D)).astype(np.uint16)  # above COST_CAP too
+    m = census_sgm(threads)
+    got = m.compute_from_cost(cost, left)
+    np.testing.assert_array_equal(got, ref_match(left, right, D, cost=cost))
+    assert cost.max() >= 5000  # not modified
+
+
+def test_kept_buffers_follow_shape_disparities_and_threads():
+    m = census_sgm(2)
+    for h, w, seed in [(12, 40, 5), (9, 33, 6), (12, 40, 7)]:
+        left, right = pair(seed, h, w)
+        np.testing.assert_array_equal(m.compute(left, right), ref_match(left, right, D))
+    m2 = build_matcher("census-sgm", {"max_disparity": 8, "threads": 1, "speckle_size": 0})
+    left, right = pair(8)
+    np.testing.assert_array_equal(m2.compute(left, right), ref_match(left, right, 8))
+    a = m.compute(left, right)
+    b = m.compute(left, right)
+    assert a is not b  # each call returns its own array
+    np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_wide_disparity_range_and_odd_sizes(threads):
+    # D not a multiple of the SIMD width, the band covers most of the image
+    left, right = pair(9, 7, 29, 3)
+    m = build_matcher("census-sgm", {"max_disparity": 23, "threads": threads, "speckle_size": 0})
+    np.testing.assert_array_equal(m.compute(left, right), ref_match(left, right, 23))

@@ -1,0 +1,921 @@
+/* Census-SGM kernels in C (included by _census_sgm.pyx; compiled twice: portable and x86-64-v3).
+ *
+ * Plain loops written so that GCC/Clang vectorise them (-O3): int16 path costs,
+ * uint16 sums, branch-free selects.  The per-call driver csgm_sgm runs one OpenMP
+ * parallel region: the forward pass (4 paths: left->right and the three from the
+ * row above) and the backward pass (the 4 mirrored paths) run on two threads at
+ * once; whichever pass finishes a row second adds the two partial sums and runs
+ * the row's left and right winner-takes-all and left-right check; after one
+ * barrier all threads run the 3x3 median on row blocks.  With one thread the
+ * forward pass runs first, then the backward pass finishes every row.
+ *
+ * Valid disparities of column x are d <= min(x, D - 1) ("band"): path costs of
+ * the others hold CSGM_SENT, which never wins a minimum.
+ */
+#ifndef VPP_CENSUS_SGM_H
+#define VPP_CENSUS_SGM_H
+
+#include <math.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+#if defined(__AVX__) || defined(__SSE2__)
+#include <immintrin.h>
+#endif
+
+#define CSGM_SENT 16383 /* > any path cost (<= 4095 + 4095); + P1 (<= 4095) fits int16 */
+#define CSGM_NOCOST 65535u /* aggregated cost of an invalid (x < d) entry */
+
+#if defined(__GNUC__)
+#define CSGM_RESTRICT __restrict__
+#define CSGM_INLINE static inline __attribute__((always_inline))
+#else
+#define CSGM_RESTRICT
+#define CSGM_INLINE static inline
+#endif
+
+static int csgm_build_avx2(void) {
+#ifdef __AVX2__
+    return 1;
+#else
+    return 0;
+#endif
+}
+
+/* ------------------------------------------------------------------ census */
+
+/* Rows [y0, y1) of the 5x5 census of img (H x W) using pad, the image replicated by 2 on every side
+ * ((H + 4) x (W + 4), filled by csgm_pad_rows).  b0..b2: three scratch rows of W bytes. */
+static void csgm_census_rows(const uint8_t* CSGM_RESTRICT pad, int H, int W, uint32_t* CSGM_RESTRICT out,
+                             int y0, int y1, uint8_t* CSGM_RESTRICT b0, uint8_t* CSGM_RESTRICT b1,
+                             uint8_t* CSGM_RESTRICT b2) {
+    const ptrdiff_t P = (ptrdiff_t)W + 4;
+    (void)H;
+    for (int y = y0; y < y1; y++) {
+        /* q[k]: the window offset k (row-major, centre skipped) of pixel 0; c: the centre */
+        const uint8_t* r = pad + (ptrdiff_t)y * P;
+        const uint8_t* CSGM_RESTRICT c = r + 2 * P + 2;
+        const uint8_t *q0 = r, *q1 = r + 1, *q2 = r + 2, *q3 = r + 3, *q4 = r + 4;
+        const uint8_t *q5 = r + P, *q6 = q5 + 1, *q7 = q5 + 2, *q8 = q5 + 3, *q9 = q5 + 4;
+        const uint8_t *q10 = r + 2 * P, *q11 = q10 + 1, *q12 = q10 + 3, *q13 = q10 + 4;
+        const uint8_t *q14 = r + 3 * P, *q15 = q14 + 1, *q16 = q14 + 2, *q17 = q14 + 3, *q18 = q14 + 4;
+        const uint8_t *q19 = r + 4 * P, *q20 = q19 + 1, *q21 = q19 + 2, *q22 = q19 + 3, *q23 = q19 + 4;
+        for (ptrdiff_t x = 0; x < W; x++) {
+            const uint8_t v = c[x];
+            b0[x] = (uint8_t)(((q0[x] < v) << 7) | ((q1[x] < v) << 6) | ((q2[x] < v) << 5) | ((q3[x] < v) << 4) |
+                              ((q4[x] < v) << 3) | ((q5[x] < v) << 2) | ((q6[x] < v) << 1) | (q7[x] < v));
+            b1[x] = (uint8_t)(((q8[x] < v) << 7) | ((q9[x] < v) << 6) | ((q10[x] < v) << 5) | ((q11[x] < v) << 4) |
+                              ((q12[x] < v) << 3) | ((q13[x] < v) << 2) | ((q14[x] < v) << 1) | (q15[x] < v));
+            b2[x] = (uint8_t)(((q16[x] < v) << 7) | ((q17[x] < v) << 6) | ((q18[x] < v) << 5) |
+                              ((q19[x] < v) << 4) | ((q20[x] < v) << 3) | ((q21[x] < v) << 2) | ((q22[x] < v) << 1) |
+                              (q23[x] < v));
+        }
+        uint32_t* CSGM_RESTRICT o = out + (ptrdiff_t)y * W;
+        for (ptrdiff_t x = 0; x < W; x++)
+            o[x] = ((uint32_t)b0[x] << 16) | ((uint32_t)b1[x] << 8) | (uint32_t)b2[x];
+    }
+}
+
+/* Padded rows [y0, y1) of the (H + 4) x (W + 4) edge-replicated copy of img. */
+static void csgm_pad_rows(const uint8_t* CSGM_RESTRICT img, int H, int W, uint8_t* CSGM_RESTRICT pad, int y0,
+                          int y1) {
+    const ptrdiff_t P = (ptrdiff_t)W + 4;
+    for (int py = y0; py < y1; py++) {
+        int y = py - 2;
+        y = y < 0 ? 0 : (y > H - 1 ? H - 1 : y);
+        const uint8_t* s = img + (ptrdiff_t)y * W;
+        uint8_t* d = pad + (ptrdiff_t)py * P;
+        d[0] = d[1] = s[0];
+        memcpy(d + 2, s, (size_t)W);
+        d[W + 2] = d[W + 3] = s[W - 1];
+    }
+}
+
+/* ----------------------------------------------------------------- hamming */
+
+CSGM_INLINE uint16_t csgm_popcount24(uint32_t v) {
+    v = v - ((v >> 1) & 0x55555555u);
+    v = (v & 0x33333333u) + ((v >> 2) & 0x33333333u);
+    v = (v + (v >> 4)) & 0x0F0F0F0Fu;
+    v = v + (v >> 8);
+    v = v + (v >> 16);
+    return (uint16_t)(v & 0x3F);
+}
+
+/* Row y of the Hamming volume: out[x][d] = popcount(cl[x] ^ cr[x - d]) for d <= x, invalid_cost above.
+ * rev: W scratch entries (cr reversed, so the d loop reads forwards). */
+static void csgm_hamming_row(const uint32_t* CSGM_RESTRICT cl, const uint32_t* CSGM_RESTRICT cr,
+                             uint32_t* CSGM_RESTRICT rev, uint16_t* CSGM_RESTRICT out, int W, int D,
+                             uint16_t invalid_cost) {
+    for (int x = 0; x < W; x++) rev[x] = cr[W - 1 - x];
+    for (int x = 0; x < W; x++) {
+        uint16_t* CSGM_RESTRICT p = out + (ptrdiff_t)x * D;
+        const uint32_t a = cl[x];
+        const uint32_t* CSGM_RESTRICT q = rev + (W - 1 - x); /* q[d] == cr[x - d] */
+        const int n = x + 1 < D ? x + 1 : D;
+        int d = 0;
+#if defined(__AVX2__)
+        {
+            /* popcount of 16 codes: nibble counts by table lookup, summed per 32-bit lane, packed to 16 bits */
+            const __m256i nib = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2, 1, 2, 2,
+                                                 3, 1, 2, 2, 3, 2, 3, 3, 4);
+            const __m256i low = _mm256_set1_epi8(0x0F), ones = _mm256_set1_epi8(1);
+            const __m256i va = _mm256_set1_epi32((int)a);
+            for (; d + 16 <= n; d += 16) {
+                __m256i u = _mm256_xor_si256(_mm256_loadu_si256((const __m256i*)(q + d)), va);
+                __m256i v = _mm256_xor_si256(_mm256_loadu_si256((const __m256i*)(q + d + 8)), va);
+                u = _mm256_add_epi8(_mm256_shuffle_epi8(nib, _mm256_and_si256(u, low)),
+                                    _mm256_shuffle_epi8(nib, _mm256_and_si256(_mm256_srli_epi16(u, 4), low)));
+                v = _mm256_add_epi8(_mm256_shuffle_epi8(nib, _mm256_and_si256(v, low)),
+                                    _mm256_shuffle_epi8(nib, _mm256_and_si256(_mm256_srli_epi16(v, 4), low)));
+                u = _mm256_maddubs_epi16(u, ones); /* byte pairs -> 16 bits */
+                v = _mm256_maddubs_epi16(v, ones);
+                __m256i h = _mm256_hadd_epi16(u, v); /* 32-bit lanes, in-lane order u0-3 v0-3 | u4-7 v4-7 */
+                _mm256_storeu_si256((__m256i*)(p + d), _mm256_permute4x64_epi64(h, 0xD8));
+            }
+        }
+#endif
+        for (; d < n; d++) p[d] = csgm_popcount24(a ^ q[d]);
+        for (d = n; d < D; d++) p[d] = invalid_cost;
+    }
+}
+
+/* --------------------------------------------------------------------- SGM */
+
+/* One pixel of the 4 paths of a pass (prev[k], cur[k]: element 0 of path-cost buffers with a sentinel at
+ * -1 and D; a path's first pixel reads a row of zeros with pm = 0, which gives L = C):
+ * L_k(d) = C(d) + min(L'_k(d), L'_k(d-1) + P1, L'_k(d+1) + P1, pm_k + P2_k) - pm_k over the n valid d,
+ * the sentinel above; acc = sum_k L_k.  Returns min_d L_k in m[k]. */
+CSGM_INLINE void csgm_step4(const uint16_t* CSGM_RESTRICT C, const int16_t* CSGM_RESTRICT p0,
+                            const int16_t* CSGM_RESTRICT p1, const int16_t* CSGM_RESTRICT p2,
+                            const int16_t* CSGM_RESTRICT p3, int16_t* CSGM_RESTRICT c0, int16_t* CSGM_RESTRICT c1,
+                            int16_t* CSGM_RESTRICT c2, int16_t* CSGM_RESTRICT c3, const int16_t* pm,
+                            const int16_t* P2, int16_t* m, uint16_t* CSGM_RESTRICT acc, int n, int D, int16_t P1) {
+    const int16_t pm0 = pm[0], pm1 = pm[1], pm2 = pm[2], pm3 = pm[3];
+    const int16_t j0 = (int16_t)(pm0 + P2[0]), j1 = (int16_t)(pm1 + P2[1]), j2 = (int16_t)(pm2 + P2[2]),
+                  j3 = (int16_t)(pm3 + P2[3]);
+    int16_t m0 = CSGM_SENT, m1 = CSGM_SENT, m2 = CSGM_SENT, m3 = CSGM_SENT;
+#define CSGM_PATH(p, c, pmk, jk, mk, Lk)                                  \
+    int16_t Lk;                                                           \
+    {                                                                     \
+        int16_t v = p[d], a = p[d - 1], b = p[d + 1];                     \
+        a = b < a ? b : a;                                                \
+        a = (int16_t)(a + P1);                                            \
+        v = a < v ? a : v;                                                \
+        v = jk < v ? jk : v;                                              \
+        Lk = (int16_t)(cd + v - pmk);                                     \
+        c[d] = Lk;                                                        \
+        mk = Lk < mk ? Lk : mk;                                           \
+    }
+    for (int d = 0; d < n; d++) {
+        const int16_t cd = (int16_t)C[d];
+        CSGM_PATH(p0, c0, pm0, j0, m0, L0)
+        CSGM_PATH(p1, c1, pm1, j1, m1, L1)
+        CSGM_PATH(p2, c2, pm2, j2, m2, L2)
+        CSGM_PATH(p3, c3, pm3, j3, m3, L3)
+        acc[d] = (uint16_t)(L0 + L1 + L2 + L3);
+    }
+    for (int d = n; d < D; d++) c0[d] = c1[d] = c2[d] = c3[d] = CSGM_SENT;
+    m[0] = m0;
+    m[1] = m1;
+    m[2] = m2;
+    m[3] = m3;
+}
+
+/* The same for the 2 paths of a pass with 4 paths in all (horizontal and vertical). */
+CSGM_INLINE void csgm_step2(const uint16_t* CSGM_RESTRICT C, const int16_t* CSGM_RESTRICT p0,
+                            const int16_t* CSGM_RESTRICT p1, int16_t* CSGM_RESTRICT c0, int16_t* CSGM_RESTRICT c1,
+                            const int16_t* pm, const int16_t* P2, int16_t* m, uint16_t* CSGM_RESTRICT acc, int n,
+                            int D, int16_t P1) {
+    const int16_t pm0 = pm[0], pm1 = pm[1];
+    const int16_t j0 = (int16_t)(pm0 + P2[0]), j1 = (int16_t)(pm1 + P2[1]);
+    int16_t m0 = CSGM_SENT, m1 = CSGM_SENT;
+    for (int d = 0; d < n; d++) {
+        const int16_t cd = (int16_t)C[d];
+        CSGM_PATH(p0, c0, pm0, j0, m0, L0)
+        CSGM_PATH(p1, c1, pm1, j1, m1, L1)
+        acc[d] = (uint16_t)(L0 + L1);
+    }
+#undef CSGM_PATH
+    for (int d = n; d < D; d++) c0[d] = c1[d] = CSGM_SENT;
+    m[0] = m0;
+    m[1] = m1;
+}
+
+CSGM_INLINE int csgm_absdiff(int a, int b) { return a > b ? a - b : b - a; }
+
+#if defined(__AVX2__)
+CSGM_INLINE int16_t csgm_hmin16(__m256i v) {
+    /* path costs are >= 0, so the unsigned minpos gives the signed minimum */
+    __m128i h = _mm_min_epi16(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+    return (int16_t)_mm_cvtsi128_si32(_mm_minpos_epu16(h));
+}
+
+/* csgm_step4 for D a multiple of 16 (the same integers, 16 disparities per instruction): lanes d >= n get
+ * the sentinel before they are stored or enter the minimum; acc there is left undefined (never read). */
+CSGM_INLINE void csgm_step4_avx2(const uint16_t* CSGM_RESTRICT C, const int16_t* CSGM_RESTRICT p0,
+                                 const int16_t* CSGM_RESTRICT p1, const int16_t* CSGM_RESTRICT p2,
+                                 const int16_t* CSGM_RESTRICT p3, int16_t* CSGM_RESTRICT c0,
+                                 int16_t* CSGM_RESTRICT c1, int16_t* CSGM_RESTRICT c2, int16_t* CSGM_RESTRICT c3,
+                                 const int16_t* pm, const int16_t* P2, int16_t* m, uint16_t* CSGM_RESTRICT acc,
+                                 int n, int D, int16_t P1) {
+    const __m256i vp1 = _mm256_set1_epi16(P1);
+    const __m256i pm0 = _mm256_set1_epi16(pm[0]), pm1 = _mm256_set1_epi16(pm[1]);
+    const __m256i pm2 = _mm256_set1_epi16(pm[2]), pm3 = _mm256_set1_epi16(pm[3]);
+    const __m256i j0 = _mm256_set1_epi16((int16_t)(pm[0] + P2[0])), j1 = _mm256_set1_epi16((int16_t)(pm[1] + P2[1]));
+    const __m256i j2 = _mm256_set1_epi16((int16_t)(pm[2] + P2[2])), j3 = _mm256_set1_epi16((int16_t)(pm[3] + P2[3]));
+    const __m256i sent = _mm256_set1_epi16(CSGM_SENT);
+    __m256i m0 = sent, m1 = m0, m2 = m0, m3 = m0;
+#define CSGM_LD(p) _mm256_loadu_si256((const __m256i*)(p))
+#define CSGM_VPATH(p, c, pmk, jk, mk, Lk)                                                              \
+    __m256i Lk = _mm256_add_epi16(_mm256_min_epi16(CSGM_LD(p + d - 1), CSGM_LD(p + d + 1)), vp1);      \
+    Lk = _mm256_min_epi16(_mm256_min_epi16(Lk, CSGM_LD(p + d)), jk);                                   \
+    Lk = _mm256_add_epi16(Lk, _mm256_sub_epi16(cd, pmk));                                              \
+    _mm256_storeu_si256((__m256i*)(c + d), Lk);                                                        \
+    mk = _mm256_min_epi16(mk, Lk);
+    int d = 0;
+    for (; d + 16 <= n; d += 16) {
+        const __m256i cd = CSGM_LD(C + d);
+        CSGM_VPATH(p0, c0, pm0, j0, m0, L0)
+        CSGM_VPATH(p1, c1, pm1, j1, m1, L1)
+        CSGM_VPATH(p2, c2, pm2, j2, m2, L2)
+        CSGM_VPATH(p3, c3, pm3, j3, m3, L3)
+        _mm256_storeu_si256((__m256i*)(acc + d),
+                            _mm256_add_epi16(_mm256_add_epi16(L0, L1), _mm256_add_epi16(L2, L3)));
+    }
+#undef CSGM_VPATH
+    if (d < n) { /* the last, partial block of the left band: lanes d >= n are absent */
+        const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+        const __m256i keep = _mm256_cmpgt_epi16(_mm256_set1_epi16((int16_t)(n - d)), lane);
+        const __m256i cd = CSGM_LD(C + d);
+#define CSGM_VPATH(p, c, pmk, jk, mk, Lk)                                                              \
+    __m256i Lk = _mm256_add_epi16(_mm256_min_epi16(CSGM_LD(p + d - 1), CSGM_LD(p + d + 1)), vp1);      \
+    Lk = _mm256_min_epi16(_mm256_min_epi16(Lk, CSGM_LD(p + d)), jk);                                   \
+    Lk = _mm256_blendv_epi8(sent, _mm256_add_epi16(Lk, _mm256_sub_epi16(cd, pmk)), keep);              \
+    _mm256_storeu_si256((__m256i*)(c + d), Lk);                                                        \
+    mk = _mm256_min_epi16(mk, Lk);
+        CSGM_VPATH(p0, c0, pm0, j0, m0, L0)
+        CSGM_VPATH(p1, c1, pm1, j1, m1, L1)
+        CSGM_VPATH(p2, c2, pm2, j2, m2, L2)
+        CSGM_VPATH(p3, c3, pm3, j3, m3, L3)
+#undef CSGM_VPATH
+        _mm256_storeu_si256((__m256i*)(acc + d),
+                            _mm256_add_epi16(_mm256_add_epi16(L0, L1), _mm256_add_epi16(L2, L3)));
+        d += 16;
+    }
+    for (; d < D; d += 16) {
+        _mm256_storeu_si256((__m256i*)(c0 + d), sent);
+        _mm256_storeu_si256((__m256i*)(c1 + d), sent);
+        _mm256_storeu_si256((__m256i*)(c2 + d), sent);
+        _mm256_storeu_si256((__m256i*)(c3 + d), sent);
+    }
+#undef CSGM_LD
+    m[0] = csgm_hmin16(m0);
+    m[1] = csgm_hmin16(m1);
+    m[2] = csgm_hmin16(m2);
+    m[3] = csgm_hmin16(m3);
+}
+#endif
+
+typedef struct {
+    int H, W, D, paths, P1;
+    const int16_t* p2lut; /* 256 entries */
+    double uniqueness;
+    int subpixel, lr_check, median;
+    double tolerance;
+    const uint32_t* cl; /* census codes (H x W): with cost == NULL the passes compute each cost row from them */
+    const uint32_t* cr;
+} csgm_params;
+
+/* Per-thread scratch (bytes), see csgm_scratch_bytes. */
+typedef struct {
+    int16_t* rowP; /* 3 planes x W x csgm_stride(D): path costs of the previous row */
+    int16_t* rowC; /* same, current row */
+    int16_t* minP; /* 3 x W */
+    int16_t* minC;
+    int16_t* hA; /* csgm_stride(D) */
+    int16_t* hB;
+    int16_t* zero; /* csgm_stride(D) zeros: the "previous pixel" of a path's first pixel */
+    uint16_t* part; /* W x D: this pass's partial sum of the row */
+    uint16_t* sum;  /* D: a pixel's full sum (finishing a row) */
+    uint16_t* crow; /* W x D: the row's Hamming costs (computed in the pass) */
+    uint32_t* rev;  /* W: right census codes reversed */
+    uint16_t* rbc;  /* W: right WTA best cost (reversed x) */
+    uint16_t* rbd;  /* W: right WTA best d */
+} csgm_thread;
+
+static size_t csgm_align(size_t n) { return (n + 63) & ~(size_t)63; }
+
+/* A pixel's path costs in a buffer: CSGM_OFF int16 of which the last is the sentinel left of d = 0, the D
+ * costs (32-byte aligned when D is a multiple of 16), the sentinel right of d = D - 1, padding. */
+#define CSGM_OFF 16
+static size_t csgm_stride(int D) { return ((size_t)D + CSGM_OFF + 1 + 15) & ~(size_t)15; }
+
+static size_t csgm_scratch_bytes(int W, int D) {
+    size_t s = csgm_stride(D);
+    size_t b = 0;
+    b += 2 * csgm_align(3 * (size_t)W * s * 2);
+    b += 2 * csgm_align(3 * (size_t)W * 2);
+    b += 3 * csgm_align(s * 2);
+    b += 2 * csgm_align((size_t)W * D * 2) + csgm_align((size_t)D * 2); /* part, crow; sum */
+    b += csgm_align((size_t)W * 4);
+    b += 2 * csgm_align((size_t)W * 2);
+    return b + 64;
+}
+
+static void csgm_thread_init(csgm_thread* t, uint8_t* base, int W, int D) {
+    size_t s = csgm_stride(D);
+    uint8_t* p = (uint8_t*)(((uintptr_t)base + 63) & ~(uintptr_t)63);
+#define CSGM_TAKE(field, type, count)        \
+    t->field = (type*)p;                     \
+    p += csgm_align((size_t)(count) * sizeof(type));
+    CSGM_TAKE(rowP, int16_t, 3 * (size_t)W * s)
+    CSGM_TAKE(rowC, int16_t, 3 * (size_t)W * s)
+    CSGM_TAKE(minP, int16_t, 3 * (size_t)W)
+    CSGM_TAKE(minC, int16_t, 3 * (size_t)W)
+    CSGM_TAKE(hA, int16_t, s)
+    CSGM_TAKE(hB, int16_t, s)
+    CSGM_TAKE(zero, int16_t, s)
+    CSGM_TAKE(part, uint16_t, (size_t)W * D)
+    CSGM_TAKE(sum, uint16_t, D)
+    CSGM_TAKE(crow, uint16_t, (size_t)W * D)
+    CSGM_TAKE(rev, uint32_t, W)
+    CSGM_TAKE(rbc, uint16_t, W)
+    CSGM_TAKE(rbd, uint16_t, W)
+#undef CSGM_TAKE
+    /* sentinels left of d = 0 and right of d = D - 1 (never overwritten) */
+    for (size_t i = 0; i < 3 * (size_t)W; i++) {
+        t->rowP[i * s + CSGM_OFF - 1] = t->rowP[i * s + CSGM_OFF + D] = CSGM_SENT;
+        t->rowC[i * s + CSGM_OFF - 1] = t->rowC[i * s + CSGM_OFF + D] = CSGM_SENT;
+    }
+    t->hA[CSGM_OFF - 1] = t->hA[CSGM_OFF + D] = t->hB[CSGM_OFF - 1] = t->hB[CSGM_OFF + D] = CSGM_SENT;
+    memset(t->zero, 0, s * sizeof(int16_t));
+}
+
+/* Row y of one pass (s = +1 forward: x ascending, predecessors in row y - 1 and x - 1; s = -1 backward).
+ * Writes the row's partial sum (4 or 2 paths) to part (W x D); rowP/minP must hold row y - s (unless first). */
+static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT cost, const uint8_t* CSGM_RESTRICT g,
+                          csgm_thread* t, int y, int s, int first, uint16_t* CSGM_RESTRICT part) {
+    const int W = p->W, D = p->D;
+    const ptrdiff_t st = (ptrdiff_t)csgm_stride(D);
+    const int16_t P1 = (int16_t)p->P1;
+    const int16_t* lut = p->p2lut;
+    const int eight = p->paths == 8;
+    const uint16_t* crow;
+    if (cost) {
+        crow = cost + (ptrdiff_t)y * W * D;
+    } else {
+        csgm_hamming_row(p->cl + (ptrdiff_t)y * W, p->cr + (ptrdiff_t)y * W, t->rev, t->crow, W, D, 0);
+        crow = t->crow;
+    }
+    const uint8_t* grow = g + (ptrdiff_t)y * W;
+    const uint8_t* gprev = first ? grow : g + (ptrdiff_t)(y - s) * W;
+    const int16_t* zero = t->zero + CSGM_OFF;
+    int16_t* hp = t->hA + CSGM_OFF;
+    int16_t* hc = t->hB + CSGM_OFF;
+    int16_t hm = 0;
+    const ptrdiff_t plane = (ptrdiff_t)W * st;
+    for (int i = 0; i < W; i++) {
+        const int x = s > 0 ? i : W - 1 - i;
+        const int n = x + 1 < D ? x + 1 : D;
+        const int gx = grow[x];
+        int16_t pm[4], P2[4], m[4];
+#if defined(__AVX2__)
+        if (eight && !first && i > 0 && i < W - 1 && (D & 15) == 0) { /* interior pixel: every path continues */
+            const int xa = x - s, xb = x + s;
+            int16_t* c1 = t->rowC + (ptrdiff_t)x * st + CSGM_OFF;
+            pm[0] = hm;
+            pm[1] = t->minP[xa];
+            pm[2] = t->minP[W + x];
+            pm[3] = t->minP[2 * W + xb];
+            P2[0] = lut[csgm_absdiff(gx, grow[xa])];
+            P2[1] = lut[csgm_absdiff(gx, gprev[xa])];
+            P2[2] = lut[csgm_absdiff(gx, gprev[x])];
+            P2[3] = lut[csgm_absdiff(gx, gprev[xb])];
+            csgm_step4_avx2(crow + (ptrdiff_t)x * D, hp, t->rowP + (ptrdiff_t)xa * st + CSGM_OFF,
+                            t->rowP + plane + (ptrdiff_t)x * st + CSGM_OFF,
+                            t->rowP + 2 * plane + (ptrdiff_t)xb * st + CSGM_OFF, hc,
+                            c1, c1 + plane, c1 + 2 * plane, pm, P2, m, part + (ptrdiff_t)x * D, n, D, P1);
+            t->minC[x] = m[1];
+            t->minC[W + x] = m[2];
+            t->minC[2 * W + x] = m[3];
+            hm = m[0];
+            int16_t* tmp = hp;
+            hp = hc;
+            hc = tmp;
+            continue;
+        }
+#endif
+        const int16_t* pv[4];
+        int16_t* cv[4];
+        /* path 0: horizontal from x - s; paths 1..3: from (y - s, x - s * dk), dk = 1, 0, -1 (8 paths)
+         * or path 1: from (y - s, x) (4 paths) */
+        if (i == 0) {
+            pv[0] = zero;
+            pm[0] = 0;
+            P2[0] = 0;
+        } else {
+            pv[0] = hp;
+            pm[0] = hm;
+            P2[0] = lut[csgm_absdiff(gx, grow[x - s])];
+        }
+        cv[0] = hc;
+        const int nk = eight ? 3 : 1;
+        for (int k = 0; k < nk; k++) {
+            const int dk = eight ? 1 - k : 0;
+            const int xp = x - s * dk;
+            cv[k + 1] = t->rowC + ((ptrdiff_t)k * W + x) * st + CSGM_OFF;
+            if (first || xp < 0 || xp >= W) {
+                pv[k + 1] = zero;
+                pm[k + 1] = 0;
+                P2[k + 1] = 0;
+            } else {
+                pv[k + 1] = t->rowP + ((ptrdiff_t)k * W + xp) * st + CSGM_OFF;
+                pm[k + 1] = t->minP[k * W + xp];
+                P2[k + 1] = lut[csgm_absdiff(gx, gprev[xp])];
+            }
+        }
+        const uint16_t* C = crow + (ptrdiff_t)x * D;
+        uint16_t* acc = part + (ptrdiff_t)x * D;
+        if (eight) {
+#if defined(__AVX2__)
+            if ((D & 15) == 0)
+                csgm_step4_avx2(C, pv[0], pv[1], pv[2], pv[3], cv[0], cv[1], cv[2], cv[3], pm, P2, m, acc, n, D, P1);
+            else
+#endif
+                csgm_step4(C, pv[0], pv[1], pv[2], pv[3], cv[0], cv[1], cv[2], cv[3], pm, P2, m, acc, n, D, P1);
+            t->minC[x] = m[1];
+            t->minC[W + x] = m[2];
+            t->minC[2 * W + x] = m[3];
+        } else {
+            csgm_step2(C, pv[0], pv[1], cv[0], cv[1], pm, P2, m, acc, n, D, P1);
+            t->minC[x] = m[1];
+        }
+        hm = m[0];
+        int16_t* tmp = hp;
+        hp = hc;
+        hc = tmp;
+    }
+    int16_t* tmp = t->rowP;
+    t->rowP = t->rowC;
+    t->rowC = tmp;
+    tmp = t->minP;
+    t->minP = t->minC;
+    t->minC = tmp;
+}
+
+/* ----------------------------------------------------------------- WTA ---- */
+
+/* The first d < n with c[d] == v (v is among them). */
+CSGM_INLINE int csgm_first_eq(const uint16_t* CSGM_RESTRICT c, int n, uint16_t v) {
+    int d = 0;
+#if defined(__AVX2__)
+    const __m256i vv = _mm256_set1_epi16((short)v);
+    for (; d + 16 <= n; d += 16) {
+        unsigned m = (unsigned)_mm256_movemask_epi8(_mm256_cmpeq_epi16(_mm256_loadu_si256((const __m256i*)(c + d)), vv));
+        if (m) return d + (__builtin_ctz(m) >> 1);
+    }
+#elif defined(__SSE2__)
+    const __m128i vv = _mm_set1_epi16((short)v);
+    for (; d + 8 <= n; d += 8) {
+        unsigned m = (unsigned)_mm_movemask_epi8(_mm_cmpeq_epi16(_mm_loadu_si128((const __m128i*)(c + d)), vv));
+        if (m) return d + (__builtin_ctz(m) >> 1);
+    }
+#endif
+    for (; d < n; d++)
+        if (c[d] == v) return d;
+    return 0;
+}
+
+/* Left WTA of one pixel over its n valid disparities (lowest d on ties), uniqueness, parabola.  In the left
+ * band (n < D) a minimum at the largest existing d = n - 1 is rejected: the match may lie beyond the image. */
+CSGM_INLINE float csgm_wta_pixel(const uint16_t* CSGM_RESTRICT c, int n, int D, double uniqueness, int subpixel) {
+    uint16_t bv = 0xFFFFu;
+    int d = 0;
+#if defined(__AVX2__)
+    __m256i vmin = _mm256_set1_epi16(-1);
+    for (; d + 16 <= n; d += 16) vmin = _mm256_min_epu16(vmin, _mm256_loadu_si256((const __m256i*)(c + d)));
+    {
+        __m128i h = _mm_min_epu16(_mm256_castsi256_si128(vmin), _mm256_extracti128_si256(vmin, 1));
+        bv = (uint16_t)_mm_cvtsi128_si32(_mm_minpos_epu16(h));
+    }
+#endif
+    for (; d < n; d++) bv = c[d] < bv ? c[d] : bv;
+    const int b = csgm_first_eq(c, n, bv);
+    if (n < D && b == n - 1) return NAN;
+    if (b >= 2 || b + 2 <= n - 1) { /* some d with |d - best| > 1 */
+        uint16_t second = 0xFFFFu;
+        d = 0;
+#if defined(__AVX2__)
+        {
+            /* lanes with d - (b - 1) in [0, 2] (unsigned) are left out */
+            const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+            const __m256i bias = _mm256_set1_epi16((int16_t)0x8000);
+            const __m256i two = _mm256_set1_epi16((int16_t)(2 ^ 0x8000));
+            __m256i vs = _mm256_set1_epi16(-1);
+            const int blo = (b > 0 ? b - 1 : 0) >> 4, bhi = (b + 1) >> 4; /* the blocks holding b - 1 .. b + 1 */
+            for (; d + 16 <= n; d += 16) {
+                __m256i v = _mm256_loadu_si256((const __m256i*)(c + d));
+                if ((d >> 4) == blo || (d >> 4) == bhi) {
+                    __m256i rel = _mm256_sub_epi16(_mm256_add_epi16(lane, _mm256_set1_epi16((int16_t)d)),
+                                                   _mm256_set1_epi16((int16_t)(b - 1)));
+                    __m256i out = _mm256_cmpgt_epi16(_mm256_xor_si256(rel, bias), two); /* rel > 2 unsigned */
+                    v = _mm256_or_si256(v, _mm256_andnot_si256(out, _mm256_set1_epi16(-1)));
+                }
+                vs = _mm256_min_epu16(vs, v);
+            }
+            __m128i h = _mm_min_epu16(_mm256_castsi256_si128(vs), _mm256_extracti128_si256(vs, 1));
+            second = (uint16_t)_mm_cvtsi128_si32(_mm_minpos_epu16(h));
+        }
+#endif
+        for (; d < n; d++) {
+            uint16_t v = (d < b - 1 || d > b + 1) ? c[d] : (uint16_t)0xFFFFu;
+            second = v < second ? v : second;
+        }
+        if (!((double)bv < uniqueness * (double)second)) return NAN;
+    }
+    if (subpixel && b > 0 && b < n - 1) {
+        int c0 = c[b - 1], c2 = c[b + 1];
+        int denom = c0 - 2 * (int)bv + c2;
+        if (denom > 0) return (float)((double)b + (double)(c0 - c2) / (2.0 * (double)denom));
+    }
+    return (float)b;
+}
+
+static void csgm_wta_row(const uint16_t* CSGM_RESTRICT S, float* CSGM_RESTRICT out, int W, int D,
+                         double uniqueness, int subpixel) {
+    for (int x = 0; x < W; x++) {
+        const int n = x + 1 < D ? x + 1 : D;
+        out[x] = csgm_wta_pixel(S + (ptrdiff_t)x * D, n, D, uniqueness, subpixel);
+    }
+}
+
+/* Right WTA of one row: out[xr] = argmin_d S[xr + d][d] (lowest d on ties), as a running minimum along
+ * the diagonals while x ascends.  rbc, rbd: W scratch entries. */
+/* Right WTA, one left pixel x (costs c, n valid): bc[d], bd[d] (right pixel x - d, reversed) keep the lowest
+ * cost and its d; x ascends, so the strict < keeps the lowest d on ties. */
+CSGM_INLINE void csgm_right_pixel(const uint16_t* CSGM_RESTRICT c, int n, uint16_t* CSGM_RESTRICT bc,
+                                  uint16_t* CSGM_RESTRICT bd) {
+    int d = 0;
+#if defined(__AVX2__)
+    {
+        const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+        const __m256i bias = _mm256_set1_epi16((int16_t)0x8000);
+        for (; d + 16 <= n; d += 16) {
+            const __m256i v = _mm256_loadu_si256((const __m256i*)(c + d));
+            const __m256i o = _mm256_loadu_si256((const __m256i*)(bc + d));
+            const __m256i lt = _mm256_cmpgt_epi16(_mm256_xor_si256(o, bias), _mm256_xor_si256(v, bias));
+            const __m256i dv = _mm256_add_epi16(lane, _mm256_set1_epi16((int16_t)d));
+            _mm256_storeu_si256((__m256i*)(bd + d),
+                                _mm256_blendv_epi8(_mm256_loadu_si256((const __m256i*)(bd + d)), dv, lt));
+            _mm256_storeu_si256((__m256i*)(bc + d), _mm256_min_epu16(v, o));
+        }
+    }
+#endif
+    for (; d < n; d++) {
+        const uint16_t v = c[d], o = bc[d];
+        bd[d] = v < o ? (uint16_t)d : bd[d];
+        bc[d] = v < o ? v : o;
+    }
+}
+
+static void csgm_right_row(const uint16_t* CSGM_RESTRICT S, float* CSGM_RESTRICT out, int W, int D,
+                           uint16_t* CSGM_RESTRICT rbc, uint16_t* CSGM_RESTRICT rbd) {
+    for (int i = 0; i < W; i++) {
+        rbc[i] = 0xFFFFu;
+        rbd[i] = 0;
+    }
+    for (int x = 0; x < W; x++) {
+        const int n = x + 1 < D ? x + 1 : D;
+        csgm_right_pixel(S + (ptrdiff_t)x * D, n, rbc + (W - 1 - x), rbd + (W - 1 - x));
+    }
+    for (int xr = 0; xr < W; xr++) out[xr] = (float)rbd[W - 1 - xr];
+}
+
+static void csgm_lr_row(const float* CSGM_RESTRICT dl, const float* CSGM_RESTRICT dr, float* CSGM_RESTRICT out,
+                        int W, double tol) {
+    for (int x = 0; x < W; x++) {
+        float d = dl[x];
+        float r = NAN;
+        if (!isnan(d)) {
+            int xr = x - (int)floor((double)d + 0.5);
+            if (xr >= 0 && xr < W && !isnan(dr[xr]) && fabs((double)d - (double)dr[xr]) <= tol) r = d;
+        }
+        out[x] = r;
+    }
+}
+
+/* ---------------------------------------------------------------- median -- */
+
+/* Row py of the (H + 2) x (W + 2) copy of src with NaN and the border as +inf. */
+static void csgm_median_pad_row(const float* CSGM_RESTRICT src, int H, int W, float* CSGM_RESTRICT pad, int py) {
+    float* d = pad + (ptrdiff_t)py * (W + 2);
+    const int y = py - 1;
+    if (y < 0 || y >= H) {
+        for (int x = 0; x < W + 2; x++) d[x] = INFINITY;
+        return;
+    }
+    const float* s = src + (ptrdiff_t)y * W;
+    d[0] = d[W + 1] = INFINITY;
+    for (int x = 0; x < W; x++) d[x + 1] = isnan(s[x]) ? INFINITY : s[x];
+}
+
+#define CSGM_CE(a, b)              \
+    {                              \
+        float lo_ = a < b ? a : b; \
+        float hi_ = a < b ? b : a; \
+        a = lo_;                   \
+        b = hi_;                   \
+    }
+/* 25-comparator sorting network for 9 inputs, CE(a, b) leaves min in a, max in b */
+#define CSGM_SORT9(CE)                                                                                      \
+    CE(v0, v1) CE(v3, v4) CE(v6, v7) CE(v1, v2) CE(v4, v5) CE(v7, v8) CE(v0, v1) CE(v3, v4) CE(v6, v7)     \
+    CE(v0, v3) CE(v3, v6) CE(v0, v3) CE(v1, v4) CE(v4, v7) CE(v1, v4) CE(v2, v5) CE(v5, v8) CE(v2, v5)     \
+    CE(v1, v3) CE(v5, v7) CE(v2, v6) CE(v4, v6) CE(v2, v4) CE(v2, v3) CE(v5, v6)
+
+#if defined(__AVX__)
+#define CSGM_VW 8
+typedef __m256 csgm_vf;
+#define CSGM_VLOAD(p) _mm256_loadu_ps(p)
+#define CSGM_VSTORE(p, v) _mm256_storeu_ps(p, v)
+#define CSGM_VSET1(x) _mm256_set1_ps(x)
+#define CSGM_VMIN(a, b) _mm256_min_ps(a, b)
+#define CSGM_VMAX(a, b) _mm256_max_ps(a, b)
+#define CSGM_VADD(a, b) _mm256_add_ps(a, b)
+#define CSGM_VMUL(a, b) _mm256_mul_ps(a, b)
+#define CSGM_VAND(a, b) _mm256_and_ps(a, b)
+#define CSGM_VLT(a, b) _mm256_cmp_ps(a, b, _CMP_LT_OQ)
+#define CSGM_VEQ(a, b) _mm256_cmp_ps(a, b, _CMP_EQ_OQ)
+#define CSGM_VSEL(m, a, b) _mm256_blendv_ps(b, a, m)
+#elif defined(__SSE2__)
+#define CSGM_VW 4
+typedef __m128 csgm_vf;
+#define CSGM_VLOAD(p) _mm_loadu_ps(p)
+#define CSGM_VSTORE(p, v) _mm_storeu_ps(p, v)
+#define CSGM_VSET1(x) _mm_set1_ps(x)
+#define CSGM_VMIN(a, b) _mm_min_ps(a, b)
+#define CSGM_VMAX(a, b) _mm_max_ps(a, b)
+#define CSGM_VADD(a, b) _mm_add_ps(a, b)
+#define CSGM_VMUL(a, b) _mm_mul_ps(a, b)
+#define CSGM_VAND(a, b) _mm_and_ps(a, b)
+#define CSGM_VLT(a, b) _mm_cmplt_ps(a, b)
+#define CSGM_VEQ(a, b) _mm_cmpeq_ps(a, b)
+#define CSGM_VSEL(m, a, b) _mm_or_ps(_mm_and_ps(m, a), _mm_andnot_ps(m, b))
+#endif
+
+/* Row y of the 3x3 median over the finite neighbours (mean of the middle two for an even count);
+ * NaN (inf in pad) stays NaN.  Sorts the 9 values (inf last) and picks by the finite count n. */
+static void csgm_median_row(const float* CSGM_RESTRICT pad, int W, float* CSGM_RESTRICT out, int y) {
+    const ptrdiff_t P = (ptrdiff_t)W + 2;
+    const float* r0 = pad + (ptrdiff_t)y * P + 1;
+    const float* r1 = r0 + P;
+    const float* r2 = r1 + P;
+    float* o = out + (ptrdiff_t)y * W;
+    ptrdiff_t x = 0;
+#ifdef CSGM_VW
+    {
+        const csgm_vf inf = CSGM_VSET1(INFINITY), one = CSGM_VSET1(1.0f), half = CSGM_VSET1(0.5f);
+        const csgm_vf nan = CSGM_VSET1(NAN);
+#define CSGM_VCE(a, b)                     \
+    {                                      \
+        csgm_vf lo_ = CSGM_VMIN(a, b);     \
+        csgm_vf hi_ = CSGM_VMAX(a, b);     \
+        a = lo_;                           \
+        b = hi_;                           \
+    }
+        for (; x + CSGM_VW <= W; x += CSGM_VW) {
+            csgm_vf v0 = CSGM_VLOAD(r0 + x - 1), v1 = CSGM_VLOAD(r0 + x), v2 = CSGM_VLOAD(r0 + x + 1);
+            csgm_vf v3 = CSGM_VLOAD(r1 + x - 1), v4 = CSGM_VLOAD(r1 + x), v5 = CSGM_VLOAD(r1 + x + 1);
+            csgm_vf v6 = CSGM_VLOAD(r2 + x - 1), v7 = CSGM_VLOAD(r2 + x), v8 = CSGM_VLOAD(r2 + x + 1);
+            const csgm_vf valid = CSGM_VLT(v4, inf);
+            csgm_vf n = CSGM_VAND(CSGM_VLT(v0, inf), one);
+            n = CSGM_VADD(n, CSGM_VAND(CSGM_VLT(v1, inf), one));
+            n = CSGM_VADD(n, CSGM_VAND(CSGM_VLT(v2, inf), one));
+            n = CSGM_VADD(n, CSGM_VAND(CSGM_VLT(v3, inf), one));
+            n = CSGM_VADD(n, CSGM_VAND(valid, one));
+            n = CSGM_VADD(n, CSGM_VAND(CSGM_VLT(v5, inf), one));
+            n = CSGM_VADD(n, CSGM_VAND(CSGM_VLT(v6, inf), one));
+            n = CSGM_VADD(n, CSGM_VAND(CSGM_VLT(v7, inf), one));
+            n = CSGM_VADD(n, CSGM_VAND(CSGM_VLT(v8, inf), one));
+            CSGM_SORT9(CSGM_VCE)
+            csgm_vf r = v4;
+#define CSGM_PICK(k, val) r = CSGM_VSEL(CSGM_VEQ(n, CSGM_VSET1((float)(k))), val, r);
+            CSGM_PICK(1, v0)
+            CSGM_PICK(2, CSGM_VMUL(CSGM_VADD(v0, v1), half))
+            CSGM_PICK(3, v1)
+            CSGM_PICK(4, CSGM_VMUL(CSGM_VADD(v1, v2), half))
+            CSGM_PICK(5, v2)
+            CSGM_PICK(6, CSGM_VMUL(CSGM_VADD(v2, v3), half))
+            CSGM_PICK(7, v3)
+            CSGM_PICK(8, CSGM_VMUL(CSGM_VADD(v3, v4), half))
+#undef CSGM_PICK
+#undef CSGM_VCE
+            CSGM_VSTORE(o + x, CSGM_VSEL(valid, r, nan));
+        }
+    }
+#endif
+    for (; x < W; x++) {
+        float v0 = r0[x - 1], v1 = r0[x], v2 = r0[x + 1];
+        float v3 = r1[x - 1], v4 = r1[x], v5 = r1[x + 1];
+        float v6 = r2[x - 1], v7 = r2[x], v8 = r2[x + 1];
+        const float centre = v4;
+        int n = (v0 < INFINITY) + (v1 < INFINITY) + (v2 < INFINITY) + (v3 < INFINITY) + (v4 < INFINITY) +
+                (v5 < INFINITY) + (v6 < INFINITY) + (v7 < INFINITY) + (v8 < INFINITY);
+        CSGM_SORT9(CSGM_CE)
+        float r = v4;
+        r = n == 1 ? v0 : r;
+        r = n == 2 ? (v0 + v1) * 0.5f : r;
+        r = n == 3 ? v1 : r;
+        r = n == 4 ? (v1 + v2) * 0.5f : r;
+        r = n == 5 ? v2 : r;
+        r = n == 6 ? (v2 + v3) * 0.5f : r;
+        r = n == 7 ? v3 : r;
+        r = n == 8 ? (v3 + v4) * 0.5f : r;
+        o[x] = centre < INFINITY ? r : NAN;
+    }
+}
+#undef CSGM_CE
+#undef CSGM_SORT9
+
+/* ---------------------------------------------------------------- driver -- */
+
+/* Finish row y: S = a + b; then either copy S to sout (invalid entries CSGM_NOCOST) or run the left and
+ * right WTA and the left-right check into dl, dr, lr. */
+static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const uint16_t* CSGM_RESTRICT a,
+                            const uint16_t* CSGM_RESTRICT b, int y, uint16_t* sout, float* dl, float* dr,
+                            float* lr) {
+    const int W = p->W, D = p->D;
+    const ptrdiff_t n = (ptrdiff_t)W * D;
+    if (sout) {
+        uint16_t* CSGM_RESTRICT S = sout + (ptrdiff_t)y * n;
+        for (ptrdiff_t i = 0; i < n; i++) S[i] = (uint16_t)(a[i] + b[i]);
+        for (int x = 0; x < W && x < D - 1; x++)
+            for (int d = x + 1; d < D; d++) S[(ptrdiff_t)x * D + d] = CSGM_NOCOST;
+        return;
+    }
+    /* pixel by pixel: its sum S (D entries, in L1), left WTA, right WTA update */
+    uint16_t* CSGM_RESTRICT S = t->sum;
+    float* l = dl ? dl + (ptrdiff_t)y * W : NULL;
+    const int right = l && p->lr_check;
+    if (right) {
+        for (int i = 0; i < W; i++) {
+            t->rbc[i] = 0xFFFFu;
+            t->rbd[i] = 0;
+        }
+    }
+    for (int x = 0; x < W; x++) {
+        const uint16_t* CSGM_RESTRICT ax = a + (ptrdiff_t)x * D;
+        const uint16_t* CSGM_RESTRICT bx = b + (ptrdiff_t)x * D;
+        const int nv = x + 1 < D ? x + 1 : D;
+        for (int d = 0; d < D; d++) S[d] = (uint16_t)(ax[d] + bx[d]);
+        if (!l) continue; /* aggregation only (timing) */
+        l[x] = csgm_wta_pixel(S, nv, D, p->uniqueness, p->subpixel);
+        if (right) csgm_right_pixel(S, nv, t->rbc + (W - 1 - x), t->rbd + (W - 1 - x));
+    }
+    if (!l) return;
+    if (!right) {
+        if (lr != l) memcpy(lr + (ptrdiff_t)y * W, l, (size_t)W * sizeof(float));
+        return;
+    }
+    float* r = dr + (ptrdiff_t)y * W;
+    for (int xr = 0; xr < W; xr++) r[xr] = (float)t->rbd[W - 1 - xr];
+    csgm_lr_row(l, r, lr + (ptrdiff_t)y * W, W, p->tolerance);
+}
+
+/* One pass over all rows (s = +1 top-down, -1 bottom-up).  The pass writes a row's partial sum to own[y]
+ * (to its scratch row when own is NULL: the one-thread backward pass, always second) and counts the row;
+ * when the other pass had counted it already, this one finishes the row with other[y]. */
+static void csgm_pass(const csgm_params* p, const uint16_t* cost, const uint8_t* g, csgm_thread* t, int s,
+                      uint16_t* own, const uint16_t* other, int* rowcnt, uint16_t* sout, float* dl, float* dr,
+                      float* lr) {
+    const int H = p->H;
+    const ptrdiff_t n = (ptrdiff_t)p->W * p->D;
+    for (int i = 0; i < H; i++) {
+        const int y = s > 0 ? i : H - 1 - i;
+        uint16_t* part = own ? own + (ptrdiff_t)y * n : t->part;
+        csgm_pass_row(p, cost, g, t, y, s, i == 0, part);
+        /* store first, then count: the pass that counts second sees the other's row */
+        if (__atomic_fetch_add(&rowcnt[y], 1, __ATOMIC_ACQ_REL) == 0) continue;
+        csgm_finish_row(p, t, part, other + (ptrdiff_t)y * n, y, sout, dl, dr, lr);
+    }
+}
+
+/* Census of both images and (cost != NULL) the Hamming volume, by thread tid of a team (called inside a
+ * parallel region: every thread of the team must call it).  padl, padr: (H + 4) x (W + 4) bytes; cl, cr: H x W
+ * codes; work: team x csgm_cost_work_bytes(W) bytes (+ 64 for alignment). */
+static size_t csgm_cost_work_bytes(int W) { return csgm_align((size_t)W * 4) + 3 * csgm_align((size_t)W); }
+
+static void csgm_cost_team(const uint8_t* gl, const uint8_t* gr, int H, int W, int D, uint8_t* padl, uint8_t* padr,
+                           uint32_t* cl, uint32_t* cr, uint16_t* cost, uint16_t invalid_cost, uint8_t* work, int tid,
+                           int team) {
+    const size_t wb = csgm_cost_work_bytes(W);
+    uint8_t* w = (uint8_t*)(((uintptr_t)work + 63) & ~(uintptr_t)63) + (size_t)tid * wb;
+    uint32_t* rev = (uint32_t*)w;
+    uint8_t* b0 = w + csgm_align((size_t)W * 4);
+    uint8_t* b1 = b0 + csgm_align((size_t)W);
+    uint8_t* b2 = b1 + csgm_align((size_t)W);
+    int p0 = (int)((int64_t)(H + 4) * tid / team), p1 = (int)((int64_t)(H + 4) * (tid + 1) / team);
+    csgm_pad_rows(gl, H, W, padl, p0, p1);
+    csgm_pad_rows(gr, H, W, padr, p0, p1);
+#ifdef _OPENMP
+#pragma omp barrier
+#endif
+    int y0 = (int)((int64_t)H * tid / team), y1 = (int)((int64_t)H * (tid + 1) / team);
+    csgm_census_rows(padl, H, W, cl, y0, y1, b0, b1, b2);
+    csgm_census_rows(padr, H, W, cr, y0, y1, b0, b1, b2);
+    if (cost) {
+#ifdef _OPENMP
+#pragma omp barrier
+#endif
+        for (int y = y0; y < y1; y++)
+            csgm_hamming_row(cl + (ptrdiff_t)y * W, cr + (ptrdiff_t)y * W, rev, cost + (ptrdiff_t)y * W * D, W, D,
+                             invalid_cost);
+    }
+}
+
+/* csgm_cost_team in a parallel region of its own. */
+static void csgm_cost(const uint8_t* gl, const uint8_t* gr, int H, int W, int D, uint8_t* padl, uint8_t* padr,
+                      uint32_t* cl, uint32_t* cr, uint16_t* cost, uint16_t invalid_cost, uint8_t* work,
+                      int nthreads) {
+    int nt = nthreads < 1 ? 1 : nthreads;
+#ifdef _OPENMP
+#pragma omp parallel num_threads(nt)
+#endif
+    {
+        int tid = 0, team = 1;
+#ifdef _OPENMP
+        tid = omp_get_thread_num();
+        team = omp_get_num_threads();
+#endif
+        csgm_cost_team(gl, gr, H, W, D, padl, padr, cl, cr, cost, invalid_cost, work, tid, team);
+    }
+}
+
+/* The census inputs of csgm_sgm when it starts with the census (else gl == NULL). */
+typedef struct {
+    const uint8_t* gl;
+    const uint8_t* gr;
+    uint8_t* padl;
+    uint8_t* padr;
+    uint8_t* work; /* nthreads x csgm_cost_work_bytes(W) + 64 */
+} csgm_census_io;
+
+/* SGM + WTA (+ right WTA, left-right check, median) of a cost volume (cost == NULL: of the Hamming costs of
+ * p->cl, p->cr, computed row by row; with census, those codes are computed first, in the same region).
+ * vf, vb: H x W x D partial-sum volumes (vb unused with one thread); rowcnt: H ints; scratch: blocks
+ * of csgm_scratch_bytes(W, D); pad: (H + 2) x (W + 2) floats for the median.  With sout, writes the
+ * aggregated volume there instead (no WTA).  Output: disp (H x W) = final disparity; dl, dr: left / right
+ * WTA (dl may be disp when neither check nor median runs).  Only threads 0 and 1 use scratch (2 blocks). */
+static void csgm_sgm(const csgm_params* p, const uint16_t* cost, const uint8_t* g, uint16_t* vf, uint16_t* vb,
+                     int* rowcnt, uint8_t* scratch, int nthreads, uint16_t* sout, float* dl, float* dr,
+                     float* lr, float* pad, float* disp, const csgm_census_io* census) {
+    const int H = p->H, W = p->W;
+    const size_t sb = csgm_scratch_bytes(W, p->D);
+    int nt = nthreads < 1 ? 1 : nthreads;
+    memset(rowcnt, 0, (size_t)H * sizeof(int));
+#ifdef _OPENMP
+#pragma omp parallel num_threads(nt)
+#endif
+    {
+        int tid = 0, team = 1;
+#ifdef _OPENMP
+        tid = omp_get_thread_num();
+        team = omp_get_num_threads();
+#endif
+        if (census) { /* the census codes p->cl, p->cr first (all threads), then the passes read them */
+            csgm_cost_team(census->gl, census->gr, H, W, p->D, census->padl, census->padr, (uint32_t*)p->cl,
+                           (uint32_t*)p->cr, NULL, 0, census->work, tid, team);
+#ifdef _OPENMP
+#pragma omp barrier
+#endif
+        }
+        csgm_thread t;
+        if (tid < 2) csgm_thread_init(&t, scratch + (size_t)tid * sb, W, p->D);
+        if (team == 1) {
+            csgm_pass(p, cost, g, &t, 1, vf, vf, rowcnt, sout, dl, dr, lr);
+            csgm_pass(p, cost, g, &t, -1, NULL, vf, rowcnt, sout, dl, dr, lr);
+        } else if (tid == 0) {
+            csgm_pass(p, cost, g, &t, 1, vf, vb, rowcnt, sout, dl, dr, lr);
+        } else if (tid == 1) {
+            csgm_pass(p, cost, g, &t, -1, vb, vf, rowcnt, sout, dl, dr, lr);
+        }
+        if (!sout && dl && p->median) {
+#ifdef _OPENMP
+#pragma omp barrier
+#endif
+            const int y0 = (int)((int64_t)(H + 2) * tid / team), y1 = (int)((int64_t)(H + 2) * (tid + 1) / team);
+            for (int py = y0; py < y1; py++) csgm_median_pad_row(lr, H, W, pad, py);
+#ifdef _OPENMP
+#pragma omp barrier
+#endif
+            const int z0 = (int)((int64_t)H * tid / team), z1 = (int)((int64_t)H * (tid + 1) / team);
+            for (int y = z0; y < z1; y++) csgm_median_row(pad, W, disp, y);
+        }
+    }
+}
+
+#endif
