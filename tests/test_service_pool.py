@@ -320,7 +320,7 @@ def test_a_stopped_workers_fresh_frames_are_answered_by_the_successor(tmp_path: 
     endpoint, rig, count = f"tcp/127.0.0.1:{free_port()}", f"kill{int(sig)}x{int(deadline_ms)}", 36
     results: list[subprocess.CompletedProcess[str]] = []
     ids = ["a", "b"]
-    slow = 'name = "census-sgm"\nmax_disparity = 64\nthreads = 1'  # ~0.15 s a frame: the victim keeps a backlog
+    slow = 'name = "census-sgm"\nmax_disparity = 128\nthreads = 1'  # ~0.15 s a full frame: the victim keeps a backlog
     configs = [worker_config(tmp_path, endpoint, rig, w, matcher=slow, deadline_ms=deadline_ms) for w in ids]
     procs = [start_worker(cfg, tmp_path / f"{w}.log") for cfg, w in zip(configs, ids, strict=True)]
     with RouterProcess(endpoint) as router:
@@ -330,9 +330,9 @@ def test_a_stopped_workers_fresh_frames_are_answered_by_the_successor(tmp_path: 
                 wait_members(session, rig, 2, procs)
                 sub = session.declare_subscriber(f"vpp/{rig}/out/disparity", zenoh.handlers.FifoChannel(256))
                 time.sleep(0.3)
-                # b and a share 15 frames/s; a frame takes a worker ~0.15 s on a busy core: a falls behind
+                # b and a share 30 frames/s; a frame takes a worker ~0.15 s: a falls behind
                 publisher = threading.Thread(
-                    target=lambda: results.append(publish(endpoint, rig, count, rate=15, scale=0.5))
+                    target=lambda: results.append(publish(endpoint, rig, count, rate=30, scale=1.0))
                 )
                 publisher.start()
                 outs = []
@@ -359,8 +359,9 @@ def test_a_stopped_workers_fresh_frames_are_answered_by_the_successor(tmp_path: 
     elif deadline_ms > 1000:  # nothing is older than the deadline: every frame is answered
         assert st["lost"] == 0 and st["taken_over"] >= 1
         assert set(answered) == set(range(count))
-    else:  # every frame "a" left is too old: counted lost, none processed
-        assert st["taken_over"] == 0 and st["lost"] >= 1
+    else:  # what "a" left is too old: counted lost, not processed (a frame that reached b within 1 ms of the
+        # token loss is still fresh and may be taken over: seen once in ~10 runs)
+        assert st["lost"] >= 1 and st["taken_over"] <= 1
         missing = [s for s in range(count) if s not in answered]
         assert len(missing) == st["lost"] and set(missing) <= set(owned_by_a)
 
