@@ -429,8 +429,10 @@ def render(doc: dict[str, Any], out: Path) -> str:
         "- Guided stereo (Poggi et al. 2019): cost modulation k = 10, c = 1 inside `census-sgm`; `sgbm` "
         "(OpenCV StereoSGBM, 3-way, block 5) exposes no cost volume, so guided is n/a for it.",
         "- `census-sgm`: our re-implementation of the rSGM recipe (5x5 census, 8-path SGM with "
-        "intensity-adaptive P2, left-right check, 3x3 median, speckle filter), 1 thread. Disparity range "
-        "per scene = smallest multiple of 16 above the largest GT disparity.",
+        "intensity-adaptive P2, left-right check, matches on the right image's border rejected, row gaps "
+        "<= 4 px closed, 3x3 median, speckle filter), 1 thread; both matchers answer the left band (columns "
+        "x < D: census-sgm over the disparities that exist there, sgbm on a left-padded pair). Disparity "
+        "range per scene = smallest multiple of 16 above the largest GT disparity.",
         "- Holes of every matcher filled before scoring (background interpolation). bad-τ = % of pixels with "
         "|d - gt| > τ, avg = mean absolute error (px), over **all** pixels with valid ground truth "
         "(occluded included); `nocc` columns use the non-occlusion mask where one exists (Middlebury: "
