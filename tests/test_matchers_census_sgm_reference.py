@@ -1,8 +1,9 @@
 """The whole ``census-sgm`` matcher vs the plain reference chain (tests/helpers/census_sgm_reference.py).
 
 Exact equality on small images, on both builds of the kernels and with 1, 2 and 3 threads, including
-the left band (columns x < D), guided stereo, 4 paths, the options that switch steps off, and the
-buffers the matcher keeps between calls.
+the left band (columns x < D), guided stereo, 4 paths, the options that switch steps off, both widths
+of the SGM's partial sums (uint8 when the penalties allow, else uint16) and the buffers the matcher keeps
+between calls.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import pytest
 
 from helpers.census_sgm_reference import ref_census, ref_hamming, ref_match
 from vpp_service.matchers import build_matcher
+from vpp_service.matchers.census_sgm import p2_table
 from vpp_service.matchers.guided import modulate_cost
 
 pytestmark = pytest.mark.usefixtures("census_build")
@@ -60,6 +62,28 @@ def test_matcher_equals_reference(threads, seed):
 )
 def test_matcher_options_equal_reference(threads, opts):
     left, right = pair(2)
+    got = census_sgm(threads, **opts).compute(left, right)
+    np.testing.assert_array_equal(got, ref_match(left, right, D, **opts))
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+@pytest.mark.parametrize(
+    ("opts", "narrow"),
+    [
+        ({}, True),  # the defaults: max P2 = 35, 4 paths per pass: 4 * (24 + 35) <= 255, uint8 partial sums
+        ({"p2_gamma": 39.0}, True),  # 4 * (24 + 39) = 252
+        ({"p2_gamma": 40.0}, False),  # 4 * (24 + 40) = 256: uint16 partial sums
+        ({"paths": 4, "p2_gamma": 103.0}, True),  # 2 paths per pass: 2 * (24 + 103) = 254
+        ({"paths": 4, "p2_gamma": 104.0}, False),
+        ({"p1": 60, "p2_min": 200}, False),  # path costs up to 224: uint8 sums of 4 would wrap
+    ],
+)
+def test_partial_sum_width_equals_reference(census_build, threads, opts, narrow):
+    o = {"paths": 8, "p1": 11, "p2_min": 17, "p2_alpha": 0.5, "p2_gamma": 35.0, **opts}
+    lut = p2_table(o["p1"], o["p2_min"], o["p2_alpha"], o["p2_gamma"])
+    assert census_build.narrow_sums(o["paths"], lut, False) is narrow
+    assert census_build.narrow_sums(o["paths"], lut, True) is False  # a cost volume (guided stereo): uint16
+    left, right = pair(10)
     got = census_sgm(threads, **opts).compute(left, right)
     np.testing.assert_array_equal(got, ref_match(left, right, D, **opts))
 

@@ -197,11 +197,18 @@ def ref_match(
     border_margin: int = 2,
     gap_size: int = 4,
     cost: np.ndarray | None = None,
+    p1: int = 11,
+    p2_min: int = 17,
+    p2_alpha: float = 0.5,
+    p2_gamma: float = 35.0,
 ) -> np.ndarray:
-    """The matcher's chain without the speckle filter (rSGM penalties); ``cost`` replaces the Hamming volume."""
+    """The matcher's chain without the speckle filter (rSGM penalties by default).
+
+    ``cost`` replaces the Hamming volume; ``p1`` .. ``p2_gamma`` as in the matcher's options.
+    """
     if cost is None:
         cost = ref_hamming(ref_census(gl), ref_census(gr), D)
-    S = ref_aggregate(cost, gl, paths, p1=11, p2min=17, alpha=0.5, gamma=35.0)
+    S = ref_aggregate(cost, gl, paths, p1=p1, p2min=p2_min, alpha=p2_alpha, gamma=p2_gamma)
     disp = ref_wta(S, uniqueness, subpixel)
     if lr_check:
         disp = ref_lr(disp, ref_right(S), 1.0)

@@ -11,6 +11,11 @@
  *
  * Valid disparities of column x are d <= min(x, D - 1) ("band"): path costs of
  * the others hold CSGM_SENT, which never wins a minimum.
+ *
+ * Partial sums (the 4 or 2 paths of one pass) are uint8 when they provably fit ("narrow", see
+ * csgm_narrow: the Hamming costs computed in the passes and small penalties), else uint16; the two
+ * passes' sums are added in uint16 for the WTA.  uint8 halves the bytes the passes write and the row
+ * finisher reads, which bounds the two-thread speed.
  */
 #ifndef VPP_CENSUS_SGM_H
 #define VPP_CENSUS_SGM_H
@@ -106,6 +111,35 @@ CSGM_INLINE uint16_t csgm_popcount24(uint32_t v) {
     return (uint16_t)(v & 0x3F);
 }
 
+/* One pixel of a Hamming row: p[d] = popcount(a ^ q[d]) for d < n, invalid_cost for n <= d < D. */
+CSGM_INLINE void csgm_hamming_px(uint32_t a, const uint32_t* CSGM_RESTRICT q, uint16_t* CSGM_RESTRICT p, int n,
+                                 int D, uint16_t invalid_cost) {
+    int d = 0;
+#if defined(__AVX2__)
+    {
+        /* popcount of 16 codes: nibble counts by table lookup, summed per 32-bit lane, packed to 16 bits */
+        const __m256i nib = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2, 1, 2, 2, 3,
+                                             1, 2, 2, 3, 2, 3, 3, 4);
+        const __m256i low = _mm256_set1_epi8(0x0F), ones = _mm256_set1_epi8(1);
+        const __m256i va = _mm256_set1_epi32((int)a);
+        for (; d + 16 <= n; d += 16) {
+            __m256i u = _mm256_xor_si256(_mm256_loadu_si256((const __m256i*)(q + d)), va);
+            __m256i v = _mm256_xor_si256(_mm256_loadu_si256((const __m256i*)(q + d + 8)), va);
+            u = _mm256_add_epi8(_mm256_shuffle_epi8(nib, _mm256_and_si256(u, low)),
+                                _mm256_shuffle_epi8(nib, _mm256_and_si256(_mm256_srli_epi16(u, 4), low)));
+            v = _mm256_add_epi8(_mm256_shuffle_epi8(nib, _mm256_and_si256(v, low)),
+                                _mm256_shuffle_epi8(nib, _mm256_and_si256(_mm256_srli_epi16(v, 4), low)));
+            u = _mm256_maddubs_epi16(u, ones); /* byte pairs -> 16 bits */
+            v = _mm256_maddubs_epi16(v, ones);
+            __m256i h = _mm256_hadd_epi16(u, v); /* 32-bit lanes, in-lane order u0-3 v0-3 | u4-7 v4-7 */
+            _mm256_storeu_si256((__m256i*)(p + d), _mm256_permute4x64_epi64(h, 0xD8));
+        }
+    }
+#endif
+    for (; d < n; d++) p[d] = csgm_popcount24(a ^ q[d]);
+    for (d = n; d < D; d++) p[d] = invalid_cost;
+}
+
 /* Row y of the Hamming volume: out[x][d] = popcount(cl[x] ^ cr[x - d]) for d <= x, invalid_cost above.
  * rev: W scratch entries (cr reversed, so the d loop reads forwards). */
 static void csgm_hamming_row(const uint32_t* CSGM_RESTRICT cl, const uint32_t* CSGM_RESTRICT cr,
@@ -113,34 +147,9 @@ static void csgm_hamming_row(const uint32_t* CSGM_RESTRICT cl, const uint32_t* C
                              uint16_t invalid_cost) {
     for (int x = 0; x < W; x++) rev[x] = cr[W - 1 - x];
     for (int x = 0; x < W; x++) {
-        uint16_t* CSGM_RESTRICT p = out + (ptrdiff_t)x * D;
-        const uint32_t a = cl[x];
-        const uint32_t* CSGM_RESTRICT q = rev + (W - 1 - x); /* q[d] == cr[x - d] */
         const int n = x + 1 < D ? x + 1 : D;
-        int d = 0;
-#if defined(__AVX2__)
-        {
-            /* popcount of 16 codes: nibble counts by table lookup, summed per 32-bit lane, packed to 16 bits */
-            const __m256i nib = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2, 1, 2, 2,
-                                                 3, 1, 2, 2, 3, 2, 3, 3, 4);
-            const __m256i low = _mm256_set1_epi8(0x0F), ones = _mm256_set1_epi8(1);
-            const __m256i va = _mm256_set1_epi32((int)a);
-            for (; d + 16 <= n; d += 16) {
-                __m256i u = _mm256_xor_si256(_mm256_loadu_si256((const __m256i*)(q + d)), va);
-                __m256i v = _mm256_xor_si256(_mm256_loadu_si256((const __m256i*)(q + d + 8)), va);
-                u = _mm256_add_epi8(_mm256_shuffle_epi8(nib, _mm256_and_si256(u, low)),
-                                    _mm256_shuffle_epi8(nib, _mm256_and_si256(_mm256_srli_epi16(u, 4), low)));
-                v = _mm256_add_epi8(_mm256_shuffle_epi8(nib, _mm256_and_si256(v, low)),
-                                    _mm256_shuffle_epi8(nib, _mm256_and_si256(_mm256_srli_epi16(v, 4), low)));
-                u = _mm256_maddubs_epi16(u, ones); /* byte pairs -> 16 bits */
-                v = _mm256_maddubs_epi16(v, ones);
-                __m256i h = _mm256_hadd_epi16(u, v); /* 32-bit lanes, in-lane order u0-3 v0-3 | u4-7 v4-7 */
-                _mm256_storeu_si256((__m256i*)(p + d), _mm256_permute4x64_epi64(h, 0xD8));
-            }
-        }
-#endif
-        for (; d < n; d++) p[d] = csgm_popcount24(a ^ q[d]);
-        for (d = n; d < D; d++) p[d] = invalid_cost;
+        /* rev + (W - 1 - x): q[d] == cr[x - d] */
+        csgm_hamming_px(cl[x], rev + (W - 1 - x), out + (ptrdiff_t)x * D, n, D, invalid_cost);
     }
 }
 
@@ -154,7 +163,10 @@ CSGM_INLINE void csgm_step4(const uint16_t* CSGM_RESTRICT C, const int16_t* CSGM
                             const int16_t* CSGM_RESTRICT p1, const int16_t* CSGM_RESTRICT p2,
                             const int16_t* CSGM_RESTRICT p3, int16_t* CSGM_RESTRICT c0, int16_t* CSGM_RESTRICT c1,
                             int16_t* CSGM_RESTRICT c2, int16_t* CSGM_RESTRICT c3, const int16_t* pm,
-                            const int16_t* P2, int16_t* m, uint16_t* CSGM_RESTRICT acc, int n, int D, int16_t P1) {
+                            const int16_t* P2, int16_t* m, void* CSGM_RESTRICT acc, int n, int D, int16_t P1,
+                            int narrow) {
+    uint8_t* CSGM_RESTRICT a8 = (uint8_t*)acc;
+    uint16_t* CSGM_RESTRICT a16 = (uint16_t*)acc;
     const int16_t pm0 = pm[0], pm1 = pm[1], pm2 = pm[2], pm3 = pm[3];
     const int16_t j0 = (int16_t)(pm0 + P2[0]), j1 = (int16_t)(pm1 + P2[1]), j2 = (int16_t)(pm2 + P2[2]),
                   j3 = (int16_t)(pm3 + P2[3]);
@@ -177,7 +189,10 @@ CSGM_INLINE void csgm_step4(const uint16_t* CSGM_RESTRICT C, const int16_t* CSGM
         CSGM_PATH(p1, c1, pm1, j1, m1, L1)
         CSGM_PATH(p2, c2, pm2, j2, m2, L2)
         CSGM_PATH(p3, c3, pm3, j3, m3, L3)
-        acc[d] = (uint16_t)(L0 + L1 + L2 + L3);
+        if (narrow)
+            a8[d] = (uint8_t)(L0 + L1 + L2 + L3);
+        else
+            a16[d] = (uint16_t)(L0 + L1 + L2 + L3);
     }
     for (int d = n; d < D; d++) c0[d] = c1[d] = c2[d] = c3[d] = CSGM_SENT;
     m[0] = m0;
@@ -189,8 +204,10 @@ CSGM_INLINE void csgm_step4(const uint16_t* CSGM_RESTRICT C, const int16_t* CSGM
 /* The same for the 2 paths of a pass with 4 paths in all (horizontal and vertical). */
 CSGM_INLINE void csgm_step2(const uint16_t* CSGM_RESTRICT C, const int16_t* CSGM_RESTRICT p0,
                             const int16_t* CSGM_RESTRICT p1, int16_t* CSGM_RESTRICT c0, int16_t* CSGM_RESTRICT c1,
-                            const int16_t* pm, const int16_t* P2, int16_t* m, uint16_t* CSGM_RESTRICT acc, int n,
-                            int D, int16_t P1) {
+                            const int16_t* pm, const int16_t* P2, int16_t* m, void* CSGM_RESTRICT acc, int n,
+                            int D, int16_t P1, int narrow) {
+    uint8_t* CSGM_RESTRICT a8 = (uint8_t*)acc;
+    uint16_t* CSGM_RESTRICT a16 = (uint16_t*)acc;
     const int16_t pm0 = pm[0], pm1 = pm[1];
     const int16_t j0 = (int16_t)(pm0 + P2[0]), j1 = (int16_t)(pm1 + P2[1]);
     int16_t m0 = CSGM_SENT, m1 = CSGM_SENT;
@@ -198,7 +215,10 @@ CSGM_INLINE void csgm_step2(const uint16_t* CSGM_RESTRICT C, const int16_t* CSGM
         const int16_t cd = (int16_t)C[d];
         CSGM_PATH(p0, c0, pm0, j0, m0, L0)
         CSGM_PATH(p1, c1, pm1, j1, m1, L1)
-        acc[d] = (uint16_t)(L0 + L1);
+        if (narrow)
+            a8[d] = (uint8_t)(L0 + L1);
+        else
+            a16[d] = (uint16_t)(L0 + L1);
     }
 #undef CSGM_PATH
     for (int d = n; d < D; d++) c0[d] = c1[d] = CSGM_SENT;
@@ -221,8 +241,8 @@ CSGM_INLINE void csgm_step4_avx2(const uint16_t* CSGM_RESTRICT C, const int16_t*
                                  const int16_t* CSGM_RESTRICT p1, const int16_t* CSGM_RESTRICT p2,
                                  const int16_t* CSGM_RESTRICT p3, int16_t* CSGM_RESTRICT c0,
                                  int16_t* CSGM_RESTRICT c1, int16_t* CSGM_RESTRICT c2, int16_t* CSGM_RESTRICT c3,
-                                 const int16_t* pm, const int16_t* P2, int16_t* m, uint16_t* CSGM_RESTRICT acc,
-                                 int n, int D, int16_t P1) {
+                                 const int16_t* pm, const int16_t* P2, int16_t* m, void* CSGM_RESTRICT acc,
+                                 int n, int D, int16_t P1, int narrow) {
     const __m256i vp1 = _mm256_set1_epi16(P1);
     const __m256i pm0 = _mm256_set1_epi16(pm[0]), pm1 = _mm256_set1_epi16(pm[1]);
     const __m256i pm2 = _mm256_set1_epi16(pm[2]), pm3 = _mm256_set1_epi16(pm[3]);
@@ -237,6 +257,17 @@ CSGM_INLINE void csgm_step4_avx2(const uint16_t* CSGM_RESTRICT C, const int16_t*
     Lk = _mm256_add_epi16(Lk, _mm256_sub_epi16(cd, pmk));                                              \
     _mm256_storeu_si256((__m256i*)(c + d), Lk);                                                        \
     mk = _mm256_min_epi16(mk, Lk);
+/* narrow: packus saturates, exact on the valid lanes (<= 255); lanes d >= n are never read */
+#define CSGM_STORE_ACC(v)                                                                              \
+    {                                                                                                  \
+        const __m256i s_ = (v);                                                                        \
+        if (narrow)                                                                                    \
+            _mm_storeu_si128((__m128i*)((uint8_t*)acc + d),                                            \
+                             _mm_packus_epi16(_mm256_castsi256_si128(s_),                              \
+                                              _mm256_extracti128_si256(s_, 1)));                       \
+        else                                                                                           \
+            _mm256_storeu_si256((__m256i*)((uint16_t*)acc + d), s_);                                   \
+    }
     int d = 0;
     for (; d + 16 <= n; d += 16) {
         const __m256i cd = CSGM_LD(C + d);
@@ -244,8 +275,7 @@ CSGM_INLINE void csgm_step4_avx2(const uint16_t* CSGM_RESTRICT C, const int16_t*
         CSGM_VPATH(p1, c1, pm1, j1, m1, L1)
         CSGM_VPATH(p2, c2, pm2, j2, m2, L2)
         CSGM_VPATH(p3, c3, pm3, j3, m3, L3)
-        _mm256_storeu_si256((__m256i*)(acc + d),
-                            _mm256_add_epi16(_mm256_add_epi16(L0, L1), _mm256_add_epi16(L2, L3)));
+        CSGM_STORE_ACC(_mm256_add_epi16(_mm256_add_epi16(L0, L1), _mm256_add_epi16(L2, L3)));
     }
 #undef CSGM_VPATH
     if (d < n) { /* the last, partial block of the left band: lanes d >= n are absent */
@@ -263,8 +293,7 @@ CSGM_INLINE void csgm_step4_avx2(const uint16_t* CSGM_RESTRICT C, const int16_t*
         CSGM_VPATH(p2, c2, pm2, j2, m2, L2)
         CSGM_VPATH(p3, c3, pm3, j3, m3, L3)
 #undef CSGM_VPATH
-        _mm256_storeu_si256((__m256i*)(acc + d),
-                            _mm256_add_epi16(_mm256_add_epi16(L0, L1), _mm256_add_epi16(L2, L3)));
+        CSGM_STORE_ACC(_mm256_add_epi16(_mm256_add_epi16(L0, L1), _mm256_add_epi16(L2, L3)));
         d += 16;
     }
     for (; d < D; d += 16) {
@@ -274,6 +303,7 @@ CSGM_INLINE void csgm_step4_avx2(const uint16_t* CSGM_RESTRICT C, const int16_t*
         _mm256_storeu_si256((__m256i*)(c3 + d), sent);
     }
 #undef CSGM_LD
+#undef CSGM_STORE_ACC
     m[0] = csgm_hmin16(m0);
     m[1] = csgm_hmin16(m1);
     m[2] = csgm_hmin16(m2);
@@ -289,7 +319,23 @@ typedef struct {
     double tolerance;
     const uint32_t* cl; /* census codes (H x W): with cost == NULL the passes compute each cost row from them */
     const uint32_t* cr;
+    int narrow; /* partial sums are uint8 (set by csgm_sgm from csgm_narrow) */
 } csgm_params;
+
+/* Whether the partial sums of a pass fit uint8: the costs are the Hamming costs the passes compute (<= 24,
+ * cost volume == NULL) and (paths / 2) * (24 + max P2) <= 255 with every P2 >= 0.  A path cost is
+ * L = C + min(L'(d), L'(d +- 1) + P1, pm + P2) - pm with pm = min L' <= L'(d), so C <= L <= C + P2 (the
+ * first pixel of a path has L = C); a pass sums paths / 2 of them.  Guided stereo (a modulated cost volume)
+ * and large penalties keep uint16. */
+static int csgm_narrow(int paths, const int16_t* p2lut, int have_cost) {
+    if (have_cost) return 0;
+    int hi = 0;
+    for (int i = 0; i < 256; i++) {
+        if (p2lut[i] < 0) return 0;
+        if (p2lut[i] > hi) hi = p2lut[i];
+    }
+    return (paths / 2) * (24 + hi) <= 255;
+}
 
 /* Per-thread scratch (bytes), see csgm_scratch_bytes. */
 typedef struct {
@@ -302,7 +348,7 @@ typedef struct {
     int16_t* zero; /* csgm_stride(D) zeros: the "previous pixel" of a path's first pixel */
     uint16_t* part; /* W x D: this pass's partial sum of the row */
     uint16_t* sum;  /* D: a pixel's full sum (finishing a row) */
-    uint16_t* crow; /* W x D: the row's Hamming costs (computed in the pass) */
+    uint16_t* crow; /* D: a pixel's Hamming costs (computed in the pass, used at once) */
     uint32_t* rev;  /* W: right census codes reversed */
     uint16_t* rbc;  /* W: right WTA best cost (reversed x) */
     uint16_t* rbd;  /* W: right WTA best d */
@@ -321,7 +367,7 @@ static size_t csgm_scratch_bytes(int W, int D) {
     b += 2 * csgm_align(3 * (size_t)W * s * 2);
     b += 2 * csgm_align(3 * (size_t)W * 2);
     b += 3 * csgm_align(s * 2);
-    b += 2 * csgm_align((size_t)W * D * 2) + csgm_align((size_t)D * 2); /* part, crow; sum */
+    b += csgm_align((size_t)W * D * 2) + 2 * csgm_align((size_t)D * 2); /* part; sum, crow */
     b += csgm_align((size_t)W * 4);
     b += 2 * csgm_align((size_t)W * 2);
     return b + 64;
@@ -342,7 +388,7 @@ static void csgm_thread_init(csgm_thread* t, uint8_t* base, int W, int D) {
     CSGM_TAKE(zero, int16_t, s)
     CSGM_TAKE(part, uint16_t, (size_t)W * D)
     CSGM_TAKE(sum, uint16_t, D)
-    CSGM_TAKE(crow, uint16_t, (size_t)W * D)
+    CSGM_TAKE(crow, uint16_t, D)
     CSGM_TAKE(rev, uint32_t, W)
     CSGM_TAKE(rbc, uint16_t, W)
     CSGM_TAKE(rbd, uint16_t, W)
@@ -356,21 +402,32 @@ static void csgm_thread_init(csgm_thread* t, uint8_t* base, int W, int D) {
     memset(t->zero, 0, s * sizeof(int16_t));
 }
 
+/* The costs of pixel x (n valid disparities): row crow of the cost volume, else (crow == NULL) the Hamming
+ * costs of clr[x] and the reversed right codes rev, computed into buf (D entries). */
+CSGM_INLINE const uint16_t* csgm_costs_px(const uint16_t* crow, const uint32_t* clr, const uint32_t* rev,
+                                          uint16_t* buf, int W, int x, int n, int D) {
+    if (crow) return crow + (ptrdiff_t)x * D;
+    csgm_hamming_px(clr[x], rev + (W - 1 - x), buf, n, D, 0);
+    return buf;
+}
+
 /* Row y of one pass (s = +1 forward: x ascending, predecessors in row y - 1 and x - 1; s = -1 backward).
  * Writes the row's partial sum (4 or 2 paths) to part (W x D); rowP/minP must hold row y - s (unless first). */
 static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT cost, const uint8_t* CSGM_RESTRICT g,
-                          csgm_thread* t, int y, int s, int first, uint16_t* CSGM_RESTRICT part) {
+                          csgm_thread* t, int y, int s, int first, void* CSGM_RESTRICT part) {
     const int W = p->W, D = p->D;
     const ptrdiff_t st = (ptrdiff_t)csgm_stride(D);
     const int16_t P1 = (int16_t)p->P1;
     const int16_t* lut = p->p2lut;
     const int eight = p->paths == 8;
-    const uint16_t* crow;
-    if (cost) {
-        crow = cost + (ptrdiff_t)y * W * D;
-    } else {
-        csgm_hamming_row(p->cl + (ptrdiff_t)y * W, p->cr + (ptrdiff_t)y * W, t->rev, t->crow, W, D, 0);
-        crow = t->crow;
+    const int narrow = p->narrow;
+    const size_t es = narrow ? 1 : 2; /* bytes per partial sum */
+    /* the costs: row y of the volume, or (cost == NULL) each pixel's Hamming costs just before its step */
+    const uint16_t* crow = cost ? cost + (ptrdiff_t)y * W * D : NULL;
+    const uint32_t* clr = cost ? NULL : p->cl + (ptrdiff_t)y * W;
+    if (!cost) {
+        const uint32_t* crr = p->cr + (ptrdiff_t)y * W;
+        for (int x = 0; x < W; x++) t->rev[x] = crr[W - 1 - x];
     }
     const uint8_t* grow = g + (ptrdiff_t)y * W;
     const uint8_t* gprev = first ? grow : g + (ptrdiff_t)(y - s) * W;
@@ -396,10 +453,15 @@ static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT co
             P2[1] = lut[csgm_absdiff(gx, gprev[xa])];
             P2[2] = lut[csgm_absdiff(gx, gprev[x])];
             P2[3] = lut[csgm_absdiff(gx, gprev[xb])];
-            csgm_step4_avx2(crow + (ptrdiff_t)x * D, hp, t->rowP + (ptrdiff_t)xa * st + CSGM_OFF,
-                            t->rowP + plane + (ptrdiff_t)x * st + CSGM_OFF,
-                            t->rowP + 2 * plane + (ptrdiff_t)xb * st + CSGM_OFF, hc,
-                            c1, c1 + plane, c1 + 2 * plane, pm, P2, m, part + (ptrdiff_t)x * D, n, D, P1);
+            const uint16_t* Cx = csgm_costs_px(crow, clr, t->rev, t->crow, W, x, n, D);
+            const int16_t* q1 = t->rowP + (ptrdiff_t)xa * st + CSGM_OFF;
+            const int16_t* q2 = t->rowP + plane + (ptrdiff_t)x * st + CSGM_OFF;
+            const int16_t* q3 = t->rowP + 2 * plane + (ptrdiff_t)xb * st + CSGM_OFF;
+            void* acc = (uint8_t*)part + (size_t)x * D * es;
+            if (narrow)
+                csgm_step4_avx2(Cx, hp, q1, q2, q3, hc, c1, c1 + plane, c1 + 2 * plane, pm, P2, m, acc, n, D, P1, 1);
+            else
+                csgm_step4_avx2(Cx, hp, q1, q2, q3, hc, c1, c1 + plane, c1 + 2 * plane, pm, P2, m, acc, n, D, P1, 0);
             t->minC[x] = m[1];
             t->minC[W + x] = m[2];
             t->minC[2 * W + x] = m[3];
@@ -439,20 +501,29 @@ static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT co
                 P2[k + 1] = lut[csgm_absdiff(gx, gprev[xp])];
             }
         }
-        const uint16_t* C = crow + (ptrdiff_t)x * D;
-        uint16_t* acc = part + (ptrdiff_t)x * D;
+        const uint16_t* C = csgm_costs_px(crow, clr, t->rev, t->crow, W, x, n, D);
+        void* acc = (uint8_t*)part + (size_t)x * D * es;
         if (eight) {
+            int done = 0;
 #if defined(__AVX2__)
-            if ((D & 15) == 0)
-                csgm_step4_avx2(C, pv[0], pv[1], pv[2], pv[3], cv[0], cv[1], cv[2], cv[3], pm, P2, m, acc, n, D, P1);
-            else
+            if ((D & 15) == 0) {
+                csgm_step4_avx2(C, pv[0], pv[1], pv[2], pv[3], cv[0], cv[1], cv[2], cv[3], pm, P2, m, acc, n, D, P1,
+                                narrow);
+                done = 1;
+            }
 #endif
-                csgm_step4(C, pv[0], pv[1], pv[2], pv[3], cv[0], cv[1], cv[2], cv[3], pm, P2, m, acc, n, D, P1);
+            if (!done && narrow)
+                csgm_step4(C, pv[0], pv[1], pv[2], pv[3], cv[0], cv[1], cv[2], cv[3], pm, P2, m, acc, n, D, P1, 1);
+            else if (!done)
+                csgm_step4(C, pv[0], pv[1], pv[2], pv[3], cv[0], cv[1], cv[2], cv[3], pm, P2, m, acc, n, D, P1, 0);
             t->minC[x] = m[1];
             t->minC[W + x] = m[2];
             t->minC[2 * W + x] = m[3];
         } else {
-            csgm_step2(C, pv[0], pv[1], cv[0], cv[1], pm, P2, m, acc, n, D, P1);
+            if (narrow)
+                csgm_step2(C, pv[0], pv[1], cv[0], cv[1], pm, P2, m, acc, n, D, P1, 1);
+            else
+                csgm_step2(C, pv[0], pv[1], cv[0], cv[1], pm, P2, m, acc, n, D, P1, 0);
             t->minC[x] = m[1];
         }
         hm = m[0];
@@ -743,16 +814,25 @@ static void csgm_median_row(const float* CSGM_RESTRICT pad, int W, float* CSGM_R
 
 /* ---------------------------------------------------------------- driver -- */
 
-/* Finish row y: S = a + b; then either copy S to sout (invalid entries CSGM_NOCOST) or run the left and
- * right WTA and the left-right check into dl, dr, lr. */
-static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const uint16_t* CSGM_RESTRICT a,
-                            const uint16_t* CSGM_RESTRICT b, int y, uint16_t* sout, float* dl, float* dr,
+/* Finish row y: S = a + b (a, b: the passes' partial sums of the row, uint8 when p->narrow); then either
+ * copy S to sout (invalid entries CSGM_NOCOST) or run the left and right WTA and the left-right check into
+ * dl, dr, lr. */
+static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CSGM_RESTRICT a,
+                            const void* CSGM_RESTRICT b, int y, uint16_t* sout, float* dl, float* dr,
                             float* lr) {
     const int W = p->W, D = p->D;
     const ptrdiff_t n = (ptrdiff_t)W * D;
+    const int narrow = p->narrow;
+    const uint8_t* CSGM_RESTRICT a8 = (const uint8_t*)a;
+    const uint8_t* CSGM_RESTRICT b8 = (const uint8_t*)b;
+    const uint16_t* CSGM_RESTRICT a16 = (const uint16_t*)a;
+    const uint16_t* CSGM_RESTRICT b16 = (const uint16_t*)b;
     if (sout) {
         uint16_t* CSGM_RESTRICT S = sout + (ptrdiff_t)y * n;
-        for (ptrdiff_t i = 0; i < n; i++) S[i] = (uint16_t)(a[i] + b[i]);
+        if (narrow)
+            for (ptrdiff_t i = 0; i < n; i++) S[i] = (uint16_t)(a8[i] + b8[i]);
+        else
+            for (ptrdiff_t i = 0; i < n; i++) S[i] = (uint16_t)(a16[i] + b16[i]);
         for (int x = 0; x < W && x < D - 1; x++)
             for (int d = x + 1; d < D; d++) S[(ptrdiff_t)x * D + d] = CSGM_NOCOST;
         return;
@@ -768,10 +848,16 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const uint16_t
         }
     }
     for (int x = 0; x < W; x++) {
-        const uint16_t* CSGM_RESTRICT ax = a + (ptrdiff_t)x * D;
-        const uint16_t* CSGM_RESTRICT bx = b + (ptrdiff_t)x * D;
         const int nv = x + 1 < D ? x + 1 : D;
-        for (int d = 0; d < D; d++) S[d] = (uint16_t)(ax[d] + bx[d]);
+        if (narrow) {
+            const uint8_t* CSGM_RESTRICT ax = a8 + (ptrdiff_t)x * D;
+            const uint8_t* CSGM_RESTRICT bx = b8 + (ptrdiff_t)x * D;
+            for (int d = 0; d < D; d++) S[d] = (uint16_t)(ax[d] + bx[d]);
+        } else {
+            const uint16_t* CSGM_RESTRICT ax = a16 + (ptrdiff_t)x * D;
+            const uint16_t* CSGM_RESTRICT bx = b16 + (ptrdiff_t)x * D;
+            for (int d = 0; d < D; d++) S[d] = (uint16_t)(ax[d] + bx[d]);
+        }
         if (!l) continue; /* aggregation only (timing) */
         l[x] = csgm_wta_pixel(S, nv, D, p->uniqueness, p->subpixel);
         if (right) csgm_right_pixel(S, nv, t->rbc + (W - 1 - x), t->rbd + (W - 1 - x));
@@ -790,17 +876,17 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const uint16_t
  * (to its scratch row when own is NULL: the one-thread backward pass, always second) and counts the row;
  * when the other pass had counted it already, this one finishes the row with other[y]. */
 static void csgm_pass(const csgm_params* p, const uint16_t* cost, const uint8_t* g, csgm_thread* t, int s,
-                      uint16_t* own, const uint16_t* other, int* rowcnt, uint16_t* sout, float* dl, float* dr,
+                      void* own, const void* other, int* rowcnt, uint16_t* sout, float* dl, float* dr,
                       float* lr) {
     const int H = p->H;
-    const ptrdiff_t n = (ptrdiff_t)p->W * p->D;
+    const size_t n = (size_t)p->W * p->D * (p->narrow ? 1 : 2); /* bytes of a row of partial sums */
     for (int i = 0; i < H; i++) {
         const int y = s > 0 ? i : H - 1 - i;
-        uint16_t* part = own ? own + (ptrdiff_t)y * n : t->part;
+        void* part = own ? (uint8_t*)own + (size_t)y * n : (void*)t->part;
         csgm_pass_row(p, cost, g, t, y, s, i == 0, part);
         /* store first, then count: the pass that counts second sees the other's row */
         if (__atomic_fetch_add(&rowcnt[y], 1, __ATOMIC_ACQ_REL) == 0) continue;
-        csgm_finish_row(p, t, part, other + (ptrdiff_t)y * n, y, sout, dl, dr, lr);
+        csgm_finish_row(p, t, part, (const uint8_t*)other + (size_t)y * n, y, sout, dl, dr, lr);
     }
 }
 
@@ -866,13 +952,17 @@ typedef struct {
 
 /* SGM + WTA (+ right WTA, left-right check, median) of a cost volume (cost == NULL: of the Hamming costs of
  * p->cl, p->cr, computed row by row; with census, those codes are computed first, in the same region).
- * vf, vb: H x W x D partial-sum volumes (vb unused with one thread); rowcnt: H ints; scratch: blocks
+ * vf, vb: H x W x D uint16 partial-sum volumes (vb unused with one thread; when csgm_narrow holds, the
+ * passes use their first H x W x D bytes as uint8 sums); rowcnt: H ints; scratch: blocks
  * of csgm_scratch_bytes(W, D); pad: (H + 2) x (W + 2) floats for the median.  With sout, writes the
  * aggregated volume there instead (no WTA).  Output: disp (H x W) = final disparity; dl, dr: left / right
  * WTA (dl may be disp when neither check nor median runs).  Only threads 0 and 1 use scratch (2 blocks). */
-static void csgm_sgm(const csgm_params* p, const uint16_t* cost, const uint8_t* g, uint16_t* vf, uint16_t* vb,
+static void csgm_sgm(const csgm_params* p0, const uint16_t* cost, const uint8_t* g, uint16_t* vf, uint16_t* vb,
                      int* rowcnt, uint8_t* scratch, int nthreads, uint16_t* sout, float* dl, float* dr,
                      float* lr, float* pad, float* disp, const csgm_census_io* census) {
+    csgm_params q = *p0;
+    q.narrow = csgm_narrow(q.paths, q.p2lut, cost != NULL);
+    const csgm_params* p = &q;
     const int H = p->H, W = p->W;
     const size_t sb = csgm_scratch_bytes(W, p->D);
     int nt = nthreads < 1 ? 1 : nthreads;

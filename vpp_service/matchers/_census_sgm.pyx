@@ -42,7 +42,9 @@ cdef extern from "_census_sgm.h" nogil:
         double tolerance
         const uint32_t* cl
         const uint32_t* cr
+        int narrow
     int csgm_build_avx2()
+    int csgm_narrow(int paths, const int16_t* p2lut, int have_cost)
     size_t csgm_scratch_bytes(int W, int D)
     size_t csgm_cost_work_bytes(int W)
     void csgm_pad_rows(const uint8_t* img, int H, int W, uint8_t* pad, int y0, int y1)
@@ -75,6 +77,15 @@ AVX2 = bool(csgm_build_avx2())
 def scratch_bytes(int W, int D):
     """Bytes of SGM scratch per pass thread (two are used) for width ``W`` and ``D`` disparities."""
     return csgm_scratch_bytes(W, D)
+
+
+def narrow_sums(int paths, const int16_t[::1] p2lut, bint volume):
+    """Whether the SGM keeps its per-pass partial sums as uint8 (else uint16).
+
+    True when the costs are the Hamming costs the passes compute (no cost ``volume``: at most 24) and
+    ``paths / 2 * (24 + max(p2lut)) <= 255`` (a path cost is at most its matching cost plus P2).
+    """
+    return bool(csgm_narrow(paths, &p2lut[0], 1 if volume else 0))
 
 
 def cost_work_bytes(int W, int nthreads):
@@ -145,6 +156,7 @@ cdef csgm_params make_params(int H, int W, int D, int paths, int P1, const int16
     p.tolerance = tolerance
     p.cl = NULL
     p.cr = NULL
+    p.narrow = 0  # csgm_sgm decides
     return p
 
 
