@@ -58,8 +58,12 @@ not set to 1). :meth:`CensusSGM.compute` runs one parallel region per call
 the census of both images (rows in blocks), then the SGM: the forward pass
 (left-to-right plus the three paths from the row above) and the backward
 pass (the four mirrored paths) on two threads at once, each computing the
-Hamming costs of a row as it goes (the cost volume is built only for guided
-stereo); each row is finished (sum of the two passes, left and right WTA,
+Hamming costs of a pixel as it goes (the cost volume is built only for guided
+stereo) and storing the row's partial sum of its paths as uint8 when that
+provably fits (Hamming costs <= 24 and ``paths / 2 * (24 + max P2) <= 255``,
+true for the default penalties: a path cost is at most its matching cost plus
+P2), else as uint16 (guided stereo, :meth:`CensusSGM.compute_from_cost`, large
+penalties); each row is finished (sum of the two passes, left and right WTA,
 left-right check) by whichever pass reaches it second; then the median on
 row blocks (with the border and short-gap steps on, the defaults, the median
 runs after them, in its own region). So the aggregation uses at most two threads. The matcher keeps
