@@ -31,17 +31,22 @@ def zenoh_config() -> Callable[..., zenoh.Config]:
     return zenoh_test_config
 
 
+def _use_build(name: str, builds: dict, module: object, attr: str, monkeypatch: pytest.MonkeyPatch):
+    """Point ``module.attr`` at the kernel build ``builds[name]`` for one test (skip where it cannot run)."""
+    mod = builds[name]
+    if mod is None:
+        pytest.skip("no AVX2 build for this CPU / platform")
+    monkeypatch.setattr(module, attr, mod)
+    return mod
+
+
 @pytest.fixture(params=["portable", "avx2"])
 def build(request, monkeypatch):
     """Run the test on each build of the VPP sweep kernel this machine can execute."""
     from helpers.vpp import BUILDS
     from vpp_service.vpp import backend
 
-    mod = BUILDS[request.param]
-    if mod is None:
-        pytest.skip("no AVX2 build for this CPU / platform")
-    monkeypatch.setattr(backend, "sweep", mod)
-    return mod
+    return _use_build(request.param, BUILDS, backend, "sweep", monkeypatch)
 
 
 @pytest.fixture(params=["portable", "avx2"])
@@ -50,11 +55,7 @@ def census_build(request, monkeypatch):
     from helpers.census_sgm_reference import CENSUS_BUILDS
     from vpp_service.matchers import census_sgm
 
-    mod = CENSUS_BUILDS[request.param]
-    if mod is None:
-        pytest.skip("no AVX2 build for this CPU / platform")
-    monkeypatch.setattr(census_sgm, "_k", mod)
-    return mod
+    return _use_build(request.param, CENSUS_BUILDS, census_sgm, "_k", monkeypatch)
 
 
 @pytest.fixture
