@@ -872,9 +872,10 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CS
     csgm_lr_row(l, r, lr + (ptrdiff_t)y * W, W, p->tolerance);
 }
 
-/* One pass over all rows (s = +1 top-down, -1 bottom-up).  The pass writes a row's partial sum to own[y]
- * (to its scratch row when own is NULL: the one-thread backward pass, always second) and counts the row;
- * when the other pass had counted it already, this one finishes the row with other[y]. */
+/* One pass over all rows (s = +1 top-down, -1 bottom-up).  Each row's partial sum goes to the thread's
+ * scratch row (in cache whichever way x runs).  A pass that reaches a row first copies it to own[y] and
+ * counts the row; the pass that comes second (the other had counted it) finishes the row from its scratch
+ * and other[y].  own is NULL for the one-thread backward pass (always second). */
 static void csgm_pass(const csgm_params* p, const uint16_t* cost, const uint8_t* g, csgm_thread* t, int s,
                       void* own, const void* other, int* rowcnt, uint16_t* sout, float* dl, float* dr,
                       float* lr) {
@@ -882,11 +883,13 @@ static void csgm_pass(const csgm_params* p, const uint16_t* cost, const uint8_t*
     const size_t n = (size_t)p->W * p->D * (p->narrow ? 1 : 2); /* bytes of a row of partial sums */
     for (int i = 0; i < H; i++) {
         const int y = s > 0 ? i : H - 1 - i;
-        void* part = own ? (uint8_t*)own + (size_t)y * n : (void*)t->part;
-        csgm_pass_row(p, cost, g, t, y, s, i == 0, part);
-        /* store first, then count: the pass that counts second sees the other's row */
-        if (__atomic_fetch_add(&rowcnt[y], 1, __ATOMIC_ACQ_REL) == 0) continue;
-        csgm_finish_row(p, t, part, (const uint8_t*)other + (size_t)y * n, y, sout, dl, dr, lr);
+        csgm_pass_row(p, cost, g, t, y, s, i == 0, t->part);
+        /* first: store the row, then count it; the pass that counts second sees the other's row */
+        if (own && __atomic_load_n(&rowcnt[y], __ATOMIC_ACQUIRE) == 0) {
+            memcpy((uint8_t*)own + (size_t)y * n, t->part, n);
+            if (__atomic_fetch_add(&rowcnt[y], 1, __ATOMIC_ACQ_REL) == 0) continue;
+        }
+        csgm_finish_row(p, t, t->part, (const uint8_t*)other + (size_t)y * n, y, sout, dl, dr, lr);
     }
 }
 
