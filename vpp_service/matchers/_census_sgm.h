@@ -25,6 +25,8 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+
+#include "_gaps.h"
 #ifdef _OPENMP
 #include <omp.h>
 #endif
@@ -320,6 +322,9 @@ typedef struct {
     const uint32_t* cl; /* census codes (H x W): with cost == NULL the passes compute each cost row from them */
     const uint32_t* cr;
     int narrow; /* partial sums are uint8 (set by csgm_sgm from csgm_narrow) */
+    int border_margin; /* after the left-right check: border.reject_border_matches (0 = off) */
+    int gap_size;      /* then holes.fill_short_gaps (0 = off) with gap_step */
+    double gap_step;
 } csgm_params;
 
 /* Whether the partial sums of a pass fit uint8: the costs are the Hamming costs the passes compute (<= 24,
@@ -680,6 +685,21 @@ static void csgm_lr_row(const float* CSGM_RESTRICT dl, const float* CSGM_RESTRIC
     }
 }
 
+/* The steps between the left-right check and the median, on one finished row (in place): reject matches
+ * whose right pixel x - floor(d + 0.5) lies within margin columns of the border (NaN fails both tests; the
+ * float32 comparisons of border.reject_border_matches), then close short gaps. */
+static void csgm_post_row(const csgm_params* p, float* CSGM_RESTRICT row) {
+    const int W = p->W;
+    if (p->border_margin) {
+        const int mg = p->border_margin;
+        for (int x = 0; x < W; x++) {
+            const float v = row[x] + 0.5f;
+            row[x] = (v < (float)(x - mg + 1) && v >= (float)(x - (W - 1 - mg))) ? row[x] : NAN;
+        }
+    }
+    if (p->gap_size) vpp_gap_row(row, row, W, p->gap_size, p->gap_step);
+}
+
 /* ---------------------------------------------------------------- median -- */
 
 /* Row py of the (H + 2) x (W + 2) copy of src with NaN and the border as +inf. */
@@ -865,11 +885,12 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CS
     if (!l) return;
     if (!right) {
         if (lr != l) memcpy(lr + (ptrdiff_t)y * W, l, (size_t)W * sizeof(float));
-        return;
+    } else {
+        float* r = dr + (ptrdiff_t)y * W;
+        for (int xr = 0; xr < W; xr++) r[xr] = (float)t->rbd[W - 1 - xr];
+        csgm_lr_row(l, r, lr + (ptrdiff_t)y * W, W, p->tolerance);
     }
-    float* r = dr + (ptrdiff_t)y * W;
-    for (int xr = 0; xr < W; xr++) r[xr] = (float)t->rbd[W - 1 - xr];
-    csgm_lr_row(l, r, lr + (ptrdiff_t)y * W, W, p->tolerance);
+    csgm_post_row(p, lr + (ptrdiff_t)y * W);
 }
 
 /* One pass over all rows (s = +1 top-down, -1 bottom-up).  Each row's partial sum goes to the thread's

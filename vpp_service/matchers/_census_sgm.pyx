@@ -43,6 +43,9 @@ cdef extern from "_census_sgm.h" nogil:
         const uint32_t* cl
         const uint32_t* cr
         int narrow
+        int border_margin
+        int gap_size
+        double gap_step
     int csgm_build_avx2()
     int csgm_narrow(int paths, const int16_t* p2lut, int have_cost)
     size_t csgm_scratch_bytes(int W, int D)
@@ -157,6 +160,9 @@ cdef csgm_params make_params(int H, int W, int D, int paths, int P1, const int16
     p.cl = NULL
     p.cr = NULL
     p.narrow = 0  # csgm_sgm decides
+    p.border_margin = 0
+    p.gap_size = 0
+    p.gap_step = 0.0
     return p
 
 
@@ -182,7 +188,8 @@ def sgm_stage(const uint16_t[:, :, ::1] C, uint32_t[:, ::1] cl, uint32_t[:, ::1]
               const int16_t[::1] p2lut, double uniqueness, bint subpixel, bint lr_check, double tolerance,
               bint median, uint16_t[:, :, ::1] vf, uint16_t[:, :, ::1] vb, int[::1] rowcnt,
               uint8_t[::1] scratch, float[:, ::1] dl, float[:, ::1] dr, float[:, ::1] lr,
-              float[:, ::1] pad, float[:, ::1] disp, bint volume, int nthreads, bint wta=True):
+              float[:, ::1] pad, float[:, ::1] disp, bint volume, int nthreads, bint wta=True,
+              int border_margin=0, int gap_size=0, double gap_step=2.0):
     """(Census,) aggregation, left and right WTA, left-right check and median in one parallel region.
 
     The costs are the volume ``C`` (H x W x D) with ``volume``, else each pass computes them row by row
@@ -193,12 +200,17 @@ def sgm_stage(const uint16_t[:, :, ::1] C, uint32_t[:, ::1] cl, uint32_t[:, ::1]
     ``vf``, ``vb``: H x W x D partial sums (``vb`` only read with >= 2 threads); ``rowcnt``: H ints;
     ``scratch``: 2 x :func:`scratch_bytes` + 64 bytes; ``pad``: (H + 2) x (W + 2). The result is ``lr``
     (``disp`` after the median when ``median``); ``lr`` may be ``dl`` when ``lr_check`` is off. ``wta``
-    False stops after the aggregation (benchmarks time the stage so).
+    False stops after the aggregation (benchmarks time the stage so). ``border_margin`` and ``gap_size``,
+    ``gap_step`` (0 = off) run ``border.reject_border_matches`` and ``holes.fill_short_gaps`` (``_gaps.h``)
+    on each row of ``lr`` right after its left-right check, before the median.
     """
     cdef int H = g.shape[0], W = g.shape[1]
     cdef csgm_params p = make_params(H, W, D, paths, P1, p2lut, uniqueness, subpixel, lr_check, tolerance,
                                      median)
     cdef csgm_census_io io
+    p.border_margin = border_margin
+    p.gap_size = gap_size
+    p.gap_step = gap_step
     if not volume:
         p.cl = &cl[0, 0]
         p.cr = &cr[0, 0]

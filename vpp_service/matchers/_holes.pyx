@@ -1,6 +1,10 @@
 """Row-wise hole filling kernels (unchecked; see ``holes.fill_holes`` and ``holes.fill_short_gaps``)."""
 from cython.parallel cimport prange
-from libc.math cimport isnan, fabs
+from libc.math cimport isnan
+
+
+cdef extern from "_gaps.h" nogil:
+    void vpp_gap_row(const float* src, float* dst, int W, int max_gap, double max_step)
 
 
 cdef inline void fill_row(const float* src, float* dst, int W, float empty) noexcept nogil:
@@ -39,34 +43,6 @@ def fill_rows(const float[:, ::1] src, float[:, ::1] dst, float empty, int nthre
             fill_row(&src[y, 0], &dst[y, 0], W, empty)
 
 
-cdef inline void gap_row(const float* src, float* dst, int W, int max_gap,
-                         double max_step) noexcept nogil:
-    cdef int x, right, j, n
-    cdef float a, b
-    for x in range(W):
-        dst[x] = src[x]
-    x = 0
-    while x < W:
-        if not isnan(src[x]):
-            x += 1
-            continue
-        right = x
-        while right < W and isnan(src[right]):
-            right += 1
-        # gap spans [x, right); interior only, at most max_gap long
-        n = right - x
-        if x > 0 and right < W and n <= max_gap:
-            a = src[x - 1]
-            b = src[right]
-            if fabs(<double>a - <double>b) <= max_step:
-                for j in range(n):
-                    dst[x + j] = <float>(<double>a + (<double>b - <double>a) * (j + 1) / (n + 1))
-            else:
-                for j in range(x, right):
-                    dst[j] = a if a < b else b
-        x = right
-
-
 def fill_gap_rows(const float[:, ::1] src, float[:, ::1] dst, int max_gap, double max_step,
                   int nthreads):
     """Interior NaN runs of <= max_gap pixels: linear between the ends if they differ
@@ -75,4 +51,4 @@ def fill_gap_rows(const float[:, ::1] src, float[:, ::1] dst, int max_gap, doubl
     cdef int y
     with nogil:
         for y in prange(H, schedule="static", num_threads=nthreads):
-            gap_row(&src[y, 0], &dst[y, 0], W, max_gap, max_step)
+            vpp_gap_row(&src[y, 0], &dst[y, 0], W, max_gap, max_step)

@@ -63,10 +63,11 @@ stereo) and storing the row's partial sum of its paths as uint8 when that
 provably fits (Hamming costs <= 24 and ``paths / 2 * (24 + max P2) <= 255``,
 true for the default penalties: a path cost is at most its matching cost plus
 P2), else as uint16 (guided stereo, :meth:`CensusSGM.compute_from_cost`, large
-penalties); each row is finished (sum of the two passes, left and right WTA,
-left-right check) by whichever pass reaches it second; then the median on
-row blocks (with the border and short-gap steps on, the defaults, the median
-runs after them, in its own region). So the aggregation uses at most two threads. The matcher keeps
+penalties); each pass aggregates a row into a scratch row of its own (in
+cache) and copies it out only when it reaches the row first; the pass that
+comes second finishes the row (sum of the two passes, left and right WTA,
+left-right check, border step, short gaps); then the median on row blocks.
+So the aggregation uses at most two threads. The matcher keeps
 its buffers (census codes, partial sums, the cost volume once guided stereo
 needed it) between calls and reallocates them only when the image size,
 ``max_disparity`` or the thread count changes.
@@ -98,9 +99,8 @@ from vpp_service.matchers.base import (
     check_pair,
     to_gray,
 )
-from vpp_service.matchers.border import reject_border_matches
 from vpp_service.matchers.guided import modulate_cost
-from vpp_service.matchers.holes import fill_short_gaps
+from vpp_service.matchers.holes import GAP_STEP
 from vpp_service.matchers.speckle import remove_speckles
 from vpp_service.threads import resolve_threads
 from vpp_service.vpp import backend
@@ -568,12 +568,11 @@ class CensusSGM(Matcher):
                 own_cost = True
             if cost.max(initial=0) > COST_CAP:
                 cost = np.minimum(cost, COST_CAP, out=cost if own_cost else None)
-        # The kernel runs the median in its parallel region; a step that must run between the left-right
-        # check and the median sets fused_median False and runs after the kernel, before median_filter3x3.
-        fused_median = o.median and not (o.border_margin or o.gap_size)
+        # The kernel finishes each row (left-right check, border step, short gaps) and runs the median in
+        # its parallel region.
         out = np.empty(gray.shape, np.float32)
-        lr = ws.lr if fused_median else out
-        dl = ws.dl if (fused_median or o.lr_check) else out
+        lr = ws.lr if o.median else out
+        dl = ws.dl if (o.median or o.lr_check) else out
         _k.sgm_stage(
             _NO_VOLUME if cost is None else cost,
             ws.cl,
@@ -592,7 +591,7 @@ class CensusSGM(Matcher):
             bool(o.subpixel),
             bool(o.lr_check),
             float(o.lr_tolerance),
-            fused_median,
+            bool(o.median),
             ws.vf,
             ws.vb,
             ws.rowcnt,
@@ -604,13 +603,10 @@ class CensusSGM(Matcher):
             out,
             cost is not None,
             t,
+            border_margin=int(o.border_margin),
+            gap_size=int(o.gap_size),
+            gap_step=GAP_STEP,
         )
-        if o.border_margin:
-            out = reject_border_matches(out, o.border_margin)
-        if o.gap_size:
-            out = fill_short_gaps(out, o.gap_size, threads=t)
-        if o.median and not fused_median:
-            out = median_filter3x3(out, t)
         if o.speckle_size:
             out = remove_speckles(out, o.speckle_size, o.speckle_diff)
         return out

@@ -64,8 +64,12 @@ def fill_holes(disparity: np.ndarray, empty: float = float("nan"), threads: int 
     return out
 
 
+#: Default largest step between a gap's ends (pixels) for linear filling (:func:`fill_short_gaps`).
+GAP_STEP = 2.0
+
+
 def fill_short_gaps(
-    disparity: np.ndarray, max_gap: int = 4, max_step: float = 2.0, threads: int | None = None
+    disparity: np.ndarray, max_gap: int = 4, max_step: float = GAP_STEP, threads: int | None = None
 ) -> np.ndarray:
     """Close short interior gaps of a disparity map along rows.
 
