@@ -63,8 +63,11 @@ def sgm_stage(
     volume: bool,
     nthreads: int,
     wta: bool = True,
+    border_margin: int = 0,
+    gap_size: int = 0,
+    gap_step: float = 2.0,
 ) -> None:
-    """(Census,) SGM (costs from ``C`` with ``volume``, else ``cl``/``cr``), WTAs, LR check, median."""
+    """(Census,) SGM (costs from ``C`` with ``volume``, else ``cl``/``cr``), WTAs, LR check, border, gaps, median."""
 
 def census5x5(img: npt.NDArray[np.uint8], out: npt.NDArray[np.uint32], nthreads: int) -> None:
     """24-bit 5x5 census of ``img`` (H x W) into ``out`` (H x W)."""

@@ -608,7 +608,7 @@ class CensusSGM(Matcher):
             gap_step=GAP_STEP,
         )
         if o.speckle_size:
-            out = remove_speckles(out, o.speckle_size, o.speckle_diff)
+            out = remove_speckles(out, o.speckle_size, o.speckle_diff, threads=t)
         return out
 
     def _workspace(self, h: int, w: int) -> _Workspace:
