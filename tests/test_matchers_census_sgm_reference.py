@@ -89,6 +89,20 @@ def test_partial_sum_width_equals_reference(census_build, threads, opts, narrow)
 
 
 @pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("d", [32, 48, 64])
+def test_byte_path_costs_equal_reference(census_build, threads, d):
+    """D = 32, 48, 64: whole 32-disparity blocks and a half block, a left band wider than a block."""
+    lut = p2_table()
+    assert census_build.byte_path_costs(8, lut, False, d) is census_build.AVX2  # the uint8 path costs run
+    assert census_build.byte_path_costs(4, lut, False, d) is False
+    assert census_build.byte_path_costs(8, lut, True, d) is False  # guided stereo: a cost volume
+    assert census_build.byte_path_costs(8, p2_table(gamma=40.0), False, d) is False  # uint16 sums
+    left, right = pair(11, 10, 90, 7)
+    m = build_matcher("census-sgm", {"max_disparity": d, "threads": threads, "speckle_size": 0})
+    np.testing.assert_array_equal(m.compute(left, right), ref_match(left, right, d))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
 def test_guided_equals_reference(threads):
     left, right = pair(3)
     rng = np.random.default_rng(3)

@@ -322,6 +322,7 @@ typedef struct {
     const uint32_t* cl; /* census codes (H x W): with cost == NULL the passes compute each cost row from them */
     const uint32_t* cr;
     int narrow; /* partial sums are uint8 (set by csgm_sgm from csgm_narrow) */
+    int narrow8; /* AVX2 build, 8 paths, D % 16 == 0 and narrow: the path costs are uint8 too (csgm_pass_row8) */
     int border_margin; /* after the left-right check: border.reject_border_matches (0 = off) */
     int gap_size;      /* then holes.fill_short_gaps (0 = off) with gap_step */
     double gap_step;
@@ -340,6 +341,17 @@ static int csgm_narrow(int paths, const int16_t* p2lut, int have_cost) {
         if (p2lut[i] > hi) hi = p2lut[i];
     }
     return (paths / 2) * (24 + hi) <= 255;
+}
+
+/* Whether the path costs are uint8 as well (csgm_pass_row8): the AVX2 build, narrow partial sums, 8 paths
+ * and D a multiple of 16. */
+static int csgm_narrow8(int paths, const int16_t* p2lut, int have_cost, int D) {
+#if defined(__AVX2__)
+    return paths == 8 && (D & 15) == 0 && csgm_narrow(paths, p2lut, have_cost);
+#else
+    (void)paths, (void)p2lut, (void)have_cost, (void)D;
+    return 0;
+#endif
 }
 
 /* Per-thread scratch (bytes), see csgm_scratch_bytes. */
@@ -372,7 +384,7 @@ static size_t csgm_scratch_bytes(int W, int D) {
     b += 2 * csgm_align(3 * (size_t)W * s * 2);
     b += 2 * csgm_align(3 * (size_t)W * 2);
     b += 3 * csgm_align(s * 2);
-    b += csgm_align((size_t)W * D * 2) + 2 * csgm_align((size_t)D * 2); /* part; sum, crow */
+    b += csgm_align((size_t)W * D * 2) + 2 * csgm_align(((size_t)D + 32) * 2); /* part; sum, crow (+ 32: csgm_step4_u8) */
     b += csgm_align((size_t)W * 4);
     b += 2 * csgm_align((size_t)W * 2);
     return b + 64;
@@ -392,8 +404,8 @@ static void csgm_thread_init(csgm_thread* t, uint8_t* base, int W, int D) {
     CSGM_TAKE(hB, int16_t, s)
     CSGM_TAKE(zero, int16_t, s)
     CSGM_TAKE(part, uint16_t, (size_t)W * D)
-    CSGM_TAKE(sum, uint16_t, D)
-    CSGM_TAKE(crow, uint16_t, D)
+    CSGM_TAKE(sum, uint16_t, (size_t)D + 32)
+    CSGM_TAKE(crow, uint16_t, (size_t)D + 32)
     CSGM_TAKE(rev, uint32_t, W)
     CSGM_TAKE(rbc, uint16_t, W)
     CSGM_TAKE(rbd, uint16_t, W)
@@ -407,6 +419,20 @@ static void csgm_thread_init(csgm_thread* t, uint8_t* base, int W, int D) {
     memset(t->zero, 0, s * sizeof(int16_t));
 }
 
+#if defined(__AVX2__)
+static size_t csgm_stride8(int D);
+/* The row buffers of t for csgm_pass_row8 (they fit in those of csgm_thread_init: csgm_stride8(D) bytes <
+ * 2 csgm_stride(D)): everything the sentinel 0xFF, the path start's row 0. */
+static void csgm_thread_init8(csgm_thread* t, int W, int D) {
+    const size_t s8 = csgm_stride8(D);
+    memset(t->rowP, 0xFF, 3 * (size_t)W * s8);
+    memset(t->rowC, 0xFF, 3 * (size_t)W * s8);
+    memset(t->hA, 0xFF, s8);
+    memset(t->hB, 0xFF, s8);
+    memset(t->zero, 0, s8);
+}
+#endif
+
 /* The costs of pixel x (n valid disparities): row crow of the cost volume, else (crow == NULL) the Hamming
  * costs of clr[x] and the reversed right codes rev, computed into buf (D entries). */
 CSGM_INLINE const uint16_t* csgm_costs_px(const uint16_t* crow, const uint32_t* clr, const uint32_t* rev,
@@ -416,10 +442,151 @@ CSGM_INLINE const uint16_t* csgm_costs_px(const uint16_t* crow, const uint32_t* 
     return buf;
 }
 
+#if defined(__AVX2__)
+/* ------------------------------------------------- SGM with uint8 path costs --
+ * When the partial sums are narrow, every path cost fits uint8 as well: L = C + (v - pm) with
+ * pm <= v <= pm + P2, so L <= 24 + P2 and 4 (24 + max P2) <= 255.  csgm_pass_row8 then keeps the path
+ * costs as bytes (32 disparities per instruction, half the bytes of the row buffers) with 0xFF as the
+ * sentinel: saturating adds keep it at 0xFF, so it never wins a minimum.  The same integers as
+ * csgm_step4: every intermediate value of a valid lane is below 255 (pm + P2 <= 63 + 39 and
+ * L' + P1 saturating only when L' is the sentinel). */
+#define CSGM_OFF8 16
+static size_t csgm_stride8(int D) { return CSGM_OFF8 + (((size_t)D + 31) & ~(size_t)31) + 16; }
+
+CSGM_INLINE int16_t csgm_hmin8(__m256i v) {
+    __m128i h = _mm_min_epu8(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+    h = _mm_min_epu8(h, _mm_srli_epi16(h, 8));
+    return (int16_t)_mm_cvtsi128_si32(_mm_minpos_epu16(_mm_and_si128(h, _mm_set1_epi16(0xFF))));
+}
+
+/* csgm_step4 on uint8 path costs; C: the pixel's Hamming costs (uint16, readable up to round32(D)). */
+CSGM_INLINE void csgm_step4_u8(const uint16_t* CSGM_RESTRICT C, const uint8_t* CSGM_RESTRICT p0,
+                               const uint8_t* CSGM_RESTRICT p1, const uint8_t* CSGM_RESTRICT p2,
+                               const uint8_t* CSGM_RESTRICT p3, uint8_t* CSGM_RESTRICT c0,
+                               uint8_t* CSGM_RESTRICT c1, uint8_t* CSGM_RESTRICT c2, uint8_t* CSGM_RESTRICT c3,
+                               const int16_t* pm, const int16_t* P2, int16_t* m, uint8_t* CSGM_RESTRICT acc,
+                               int n, int D, int16_t P1) {
+    const __m256i vp1 = _mm256_set1_epi8((char)P1);
+    const __m256i pm0 = _mm256_set1_epi8((char)pm[0]), pm1 = _mm256_set1_epi8((char)pm[1]);
+    const __m256i pm2 = _mm256_set1_epi8((char)pm[2]), pm3 = _mm256_set1_epi8((char)pm[3]);
+    const __m256i j0 = _mm256_set1_epi8((char)(pm[0] + P2[0])), j1 = _mm256_set1_epi8((char)(pm[1] + P2[1]));
+    const __m256i j2 = _mm256_set1_epi8((char)(pm[2] + P2[2])), j3 = _mm256_set1_epi8((char)(pm[3] + P2[3]));
+    const __m256i sent = _mm256_set1_epi8((char)0xFF);
+    const __m256i lane = _mm256_setr_epi8(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20,
+                                          21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31);
+    __m256i m0 = sent, m1 = sent, m2 = sent, m3 = sent;
+#define CSGM_LD8(q) _mm256_loadu_si256((const __m256i*)(q))
+#define CSGM_VPATH8(p, c, pmk, jk, mk, Lk)                                                             \
+    __m256i Lk = _mm256_adds_epu8(_mm256_min_epu8(CSGM_LD8(p + d - 1), CSGM_LD8(p + d + 1)), vp1);    \
+    Lk = _mm256_min_epu8(_mm256_min_epu8(Lk, CSGM_LD8(p + d)), jk);                                    \
+    Lk = _mm256_blendv_epi8(sent, _mm256_adds_epu8(_mm256_subs_epu8(Lk, pmk), cd), keep);              \
+    _mm256_storeu_si256((__m256i*)(c + d), Lk);                                                        \
+    mk = _mm256_min_epu8(mk, Lk);
+    int d = 0;
+    for (; d < n; d += 32) {
+        const __m256i keep = d + 32 <= n ? sent : _mm256_cmpgt_epi8(_mm256_set1_epi8((char)(n - d)), lane);
+        const __m256i cd = _mm256_permute4x64_epi64(
+            _mm256_packus_epi16(CSGM_LD8(C + d), CSGM_LD8(C + d + 16)), 0xD8);
+        CSGM_VPATH8(p0, c0, pm0, j0, m0, L0)
+        CSGM_VPATH8(p1, c1, pm1, j1, m1, L1)
+        CSGM_VPATH8(p2, c2, pm2, j2, m2, L2)
+        CSGM_VPATH8(p3, c3, pm3, j3, m3, L3)
+        const __m256i sum = _mm256_adds_epu8(_mm256_adds_epu8(L0, L1), _mm256_adds_epu8(L2, L3));
+        if (d + 32 <= D)
+            _mm256_storeu_si256((__m256i*)(acc + d), sum);
+        else /* D % 32 == 16: the first 16 bytes only (acc + D is the next pixel's) */
+            _mm_storeu_si128((__m128i*)(acc + d), _mm256_castsi256_si128(sum));
+    }
+#undef CSGM_VPATH8
+#undef CSGM_LD8
+    for (; d < D; d += 32) {
+        _mm256_storeu_si256((__m256i*)(c0 + d), sent);
+        _mm256_storeu_si256((__m256i*)(c1 + d), sent);
+        _mm256_storeu_si256((__m256i*)(c2 + d), sent);
+        _mm256_storeu_si256((__m256i*)(c3 + d), sent);
+    }
+    m[0] = csgm_hmin8(m0);
+    m[1] = csgm_hmin8(m1);
+    m[2] = csgm_hmin8(m2);
+    m[3] = csgm_hmin8(m3);
+}
+
+/* csgm_pass_row with uint8 path costs (p->narrow8): the row buffers of t hold csgm_stride8(D) bytes per
+ * pixel and path (csgm_thread_init8). */
+static void csgm_pass_row8(const csgm_params* p, const uint8_t* CSGM_RESTRICT g, csgm_thread* t, int y, int s,
+                           int first, uint8_t* CSGM_RESTRICT part) {
+    const int W = p->W, D = p->D;
+    const ptrdiff_t st = (ptrdiff_t)csgm_stride8(D);
+    const ptrdiff_t plane = (ptrdiff_t)W * st;
+    const int16_t P1 = (int16_t)p->P1;
+    const int16_t* lut = p->p2lut;
+    const uint32_t* clr = p->cl + (ptrdiff_t)y * W;
+    const uint32_t* crr = p->cr + (ptrdiff_t)y * W;
+    for (int x = 0; x < W; x++) t->rev[x] = crr[W - 1 - x];
+    const uint8_t* grow = g + (ptrdiff_t)y * W;
+    const uint8_t* gprev = first ? grow : g + (ptrdiff_t)(y - s) * W;
+    uint8_t* rowP = (uint8_t*)t->rowP;
+    uint8_t* rowC = (uint8_t*)t->rowC;
+    const uint8_t* zero = (const uint8_t*)t->zero + CSGM_OFF8;
+    uint8_t* hp = (uint8_t*)t->hA + CSGM_OFF8;
+    uint8_t* hc = (uint8_t*)t->hB + CSGM_OFF8;
+    int16_t hm = 0;
+    for (int i = 0; i < W; i++) {
+        const int x = s > 0 ? i : W - 1 - i;
+        const int n = x + 1 < D ? x + 1 : D;
+        const int gx = grow[x];
+        int16_t pm[4], P2[4], m[4];
+        const uint8_t* pv[4];
+        uint8_t* cv[4];
+        /* path 0: horizontal from x - s; paths 1..3: from (y - s, x - s * dk), dk = 1, 0, -1 */
+        pv[0] = i == 0 ? zero : hp;
+        pm[0] = i == 0 ? 0 : hm;
+        P2[0] = i == 0 ? 0 : lut[csgm_absdiff(gx, grow[x - s])];
+        cv[0] = hc;
+        for (int k = 0; k < 3; k++) {
+            const int xp = x - s * (1 - k);
+            cv[k + 1] = rowC + k * plane + (ptrdiff_t)x * st + CSGM_OFF8;
+            if (first || xp < 0 || xp >= W) {
+                pv[k + 1] = zero;
+                pm[k + 1] = 0;
+                P2[k + 1] = 0;
+            } else {
+                pv[k + 1] = rowP + k * plane + (ptrdiff_t)xp * st + CSGM_OFF8;
+                pm[k + 1] = t->minP[k * W + xp];
+                P2[k + 1] = lut[csgm_absdiff(gx, gprev[xp])];
+            }
+        }
+        csgm_hamming_px(clr[x], t->rev + (W - 1 - x), t->crow, n, D, 0);
+        csgm_step4_u8(t->crow, pv[0], pv[1], pv[2], pv[3], cv[0], cv[1], cv[2], cv[3], pm, P2, m,
+                      part + (size_t)x * D, n, D, P1);
+        t->minC[x] = m[1];
+        t->minC[W + x] = m[2];
+        t->minC[2 * W + x] = m[3];
+        hm = m[0];
+        uint8_t* tmp = hp;
+        hp = hc;
+        hc = tmp;
+    }
+    int16_t* tmp = t->rowP;
+    t->rowP = t->rowC;
+    t->rowC = tmp;
+    tmp = t->minP;
+    t->minP = t->minC;
+    t->minC = tmp;
+}
+#endif
+
+
 /* Row y of one pass (s = +1 forward: x ascending, predecessors in row y - 1 and x - 1; s = -1 backward).
  * Writes the row's partial sum (4 or 2 paths) to part (W x D); rowP/minP must hold row y - s (unless first). */
 static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT cost, const uint8_t* CSGM_RESTRICT g,
                           csgm_thread* t, int y, int s, int first, void* CSGM_RESTRICT part) {
+#if defined(__AVX2__)
+    if (p->narrow8) {
+        csgm_pass_row8(p, g, t, y, s, first, (uint8_t*)part);
+        return;
+    }
+#endif
     const int W = p->W, D = p->D;
     const ptrdiff_t st = (ptrdiff_t)csgm_stride(D);
     const int16_t P1 = (int16_t)p->P1;
@@ -986,6 +1153,7 @@ static void csgm_sgm(const csgm_params* p0, const uint16_t* cost, const uint8_t*
                      float* lr, float* pad, float* disp, const csgm_census_io* census) {
     csgm_params q = *p0;
     q.narrow = csgm_narrow(q.paths, q.p2lut, cost != NULL);
+    q.narrow8 = csgm_narrow8(q.paths, q.p2lut, cost != NULL, q.D);
     const csgm_params* p = &q;
     const int H = p->H, W = p->W;
     const size_t sb = csgm_scratch_bytes(W, p->D);
@@ -1008,7 +1176,12 @@ static void csgm_sgm(const csgm_params* p0, const uint16_t* cost, const uint8_t*
 #endif
         }
         csgm_thread t;
-        if (tid < 2) csgm_thread_init(&t, scratch + (size_t)tid * sb, W, p->D);
+        if (tid < 2) {
+            csgm_thread_init(&t, scratch + (size_t)tid * sb, W, p->D);
+#if defined(__AVX2__)
+            if (p->narrow8) csgm_thread_init8(&t, W, p->D);
+#endif
+        }
         if (team == 1) {
             csgm_pass(p, cost, g, &t, 1, vf, vf, rowcnt, sout, dl, dr, lr);
             csgm_pass(p, cost, g, &t, -1, NULL, vf, rowcnt, sout, dl, dr, lr);

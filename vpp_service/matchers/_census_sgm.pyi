@@ -14,6 +14,12 @@ AVX2: bool
 def scratch_bytes(W: int, D: int) -> int:
     """Bytes of SGM scratch per pass thread for width ``W`` and ``D`` disparities."""
 
+def narrow_sums(paths: int, p2lut: npt.NDArray[np.int16], volume: bool) -> bool:
+    """Whether the SGM keeps its per-pass partial sums as uint8 (else uint16)."""
+
+def byte_path_costs(paths: int, p2lut: npt.NDArray[np.int16], volume: bool, D: int) -> bool:
+    """Whether the SGM passes keep their path costs as uint8 too (AVX2 build, 8 paths, D % 16 == 0)."""
+
 def cost_work_bytes(W: int, nthreads: int) -> int:
     """Bytes of census / Hamming scratch for ``nthreads`` threads at width ``W``."""
 

@@ -43,11 +43,13 @@ cdef extern from "_census_sgm.h" nogil:
         const uint32_t* cl
         const uint32_t* cr
         int narrow
+        int narrow8
         int border_margin
         int gap_size
         double gap_step
     int csgm_build_avx2()
     int csgm_narrow(int paths, const int16_t* p2lut, int have_cost)
+    int csgm_narrow8(int paths, const int16_t* p2lut, int have_cost, int D)
     size_t csgm_scratch_bytes(int W, int D)
     size_t csgm_cost_work_bytes(int W)
     void csgm_pad_rows(const uint8_t* img, int H, int W, uint8_t* pad, int y0, int y1)
@@ -89,6 +91,15 @@ def narrow_sums(int paths, const int16_t[::1] p2lut, bint volume):
     ``paths / 2 * (24 + max(p2lut)) <= 255`` (a path cost is at most its matching cost plus P2).
     """
     return bool(csgm_narrow(paths, &p2lut[0], 1 if volume else 0))
+
+
+def byte_path_costs(int paths, const int16_t[::1] p2lut, bint volume, int D):
+    """Whether the SGM passes keep their path costs as uint8 too (32 disparities per AVX2 instruction).
+
+    True in the AVX2 build with 8 paths, ``D`` a multiple of 16 and :func:`narrow_sums`; the same integers
+    as the int16 path costs either way.
+    """
+    return bool(csgm_narrow8(paths, &p2lut[0], 1 if volume else 0, D))
 
 
 def cost_work_bytes(int W, int nthreads):
@@ -160,6 +171,7 @@ cdef csgm_params make_params(int H, int W, int D, int paths, int P1, const int16
     p.cl = NULL
     p.cr = NULL
     p.narrow = 0  # csgm_sgm decides
+    p.narrow8 = 0
     p.border_margin = 0
     p.gap_size = 0
     p.gap_step = 0.0
