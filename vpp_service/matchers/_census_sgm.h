@@ -1,7 +1,7 @@
 /* Census-SGM kernels in C (included by _census_sgm.pyx; compiled twice: portable and x86-64-v3).
  *
  * Plain loops written so that GCC/Clang vectorise them (-O3): int16 path costs,
- * uint16 sums, branch-free selects.  The per-call driver csgm_sgm runs one OpenMP
+ * uint16 sums, branch-free selects; AVX2 intrinsics in the x86-64-v3 build.  The per-call driver csgm_sgm runs one OpenMP
  * parallel region: the forward pass (4 paths: left->right and the three from the
  * row above) and the backward pass (the 4 mirrored paths) run on two threads at
  * once; whichever pass finishes a row second adds the two partial sums and runs
@@ -15,7 +15,12 @@
  * Partial sums (the 4 or 2 paths of one pass) are uint8 when they provably fit ("narrow", see
  * csgm_narrow: the Hamming costs computed in the passes and small penalties), else uint16; the two
  * passes' sums are added in uint16 for the WTA.  uint8 halves the bytes the passes write and the row
- * finisher reads, which bounds the two-thread speed.
+ * finisher reads, which bounds the two-thread speed.  Under the same bound the AVX2 build keeps the
+ * path costs themselves as uint8 too (csgm_pass_row8: 8 paths, D a multiple of 16).
+ *
+ * Each pass aggregates a row into its own scratch row (in cache whichever way x runs) and copies it to
+ * its partial-sum volume only when it reaches the row first; the pass that comes second finishes the row
+ * (sum, WTAs, left-right check, border step, short gaps) from its scratch row.
  */
 #ifndef VPP_CENSUS_SGM_H
 #define VPP_CENSUS_SGM_H

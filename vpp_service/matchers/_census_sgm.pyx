@@ -16,8 +16,9 @@ Conventions
   fastest, disparity ``d`` matching left ``x`` with right ``x - d``; column
   ``x`` has the valid disparities ``d <= min(x, D - 1)`` (the others are
   never read; aggregated volumes hold 65535 there);
-* path costs are int16 in buffers padded with a sentinel on each side of the
-  disparity axis, so the inner ``d`` loop has no branch and vectorises;
+* path costs are int16 (uint8 in the AVX2 build when :func:`byte_path_costs`)
+  in buffers padded with a sentinel on each side of the disparity axis, so the
+  inner ``d`` loop has no branch and vectorises;
 * every routine takes ``nthreads`` (>= 1) and opens one OpenMP parallel
   region (rows split in blocks; the SGM passes on two threads).
 """

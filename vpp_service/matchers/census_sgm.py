@@ -63,14 +63,16 @@ stereo) and storing the row's partial sum of its paths as uint8 when that
 provably fits (Hamming costs <= 24 and ``paths / 2 * (24 + max P2) <= 255``,
 true for the default penalties: a path cost is at most its matching cost plus
 P2), else as uint16 (guided stereo, :meth:`CensusSGM.compute_from_cost`, large
-penalties); each pass aggregates a row into a scratch row of its own (in
-cache) and copies it out only when it reaches the row first; the pass that
-comes second finishes the row (sum of the two passes, left and right WTA,
-left-right check, border step, short gaps); then the median on row blocks.
-So the aggregation uses at most two threads. The matcher keeps
-its buffers (census codes, partial sums, the cost volume once guided stereo
-needed it) between calls and reallocates them only when the image size,
-``max_disparity`` or the thread count changes.
+penalties); under that bound the AVX2 build keeps the path costs as bytes too
+(8 paths, ``max_disparity`` a multiple of 16). Each pass aggregates a row into
+a scratch row of its own (in cache) and copies it out only when it reaches the
+row first; the pass that comes second finishes the row (sum of the two passes,
+left and right WTA, left-right check, border step, short gaps); then the
+median on row blocks. So the aggregation uses at most two threads. The matcher
+keeps its buffers (census codes, partial sums, the cost volume once guided
+stereo needed it) between calls and reallocates them only when the image size,
+``max_disparity`` or the thread count changes. The speckle filter runs last,
+on row strips in parallel (:mod:`vpp_service.matchers.speckle`).
 
 Speed: ``benchmarks/bench_matchers.py`` times the matcher and each of its
 stages; the latest numbers are in ``benchmarks/results/bench_matchers.json``.
