@@ -438,6 +438,16 @@ static void csgm_thread_init8(csgm_thread* t, int W, int D) {
 }
 #endif
 
+/* After a row of a pass: the current row's path costs and minima become the previous row's. */
+CSGM_INLINE void csgm_next_row(csgm_thread* t) {
+    int16_t* tmp = t->rowP;
+    t->rowP = t->rowC;
+    t->rowC = tmp;
+    tmp = t->minP;
+    t->minP = t->minC;
+    t->minC = tmp;
+}
+
 /* The costs of pixel x (n valid disparities): row crow of the cost volume, else (crow == NULL) the Hamming
  * costs of clr[x] and the reversed right codes rev, computed into buf (D entries). */
 CSGM_INLINE const uint16_t* csgm_costs_px(const uint16_t* crow, const uint32_t* clr, const uint32_t* rev,
@@ -572,12 +582,7 @@ static void csgm_pass_row8(const csgm_params* p, const uint8_t* CSGM_RESTRICT g,
         hp = hc;
         hc = tmp;
     }
-    int16_t* tmp = t->rowP;
-    t->rowP = t->rowC;
-    t->rowC = tmp;
-    tmp = t->minP;
-    t->minP = t->minC;
-    t->minC = tmp;
+    csgm_next_row(t);
 }
 #endif
 
@@ -708,12 +713,7 @@ static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT co
         hp = hc;
         hc = tmp;
     }
-    int16_t* tmp = t->rowP;
-    t->rowP = t->rowC;
-    t->rowC = tmp;
-    tmp = t->minP;
-    t->minP = t->minC;
-    t->minC = tmp;
+    csgm_next_row(t);
 }
 
 /* ----------------------------------------------------------------- WTA ---- */
