@@ -79,6 +79,7 @@ def test_stage_timer_matches_numpy():
     w = np.array(vals[-5:])
     assert s["n"] == 5 and s["last"] == 8.0
     assert s["mean"] == pytest.approx(w.mean()) and s["p99"] == pytest.approx(np.percentile(w, 99))
+    assert s["p50"] == np.percentile(w, 50) and s["p99"] == np.percentile(w, 99)  # exactly numpy's
     with pytest.raises(ValueError, match="window must be >= 1"):
         StageTimer(0)
 
@@ -145,6 +146,7 @@ def test_bad_frames_are_rejected_and_service_keeps_running():
     run(pipe)
     c = pipe.counters
     assert c["rejected"] == 5  # 0, 3, 6, 9, 12
+    assert pipe.rejected == 5  # the cheap accessor the service polls
     assert c["errors"] == 2  # 5, 10
     assert c["processed"] == len(sink.results) == 8
 
@@ -206,7 +208,11 @@ def test_status_and_summary_report_bad2_of_answered_pixels_and_density():
     assert 6.0 < m["bad2_answered_mean"] < 7.5  # every 10th row of 2/3 of the answered columns: 6.7 %
     assert m["bad2_mean"] == pytest.approx(last["bad2"]) and m["bad2_mean"] > m["bad2_answered_mean"] + 20.0
     assert gt_ok > 0
-    line = pipe.summary_line()
+    assert "density" in pipe.summary_line()
+    st = pipe.status()
+    st["fps"] = 1234.5  # a status the caller already has is used as given
+    line = pipe.summary_line(st)
+    assert line.startswith("1234.5 fps |")
     assert f"bad-2 {m['bad2_answered_mean']:.2f} %" in line and f"density {m['density_mean']:.1f} %" in line
 
 

@@ -249,20 +249,21 @@ def run_service(
                 link = pipe.connectivity() if cfg.zenoh.connect else None
                 if link is not None:
                     linked = _log_link(link, linked, cfg.zenoh.connect)
-                trim.poll(pipe.counters["rejected"])
+                trim.poll(pipe.rejected)  # polled every 0.1 s: not the whole status
                 if time.monotonic() >= next_report:
                     next_report += s.summary_period_s
-                    counters = pipe.status()["counters"]
+                    st = pipe.status()  # once per report: it costs about a millisecond of the matcher's CPU
+                    counters = st["counters"]
                     # a terminal gets a live line; a log (journal, file) only a line when something changed
                     if s.summary and stream is not None and (tty or counters != last_counters):
                         print(
-                            ("\r" if tty else "") + pipe.summary_line(),
+                            ("\r" if tty else "") + pipe.summary_line(st),
                             end="" if tty else "\n",
                             file=stream,
                             flush=True,
                         )
                     last_counters = counters
-                    _write_json(summary_path, {**pipe.status(), "summary_write_errors": write_errors[0]}, write_errors)
+                    _write_json(summary_path, {**st, "summary_write_errors": write_errors[0]}, write_errors)
         finally:
             t0 = time.monotonic()
             pipe.stop(s.shutdown_timeout_s)
