@@ -54,7 +54,9 @@ def remove_speckles(
     TypeError
         If ``disparity`` is not a float32 array.
     ValueError
-        If it is not 2-D, or ``max_size`` / ``max_diff`` are out of range.
+        If it is not 2-D, ``max_size`` / ``max_diff`` / ``threads`` are out of
+        range, or a finite disparity is at or beyond 2047.9375 px in magnitude
+        (1/16 px must fit int16, as in OpenCV).
     """
     check_array(disparity, "disparity", (np.float32,), 2, "a 2-D (H x W) map", contiguous=False)
     if isinstance(max_size, bool) or not isinstance(max_size, (int, np.integer)) or max_size < 0:
