@@ -32,6 +32,7 @@
 #include <string.h>
 
 #include "_gaps.h"
+#include "_omp_team.h"
 #ifdef _OPENMP
 #include <omp.h>
 #endif
@@ -1128,11 +1129,8 @@ static void csgm_cost(const uint8_t* gl, const uint8_t* gr, int H, int W, int D,
 #pragma omp parallel num_threads(nt)
 #endif
     {
-        int tid = 0, team = 1;
-#ifdef _OPENMP
-        tid = omp_get_thread_num();
-        team = omp_get_num_threads();
-#endif
+        int tid, team;
+        vpp_omp_team(&tid, &team);
         csgm_cost_team(gl, gr, H, W, D, padl, padr, cl, cr, cost, invalid_cost, work, tid, team);
     }
 }
@@ -1168,11 +1166,8 @@ static void csgm_sgm(const csgm_params* p0, const uint16_t* cost, const uint8_t*
 #pragma omp parallel num_threads(nt)
 #endif
     {
-        int tid = 0, team = 1;
-#ifdef _OPENMP
-        tid = omp_get_thread_num();
-        team = omp_get_num_threads();
-#endif
+        int tid, team;
+        vpp_omp_team(&tid, &team);
         if (census) { /* the census codes p->cl, p->cr first (all threads), then the passes read them */
             csgm_cost_team(census->gl, census->gr, H, W, p->D, census->padl, census->padr, (uint32_t*)p->cl,
                            (uint32_t*)p->cr, NULL, 0, census->work, tid, team);

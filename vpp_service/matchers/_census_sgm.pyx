@@ -1,4 +1,4 @@
-"""Census-SGM kernels (nogil, typed memoryviews; the C is in ``_census_sgm.h``).
+"""Census-SGM kernels (nogil, typed memoryviews; the C is in ``_census_sgm.h``, with ``_gaps.h`` and ``_omp_team.h``).
 
 Low-level, unchecked kernels behind :mod:`vpp_service.matchers.census_sgm`;
 the Python wrappers there validate every argument (shape, dtype, contiguity)

@@ -14,6 +14,7 @@
 #include <math.h>
 #include <stdint.h>
 #include <string.h>
+#include "_omp_team.h"
 #ifdef _OPENMP
 #include <omp.h>
 #endif
@@ -55,11 +56,8 @@ static int spk_filter(const float* src, float* dst, int H, int W, int32_t* q, in
 #pragma omp parallel num_threads(team_max) reduction(| : bad)
 #endif
     {
-        int tid = 0, team = 1;
-#ifdef _OPENMP
-        tid = omp_get_thread_num();
-        team = omp_get_num_threads();
-#endif
+        int tid, team;
+        vpp_omp_team(&tid, &team);
         const int y0 = (int)((int64_t)H * tid / team), y1 = (int)((int64_t)H * (tid + 1) / team);
         for (int y = y0; y < y1; y++) {
             for (int x = 0; x < W; x++) {

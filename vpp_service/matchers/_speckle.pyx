@@ -1,4 +1,4 @@
-"""Speckle filter kernel (nogil, typed memoryviews; the C is in ``_speckle.h``).
+"""Speckle filter kernel (nogil, typed memoryviews; the C is in ``_speckle.h``, with ``_omp_team.h``).
 
 Unchecked; :func:`vpp_service.matchers.speckle.remove_speckles` validates the
 arguments and allocates the output and scratch. Call that, not this.
