@@ -62,6 +62,10 @@ def test_frames_decoded_and_malformed_rejected(sessions):
         assert [f.seq for f in frames] == [7, 8]
         np.testing.assert_array_equal(frames[0].left, make_frame(seed=1).left)
         assert "decode" in frames[0].meta["timing_ms"]
+        # metric points arrive as their disparity alone (decoded as decode_frame(metric_map=False) does)
+        sent = wire.decode_frame(wire.encode_frame(make_frame(seed=1)))
+        assert frames[0].sensor_depth is None and sent.sensor_depth is not None
+        np.testing.assert_array_equal(frames[0].sparse_disparity, sent.sparse_disparity)
         st = src.stats()
         assert st["rejected"] == 5 and st["emitted"] == 2 and st["received"] == 7
         assert any("calib.f" in r for r in rejects) and any("left.h" in r for r in rejects)

@@ -76,6 +76,29 @@ def test_equals_reference(seed, collide, keep, calib):
         np.testing.assert_array_equal(got[1], want[1])
 
 
+@pytest.mark.parametrize("collide", [False, True])
+@pytest.mark.parametrize("seed", range(6))
+def test_disparity_alone_equals_reference(seed, collide):
+    """values_map=False: no metric map, and the disparity map the reference derives from its metric map."""
+    h, w = (5, 7) if collide else (37, 53)
+    uv, vals = random_points(seed, h, w, 60 if collide else 400, collide)
+    depth, disp = wire.points_to_maps(uv, vals, h, w, "min", calib=CALIB, values_map=False)
+    assert depth is None
+    np.testing.assert_array_equal(disp, reference_maps(uv, vals, h, w, "min", CALIB)[1])
+
+
+@pytest.mark.parametrize("keep", ["min", "max"])
+def test_disparity_alone_needs_metric_points_and_calib(keep):
+    uv, vals = np.zeros((1, 2), np.float32), np.ones(1, np.float32)
+    calib = CALIB if keep == "max" else None
+    with pytest.raises(ValueError, match="values_map"):
+        wire.points_to_maps(uv, vals, 2, 2, keep, calib=calib, values_map=False)
+    with pytest.raises(ValueError, match="out may be 0 x 0"):
+        _points.scatter_points(
+            uv.reshape(-1), vals, keep == "min", np.empty((0, 0), np.float32), np.empty((0, 0), np.float32), 1.0, 0.0
+        )
+
+
 def test_disparity_left_out_where_not_positive():
     """D = f b / z - doffs <= 0 for far points: NaN, like depth_to_disparity."""
     uv = np.float32([[0, 0], [1, 0], [2, 0]])
@@ -121,6 +144,8 @@ def test_bad_points(uv, vals, match):
     uv, vals = np.float32(uv), np.float32(vals)
     with pytest.raises(wire.WireError, match=match):
         wire.points_to_maps(uv, vals, 3, 4, "min")
+    with pytest.raises(wire.WireError, match=match):
+        wire.points_to_maps(uv, vals, 3, 4, "min", calib=CALIB, values_map=False)
     with pytest.raises(wire.WireError, match=match):
         reference_maps(uv, vals, 3, 4, "min")
 

@@ -63,6 +63,30 @@ def test_points_disparity_equals_dense_conversion(doffs):
     np.testing.assert_array_equal(disp, ref)
     assert np.isnan(disp).any() and np.isfinite(disp).any()
     assert wire.decode_depth(m, h, w)[1] is None  # no calibration: metric only
+    alone = wire.decode_depth(m, h, w, calib=calib, metric_map=False)  # the disparity map alone, the same
+    assert alone[0] is None
+    np.testing.assert_array_equal(alone[1], ref)
+    z, d = wire.decode_depth(m, h, w, metric_map=False)  # without a calibration the metric map stays
+    np.testing.assert_array_equal(z, sensor)
+    assert d is None
+
+
+@pytest.mark.parametrize("kind", ["auto", "disparity_points", "map"])
+@pytest.mark.parametrize("depth", ["metric", "disparity"])
+def test_frame_without_metric_map(depth, kind):
+    """decode_frame(metric_map=False): metric points as their disparity alone; anything else as by default."""
+    fr = make_frame(depth=depth)
+    payload = wire.encode_frame(fr, depth_kind=kind)
+    full, alone = wire.decode_frame(payload), wire.decode_frame(payload, metric_map=False)
+    np.testing.assert_array_equal(alone.left, full.left)
+    if depth == "metric" and kind == "auto":  # metric points: no metric map, the same disparity map
+        assert full.sensor_depth is not None and alone.sensor_depth is None
+        np.testing.assert_array_equal(alone.sparse_disparity, full.sparse_disparity)
+    else:  # a metric map (converted later) or disparity: unchanged
+        for a, b in ((alone.sensor_depth, full.sensor_depth), (alone.sparse_disparity, full.sparse_disparity)):
+            assert (a is None) == (b is None)
+            if a is not None:
+                np.testing.assert_array_equal(a, b)
 
 
 @pytest.mark.parametrize("kind", ["auto", "disparity_points", "map"])

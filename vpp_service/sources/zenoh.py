@@ -23,6 +23,11 @@ the publisher nothing is lost end to end (a publisher using ``DROP`` loses
 samples in its own session, where no counter of this service can see them). While the link is held back,
 other traffic on it waits too (``@status`` answers within about a frame time).
 
+Metric depth points in an ``in/frame`` message arrive as their disparity only
+(:func:`~vpp_service.transport.wire.decode_frame` with ``metric_map=False``):
+the fusion and the sinks read that map, and building the metric one as well
+cost a second H x W map per frame.
+
 Topics: ``<prefix>/<rig>/in/frame`` (default), or with ``topics = "separate"``
 ``in/left``, ``in/right`` and ``in/depth`` joined by
 :class:`vpp_service.transport.sync.Synchronizer` (``sync = "exact"`` by seq or
@@ -208,7 +213,7 @@ class ZenohSource(Source):
         try:
             payload = sample.payload.to_bytes()
             value: wire.Part | StereoFrame = (
-                wire.decode_frame(payload, self._limits)
+                wire.decode_frame(payload, self._limits, metric_map=False)
                 if part == "frame"
                 else wire.decode_part(payload, part, self._limits)
             )

@@ -26,15 +26,19 @@ def scatter_points(const float[::1] uv, const float[::1] vals, bint keep_min,
     (metric points with a calibration) it receives the disparity
     ``fb / z - doffs`` (float64, stored as float32) of each winning depth
     ``z``, or stays NaN where that disparity is ``<= 0``; pass a 0 x 0 array
-    otherwise.
+    otherwise.  ``out`` may be 0 x 0 when ``out_d`` has rows (``keep_min``):
+    only the disparity map is filled, the largest disparity winning a pixel
+    (the same values: the disparity falls as the depth grows).
 
     Returns the problem mask (``BAD_UV | OUTSIDE | BAD_VALUE``, 0 = valid);
     with a non-zero mask the maps hold partial results and must be dropped.
     """
     cdef Py_ssize_t n = vals.shape[0], i
-    cdef int h = out.shape[0], w = out.shape[1]
+    cdef bint with_z = out.shape[0] > 0
     cdef bint with_d = out_d.shape[0] > 0
-    cdef float x, y, v, old
+    cdef int h = out.shape[0] if with_z else out_d.shape[0]
+    cdef int w = out.shape[1] if with_z else out_d.shape[1]
+    cdef float x, y, v, old, fd
     cdef float xlo = -0.5, xhi = <float>(w - 0.5), yhi = <float>(h - 0.5)
     cdef int bad = 0
     cdef int64_t r, c
@@ -43,6 +47,8 @@ def scatter_points(const float[::1] uv, const float[::1] vals, bint keep_min,
         raise ValueError(f"uv has {uv.shape[0]} values, need {2 * n}")
     if with_d and (out_d.shape[0] != h or out_d.shape[1] != w):
         raise ValueError("out_d must be 0 x 0 or the shape of out")
+    if not with_z and not (with_d and keep_min):
+        raise ValueError("out may be 0 x 0 only with an out_d (metric points, keep_min)")
     with nogil:
         for i in range(n):
             x = uv[2 * i]
@@ -61,6 +67,14 @@ def scatter_points(const float[::1] uv, const float[::1] vals, bint keep_min,
                 continue        # keep validating, stop writing
             r = <int64_t>nearbyint(y)
             c = <int64_t>nearbyint(x)
+            if not with_z:      # disparity only: the largest (nearest) one wins
+                d = fb / <double>v - doffs
+                if d > 0:
+                    fd = <float>d
+                    old = out_d[r, c]
+                    if isnan(old) or fd > old:
+                        out_d[r, c] = fd
+                continue
             old = out[r, c]
             if isnan(old) or (v < old if keep_min else v > old):
                 out[r, c] = v

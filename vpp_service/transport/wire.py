@@ -414,7 +414,8 @@ def points_to_maps(
     *,
     calib: Calibration | None = None,
     path: str = "depth.",
-) -> tuple[np.ndarray, np.ndarray | None]:
+    values_map: bool = True,
+) -> tuple[np.ndarray | None, np.ndarray | None]:
     """Validate sparse points and scatter them into H x W float32 maps (NaN = none).
 
     Parameters
@@ -438,10 +439,14 @@ def points_to_maps(
         where it is ``<= 0`` stay NaN.
     path : str
         Field prefix for error messages.
+    values_map : bool
+        False (only with ``calib`` and ``keep="min"``): build the disparity map
+        alone and return None for the values map (the disparity map is the
+        same: the largest disparity of a pixel belongs to its smallest depth).
 
     Returns
     -------
-    (values_map, disparity_map or None)
+    (values_map or None, disparity_map or None)
 
     Raises
     ------
@@ -456,8 +461,10 @@ def points_to_maps(
     """
     if keep not in ("min", "max"):
         raise ValueError(f"keep must be 'min' or 'max', got {keep!r}")
-    out = np.full((h, w), np.nan, dtype=np.float32)
     d_calib = calib if keep == "min" else None  # disparities of metric points only
+    if not values_map and d_calib is None:
+        raise ValueError('values_map=False needs keep="min" and a calib (it builds the disparity map alone)')
+    out = np.full((h, w), np.nan, dtype=np.float32) if values_map else _NO_MAP
     out_d = np.full((h, w), np.nan, dtype=np.float32) if d_calib is not None else _NO_MAP
     fb, doffs = (d_calib.f * d_calib.baseline, d_calib.doffs) if d_calib is not None else (0.0, 0.0)
     bad = _points.scatter_points(
@@ -475,7 +482,7 @@ def points_to_maps(
         raise WireError(f"{path}uv: points must lie inside the {w}x{h} left image")
     if bad:
         raise WireError(f"{path}{'z' if keep == 'min' else 'd'}: values must be finite and > 0")
-    return out, (out_d if d_calib is not None else None)
+    return (out if values_map else None), (out_d if d_calib is not None else None)
 
 
 _NO_MAP = np.empty((0, 0), np.float32)
@@ -489,6 +496,7 @@ def decode_depth(
     *,
     limits: WireLimits = DEFAULT_LIMITS,
     calib: Calibration | None = None,
+    metric_map: bool = True,
 ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """Validate a ``SparseDepth`` map; return ``(sensor_depth_m, sparse_disparity_px)``.
 
@@ -497,6 +505,8 @@ def decode_depth(
     points only (the same float32 values as
     :func:`vpp_service.vpp.depth_to_disparity` of the metric map, which costs
     four passes over the whole map; points with ``d <= 0`` are left out).
+    With ``metric_map=False`` such points come back as their disparity alone
+    (``sensor_depth_m`` None: one H x W map built instead of two).
     Points are rounded to the nearest pixel; when two land on one pixel the
     nearest (smaller depth / larger disparity) wins.
 
@@ -529,7 +539,7 @@ def decode_depth(
     vals = _f32(_bytes(m, key, p), n, p + key)
     if kind != "points":
         return None, points_to_maps(uv, vals, h, w, "max", path=p)[0]
-    return points_to_maps(uv, vals, h, w, "min", calib=calib, path=p)
+    return points_to_maps(uv, vals, h, w, "min", calib=calib, path=p, values_map=metric_map or calib is None)
 
 
 def _encode_gt(gt: np.ndarray) -> dict[str, object]:
@@ -620,12 +630,14 @@ def encode_frame(frame: StereoFrame, enc: str = "raw", depth_kind: str = "auto",
     return msgpack.packb(msg, use_bin_type=True)
 
 
-def decode_frame(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> StereoFrame:
+def decode_frame(payload: bytes, limits: WireLimits = DEFAULT_LIMITS, *, metric_map: bool = True) -> StereoFrame:
     """Parse and fully validate an ``in/frame`` message into a :class:`StereoFrame`.
 
     Metric depth arrives as ``sensor_depth``, and metric points also as their
     ``sparse_disparity`` (see :func:`decode_depth`; a metric map is converted
-    by the pipeline); disparity points/maps as ``sparse_disparity``.
+    by the pipeline); disparity points/maps as ``sparse_disparity``. With
+    ``metric_map=False`` metric points arrive as their ``sparse_disparity``
+    only (``sensor_depth`` None), which is all the fusion reads of them.
 
     Raises
     ------
@@ -642,7 +654,7 @@ def decode_frame(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> StereoF
     h, w = left.shape[:2]
     sensor = disp = gt = None
     if msg.get("depth") is not None:
-        sensor, disp = decode_depth(msg["depth"], h, w, "depth", limits=limits, calib=calib)
+        sensor, disp = decode_depth(msg["depth"], h, w, "depth", limits=limits, calib=calib, metric_map=metric_map)
     if msg.get("gt") is not None:
         gt = _decode_gt(msg["gt"], h, w)
     return StereoFrame(
