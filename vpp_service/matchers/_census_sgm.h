@@ -618,7 +618,9 @@ static void csgm_pass_row(const csgm_params* p, const uint16_t* CSGM_RESTRICT co
     int16_t* hp = t->hA + CSGM_OFF;
     int16_t* hc = t->hB + CSGM_OFF;
     int16_t hm = 0;
-    const ptrdiff_t plane = (ptrdiff_t)W * st;
+#if defined(__AVX2__)
+    const ptrdiff_t plane = (ptrdiff_t)W * st; /* the interior-pixel path below */
+#endif
     for (int i = 0; i < W; i++) {
         const int x = s > 0 ? i : W - 1 - i;
         const int n = x + 1 < D ? x + 1 : D;
