@@ -22,4 +22,4 @@ def scatter_points(
     fb: float,
     doffs: float,
 ) -> int:
-    """Validate ``n`` points, scatter them into ``out`` (and ``out_d``); return the problem mask (0 = valid)."""
+    """Validate ``n`` points, scatter them into ``out`` and/or ``out_d`` (one may be 0 x 0); return the problem mask."""
