@@ -80,8 +80,9 @@ def test_aggregate_custom_penalties_and_threads(rng):
 
 @pytest.mark.parametrize("uniqueness", [0.95, 0.7, 1.0])
 @pytest.mark.parametrize("subpixel", [True, False])
-def test_wta_matches_reference(rng, uniqueness, subpixel):
-    S = rng.integers(0, 40, (6, 8, 7)).astype(np.uint16)
+@pytest.mark.parametrize("d", [7, 16, 48])  # 16 and 48: whole 16-disparity blocks past the left band
+def test_wta_matches_reference(rng, uniqueness, subpixel, d):
+    S = rng.integers(0, 40, (3, d + 20, d)).astype(np.uint16)  # small costs: many ties
     got = cs.select_disparity(S, uniqueness, subpixel)
     np.testing.assert_array_equal(got, ref_wta(S, uniqueness, subpixel))
 
