@@ -128,6 +128,28 @@ def test_right_and_lr_check_match_reference(rng):
         np.testing.assert_array_equal(cs.left_right_check(dl, dr, tol), ref_lr(dl, dr, tol))
 
 
+@pytest.mark.parametrize("width", [5, 8, 45])  # the AVX2 build checks 8 pixels at once, then the rest
+def test_lr_check_matches_reference_on_any_values(rng, width):
+    H = 7
+    x = np.arange(width)
+    xr = rng.integers(0, width, (H, width))
+    frac = rng.choice(np.float32([-0.5, -0.25, 0.0, 0.25, 0.5, 0.49]), (H, width))  # 0.5: the next x_r
+    dl = (x - xr + frac).astype(np.float32)  # mostly inside the image, both signs
+    pick = rng.random((H, width))
+    dl[pick < 0.05] = np.nan
+    big = (pick > 0.9) & (pick < 0.95)
+    dl[big] = rng.choice(np.float32([3e6, -3e6, 2.0**21, -(2.0**21), 1e30, -1e30, 2.0**21 - 0.5]), big.sum())
+    dr = np.full((H, width), np.nan, np.float32)
+    rows = np.repeat(np.arange(H), width).reshape(H, width)
+    dr[rows, xr] = dl + rng.choice(np.float32([0.0, 0.25, -0.5, 1.0, -1.5, 3.0]), (H, width))
+    dr[rng.random((H, width)) < 0.1] = np.nan
+    dr[~np.isfinite(dr)] = np.where(rng.random(int((~np.isfinite(dr)).sum())) < 0.5, np.nan, 2.0)
+    for tol in (0.0, 0.5, 1.0, 2.5):
+        got = cs.left_right_check(dl, dr, tol)
+        np.testing.assert_array_equal(got, ref_lr(dl, dr, tol))
+        assert np.isfinite(got).sum() > 0
+
+
 def test_median_matches_reference(rng):
     a = rng.normal(10, 3, (9, 11)).astype(np.float32)
     a[rng.random(a.shape) < 0.3] = np.nan
