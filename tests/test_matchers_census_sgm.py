@@ -80,11 +80,21 @@ def test_aggregate_custom_penalties_and_threads(rng):
 
 @pytest.mark.parametrize("uniqueness", [0.95, 0.7, 1.0])
 @pytest.mark.parametrize("subpixel", [True, False])
-@pytest.mark.parametrize("d", [7, 16, 48])  # 16 and 48: whole 16-disparity blocks past the left band
+@pytest.mark.parametrize("d", [7, 16, 20, 48])  # 16, 20 and 48: whole 16-disparity blocks and a part block
 def test_wta_matches_reference(rng, uniqueness, subpixel, d):
     S = rng.integers(0, 40, (3, d + 20, d)).astype(np.uint16)  # small costs: many ties
     got = cs.select_disparity(S, uniqueness, subpixel)
     np.testing.assert_array_equal(got, ref_wta(S, uniqueness, subpixel))
+
+
+@pytest.mark.parametrize("d", [5, 20, 32])
+def test_wta_with_the_largest_cost_matches_reference(rng, d):
+    # 65535 (NO_COST, the value of absent entries) as a real cost: the first minimum at the lowest d, and a
+    # second minimum that equals the start value of the search
+    S = np.where(rng.random((3, d + 20, d)) < 0.5, 65535, rng.integers(0, 4, (3, d + 20, d))).astype(np.uint16)
+    S[:, ::7] = 65535  # whole pixels of it
+    for uniqueness in (1.0, 0.95):
+        np.testing.assert_array_equal(cs.select_disparity(S, uniqueness, True), ref_wta(S, uniqueness, True))
 
 
 def test_wta_hand_cases():
