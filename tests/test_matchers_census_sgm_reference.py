@@ -103,6 +103,25 @@ def test_byte_path_costs_equal_reference(census_build, threads, d):
 
 
 @pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("d", [20, 128, 144])
+def test_keyed_wta_equals_reference(census_build, threads, d):
+    """D = 20 (part of a 16-disparity block), 128 (the largest with keys), 144 (no keys: plain WTA).
+
+    Flat stripes in the right image give tied costs (the lowest d wins) and rejected pixels.
+    """
+    lut = p2_table()
+    assert census_build.keyed_wta(8, lut, False, d) is (census_build.AVX2 and d <= 128)
+    assert census_build.keyed_wta(4, lut, False, d) is (census_build.AVX2 and d <= 128)  # also narrow
+    assert census_build.keyed_wta(8, lut, True, d) is False  # guided stereo: a cost volume, uint16 sums
+    assert census_build.keyed_wta(8, p2_table(gamma=40.0), False, d) is False  # uint16 sums: sums > 510
+    left, right = pair(12, 8, d + 40, 9)
+    right[:, 30:36] = 128
+    right[:, d : d + 3] = 40
+    m = build_matcher("census-sgm", {"max_disparity": d, "threads": threads, "speckle_size": 0})
+    np.testing.assert_array_equal(m.compute(left, right), ref_match(left, right, d))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
 def test_guided_equals_reference(threads):
     left, right = pair(3)
     rng = np.random.default_rng(3)

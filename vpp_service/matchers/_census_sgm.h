@@ -16,7 +16,9 @@
  * csgm_narrow: the Hamming costs computed in the passes and small penalties), else uint16; the two
  * passes' sums are added in uint16 for the WTA.  uint8 halves the bytes the passes write and the row
  * finisher reads, which bounds the two-thread speed.  Under the same bound the AVX2 build keeps the
- * path costs themselves as uint8 too (csgm_pass_row8: 8 paths, D a multiple of 16).
+ * path costs themselves as uint8 too (csgm_pass_row8: 8 paths, D a multiple of 16).  A full sum is then at
+ * most 510, so with D <= 128 the row finisher runs both winner-takes-all on 16-bit keys (sum << 7) | d, whose
+ * minimum is the disparity and its cost at once (csgm_wta_keys, csgm_right_keys).
  *
  * Each pass aggregates a row into its own scratch row (in cache whichever way x runs) and copies it to
  * its partial-sum volume only when it reaches the row first; the pass that comes second finishes the row
@@ -243,6 +245,12 @@ CSGM_INLINE int16_t csgm_hmin16(__m256i v) {
     return (int16_t)_mm_cvtsi128_si32(_mm_minpos_epu16(h));
 }
 
+/* The smallest of 16 uint16 lanes. */
+CSGM_INLINE unsigned csgm_hmin16u(__m256i v) {
+    __m128i h = _mm_min_epu16(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+    return (unsigned)(uint16_t)_mm_cvtsi128_si32(_mm_minpos_epu16(h));
+}
+
 /* csgm_step4 for D a multiple of 16 (the same integers, 16 disparities per instruction): lanes d >= n get
  * the sentinel before they are stored or enter the minimum; acc there is left undefined (never read). */
 CSGM_INLINE void csgm_step4_avx2(const uint16_t* CSGM_RESTRICT C, const int16_t* CSGM_RESTRICT p0,
@@ -329,6 +337,7 @@ typedef struct {
     const uint32_t* cr;
     int narrow; /* partial sums are uint8 (set by csgm_sgm from csgm_narrow) */
     int narrow8; /* AVX2 build, 8 paths, D % 16 == 0 and narrow: the path costs are uint8 too (csgm_pass_row8) */
+    int packed;  /* AVX2 build, narrow and D <= 128: the row finisher's WTAs run on keys (csgm_pack_px) */
     int border_margin; /* after the left-right check: border.reject_border_matches (0 = off) */
     int gap_size;      /* then holes.fill_short_gaps (0 = off) with gap_step */
     double gap_step;
@@ -360,6 +369,17 @@ static int csgm_narrow8(int paths, const int16_t* p2lut, int have_cost, int D) {
 #endif
 }
 
+/* Whether the row finisher's WTAs run on 16-bit keys (csgm_wta_keys): the AVX2 build, narrow partial sums
+ * and D <= 128. */
+static int csgm_packed(int paths, const int16_t* p2lut, int have_cost, int D) {
+#if defined(__AVX2__)
+    return D <= 128 && csgm_narrow(paths, p2lut, have_cost);
+#else
+    (void)paths, (void)p2lut, (void)have_cost, (void)D;
+    return 0;
+#endif
+}
+
 /* Per-thread scratch (bytes), see csgm_scratch_bytes. */
 typedef struct {
     int16_t* rowP; /* 3 planes x W x csgm_stride(D): path costs of the previous row */
@@ -373,8 +393,9 @@ typedef struct {
     uint16_t* sum;  /* D: a pixel's full sum (finishing a row) */
     uint16_t* crow; /* D: a pixel's Hamming costs (computed in the pass, used at once) */
     uint32_t* rev;  /* W: right census codes reversed */
-    uint16_t* rbc;  /* W: right WTA best cost (reversed x) */
+    uint16_t* rbc;  /* W + 16: right WTA best cost (reversed x), or best key (p->packed) */
     uint16_t* rbd;  /* W: right WTA best d */
+    uint16_t* keys; /* CSGM_KEYS: a pixel's keys (p->packed), see csgm_pack_px */
 } csgm_thread;
 
 static size_t csgm_align(size_t n) { return (n + 63) & ~(size_t)63; }
@@ -382,6 +403,8 @@ static size_t csgm_align(size_t n) { return (n + 63) & ~(size_t)63; }
 /* A pixel's path costs in a buffer: CSGM_OFF int16 of which the last is the sentinel left of d = 0, the D
  * costs (32-byte aligned when D is a multiple of 16), the sentinel right of d = D - 1, padding. */
 #define CSGM_OFF 16
+/* A pixel's keys: 16 entries 0xFFFF, the 128 keys of d = 0 .. 127, 16 entries 0xFFFF (csgm_pack_px). */
+#define CSGM_KEYS (16 + 128 + 16)
 static size_t csgm_stride(int D) { return ((size_t)D + CSGM_OFF + 1 + 15) & ~(size_t)15; }
 
 static size_t csgm_scratch_bytes(int W, int D) {
@@ -392,7 +415,8 @@ static size_t csgm_scratch_bytes(int W, int D) {
     b += 3 * csgm_align(s * 2);
     b += csgm_align((size_t)W * D * 2) + 2 * csgm_align(((size_t)D + 32) * 2); /* part; sum, crow (+ 32: csgm_step4_u8) */
     b += csgm_align((size_t)W * 4);
-    b += 2 * csgm_align((size_t)W * 2);
+    b += csgm_align(((size_t)W + 16) * 2) + csgm_align((size_t)W * 2);
+    b += csgm_align(CSGM_KEYS * 2);
     return b + 64;
 }
 
@@ -413,9 +437,11 @@ static void csgm_thread_init(csgm_thread* t, uint8_t* base, int W, int D) {
     CSGM_TAKE(sum, uint16_t, (size_t)D + 32)
     CSGM_TAKE(crow, uint16_t, (size_t)D + 32)
     CSGM_TAKE(rev, uint32_t, W)
-    CSGM_TAKE(rbc, uint16_t, W)
+    CSGM_TAKE(rbc, uint16_t, (size_t)W + 16)
     CSGM_TAKE(rbd, uint16_t, W)
+    CSGM_TAKE(keys, uint16_t, CSGM_KEYS)
 #undef CSGM_TAKE
+    memset(t->keys, 0xFF, CSGM_KEYS * sizeof(uint16_t)); /* keys of d >= D and the padding: never written */
     /* sentinels left of d = 0 and right of d = D - 1 (never overwritten) */
     for (size_t i = 0; i < 3 * (size_t)W; i++) {
         t->rowP[i * s + CSGM_OFF - 1] = t->rowP[i * s + CSGM_OFF + D] = CSGM_SENT;
@@ -1046,6 +1072,82 @@ static void csgm_median_row(const float* CSGM_RESTRICT pad, int W, float* CSGM_R
 #undef CSGM_CE
 #undef CSGM_SORT9
 
+#if defined(__AVX2__)
+/* ------------------------------------------------- WTA on keys (p->packed) --
+ * With narrow partial sums a pixel's full sum S[d] is at most 2 * 255 = 510, so for D <= 128 the 16-bit
+ * key (S[d] << 7) | d orders the disparities by cost, then by d: the smallest key is the lowest-cost
+ * disparity with the lowest d, as csgm_wta_pixel and csgm_right_pixel choose, and carries its cost.  Keys
+ * of absent disparities (d >= n, d >= D) are 0xFFFF, above every real key (<= 510 * 128 + 127). */
+
+/* The keys of pixel x (n valid disparities) from its two passes' uint8 partial sums ax, bx (D each) into
+ * k = t->keys + 16; k[d] for D <= d < 128 and the padding stay 0xFFFF. */
+CSGM_INLINE void csgm_pack_px(const uint8_t* CSGM_RESTRICT ax, const uint8_t* CSGM_RESTRICT bx,
+                              uint16_t* CSGM_RESTRICT k, int n, int D) {
+    const __m256i last = _mm256_set1_epi16((int16_t)(n - 1)), sixteen = _mm256_set1_epi16(16);
+    __m256i dv = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    int d = 0;
+    for (; d + 16 <= D; d += 16) {
+        const __m256i s = _mm256_add_epi16(_mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i*)(ax + d))),
+                                           _mm256_cvtepu8_epi16(_mm_loadu_si128((const __m128i*)(bx + d))));
+        const __m256i key = _mm256_or_si256(_mm256_slli_epi16(s, 7), dv);
+        _mm256_store_si256((__m256i*)(k + d), _mm256_or_si256(key, _mm256_cmpgt_epi16(dv, last)));
+        dv = _mm256_add_epi16(dv, sixteen);
+    }
+    for (; d < D; d++) k[d] = d < n ? (uint16_t)(((ax[d] + bx[d]) << 7) | d) : (uint16_t)0xFFFFu;
+}
+
+/* csgm_wta_pixel on the keys k of a pixel (n valid).  One pass keeps, per lane (d mod 16), the smallest
+ * and second-smallest key over the 8 blocks; the smallest over the lanes gives b and its cost.  The
+ * runner-up outside b - 1 .. b + 1 is each lane's smallest key, or its second where the smallest is one
+ * of those three (keys are distinct, so equality identifies it). */
+CSGM_INLINE float csgm_wta_keys(const uint16_t* CSGM_RESTRICT k, int n, int D, double uniqueness, int subpixel) {
+    const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    __m256i lo[4], hi[4];
+    for (int i = 0; i < 4; i++) {
+        const __m256i a = _mm256_load_si256((const __m256i*)(k + 32 * i));
+        const __m256i c = _mm256_load_si256((const __m256i*)(k + 32 * i + 16));
+        lo[i] = _mm256_min_epu16(a, c);
+        hi[i] = _mm256_max_epu16(a, c);
+    }
+    for (int step = 1; step < 4; step *= 2) /* pairs of (smallest, second) per lane, as a tree */
+        for (int i = 0; i + step < 4; i += 2 * step) {
+            const __m256i m = _mm256_min_epu16(lo[i], lo[i + step]);
+            hi[i] = _mm256_min_epu16(_mm256_max_epu16(lo[i], lo[i + step]), _mm256_min_epu16(hi[i], hi[i + step]));
+            lo[i] = m;
+        }
+    const unsigned best = csgm_hmin16u(lo[0]);
+    const int b = (int)(best & 127u);
+    const unsigned bv = best >> 7;
+    if (n < D && b == n - 1) return NAN;
+    if (b >= 2 || b + 2 <= n - 1) { /* some d with |d - best| > 1 */
+        const int base = (b - 1) & ~15, r = (b - 1) & 15; /* b - 1 .. b + 1: lanes r .. r + 2 (mod 16) */
+        const __m256i rv = _mm256_set1_epi16((int16_t)r);
+        const __m256i rel = _mm256_and_si256(_mm256_sub_epi16(lane, rv), _mm256_set1_epi16(15));
+        const __m256i three = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, _mm256_set1_epi16(2)), rel);
+        const __m256i w = _mm256_blendv_epi8(_mm256_loadu_si256((const __m256i*)(k + base)),
+                                             _mm256_loadu_si256((const __m256i*)(k + base + 16)),
+                                             _mm256_cmpgt_epi16(rv, lane)); /* lanes < r: the next block */
+        const __m256i use2 = _mm256_and_si256(three, _mm256_cmpeq_epi16(lo[0], w));
+        const unsigned second = csgm_hmin16u(_mm256_blendv_epi8(lo[0], hi[0], use2)) >> 7;
+        if (!((double)bv < uniqueness * (double)second)) return NAN;
+    }
+    if (subpixel && b > 0 && b < n - 1) {
+        int c0 = k[b - 1] >> 7, c2 = k[b + 1] >> 7;
+        int denom = c0 - 2 * (int)bv + c2;
+        if (denom > 0) return (float)((double)b + (double)(c0 - c2) / (2.0 * (double)denom));
+    }
+    return (float)b;
+}
+
+/* Right WTA update of one left pixel on its keys k (n valid): bk[d] (right pixel x - d, reversed) keeps the
+ * smallest key.  Whole blocks: the keys past n are 0xFFFF and bk has 16 entries of slack. */
+CSGM_INLINE void csgm_right_keys(const uint16_t* CSGM_RESTRICT k, int n, uint16_t* CSGM_RESTRICT bk) {
+    for (int d = 0; d < n; d += 16)
+        _mm256_storeu_si256((__m256i*)(bk + d), _mm256_min_epu16(_mm256_loadu_si256((const __m256i*)(bk + d)),
+                                                                 _mm256_load_si256((const __m256i*)(k + d))));
+}
+#endif
+
 /* ---------------------------------------------------------------- driver -- */
 
 /* Finish row y: S = a + b (a, b: the passes' partial sums of the row, uint8 when p->narrow); then either
@@ -1076,11 +1178,23 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CS
     float* l = dl ? dl + (ptrdiff_t)y * W : NULL;
     const int right = l && p->lr_check;
     if (right) {
-        for (int i = 0; i < W; i++) {
-            t->rbc[i] = 0xFFFFu;
-            t->rbd[i] = 0;
-        }
+        for (int i = 0; i < W + 16; i++) t->rbc[i] = 0xFFFFu;
+        for (int i = 0; i < W; i++) t->rbd[i] = 0;
     }
+#if defined(__AVX2__)
+    if (p->packed) {
+        uint16_t* CSGM_RESTRICT k = t->keys + 16;
+        for (int x = 0; x < W; x++) {
+            const int nv = x + 1 < D ? x + 1 : D;
+            csgm_pack_px(a8 + (ptrdiff_t)x * D, b8 + (ptrdiff_t)x * D, k, nv, D);
+            if (!l) continue; /* aggregation only (timing) */
+            l[x] = csgm_wta_keys(k, nv, D, p->uniqueness, p->subpixel);
+            if (right) csgm_right_keys(k, nv, t->rbc + (W - 1 - x));
+        }
+        if (right)
+            for (int i = 0; i < W; i++) t->rbd[i] = (uint16_t)(t->rbc[i] & 127u);
+    } else
+#endif
     for (int x = 0; x < W; x++) {
         const int nv = x + 1 < D ? x + 1 : D;
         if (narrow) {
@@ -1198,6 +1312,7 @@ static void csgm_sgm(const csgm_params* p0, const uint16_t* cost, const uint8_t*
     csgm_params q = *p0;
     q.narrow = csgm_narrow(q.paths, q.p2lut, cost != NULL);
     q.narrow8 = csgm_narrow8(q.paths, q.p2lut, cost != NULL, q.D);
+    q.packed = csgm_packed(q.paths, q.p2lut, cost != NULL, q.D);
     const csgm_params* p = &q;
     const int H = p->H, W = p->W;
     const size_t sb = csgm_scratch_bytes(W, p->D);

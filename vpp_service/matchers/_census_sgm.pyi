@@ -20,6 +20,9 @@ def narrow_sums(paths: int, p2lut: npt.NDArray[np.int16], volume: bool) -> bool:
 def byte_path_costs(paths: int, p2lut: npt.NDArray[np.int16], volume: bool, D: int) -> bool:
     """Whether the SGM passes keep their path costs as uint8 too (AVX2 build, 8 paths, D % 16 == 0)."""
 
+def keyed_wta(paths: int, p2lut: npt.NDArray[np.int16], volume: bool, D: int) -> bool:
+    """Whether the SGM stage's winner-takes-all runs on 16-bit keys (AVX2 build, narrow sums, D <= 128)."""
+
 def cost_work_bytes(W: int, nthreads: int) -> int:
     """Bytes of census / Hamming scratch for ``nthreads`` threads at width ``W``."""
 

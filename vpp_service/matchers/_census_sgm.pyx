@@ -45,12 +45,14 @@ cdef extern from "_census_sgm.h" nogil:
         const uint32_t* cr
         int narrow
         int narrow8
+        int packed
         int border_margin
         int gap_size
         double gap_step
     int csgm_build_avx2()
     int csgm_narrow(int paths, const int16_t* p2lut, int have_cost)
     int csgm_narrow8(int paths, const int16_t* p2lut, int have_cost, int D)
+    int csgm_packed(int paths, const int16_t* p2lut, int have_cost, int D)
     size_t csgm_scratch_bytes(int W, int D)
     size_t csgm_cost_work_bytes(int W)
     void csgm_pad_rows(const uint8_t* img, int H, int W, uint8_t* pad, int y0, int y1)
@@ -101,6 +103,15 @@ def byte_path_costs(int paths, const int16_t[::1] p2lut, bint volume, int D):
     as the int16 path costs either way.
     """
     return bool(csgm_narrow8(paths, &p2lut[0], 1 if volume else 0, D))
+
+
+def keyed_wta(int paths, const int16_t[::1] p2lut, bint volume, int D):
+    """Whether the SGM stage's winner-takes-all (both views) runs on 16-bit keys ``(cost << 7) | d``.
+
+    True in the AVX2 build with :func:`narrow_sums` (a pixel's full sum is then at most 510) and
+    ``D <= 128``; the same disparities as the plain winner-takes-all either way.
+    """
+    return bool(csgm_packed(paths, &p2lut[0], 1 if volume else 0, D))
 
 
 def cost_work_bytes(int W, int nthreads):
@@ -173,6 +184,7 @@ cdef csgm_params make_params(int H, int W, int D, int paths, int P1, const int16
     p.cr = NULL
     p.narrow = 0  # csgm_sgm decides
     p.narrow8 = 0
+    p.packed = 0
     p.border_margin = 0
     p.gap_size = 0
     p.gap_step = 0.0

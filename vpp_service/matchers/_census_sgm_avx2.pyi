@@ -7,6 +7,7 @@ from vpp_service.matchers._census_sgm import census5x5 as census5x5
 from vpp_service.matchers._census_sgm import cost_stage as cost_stage
 from vpp_service.matchers._census_sgm import cost_work_bytes as cost_work_bytes
 from vpp_service.matchers._census_sgm import hamming_volume as hamming_volume
+from vpp_service.matchers._census_sgm import keyed_wta as keyed_wta
 from vpp_service.matchers._census_sgm import left_right_check as left_right_check
 from vpp_service.matchers._census_sgm import median3x3 as median3x3
 from vpp_service.matchers._census_sgm import narrow_sums as narrow_sums
