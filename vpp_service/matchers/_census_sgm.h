@@ -1151,8 +1151,8 @@ CSGM_INLINE void csgm_right_keys(const uint16_t* CSGM_RESTRICT k, int n, uint16_
 /* ---------------------------------------------------------------- driver -- */
 
 /* Finish row y: S = a + b (a, b: the passes' partial sums of the row, uint8 when p->narrow); then either
- * copy S to sout (invalid entries CSGM_NOCOST) or run the left and right WTA and the left-right check into
- * dl, dr, lr. */
+ * copy S to sout (invalid entries CSGM_NOCOST) or run the left and right WTA (on keys when p->packed) and
+ * the left-right check into dl, dr, lr. */
 static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CSGM_RESTRICT a,
                             const void* CSGM_RESTRICT b, int y, uint16_t* sout, float* dl, float* dr,
                             float* lr) {
