@@ -21,8 +21,9 @@ stereo needs the volume); the 8-path aggregation from a stored volume and
 with the costs computed in the passes; the SGM stage with the left
 winner-takes-all, then also the right one and the left-right check, then
 also the median (the steps' times are the per-round differences: the stage
-finishes each row while it is in cache); and the WTA, left-right check and
-median kernels alone on stored volumes / maps.
+finishes each row while it is in cache; with uint8 partial sums and D <= 128,
+the AVX2 build's stage runs both WTAs on 16-bit keys); and the plain WTA,
+left-right check and median kernels alone on stored volumes / maps.
 
 Prints tables and writes JSON (default ``out/benchmarks/bench_matchers.json``;
 ``--update-committed`` writes ``benchmarks/results/bench_matchers.json``).
@@ -233,7 +234,11 @@ def stage_rows(reps: int) -> list[Row]:
         "median": lambda: k.median3x3(lr, out, 1),
     }
     ts = interleaved_ms(stages, reps)
-    print(f"\ncensus-sgm stages, KITTI {W}x{H}, D = {D}, 1 thread, {'AVX2' if k.AVX2 else 'portable'} build")
+    keyed = k.keyed_wta(8, lut, False, D)  # the stage's WTAs on 16-bit keys; the "(volume)" rows: plain kernels
+    print(
+        f"\ncensus-sgm stages, KITTI {W}x{H}, D = {D}, 1 thread, {'AVX2' if k.AVX2 else 'portable'} build, "
+        f"WTA in the SGM stage on {'keys' if keyed else 'costs'}"
+    )
     rows: list[Row] = []
     for stage, v in ts.items():
         st = spread(v)
@@ -248,6 +253,7 @@ def stage_rows(reps: int) -> list[Row]:
                 "stage": stage,
                 "threads": 1,
                 "avx2": bool(k.AVX2),
+                "keyed_wta": keyed,
                 **st,
             }
         )
