@@ -1179,7 +1179,8 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CS
     const int right = l && p->lr_check;
     if (right) {
         for (int i = 0; i < W + 16; i++) t->rbc[i] = 0xFFFFu;
-        for (int i = 0; i < W; i++) t->rbd[i] = 0;
+        if (!p->packed)
+            for (int i = 0; i < W; i++) t->rbd[i] = 0;
     }
 #if defined(__AVX2__)
     if (p->packed) {
@@ -1191,8 +1192,6 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CS
             l[x] = csgm_wta_keys(k, nv, D, p->uniqueness, p->subpixel);
             if (right) csgm_right_keys(k, nv, t->rbc + (W - 1 - x));
         }
-        if (right)
-            for (int i = 0; i < W; i++) t->rbd[i] = (uint16_t)(t->rbc[i] & 127u);
     } else
 #endif
     for (int x = 0; x < W; x++) {
@@ -1215,7 +1214,9 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CS
         if (lr != l) memcpy(lr + (ptrdiff_t)y * W, l, (size_t)W * sizeof(float));
     } else {
         float* r = dr + (ptrdiff_t)y * W;
-        for (int xr = 0; xr < W; xr++) r[xr] = (float)t->rbd[W - 1 - xr];
+        const uint16_t* best = p->packed ? t->rbc : t->rbd; /* keys: the disparity is the low 7 bits */
+        const unsigned mask = p->packed ? 127u : 0xFFFFu;
+        for (int xr = 0; xr < W; xr++) r[xr] = (float)(best[W - 1 - xr] & mask);
         csgm_lr_row(l, r, lr + (ptrdiff_t)y * W, W, p->tolerance);
     }
     csgm_post_row(p, lr + (ptrdiff_t)y * W);
