@@ -9,14 +9,13 @@ import cv2
 import numpy as np
 import pytest
 
+from helpers.shared_data import need_shared
 from vpp_service.datasets import AUTO_ORDER, DATASETS, Dataset, open_dataset, read_pfm, write_pfm
 from vpp_service.datasets.base import reader_class
 from vpp_service.datasets.calibfile import parse_kitti_calib, parse_middlebury_calib
 from vpp_service.datasets.nocc import lr_consistency_mask
 from vpp_service.datasets.velodyne import project_points, read_velodyne_bin, velo_to_camera
 from vpp_service.frame import StereoFrame
-
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 # folder, expected reader, scene count, (H, W) of the first scene, gray?
 REAL = [
@@ -29,10 +28,7 @@ REAL = [
 
 
 def need(folder: str) -> Path:
-    root = DATA / folder
-    if not root.is_dir():
-        pytest.skip(f"{root} not available")
-    return root
+    return need_shared(folder)
 
 
 def warp_error(frame: StereoFrame, gt: np.ndarray) -> float:

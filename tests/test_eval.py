@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
+from helpers.shared_data import need_shared
 from vpp_service.cli import main
 from vpp_service.datasets import open_dataset
 from vpp_service.evaluation import (
@@ -26,14 +27,9 @@ from vpp_service.matchers import build_matcher, fill_holes
 from vpp_service.sources.sensors import build_sensor
 from vpp_service.sources.synthetic import make_scene
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-MIDD06 = DATA / "middlebury2005_2006_thirdsize"
-
 
 def need_midd06() -> Path:
-    if not MIDD06.is_dir():
-        pytest.skip(f"{MIDD06} not available")
-    return MIDD06
+    return need_shared("middlebury2005_2006_thirdsize")
 
 
 @pytest.fixture(scope="module")

@@ -8,22 +8,17 @@ truth; if a change to VPP, the matcher or the harness makes VPP quietly worse,
 this fails. Takes ~30-60 s on 2 cores.
 """
 
-from pathlib import Path
-
 import pytest
 
+from helpers.shared_data import need_shared
 from vpp_service.datasets import open_dataset
 from vpp_service.evaluation.report import summarize
 from vpp_service.evaluation.runner import run_evaluation
 
-ROOT = Path(__file__).resolve().parents[2] / "shared" / "data" / "middlebury2005_2006_thirdsize"
-
 
 @pytest.mark.slow
 def test_vpp_beats_baseline_and_guided_on_middlebury2006():
-    if not ROOT.is_dir():
-        pytest.skip(f"shared data not found at {ROOT}")
-    dataset = open_dataset("auto", ROOT)
+    dataset = open_dataset("auto", need_shared("middlebury2005_2006_thirdsize"))
     assert len(dataset) == 26
     rows = run_evaluation(dataset, "census-sgm", ("baseline", "guided", "vpp"), 0.05, seed=0)
     assert len(rows) == 3 * 26

@@ -7,6 +7,7 @@ import time
 import numpy as np
 import pytest
 
+from helpers.shared_data import need_shared
 from vpp_service.settings import SettingsError
 from vpp_service.sources.base import Pacer, SourceContext, build_source
 from vpp_service.sources.sim import MOTORCYCLE_CALIB, motorcycle_frame, scale_frame
@@ -170,13 +171,8 @@ def test_files_errors(tmp_path):
         build_source("files", {"root": str(tmp_path), "format": "msgpack"}).open()
 
 
-SHARED = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / "data"
-
-
 def test_files_dataset_reader():
-    root = SHARED / "middlebury2003_quartersize"
-    if not root.is_dir():
-        pytest.skip("shared data not available")
+    root = need_shared("middlebury2003_quartersize")
     frames, _ = drain(build_source("files", {"root": str(root), "count": 2, "scale": 0.5}))
     assert len(frames) == 2
     for f in frames:

@@ -1,0 +1,42 @@
+"""The external evaluation data the tests read in place: ``<repo>/../shared/data`` (not part of the repository).
+
+The folder holds real benchmark scenes (Middlebury 2001-2006, KITTI 2012 frame 000070, ETH3D
+playground_1l; see its README.md). A fresh clone does not have it: every test that reads it asks
+:func:`need_shared` for its folder, which **skips** the test with a reason naming the missing path.
+CI sets ``VPP_REQUIRE_SHARED_DATA=1`` (``.ci/run``): there a missing folder **fails** the test
+instead, so coverage of the real scenes cannot vanish silently.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+#: The repository root (this file is ``tests/helpers/shared_data.py``).
+REPO_ROOT = Path(__file__).resolve().parents[2]
+#: The shared evaluation data: beside the repository root.
+SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
+#: Set (to 1) where the shared data must be present: a missing folder fails instead of skipping.
+REQUIRE_ENV = "VPP_REQUIRE_SHARED_DATA"
+
+
+def need_shared(relative: str) -> Path:
+    """The path ``SHARED_DATA / relative``; skip (or fail under ``$VPP_REQUIRE_SHARED_DATA``) when absent.
+
+    Parameters
+    ----------
+    relative : str
+        A folder or file inside the shared data, e.g. ``"kitti2012_training/000070"``.
+    """
+    path = SHARED_DATA / relative
+    if path.exists():
+        return path
+    reason = (
+        f"shared evaluation data missing: {path} (the real benchmark scenes this test reads are expected in "
+        f"<repo>/../shared/data; see README.md, 'Test data')"
+    )
+    if os.environ.get(REQUIRE_ENV, "") not in ("", "0"):
+        pytest.fail(f"{reason}; ${REQUIRE_ENV} is set, so it must be there", pytrace=False)
+    pytest.skip(reason)
