@@ -218,3 +218,57 @@ def test_max_message_mb_is_validated():
 
     with pytest.raises(ValueError, match="max_message_mb"):
         ZenohSection(max_message_mb=0)
+
+
+@pytest.fixture
+def recorded_frames(tmp_path):
+    """Nine valid wire-format frames in a folder (a recording to replay)."""
+    from vpp_service.sources.base import SourceContext, build_source
+    from vpp_service.transport import wire
+
+    folder = tmp_path / "rec"
+    folder.mkdir()
+    scene = {"height": 120, "width": 240, "max_disparity": 32}
+    src = build_source("sim", {"scene": "synthetic", "scene_options": scene, "rate_hz": 0}, SourceContext())
+    src.open()
+    for i in range(9):
+        (folder / f"{i:03d}.msgpack").write_bytes(wire.encode_frame(src.frame(i)))
+    return folder
+
+
+def replay_config(tmp_path, folder, queues: dict | None = None) -> dict:
+    data = small_config(tmp_path)
+    data["source"] = {"type": "files", "root": str(folder), "format": "msgpack"}  # rate_hz 0: as fast as it reads
+    data["matcher"] = {"name": "census-sgm", "max_disparity": 32}
+    data["sinks"] = [{"type": "rerun", "mode": "save", "path": str(tmp_path / "x.rrd"), "queue_size": 1}]
+    if queues is not None:
+        data["queues"] = queues
+    return data
+
+
+def test_a_finite_source_loses_no_frame_by_default(tmp_path, recorded_frames):
+    cfg = validate_config(replay_config(tmp_path, recorded_frames))
+    assert (cfg.queues.input_policy, cfg.queues.output_policy) == ("block", "block")
+    summary = run_service(cfg, stream=None)
+    c = summary["counters"]
+    assert c["processed"] == 9 and c["dropped"] == 0 and c["rejected"] == 0, summary["dropped"]
+    (rerun,) = summary["sinks"].values()
+    assert rerun["written"] == 9 and rerun["dropped"] == 0, summary["sinks"]
+
+
+def test_a_replay_asked_to_drop_counts_every_drop_by_cause(tmp_path, recorded_frames):
+    cfg = validate_config(replay_config(tmp_path, recorded_frames, {"input_policy": "latest", "input_size": 1}))
+    assert (cfg.queues.input_policy, cfg.queues.output_policy) == ("latest", "block")  # only what was asked
+    summary = run_service(cfg, stream=None)
+    c, d = summary["counters"], summary["dropped"]
+    assert c["processed"] + d["input_queue"] == 9 and c["dropped"] == sum(d.values()) == d["input_queue"]
+
+
+def test_closing_line_says_what_was_dropped_by_cause(tmp_path):
+    from vpp_service.cli.run import closing_line
+
+    cfg = validate_config(small_config(tmp_path))
+    line = closing_line(cfg, {"processed": 1, "dropped": 0})
+    assert "after 1 frame;" in line and "dropped" not in line
+    line = closing_line(cfg, {"processed": 3, "dropped": 6}, {"input_queue": 6, "shutdown": 0})
+    assert "after 3 frames; dropped 6 frames (input_queue 6);" in line

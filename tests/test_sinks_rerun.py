@@ -239,14 +239,30 @@ def test_save_variants(tmp_path, opts, painted, calib, raw, has_camera):
     assert (f"/{RIG}/camera/depth" in data) == has_camera
 
 
-def test_throttle_drops_are_counted(tmp_path):
-    sink = save_sink(tmp_path, max_hz=0.001)  # one frame per 1000 s: only the first passes
+def test_throttled_frames_are_counted_apart_from_losses(tmp_path):
+    sink = save_sink(tmp_path, max_hz=0.001)  # one frame per 1000 s: only the bucket's two frames pass
     for i in range(5):
         sink.write(make_result(i))
     sink.close(timeout=10)
     st = sink.stats()
-    assert st["written"] == 1 and st["throttled"] == 4 and st["dropped"] == 4 and st["queue_dropped"] == 0
-    assert read_rrd(tmp_path / "out.rrd")[f"/{RIG}/left"]["seq"] == [0]
+    assert st["written"] == 2 and st["throttled"] == 3 and st["dropped"] == 0 and st["queue_dropped"] == 0
+    assert read_rrd(tmp_path / "out.rrd")[f"/{RIG}/left"]["seq"] == [0, 1]
+
+
+@pytest.mark.parametrize(("mode", "expected"), [("save", 0.0), ("connect", 15.0), ("serve", 15.0)])
+def test_default_throttle_logs_every_saved_frame_and_caps_viewers(mode, expected):
+    sink = build_sink("rerun", {"mode": mode}, SinkContext(rig=RIG))
+    assert sink.max_hz == expected
+
+
+def test_a_10hz_camera_with_jitter_is_not_throttled(tmp_path):
+    sink = save_sink(tmp_path, max_hz=10.0)
+    rng = np.random.default_rng(0)
+    for i in range(12):  # 10 Hz on average, each interval 100 ms +- 20 ms
+        sink.write(make_result(i))
+        time.sleep(0.1 + rng.uniform(-0.02, 0.02))
+    sink.close(timeout=10)
+    assert sink.stats()["throttled"] == 0 and sink.stats()["written"] == 12
 
 
 def test_queue_drop_oldest_is_counted(tmp_path):
@@ -280,11 +296,11 @@ def test_connect_to_dead_viewer_closes_within_bound():
 
 def test_throttled_frames_are_said(tmp_path, caplog):
     sink = save_sink(tmp_path, max_hz=0.001)
-    with caplog.at_level(logging.WARNING, logger="vpp_service.sinks.rerun"):
-        for i in range(3):
+    with caplog.at_level(logging.INFO, logger="vpp_service.sinks.rerun"):
+        for i in range(4):
             sink.write(make_result(i))
     sink.close(timeout=10)
-    said = [r.getMessage() for r in caplog.records if "max_hz" in r.getMessage()]
+    said = [r.getMessage() for r in caplog.records if "(max_hz)" in r.getMessage()]
     assert len(said) == 1 and "throttled" in said[0] and sink.stats()["throttled"] == 2
 
 

@@ -240,6 +240,22 @@ class QueueWorker(Generic[T]):
         """Queue ``item`` under the policy; False when refused (closed, or ``block`` timed out)."""
         return self.queue.put(item, timeout)
 
+    def set_policy(self, policy: Policy) -> None:
+        """Change the full-queue policy before :meth:`start` (a sink takes the pipeline's output policy at open).
+
+        Raises
+        ------
+        ValueError
+            Unknown policy.
+        RuntimeError
+            When already started.
+        """
+        if policy not in POLICIES:
+            raise ValueError(f"policy must be one of {', '.join(POLICIES)}, got {policy!r}")
+        if self._thread is not None:
+            raise RuntimeError(f"{self.name}: the policy is set before start")
+        self.queue.policy = policy
+
     def start(self) -> None:
         """Start the worker thread.
 

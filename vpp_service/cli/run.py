@@ -19,6 +19,7 @@ import json
 import signal
 import sys
 import threading
+from collections.abc import Mapping
 from types import FrameType
 from typing import TYPE_CHECKING, Any
 
@@ -235,7 +236,7 @@ def main(args: argparse.Namespace) -> int:
     finally:
         for s, h in old.items():
             signal.signal(s, h)
-    print(closing_line(cfg, status["counters"]), file=sys.stderr)
+    print(closing_line(cfg, status["counters"], status["dropped"]), file=sys.stderr)
     print(
         json.dumps(
             {"counters": status["counters"], "out": cfg.service.out, "shutdown_s": round(status["shutdown_s"], 3)}
@@ -275,11 +276,22 @@ def startup_line(cfg: ServiceConfig) -> str:
     )
 
 
-def closing_line(cfg: ServiceConfig, counters: dict[str, int]) -> str:
-    """The line ``run`` prints when it stops: frames processed, where the summary and the files went."""
+def plural(n: int, noun: str) -> str:
+    """``"1 frame"``, ``"3 frames"``."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
+def closing_line(cfg: ServiceConfig, counters: dict[str, int], dropped: Mapping[str, int] | None = None) -> str:
+    """The line ``run`` prints when it stops: frames processed, any frames lost (by cause), where the files went."""
     from pathlib import Path
 
     files = [str(Path(cfg.service.out) / "summary.json")]
     files += [str(sp.raw["path"]) for sp in cfg.sinks if sp.name == "rerun" and sp.raw.get("mode", "save") == "save"]
     files += [str(sp.raw["dir"]) for sp in cfg.sinks if "dir" in sp.raw]
-    return f"vpp-service run: stopped after {counters.get('processed', 0)} frames; wrote {', '.join(files)}"
+    lost = ""
+    if counters.get("dropped", 0):
+        causes = ", ".join(f"{k} {v}" for k, v in sorted((dropped or {}).items()) if v)
+        lost = f"; dropped {plural(counters['dropped'], 'frame')}" + (f" ({causes})" if causes else "")
+    rejected = f"; rejected {counters['rejected']}" if counters.get("rejected", 0) else ""
+    processed = plural(counters.get("processed", 0), "frame")
+    return f"vpp-service run: stopped after {processed}{lost}{rejected}; wrote {', '.join(files)}"

@@ -196,6 +196,10 @@ class QueuesSection:
         ``latest`` drops the oldest item when full (live camera: freshest
         frame wins; drops counted); ``block`` makes the producer wait (lossless
         replay; the source slows down instead). See :mod:`vpp_service.queueing`.
+        When the config leaves one out, :func:`validate_config` picks it from the
+        source: ``block`` for a finite source (``files``, ``rosbag2``: a replay
+        loses no frame unless asked), ``latest`` for a live one. The output
+        policy also reaches the sinks that buffer (Zenoh, ROS 2, Rerun).
     """
 
     input_size: int = 2
@@ -272,7 +276,7 @@ DEFAULT_CONFIG: dict[str, Any] = {
     },
     "vpp": {"enabled": True},
     "matcher": {"name": "sgbm", "max_disparity": "auto"},
-    # no [queues]: the section's defaults (latest), which `run --source zenoh` turns into a lossless block
+    # no [queues]: the source's defaults (latest for the simulated live camera), `run --source zenoh` picks block
     "sinks": [
         {"type": "zenoh", "outputs": ["disparity", "depth"]},
         {"type": "rerun", "mode": "save", "path": "{out}/vpp.rrd"},
@@ -381,7 +385,11 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
     matcher = _plugin(data.get("matcher", {"name": "sgbm"}), "matcher", "name", MATCHERS, parse_matcher)
     vpp_raw = dict(_table(data, "vpp"))
     vpp = _parse_vpp(vpp_raw)
-    queues = from_mapping(QueuesSection, _table(data, "queues"), "queues")
+    queues_raw = dict(_table(data, "queues"))
+    replay: Policy = "block" if SOURCES.get(source.name).finite else "latest"
+    for key in ("input_policy", "output_policy"):
+        queues_raw.setdefault(key, replay)  # a replay loses nothing unless the config asks for "latest"
+    queues = from_mapping(QueuesSection, queues_raw, "queues")
     sinks_raw = data.get("sinks", [])
     if not isinstance(sinks_raw, list):
         raise SettingsError(f"sinks: must be an array of tables ([[sinks]]), got {type(sinks_raw).__name__}")

@@ -218,6 +218,8 @@ class Pipeline:
         source.input_policy = input_policy  # "block": the source back-pressures its producer too
         self.process = process
         self.sinks = list(sinks)
+        for sink in self.sinks:
+            sink.queue_policy = output_policy  # "block": a buffering sink waits for room too (end to end)
         # the process stage finishes the sink stage when it ends; the sink stage then sets `done`
         self.output: QueueWorker[FusionResult] = QueueWorker(
             self._publish, size=output_size, policy=output_policy, name="pipeline-sinks", on_exit=self._sinks_done
@@ -588,9 +590,11 @@ class Pipeline:
             # two numbers, never mixed: accuracy of the values given, and how many pixels got one
             bad2 = m["bad2_answered_mean"]
             bad_s = (" | bad-2 -" if bad2 is None else f" | bad-2 {bad2:.2f} %") + f" density {m['density_mean']:.1f} %"
+        throttled = sum(n for s in st["sinks"].values() if isinstance(n := s.get("throttled"), int))
+        thr_s = f" throttled {throttled}" if throttled else ""  # skipped on purpose (a viewer's max_hz), not lost
         return (
             f"{st['fps']:.1f} fps | {lat_s}{bad_s} | recv {c['received']} proc {c['processed']} "
-            f"pub {c['published']} drop {c['dropped']} rej {c['rejected']} no-depth {c['no_depth']}"
+            f"pub {c['published']} drop {c['dropped']} rej {c['rejected']} no-depth {c['no_depth']}{thr_s}"
         )
 
 

@@ -12,6 +12,9 @@ produces. The pipeline calls, in order:
 3. ``sink.write(result)`` from the pipeline's sink thread, once per frame. It
    must not block for long: a slow consumer (a Rerun viewer, the network) is
    decoupled inside the sink (own thread + bounded queue) and drops are counted.
+   ``sink.queue_policy`` is the pipeline's output policy, set before ``open``:
+   under ``block`` (a replay) a sink that buffers makes ``write`` wait for room
+   rather than drop.
 4. ``sink.close(timeout)`` -- flush and release within ``timeout`` seconds,
    even when a peer or viewer is gone.
 
@@ -27,6 +30,7 @@ from typing import Any
 
 from vpp_service.frame import FusionResult
 from vpp_service.plugin import Plugin, PluginContext, parse_plugin_options
+from vpp_service.queueing import Policy
 from vpp_service.registry import Registry
 
 #: Registered sink classes by name ("zenoh", "rerun", "files").
@@ -49,6 +53,11 @@ class Sink(Plugin):
     """
 
     counter_names = ("written", "dropped", "errors")
+
+    def __init__(self, options: Any, context: SinkContext) -> None:
+        super().__init__(options, context)
+        #: The pipeline's output policy (set before :meth:`open`): ``block`` asks a buffering sink to wait, not drop.
+        self.queue_policy: Policy = "latest"
 
     @classmethod
     def needs_depth(cls, options: Any) -> bool:

@@ -34,11 +34,12 @@ blueprint and static data re-sent) as soon as it is back.
 
 Threading and back-pressure
 ---------------------------
-:meth:`RerunSink.write` never blocks: it applies the ``max_hz`` throttle and
-hands the result to a :class:`~vpp_service.queueing.QueueWorker` (``queue_size``,
-drop-oldest) whose thread converts and logs. Throttled frames are counted
-(``throttled``) and said once in the log; ``queue_dropped``, ``undelivered`` and
-``throttled`` add up to ``dropped``. The sink uses its own
+:meth:`RerunSink.write` applies the ``max_hz`` throttle and hands the result
+to a :class:`~vpp_service.queueing.QueueWorker` (``queue_size``; drop-oldest,
+or waiting for room under the pipeline's ``block`` output policy, a replay)
+whose thread converts and logs. Throttled frames are counted (``throttled``:
+skipped on purpose, not a loss) and said once in the log; ``queue_dropped`` and
+``undelivered`` add up to ``dropped``. The sink uses its own
 :class:`rerun.RecordingStream` (never the global one), with per-rig ids
 (application ``vpp-service-<rig>``, recording ``<rig>-<uuid>``) so that several
 rigs coexist in one viewer, and sets the time per frame on the ``seq``
@@ -94,6 +95,10 @@ _URL_RE = re.compile(r"^rerun(\+https?)?://[^/\s]+/proxy$")
 _DEFAULT_URL = "rerun+http://127.0.0.1:9876/proxy"
 #: Seconds between two checks of an unreachable viewer's port.
 PROBE_INTERVAL_S = 0.5
+#: ``max_hz`` when the option is None and the sink streams to a viewer (a 10 Hz camera is never throttled).
+VIEWER_MAX_HZ = 15.0
+#: Frames the throttle's token bucket holds: a burst this long passes (a camera's jitter is not throttled).
+THROTTLE_BURST = 2.0
 #: Longest wait for one frame to reach the viewer before it counts as undelivered.
 FLUSH_TIMEOUT_S = 2.0
 
@@ -136,8 +141,12 @@ class RerunSinkOptions:
     bind : str
         ``serve`` only: address the gRPC server and the web viewer listen on;
         default ``127.0.0.1`` (this machine only); ``0.0.0.0`` = every interface.
-    max_hz : float
-        At most this many frames per second are logged (wall clock); 0 = all.
+    max_hz : float or None
+        At most this many frames per second on average are logged (a token bucket
+        holding two frames absorbs a camera's jitter); 0 = every frame. None (the
+        default): every frame when saving to a file, at most 15/s to a viewer
+        (``spawn``, ``connect``, ``serve``). Frames over the cap are counted as
+        ``throttled``, apart from losses.
     memory_limit : str
         Memory bound of the spawned viewer / the gRPC server buffer, e.g.
         ``"512MB"``, ``"2GiB"``, ``"25%"``.
@@ -185,7 +194,7 @@ class RerunSinkOptions:
     grpc_port: int = 9876
     web_port: int = 0
     bind: str = "127.0.0.1"
-    max_hz: float = 10.0
+    max_hz: float | None = None
     memory_limit: str = "512MB"
     queue_size: int = 2
     log_painted: bool = True
@@ -210,7 +219,7 @@ class RerunSinkOptions:
         if self.max_files < 1:
             raise ValueError(f"max_files: must be >= 1, got {self.max_files}")
         self._check_network()
-        if not math.isfinite(self.max_hz) or self.max_hz < 0:
+        if self.max_hz is not None and (not math.isfinite(self.max_hz) or self.max_hz < 0):
             raise ValueError(f"max_hz: must be a finite number >= 0 (0 = every frame), got {self.max_hz}")
         if not _MEMORY_RE.match(self.memory_limit):
             raise ValueError(f"memory_limit: must look like '512MB', '2GiB' or '25%', got {self.memory_limit!r}")
@@ -327,7 +336,8 @@ class RerunSink(Sink):
         )
         self.application_id = o.application_id or f"vpp-service-{context.rig}"
         self._rec: rr.RecordingStream | None = None
-        self._last_accept = -math.inf
+        self._last_accept = time.monotonic()
+        self._tokens = THROTTLE_BURST  # the throttle's token bucket (frames that may be logged now)
         self._ready = threading.Event()
         self._close_deadline = math.inf
         self._url: str | None = None  # the viewer / server the network modes stream to
@@ -391,6 +401,7 @@ class RerunSink(Sink):
             rec.save(str(path), default_blueprint=self._first_blueprint())
             self.layout.log_static(rec, self.context.rig)
             self._ready.set()
+        self._worker.set_policy(self.queue_policy)  # block under a replay: wait for room, lose nothing
         self._worker.start()
 
     def _attach(self) -> None:
@@ -483,20 +494,32 @@ class RerunSink(Sink):
         self._check_open()
         self._ordered.write(result)
 
+    @property
+    def max_hz(self) -> float:
+        """The effective ``max_hz``: the option, else 0 (every frame) for ``save`` and 15 for a viewer."""
+        o = self.options
+        if o.max_hz is not None:
+            return o.max_hz
+        return 0.0 if o.mode == "save" else VIEWER_MAX_HZ
+
     def _accept(self, result: FusionResult) -> None:
-        """Throttle (``max_hz``) and queue one result, in order when reordering is on."""
-        now = time.monotonic()
-        if self.options.max_hz > 0 and now - self._last_accept < 1.0 / self.options.max_hz:
-            self._counters["throttled"] += 1
-            if not self._said_throttle:
-                self._said_throttle = True
-                log.warning(
-                    "rerun sink: logging at most %g frames/s (max_hz); the others are skipped and counted "
-                    "as 'throttled' (max_hz = 0 logs every frame)",
-                    self.options.max_hz,
-                )
-            return
-        self._last_accept = now
+        """Throttle (``max_hz``, a two-frame token bucket) and queue one result, in order when reordering is on."""
+        hz = self.max_hz
+        if hz > 0:
+            now = time.monotonic()
+            self._tokens = min(THROTTLE_BURST, self._tokens + (now - self._last_accept) * hz)
+            self._last_accept = now
+            if self._tokens < 1.0:
+                self._counters["throttled"] += 1
+                if not self._said_throttle:
+                    self._said_throttle = True
+                    log.info(
+                        "rerun sink: logging at most %g frames/s (max_hz); the others are skipped and counted "
+                        "as 'throttled', not lost (max_hz = 0 logs every frame)",
+                        hz,
+                    )
+                return
+            self._tokens -= 1.0
         self._worker.put(result)
 
     def submit(self, parts: RerunParts) -> None:
@@ -542,7 +565,7 @@ class RerunSink(Sink):
                 self._server.stderr.close()
             self._server = None
         st = self.stats()
-        if st["dropped"]:
+        if st["dropped"] or st["throttled"]:
             log.info(
                 "rerun sink: logged %d frames; not logged: %d over max_hz, %d queue overflow, %d undelivered",
                 st["written"],
@@ -552,14 +575,17 @@ class RerunSink(Sink):
             )
 
     def stats(self) -> dict[str, int]:
-        """Counters: ``written``, ``errors``, ``throttled``, ``queue_dropped``, ``undelivered``, ``dropped`` (sum).
+        """Counters: ``written``, ``errors``, ``throttled``, ``queue_dropped``, ``undelivered``, ``dropped``.
+
+        ``dropped`` (a loss) is ``queue_dropped + undelivered``; ``throttled`` frames (over ``max_hz``)
+        were skipped on purpose and are not in it.
 
         Also ``reconnects`` (network modes) and ``rotations`` (``save`` with ``max_mb``).
         """
         out = dict(self._counters)
         out.update(self._ordered.stats())
         out["queue_dropped"] = self._worker.dropped + self._worker.discarded
-        out["dropped"] = out["throttled"] + out["queue_dropped"] + out["undelivered"]
+        out["dropped"] = out["queue_dropped"] + out["undelivered"]  # throttled frames were skipped on purpose
         return out
 
     # -- logging thread -------------------------------------------------------------

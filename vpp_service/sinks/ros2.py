@@ -233,6 +233,7 @@ class Ros2Sink(Sink):
         for name in o.outputs:
             visual = name in ("left_vpp", "right_vpp")
             self._pubs[name] = self._node.publisher(o.topic(name), OUTPUTS[name][1], block=not visual)
+        self._worker.set_policy(self.queue_policy)  # block under a replay: wait for room, lose nothing
         self._worker.start()
 
     def write(self, result: FusionResult) -> None:

@@ -151,6 +151,7 @@ class ZenohSink(Sink):
                 congestion_control=zenoh.CongestionControl.DROP if visual else product,
                 priority=zenoh.Priority.DATA_LOW if visual else zenoh.Priority.DATA,
             )
+        self._worker.set_policy(self.queue_policy)  # block under a replay: wait for room, lose nothing
         self._worker.start()
 
     def write(self, result: FusionResult) -> None:

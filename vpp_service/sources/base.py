@@ -29,7 +29,7 @@ import logging
 import threading
 from abc import abstractmethod
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 from vpp_service.frame import StereoFrame
 from vpp_service.plugin import Plugin, PluginContext, parse_plugin_options
@@ -63,6 +63,10 @@ class Source(Plugin):
     """
 
     counter_names = ("emitted", "rejected")
+    #: True for a source that replays recorded data (a folder, a recording, a bag): nothing in the world is
+    #: lost by making it wait, so the service back-pressures it by default (``block`` queues end to end) and
+    #: loses no frame unless the config asks for ``latest``. False (the default) for a live source.
+    finite: ClassVar[bool] = False
 
     def __init__(self, options: object, context: SourceContext) -> None:
         super().__init__(options, context)

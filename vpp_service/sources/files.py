@@ -93,6 +93,8 @@ class FilesSourceOptions:
 class FilesSource(Source):
     """Replay a dataset or a folder of wire-format frames (see the module docstring)."""
 
+    finite = True  # a replay: back-pressured, loses nothing by default
+
     Options = FilesSourceOptions
     options: FilesSourceOptions
 

@@ -57,6 +57,8 @@ class Rosbag2SourceOptions(StereoTopics):
 class Rosbag2Source(Source):
     """Stereo frames from a rosbag2 bag (see the module docstring)."""
 
+    finite = True  # a replay: back-pressured, loses nothing by default
+
     Options = Rosbag2SourceOptions
 
     @classmethod
