@@ -97,3 +97,70 @@ def test_a_replay_into_the_service_loses_nothing(tmp_path, shared_endpoint, keep
         assert not thread.is_alive()  # with the latest policy frames are dropped and max_frames is never reached
     status = result["status"]
     assert status["counters"]["processed"] == 12 and status["counters"]["dropped"] == 0, status["dropped"]
+
+
+@pytest.fixture
+def middlebury2006_folder(tmp_path):
+    """A Middlebury 2005/2006-layout folder (no calibration file, as those sets ship) of two synthetic scenes."""
+    import cv2
+    import numpy as np
+
+    from vpp_service.sources.synthetic import make_scene
+
+    root = tmp_path / "midd"
+    for k in range(2):
+        frame = make_scene(height=96, width=160, max_disparity=24, seed=k)
+        scene = root / f"Scene{k}"
+        scene.mkdir(parents=True)
+        cv2.imwrite(str(scene / "view1.png"), frame.left)
+        cv2.imwrite(str(scene / "view5.png"), frame.right)
+        cv2.imwrite(str(scene / "disp1.png"), np.round(frame.gt_disparity * 3).astype(np.uint8))  # value / 3
+    return root
+
+
+def test_publish_plays_a_calibration_less_middlebury_folder_into_run(
+    tmp_path, middlebury2006_folder, shared_endpoint, keep_signal_handlers, capsys
+):
+    """--root alone (dataset auto) with nominal f / baseline: every frame reaches the service, none rejected."""
+    data = {
+        "service": {"out": str(tmp_path / "run"), "max_frames": 2, "summary": False},
+        "source": {"type": "zenoh"},
+        "matcher": {"name": "bm", "max_disparity": 32},
+        "queues": {"input_policy": "block"},
+        "sinks": [],
+    }
+    with service_in_thread(data) as (thread, result):
+        rc = main(["publish", "--root", str(middlebury2006_folder), "--rate", "0", "--wait-subscriber", "30"])
+        captured = capsys.readouterr()
+        assert rc == 0, captured.err
+        assert '"sent": 2' in captured.out and '"confirmed": true' in captured.out
+        thread.join(60)
+        assert not thread.is_alive()
+    c = result["status"]["counters"]
+    assert c["processed"] == 2 and c["rejected"] == 0 and c["no_depth"] == 0, result["status"]
+
+
+def test_publish_recording_and_root_together_is_an_error(tmp_path, capsys):
+    assert main(["publish", "--recording", str(tmp_path), "--root", str(tmp_path)]) == EXIT_STARTUP
+    assert "--recording and --dataset/--root" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "nan"])
+def test_publish_rejects_a_bad_nominal_calibration(value, capsys):
+    assert main(["publish", "--count", "1", "--nominal-f", value]) == EXIT_STARTUP
+    assert "--nominal-f: must be a finite number > 0" in capsys.readouterr().err
+
+
+def test_publish_always_exits_cleanly(tmp_path, middlebury2006_folder, shared_endpoint):
+    """Ten runs to completion as separate processes (with a subscriber, and failing without one): never a native abort."""
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "vpp_service", "publish", "--root", str(middlebury2006_folder), "--rate", "0"]
+    rcs = []
+    for k in range(10):
+        flags = ["--wait-subscriber", "0.2"] + (["--send-anyway"] if k % 2 else [])
+        proc = subprocess.run([*cmd, *flags], capture_output=True, text=True, timeout=120, check=False)
+        rcs.append(proc.returncode)
+        assert "terminate called" not in proc.stderr, proc.stderr
+    assert rcs == [EXIT_FAILURE, 0] * 5  # no subscriber: exit 1 with a message; --send-anyway: sent, exit 0

@@ -30,7 +30,7 @@ EXIT_STARTUP = 2
 #: Exit status of a failure after start-up (nobody answered or subscribed, an unexpected error while running).
 EXIT_FAILURE = 1
 
-EPILOG = f"""exit status: 0 done; {EXIT_STARTUP} configuration or start-up error (one line on stderr);
+EPILOG = f"""exit status: 0 done; {EXIT_STARTUP} configuration or start-up error (a message on stderr);
 {EXIT_FAILURE} failure while running (e.g. no service answered, no subscriber); 130 interrupted.
 Every command meets the others on tcp/127.0.0.1:7447 unless told otherwise ($VPP_SERVICE_ENDPOINT)."""
 
@@ -86,18 +86,18 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         return 130
     except (ValueError, OSError, StartupError) as exc:  # config, paths, endpoints: before anything ran
-        print(f"vpp-service {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"vpp-service {args.command}: error: {_message(exc)}", file=sys.stderr)
         return EXIT_STARTUP
     except Exception as exc:
         logging.getLogger(__name__).debug("traceback", exc_info=True)
-        print(f"vpp-service {args.command}: failed: {type(exc).__name__}: {_one_line(exc)}", file=sys.stderr)
+        print(f"vpp-service {args.command}: failed: {type(exc).__name__}: {_message(exc)}", file=sys.stderr)
         return EXIT_FAILURE
 
 
-def _one_line(exc: BaseException) -> str:
-    """The first line of ``exc``'s message (its type when it has none)."""
+def _message(exc: BaseException) -> str:
+    """``exc``'s whole message, every line (its type when it has none): a list after "looked for:" stays."""
     text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
+    return text or type(exc).__name__
 
 
 if __name__ == "__main__":  # pragma: no cover

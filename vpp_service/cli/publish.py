@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import signal
 import sys
 import threading
@@ -31,6 +32,7 @@ if TYPE_CHECKING:  # imported where they are used: the sub-command modules load 
     import zenoh
 
     from vpp_service.frame import StereoFrame
+    from vpp_service.service.config import ZenohSection
     from vpp_service.sources.base import Source
     from vpp_service.transport.shm import ShmPutter
 
@@ -45,8 +47,8 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         description=plain(__doc__),
         formatter_class=HelpFormatter,
     )
-    p.add_argument("--dataset", help="dataset name or 'auto' (default: the simulator)")
-    p.add_argument("--root", help="dataset folder (with --dataset)")
+    p.add_argument("--dataset", help="dataset name or 'auto' (default: the simulator; 'auto' when --root is given)")
+    p.add_argument("--root", help="dataset folder (implies --dataset auto)")
     p.add_argument(
         "--recording", metavar="DIR", help="replay a folder of .msgpack frames (the record sink's output) instead"
     )
@@ -57,6 +59,21 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--scale", type=float, default=1.0, help="resize factor in (0, 1]")
     p.add_argument("--sensor", default="uniform", help="sensor simulator (uniform, lidar, tof, none)")
     p.add_argument("--density", type=float, default=0.05, help="uniform sensor density")
+    p.add_argument(
+        "--nominal-f",
+        type=float,
+        default=1000.0,
+        metavar="PX",
+        help="focal length sent with frames whose dataset has no calibration (Middlebury 2001-2006), pixels; "
+        "the same nominal value the simulator's sensors use",
+    )
+    p.add_argument(
+        "--nominal-baseline",
+        type=float,
+        default=0.1,
+        metavar="M",
+        help="baseline sent with frames whose dataset has no calibration, metres",
+    )
     p.add_argument("--rate", type=float, default=10.0, help="frames per second (0 = as fast as possible)")
     p.add_argument("--count", type=int, default=0, help="frames to send (0 = until interrupted / end)")
     p.add_argument("--loop", action="store_true", help="loop over the dataset")
@@ -143,14 +160,24 @@ def _confirm_delivery(session: zenoh.Session, prefix: str, rig: str, seconds: fl
     """
     from vpp_service.transport import wire
 
+    t0 = time.monotonic()
     replies = session.get(wire.topic(prefix, rig, "@status/**"), timeout=seconds)
     if any(reply.ok is not None for reply in replies):
         return True
-    log.warning(
-        "no @status reply from a service of rig %r within %g s: frames still queued may be lost when publish exits",
-        rig,
-        seconds,
-    )
+    waited = time.monotonic() - t0
+    if waited < 0.9 * seconds:  # the query ended early: nothing that serves the rig's @status was reachable
+        log.warning(
+            "no service of rig %r is reachable any more (its @status query ended after %.1f s with no reply): "
+            "frames still queued may be lost",
+            rig,
+            waited,
+        )
+    else:
+        log.warning(
+            "no @status reply from a service of rig %r within %g s: frames still queued may be lost",
+            rig,
+            seconds,
+        )
     return False
 
 
@@ -162,13 +189,30 @@ def _check_args(args: argparse.Namespace) -> None:
         raise ValueError("--rate and --count must be >= 0")
     if not args.confirm_timeout >= 0:
         raise ValueError(f"--confirm-timeout: must be >= 0, got {args.confirm_timeout}")
+    for flag, value in (("--nominal-f", args.nominal_f), ("--nominal-baseline", args.nominal_baseline)):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{flag}: must be a finite number > 0, got {value}")
+
+
+def with_calibration(frame: StereoFrame, f: float, baseline: float) -> StereoFrame:
+    """``frame`` unchanged when it has a calibration, else with a nominal one (the wire requires one).
+
+    The principal point is the image centre and ``doffs`` 0; sparse depth sent as 3-D points is
+    converted with the same values on both ends, so the disparities the service uses are the dataset's.
+    """
+    from vpp_service.frame import Calibration
+
+    if frame.calib is not None:
+        return frame
+    h, w = frame.left.shape[:2]
+    return frame.with_(calib=Calibration(f=f, baseline=baseline, cx=(w - 1) / 2.0, cy=(h - 1) / 2.0))
 
 
 def _send(frame: StereoFrame, args: argparse.Namespace, pubs: dict[str, zenoh.Publisher], putter: ShmPutter) -> None:
     """Stamp ``frame``, strip what the flags say, publish it on ``pubs`` (one topic per part, or ``frame``)."""
     from vpp_service.transport import wire
 
-    frame = frame.with_(stamp_ns=time.time_ns())
+    frame = with_calibration(frame, args.nominal_f, args.nominal_baseline).with_(stamp_ns=time.time_ns())
     if args.no_depth:
         frame = frame.with_(sparse_disparity=None, sensor_depth=None)
     if args.no_gt:
@@ -188,13 +232,15 @@ def _source(args: argparse.Namespace) -> Source:
     ctx = SourceContext(rig=args.rig, prefix=args.prefix)
     sensor_opts = {"density": args.density} if args.sensor == "uniform" else {}
     if args.recording:
-        if args.dataset:
-            raise ValueError("--recording and --dataset: give one of them")
+        if args.dataset or args.root:
+            raise ValueError("--recording and --dataset/--root: give one of them")
         return build_source(
             "files",
             {"root": args.recording, "format": "msgpack", "rate_hz": 0.0, "loop": args.loop, "count": args.count},
             ctx,
         )
+    if args.root and not args.dataset:
+        args.dataset = "auto"  # a folder to play: find its format
     if args.dataset:
         if not args.root:
             raise ValueError("--root: required with --dataset")
@@ -228,14 +274,7 @@ def main(args: argparse.Namespace) -> int:
         from vpp_service.cli.publish_rosbag import play
 
         return play(args)
-    import queue as _queue
-
-    import zenoh
-
-    from vpp_service.service.app import zenoh_session
     from vpp_service.service.config import ZenohSection, default_endpoint
-    from vpp_service.sources.base import Pacer
-    from vpp_service.transport import wire
     from vpp_service.transport.shm import ShmPutter
 
     _check_args(args)
@@ -246,8 +285,27 @@ def main(args: argparse.Namespace) -> int:
     )
     src = _source(args)
     src.open()
-    frames: _queue.Queue[StereoFrame] = _queue.Queue(maxsize=2)
     stop = threading.Event()
+    try:
+        return _publish(args, src, stop, zsec, putter)
+    finally:  # whatever happened: no producing thread is left running when the interpreter exits
+        stop.set()
+        src.stop(2.0)
+
+
+def _publish(
+    args: argparse.Namespace, src: Source, stop: threading.Event, zsec: ZenohSection, putter: ShmPutter
+) -> int:
+    """Send ``src``'s frames until it ends, ``--count`` or a signal; print the report (the caller stops ``src``)."""
+    import queue as _queue
+
+    import zenoh
+
+    from vpp_service.service.app import zenoh_session
+    from vpp_service.sources.base import Pacer
+    from vpp_service.transport import wire
+
+    frames: _queue.Queue[StereoFrame] = _queue.Queue(maxsize=2)
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, lambda *_: stop.set())
 
@@ -271,11 +329,9 @@ def main(args: argparse.Namespace) -> int:
         }
         if args.wait_subscriber > 0 and not _wait_for_subscribers(pubs.values(), args.wait_subscriber, stop):
             if stop.is_set():  # interrupted while waiting
-                src.stop(2.0)
                 return 130
             if not args.send_anyway:
-                src.stop(2.0)
-                where = ", ".join(connect + list(args.listen))
+                where = ", ".join(list(zsec.connect) + list(zsec.listen))
                 keys = ", ".join(str(pub.key_expr) for pub in pubs.values())
                 print(
                     f"vpp-service publish: no subscriber on {keys} within {args.wait_subscriber:g} s "
