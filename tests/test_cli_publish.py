@@ -152,7 +152,7 @@ def test_publish_rejects_a_bad_nominal_calibration(value, capsys):
 
 
 def test_publish_always_exits_cleanly(tmp_path, middlebury2006_folder, shared_endpoint):
-    """Ten runs to completion as separate processes (with a subscriber, and failing without one): never a native abort."""
+    """Ten publish processes run to completion (sending, or failing for want of a subscriber): never an abort."""
     import subprocess
     import sys
 
