@@ -250,3 +250,48 @@ def test_cli_synthetic_and_errors(tmp_path, capsys):
     assert "guidance" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["eval", "--dataset", "synthetic", "--density", "2"])
+
+
+class InterruptAt:
+    """A progress callback that raises KeyboardInterrupt (what Ctrl-C does) at its ``n``-th call."""
+
+    def __init__(self, n: int) -> None:
+        self.n, self.calls = n, 0
+
+    def __call__(self, done: int, total: int, label: str) -> None:
+        self.calls += 1
+        if self.calls == self.n:
+            raise KeyboardInterrupt
+
+
+def test_an_interrupted_evaluation_keeps_the_rows_of_finished_scenes():
+    from vpp_service.evaluation.runner import EvaluationInterrupted
+
+    frames = [make_scene(height=48, width=96, max_disparity=16, seed=i) for i in range(3)]
+    with pytest.raises(EvaluationInterrupted) as info:  # 2 steps per scene: the 4th is scene 2's vpp
+        run_evaluation(frames, "bm", ("baseline", "vpp"), [0.05], progress=InterruptAt(4))
+    exc = info.value
+    assert (exc.scenes_done, exc.scenes_total) == (1, 3)
+    full = run_evaluation(frames[:1], "bm", ("baseline", "vpp"), [0.05])
+    assert [(r["scene"], r["method"]) for r in exc.rows] == [(r["scene"], r["method"]) for r in full]
+    assert [r["bad2"] for r in exc.rows] == [r["bad2"] for r in full]
+
+
+@pytest.mark.parametrize(("at", "scenes_done"), [(1, 0), (5, 2)])
+def test_eval_ctrl_c_writes_what_finished_marked_partial(tmp_path, monkeypatch, capsys, at, scenes_done):
+    import vpp_service.evaluation as evaluation
+
+    monkeypatch.setattr(evaluation, "ProgressBar", lambda stream: InterruptAt(at))
+    out_json, out_md = tmp_path / "r.json", tmp_path / "r.md"
+    argv = ["eval", "--dataset", "synthetic", "--limit", "3", "--matcher", "bm", "--methods", "baseline,vpp"]
+    rc = main([*argv, "--json", str(out_json), "--markdown", str(out_md)])
+    err = capsys.readouterr().err
+    assert rc == 130
+    if scenes_done == 0:
+        assert "nothing written" in err and not out_json.exists() and not out_md.exists()
+        return
+    doc = json.loads(out_json.read_text())
+    assert doc["config"]["partial"] == {"scenes_done": 2, "scenes_total": 3}
+    assert len({r["scene"] for r in doc["results"]}) == 2 and len(doc["results"]) == 4
+    assert "PARTIAL: interrupted after 2 of 3 scenes" in out_md.read_text()
+    assert "2 of 3 scenes finished" in err and str(out_json) in err

@@ -90,7 +90,8 @@ def test_dead_source_is_a_failure_not_a_clean_exit(tmp_path, dying_source):
     # the CLI turns it into exit code 1 (systemd restarts the service)
     cfg = tmp_path / "dies.toml"
     cfg.write_text(toml_dumps(data))
-    args = build_parser().parse_args(["run", "--config", str(cfg), "--no-summary"])
+    # (a second run into the same out: the restarted service replaces its own outputs)
+    args = build_parser().parse_args(["run", "--config", str(cfg), "--no-summary", "--overwrite"])
     assert args.func(args) == 1
 
 
@@ -272,3 +273,37 @@ def test_closing_line_says_what_was_dropped_by_cause(tmp_path):
     assert "after 1 frame;" in line and "dropped" not in line
     line = closing_line(cfg, {"processed": 3, "dropped": 6}, {"input_queue": 6, "shutdown": 0})
     assert "after 3 frames; dropped 6 frames (input_queue 6);" in line
+
+
+def test_run_never_silently_replaces_a_previous_run(tmp_path, capsys):
+    from vpp_service.cli import EXIT_STARTUP, main
+
+    data = small_config(tmp_path)
+    data["sinks"] = [{"type": "rerun", "mode": "save", "path": "{out}/vpp.rrd"}]
+    cfg = tmp_path / "run.toml"
+    cfg.write_text(toml_dumps(data))
+    assert main(["run", "--config", str(cfg), "--no-summary"]) == 0
+    out = tmp_path / "out"
+    before = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
+    assert set(before) == {"summary.json", "vpp.rrd"}
+    assert main(["run", "--config", str(cfg), "--no-summary"]) == EXIT_STARTUP
+    err = capsys.readouterr().err
+    assert "holds a previous run's outputs" in err and "summary.json" in err and "vpp.rrd" in err
+    assert "--overwrite" in err
+    assert {p.name: p.stat().st_mtime_ns for p in out.iterdir()} == before  # untouched
+    assert main(["run", "--config", str(cfg), "--no-summary", "--overwrite"]) == 0
+    assert (out / "summary.json").stat().st_mtime_ns > before["summary.json"]
+
+
+def test_a_failed_start_leaves_no_run_folder(tmp_path, zenoh_endpoint):
+    import zenoh as z
+
+    from vpp_service.cli import EXIT_STARTUP, main
+
+    data = small_config(tmp_path)
+    data["zenoh"] = {"listen": [zenoh_endpoint]}
+    cfg = tmp_path / "run.toml"
+    cfg.write_text(toml_dumps(data))
+    with z.open(zenoh_test_config(listen=[zenoh_endpoint])):  # the port is taken: the service cannot open
+        assert main(["run", "--config", str(cfg), "--no-summary"]) == EXIT_STARTUP
+    assert not (tmp_path / "out").exists()

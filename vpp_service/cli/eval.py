@@ -161,7 +161,7 @@ def _frames(args: argparse.Namespace) -> tuple[Frames, str]:
 def run(args: argparse.Namespace) -> int:
     """Run the evaluation described by ``args``; returns the exit code."""
     from vpp_service.evaluation import ProgressBar, markdown_report, plot_sweep, run_evaluation, write_json
-    from vpp_service.evaluation.runner import _check_methods
+    from vpp_service.evaluation.runner import EvaluationInterrupted, _check_methods
 
     methods = _check_methods(args.methods)
     if args.limit is not None and args.limit < 1:
@@ -171,20 +171,27 @@ def run(args: argparse.Namespace) -> int:
     densities = args.density if args.sensor == "uniform" else None
     if args.sensor != "uniform" and len(args.density) > 1:
         raise ValueError(f"--density: a sweep needs --sensor uniform, got {args.sensor!r}")
-    rows = run_evaluation(
-        frames,
-        args.matcher,
-        methods,
-        densities,
-        args.sensor,
-        vpp_config=vpp_config,
-        seed=args.seed,
-        progress=None if args.quiet else ProgressBar(sys.stderr),
-        matcher_options=dict(args.matcher_opt),
-        sensor_options=dict(args.sensor_opt),
-        max_disparity=args.max_disparity,
-        dataset_name=dataset_name,
-    )
+    partial: EvaluationInterrupted | None = None
+    try:
+        rows = run_evaluation(
+            frames,
+            args.matcher,
+            methods,
+            densities,
+            args.sensor,
+            vpp_config=vpp_config,
+            seed=args.seed,
+            progress=None if args.quiet else ProgressBar(sys.stderr),
+            matcher_options=dict(args.matcher_opt),
+            sensor_options=dict(args.sensor_opt),
+            max_disparity=args.max_disparity,
+            dataset_name=dataset_name,
+        )
+    except EvaluationInterrupted as exc:  # Ctrl-C: keep what finished, marked partial
+        if not exc.rows:
+            print("vpp-service eval: interrupted before the first scene finished: nothing written", file=sys.stderr)
+            return 130
+        partial, rows = exc, exc.rows
     config = {
         "dataset": dataset_name,
         "root": str(args.root) if args.root else None,
@@ -198,7 +205,11 @@ def run(args: argparse.Namespace) -> int:
         "max_disparity": args.max_disparity,
         "vpp": None if vpp_config is None else {k: getattr(vpp_config, k) for k in vpp_config.__dataclass_fields__},
     }
-    text = markdown_report(rows, per_scene=args.per_scene, title=f"VPP evaluation: {dataset_name}")
+    title = f"VPP evaluation: {dataset_name}"
+    if partial is not None:
+        config["partial"] = {"scenes_done": partial.scenes_done, "scenes_total": partial.scenes_total}
+        title += f" (PARTIAL: interrupted after {partial.scenes_done} of {partial.scenes_total} scenes)"
+    text = markdown_report(rows, per_scene=args.per_scene, title=title)
     if args.json:
         write_json(args.json, rows, config)
     if args.markdown:
@@ -208,4 +219,12 @@ def run(args: argparse.Namespace) -> int:
         plot_sweep(plot, rows)
         print(f"plot: {plot}", file=sys.stderr)
     sys.stdout.write(text)
+    if partial is not None:
+        written = ", ".join(str(x) for x in (args.json, args.markdown) if x) or "stdout only"
+        print(
+            f"vpp-service eval: interrupted: {partial.scenes_done} of {partial.scenes_total} scenes finished; "
+            f"their results are written, marked partial ({written})",
+            file=sys.stderr,
+        )
+        return 130
     return 0

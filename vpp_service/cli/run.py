@@ -100,6 +100,12 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--out", help="output folder for summary.json and the default .rrd (default: the config's, vpp-run)")
     p.add_argument("--no-summary", action="store_true", help="no live summary line on stderr")
     p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a previous run's outputs in --out (summary.json, .rrd, recorded frames); without it "
+        "run refuses to start over them (service.overwrite)",
+    )
+    p.add_argument(
         "--check",
         action="store_true",
         help="validate the configuration and the paths it names, print it as JSON, exit (2 on an error)",
@@ -182,6 +188,8 @@ def _service_overrides(svc: dict[str, Any], args: argparse.Namespace) -> None:
         svc["out"] = args.out
     if args.no_summary:
         svc["summary"] = False
+    if getattr(args, "overwrite", False):
+        svc["overwrite"] = True
 
 
 def _rerun_flag(args: argparse.Namespace) -> dict[str, object] | None:
@@ -216,8 +224,9 @@ def _ros_overrides(d: dict[str, Any], args: argparse.Namespace) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Validate the whole configuration, then run until done or signalled."""
+    from vpp_service.errors import StartupError
     from vpp_service.service.app import run_service
-    from vpp_service.service.config import DEFAULT_CONFIG, check_paths, read_toml, validate_config
+    from vpp_service.service.config import DEFAULT_CONFIG, check_paths, previous_outputs, read_toml, validate_config
 
     data = read_toml(args.config) if args.config else copy.deepcopy(DEFAULT_CONFIG)
     cfg = validate_config(overrides_from_args(data, args))
@@ -225,6 +234,12 @@ def main(args: argparse.Namespace) -> int:
     if args.check:
         print(json.dumps(cfg.to_dict(), indent=2))
         return 0
+    previous = [] if cfg.service.overwrite else previous_outputs(cfg)
+    if previous:
+        raise StartupError(
+            f"service.out: {cfg.service.out!r} holds a previous run's outputs ({', '.join(previous)}); "
+            "pass --overwrite to replace them, or --out DIR for a new run folder"
+        )
     stop = threading.Event()
 
     def on_signal(signum: int, _frame: FrameType | None) -> None:

@@ -216,6 +216,24 @@ def _draw_points(frame: StereoFrame, sensor: Sensor[NominalGeometry] | None, see
     return np.where(np.isfinite(sparse) & (sparse > 0), sparse, np.nan).astype(np.float32)
 
 
+class EvaluationInterrupted(KeyboardInterrupt):
+    """Ctrl-C during :func:`run_evaluation`: the rows of the scenes that finished, to save as a partial result.
+
+    Attributes
+    ----------
+    rows : list of ResultRow
+        Every row of the first ``scenes_done`` scenes (a scene half done is left out).
+    scenes_done, scenes_total : int
+        How many scenes finished, of how many.
+    """
+
+    def __init__(self, rows: list[ResultRow], scenes_done: int, scenes_total: int) -> None:
+        super().__init__(f"interrupted after {scenes_done} of {scenes_total} scenes")
+        self.rows = rows
+        self.scenes_done = scenes_done
+        self.scenes_total = scenes_total
+
+
 def run_evaluation(
     frames_or_dataset: Frames,
     matcher: str | Matcher = "census-sgm",
@@ -289,8 +307,7 @@ def run_evaluation(
     n_frames, get = _frames(frames_or_dataset)
     if n_frames == 0:
         raise ValueError("frames_or_dataset: no frames to evaluate")
-    per_density = [m for m in methods if m != "baseline"]
-    total = n_frames * (("baseline" in methods) + len(sensors) * len(per_density))
+    total = n_frames * (("baseline" in methods) + len(sensors) * sum(m != "baseline" for m in methods))
     done = 0
     rows: list[ResultRow] = []
 
@@ -298,53 +315,58 @@ def run_evaluation(
         if progress is not None:
             progress(done, total, label)
 
-    for i in range(n_frames):
-        frame, gt = _frame_with_gt(get, i)
-        scene = frame.name or f"frame{i}"
-        if ready is None:
-            md = max_disparity if max_disparity is not None else default_max_disparity(gt, frame.shape[1])
-            m = build_matcher(matcher_name, {**base_opts, "max_disparity": int(md), "fill": False})
-        else:
-            m = ready
-        common: ResultRow = {
-            "dataset": dataset_name or frame.meta.get("dataset", ""),
-            "scene": scene,
-            "matcher": matcher_name,
-            "sensor": sensor_name,
-            "max_disparity": int(m.options.max_disparity),
-        }
+    finished, scenes_done = 0, 0  # rows of the scenes whose every method is done
+    try:
+        for i in range(n_frames):
+            frame, gt = _frame_with_gt(get, i)
+            scene = frame.name or f"frame{i}"
+            if ready is None:
+                md = max_disparity if max_disparity is not None else default_max_disparity(gt, frame.shape[1])
+                m = build_matcher(matcher_name, {**base_opts, "max_disparity": int(md), "fill": False})
+            else:
+                m = ready
+            common: ResultRow = {
+                "dataset": dataset_name or frame.meta.get("dataset", ""),
+                "scene": scene,
+                "matcher": matcher_name,
+                "sensor": sensor_name,
+                "max_disparity": int(m.options.max_disparity),
+            }
 
-        baseline_row: ResultRow = {}
-        if "baseline" in methods:
-            tick(f"{scene} {matcher_name} baseline")
-            res = fuse(frame, m, None, depth=False, protocol=True)
-            baseline_row = {**res.metrics, "ms": res.timing_ms["match"]}
-            done += 1
-
-        for d, s in sensors:
-            sparse = _draw_points(frame, s, int(seed), scene)
-            n_points = int(np.isfinite(sparse).sum())
-            n_valid = int((np.isfinite(gt) & (gt > 0)).sum())
-            density = d if d is not None else (n_points / n_valid if n_valid else 0.0)
-            base: ResultRow = {**common, "density": density, "n_points": n_points}
-            dlabel = f"{d:g}" if d is not None else sensor_name
-            with_points = frame.with_(sparse_disparity=sparse, sensor_depth=None)
-            for method in methods:
-                if method == "baseline":
-                    rows.append({**base, "method": "baseline", **baseline_row})
-                    continue
-                tick(f"{scene} {matcher_name} {method} {dlabel}")
-                if method == "guided":
-                    res = fuse(with_points, m, None, guide=True, depth=False, protocol=True)
-                else:
-                    res = fuse(with_points, m, vpp_config, seed=int(seed), depth=False, protocol=True)
-                ms = res.timing_ms.get("vpp", 0.0) + res.timing_ms["match"]
-                extra = {f"vpp_{k}": v for k, v in res.vpp_stats.items()}
-                rows.append({**base, "method": method, **res.metrics, "ms": ms, **extra})
+            baseline_row: ResultRow = {}
+            if "baseline" in methods:
+                tick(f"{scene} {matcher_name} baseline")
+                res = fuse(frame, m, None, depth=False, protocol=True)
+                baseline_row = {**res.metrics, "ms": res.timing_ms["match"]}
                 done += 1
+
+            for d, s in sensors:
+                sparse = _draw_points(frame, s, int(seed), scene)
+                n_points = int(np.isfinite(sparse).sum())
+                n_valid = int((np.isfinite(gt) & (gt > 0)).sum())
+                density = d if d is not None else (n_points / n_valid if n_valid else 0.0)
+                base: ResultRow = {**common, "density": density, "n_points": n_points}
+                dlabel = f"{d:g}" if d is not None else sensor_name
+                with_points = frame.with_(sparse_disparity=sparse, sensor_depth=None)
+                for method in methods:
+                    if method == "baseline":
+                        rows.append({**base, "method": "baseline", **baseline_row})
+                        continue
+                    tick(f"{scene} {matcher_name} {method} {dlabel}")
+                    if method == "guided":
+                        res = fuse(with_points, m, None, guide=True, depth=False, protocol=True)
+                    else:
+                        res = fuse(with_points, m, vpp_config, seed=int(seed), depth=False, protocol=True)
+                    ms = res.timing_ms.get("vpp", 0.0) + res.timing_ms["match"]
+                    extra = {f"vpp_{k}": v for k, v in res.vpp_stats.items()}
+                    rows.append({**base, "method": method, **res.metrics, "ms": ms, **extra})
+                    done += 1
+            finished, scenes_done = len(rows), i + 1
+    except KeyboardInterrupt:
+        raise EvaluationInterrupted(rows[:finished], scenes_done, n_frames) from None
     if progress is not None:
         progress(done, total, "done")
     return rows
 
 
-__all__ = ["METHODS", "ResultRow", "RowValue", "default_max_disparity", "run_evaluation"]
+__all__ = ["METHODS", "EvaluationInterrupted", "ResultRow", "RowValue", "default_max_disparity", "run_evaluation"]

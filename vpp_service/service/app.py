@@ -223,7 +223,22 @@ def run_service(
     stop = stop or threading.Event()
     s = cfg.service
     out = Path(s.out)
+    created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
+    try:
+        return _run(cfg, stop, stream, banner, out)
+    except BaseException:
+        if created:  # a failed start leaves nothing behind (rmdir removes only an empty folder)
+            with contextlib.suppress(OSError):
+                out.rmdir()
+        raise
+
+
+def _run(
+    cfg: ServiceConfig, stop: threading.Event, stream: TextIO | None, banner: str | None, out: Path
+) -> ServiceSummary:
+    """:func:`run_service` once ``out`` exists."""
+    s = cfg.service
     summary_path = out / "summary.json"
     if s.reuse_memory:
         reuse_freed_memory()

@@ -101,6 +101,10 @@ class ServiceSection:
         successor; older ones are counted as lost.
     worker_id : str
         This worker's id in the pool (default ``<host>-<pid>``); 1-64 of ``A-Z a-z 0-9 _ . -``.
+    overwrite : bool
+        Start even when ``out`` holds a previous run's outputs (summary.json, a .rrd, recorded
+        frames), replacing them. False (default): ``vpp-service run`` refuses and names them.
+        A long-running service restarted in place (systemd) sets it.
     """
 
     rig: str = "rig0"
@@ -117,6 +121,7 @@ class ServiceSection:
     pool: bool = False
     pool_deadline_ms: float = 1000.0
     worker_id: str = ""
+    overwrite: bool = False
 
     def __post_init__(self) -> None:
         from vpp_service.transport.wire import topic
@@ -417,6 +422,30 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
         sinks=tuple(sinks),
         disparity_range=ranges[0] if ranges else None,
     )
+
+
+def previous_outputs(cfg: ServiceConfig) -> list[str]:
+    """Files and non-empty folders a run with ``cfg`` would write over: a previous run's outputs.
+
+    ``<out>/summary.json``, the Rerun ``save`` path, and the folders and bags of the
+    files, record and rosbag2 sinks. ``vpp-service run`` refuses to start over them
+    without ``--overwrite`` (``service.overwrite``).
+    """
+    found: list[Path] = []
+    summary = Path(cfg.service.out) / "summary.json"
+    if summary.exists():
+        found.append(summary)
+    for spec in cfg.sinks:
+        if getattr(spec.options, "mode", "save") != "save":
+            continue  # a viewer or a server: nothing on disk
+        for key in ("path", "dir"):
+            value = getattr(spec.options, key, None)
+            if not isinstance(value, str):
+                continue
+            path = Path(value).expanduser()
+            if path.is_file() or (path.is_dir() and any(path.iterdir())):
+                found.append(path)
+    return [str(p) for p in found]
 
 
 def check_paths(cfg: ServiceConfig) -> None:
