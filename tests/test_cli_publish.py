@@ -59,6 +59,18 @@ def test_publish_without_subscriber_exits_1_with_a_message(shared_endpoint, keep
     assert main(["publish", "--scale", "0.25", "--count", "1", "--wait-subscriber", "0.5"]) == EXIT_FAILURE
     assert time.monotonic() - t0 < 10
     captured = capsys.readouterr()
+    assert f"could not connect to {shared_endpoint}" in captured.err  # nothing listens there
+    assert '"sent"' not in captured.out
+
+
+def test_publish_with_a_peer_but_no_subscriber_exits_1_with_a_message(shared_endpoint, keep_signal_handlers, capsys):
+    import zenoh
+
+    from helpers.zenoh_loopback import zenoh_test_config
+
+    with zenoh.open(zenoh_test_config(listen=[shared_endpoint])):  # reachable, but nobody subscribes
+        assert main(["publish", "--scale", "0.25", "--count", "1", "--wait-subscriber", "0.5"]) == EXIT_FAILURE
+    captured = capsys.readouterr()
     assert "no subscriber on vpp/rig0/in/frame" in captured.err and shared_endpoint in captured.err
     assert "--send-anyway" in captured.err and '"sent"' not in captured.out
 

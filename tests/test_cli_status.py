@@ -47,8 +47,21 @@ def test_wildcard_status_lists_each_rig_under_its_own_key(tmp_path, capsys):
 
 
 def test_status_says_when_no_service_answered(capsys):
-    endpoint = f"tcp/127.0.0.1:{free_port()}"  # nobody listens there
-    assert main(["status", "--connect", endpoint, "--timeout", "0.5"]) == EXIT_FAILURE
+    import zenoh
+
+    from helpers.zenoh_loopback import zenoh_test_config
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with zenoh.open(zenoh_test_config(listen=[endpoint])):  # reachable, but no service there
+        assert main(["status", "--connect", endpoint, "--timeout", "0.5"]) == EXIT_FAILURE
     captured = capsys.readouterr()
     assert captured.out == ""
     assert "no service answered on vpp/*/@status" in captured.err and endpoint in captured.err
+
+
+def test_status_to_a_closed_port_says_it_could_not_connect(capsys):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"  # nothing listens there
+    assert main(["status", "--connect", endpoint, "--timeout", "1"]) == EXIT_FAILURE
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert f"could not connect to {endpoint}" in captured.err and "within" not in captured.err

@@ -279,7 +279,7 @@ def test_an_interrupted_evaluation_keeps_the_rows_of_finished_scenes():
 
 @pytest.mark.parametrize(("at", "scenes_done"), [(1, 0), (5, 2)])
 def test_eval_ctrl_c_writes_what_finished_marked_partial(tmp_path, monkeypatch, capsys, at, scenes_done):
-    import vpp_service.evaluation as evaluation
+    from vpp_service import evaluation
 
     monkeypatch.setattr(evaluation, "ProgressBar", lambda stream: InterruptAt(at))
     out_json, out_md = tmp_path / "r.json", tmp_path / "r.md"

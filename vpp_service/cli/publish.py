@@ -301,7 +301,7 @@ def _publish(
 
     import zenoh
 
-    from vpp_service.service.app import zenoh_session
+    from vpp_service.service.app import has_link, zenoh_session
     from vpp_service.sources.base import Pacer
     from vpp_service.transport import wire
 
@@ -330,6 +330,13 @@ def _publish(
         if args.wait_subscriber > 0 and not _wait_for_subscribers(pubs.values(), args.wait_subscriber, stop):
             if stop.is_set():  # interrupted while waiting
                 return 130
+            if zsec.connect and not args.send_anyway and not has_link(session):
+                print(
+                    f"vpp-service publish: could not connect to {', '.join(zsec.connect)} (nothing answers there); "
+                    "start `vpp-service run --source zenoh` there, or pass --connect",
+                    file=sys.stderr,
+                )
+                return 1
             if not args.send_anyway:
                 where = ", ".join(list(zsec.connect) + list(zsec.listen))
                 keys = ", ".join(str(pub.key_expr) for pub in pubs.values())

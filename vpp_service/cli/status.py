@@ -51,8 +51,10 @@ def query_status(
     ------
     ValueError
         Bad ``timeout``; a reply that is not JSON.
+    ConnectionError
+        None of the ``connect`` endpoints could be reached (nothing listens there).
     """
-    from vpp_service.service.app import zenoh_session
+    from vpp_service.service.app import has_link, zenoh_session
     from vpp_service.service.config import ZenohSection
 
     if not timeout > 0:
@@ -67,6 +69,8 @@ def query_status(
                     out[str(reply.ok.key_expr)] = json.loads(reply.ok.payload.to_string())
                 except json.JSONDecodeError as exc:
                     raise ValueError(f"{reply.ok.key_expr}: reply is not JSON: {exc}") from None
+        if not out and connect and not has_link(session):
+            raise ConnectionError(f"could not connect to {', '.join(connect)} (nothing answers there)")
     return {**dict(sorted(out.items())), **pool_summaries(out)}
 
 
@@ -109,7 +113,11 @@ def main(args: argparse.Namespace) -> int:
     from vpp_service.service.config import default_endpoint
 
     connect = args.connect or [default_endpoint()]
-    replies = query_status(connect, args.prefix, args.rig, args.timeout, args.multicast_scouting)
+    try:
+        replies = query_status(connect, args.prefix, args.rig, args.timeout, args.multicast_scouting)
+    except ConnectionError as exc:
+        print(f"vpp-service status: {exc}", file=sys.stderr)
+        return 1
     if not replies:
         print(
             f"vpp-service status: no service answered on {args.prefix}/{args.rig}/@status "

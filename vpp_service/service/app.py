@@ -113,6 +113,12 @@ def zenoh_session(section: ZenohSection) -> Iterator[zenoh.Session]:
         yield session
 
 
+def has_link(session: zenoh.Session) -> bool:
+    """True when ``session`` is connected to at least one router or peer (a connect endpoint answered)."""
+    info = session.info
+    return bool(list(info.routers_zid()) or list(info.peers_zid()))
+
+
 @contextlib.contextmanager
 def open_session(
     section: ZenohSection, stop: threading.Event | None = None, retry_s: float = 2.0
