@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import zenoh
 
 from helpers.cli import vpp_service_module_command
 from helpers.netns import NetnsHosts, netns_available
@@ -403,3 +404,41 @@ def test_workers_on_other_hosts_share_a_stream_through_the_router(tmp_path: Path
     for w in ids:  # each worker's only link is its namespace's veth to the router
         assert st[f"vpp/{rig}/@status/{w}"]["zenoh"] == {"routers": 1, "peers": 0}
     assert codes == [0, 0]
+
+
+def test_the_readme_pool_line_runs_twice_on_one_host(tmp_path: Path):
+    """`vpp-service run --source zenoh --pool`, twice on one host (no router): both serve, the frames are shared."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    env = {**__import__("os").environ, "VPP_SERVICE_ENDPOINT": endpoint, "PYTHONUNBUFFERED": "1"}
+    base = [*vpp_service_module_command(), "run", "--source", "zenoh", "--pool", "--headless", "--matcher", "bm"]
+    procs, logs = [], []
+    try:
+        for k in range(2):
+            logs.append(tmp_path / f"w{k}.log")
+            with open(logs[-1], "wb") as err:
+                argv = [*base, "--worker-id", f"w{k}", "--out", str(tmp_path / f"w{k}")]
+                procs.append(subprocess.Popen(argv, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=err))
+            if k == 0:
+                time.sleep(3)  # the first worker holds the default endpoint before the second starts
+        with zenoh.open(zenoh_test_config(connect=[endpoint])) as session:
+            assert wait_members(session, "rig0", 2, procs) == ["w0", "w1"]
+        sent = subprocess.run(
+            [*vpp_service_module_command(), "publish", "--count", "12", "--scale", "0.25", "--rate", "20"],
+            cwd=ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            check=False,
+        )
+        assert sent.returncode == 0 and '"sent": 12' in sent.stdout, sent.stderr
+        time.sleep(2)
+    finally:
+        for p in procs:
+            p.send_signal(signal.SIGINT)
+        codes = [p.wait(30) for p in procs]
+    texts = [log.read_text() for log in logs]
+    assert codes == [0, 0], texts
+    assert "is taken" in texts[1] and "WARNING" not in "".join(texts), texts  # its own exit is no warning
+    processed = [json.loads((tmp_path / f"w{k}" / "summary.json").read_text())["counters"]["processed"] for k in (0, 1)]
+    assert sum(processed) == 12 and min(processed) > 0, processed

@@ -228,8 +228,10 @@ def main(args: argparse.Namespace) -> int:
     from vpp_service.service.app import run_service
     from vpp_service.service.config import DEFAULT_CONFIG, check_paths, previous_outputs, read_toml, validate_config
 
-    data = read_toml(args.config) if args.config else copy.deepcopy(DEFAULT_CONFIG)
-    cfg = validate_config(overrides_from_args(data, args))
+    data = overrides_from_args(read_toml(args.config) if args.config else copy.deepcopy(DEFAULT_CONFIG), args)
+    if data.get("service", {}).get("pool") and "listen" not in data.get("zenoh", {}):
+        _join_local_pool(data.setdefault("zenoh", {}))
+    cfg = validate_config(data)
     check_paths(cfg)
     if args.check:
         print(json.dumps(cfg.to_dict(), indent=2))
@@ -261,6 +263,39 @@ def main(args: argparse.Namespace) -> int:
         print(f"vpp-service run: the source failed: {status['source_error']}", file=sys.stderr)
         return 1
     return 0
+
+
+def _join_local_pool(zen: dict[str, Any]) -> None:
+    """A pool worker on the default endpoint, which another worker on this host already holds: join it.
+
+    The worker connects to that endpoint and listens on a free loopback port instead; Zenoh's
+    gossip then links every peer of the mesh (the camera included) to every worker directly.
+    """
+    import re
+    import socket
+
+    from vpp_service.service.config import default_endpoint
+
+    endpoint = default_endpoint()
+    match = re.fullmatch(r"tcp/(?:127\.0\.0\.1|localhost):(\d{1,5})", endpoint)
+    if match is None:  # not a loopback TCP endpoint: nothing to probe here
+        return
+    port = int(match.group(1))
+    with socket.socket() as probe:
+        try:
+            probe.bind(("127.0.0.1", port))
+            return  # free: this is the first worker, it listens there
+        except OSError:
+            pass
+    with socket.socket() as free:
+        free.bind(("127.0.0.1", 0))
+        own = f"tcp/127.0.0.1:{free.getsockname()[1]}"
+    zen["listen"] = [own]
+    zen["connect"] = [*zen.get("connect", []), endpoint]
+    print(
+        f"vpp-service run: {endpoint} is taken (another worker of this host): joining it, listening on {own}",
+        file=sys.stderr,
+    )
 
 
 def _sink_text(spec_name: str, raw: dict[str, Any]) -> str:

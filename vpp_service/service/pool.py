@@ -487,7 +487,12 @@ class WorkerPool:
             return
         frames = self.state.left(worker)
         self.last_leave = time.monotonic()
-        log.warning("pool %s: %s left; taking over %d frame(s)", self.rig, worker, len(frames))
+        if worker == self.worker_id:  # its own token, undeclared as it stops: a clean exit, not news
+            log.debug("pool %s: %s (this worker) left", self.rig, worker)
+        elif frames:
+            log.warning("pool %s: %s left; taking over %d frame(s)", self.rig, worker, len(frames))
+        else:
+            log.info("pool %s: %s left", self.rig, worker)
         if frames:
             with self._wake:
                 self._takeovers.extend(frames)
