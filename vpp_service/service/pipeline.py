@@ -29,7 +29,8 @@ one, but ``status()["source_error"]`` names the exception (the service exits 1).
 Bad input never stops the pipeline: a rejected message is counted and logged
 (at most once per ``reject_log_period_s``); a frame the process step raises
 on is counted as rejected and dropped. The ``latency`` statistic runs from
-when the frame was received (``meta["recv_ns"]``), never from the sender's
+when the frame was received (``meta["recv_ns"]``, :func:`time.monotonic_ns`: a
+wall-clock step cannot corrupt the percentiles), never from the sender's
 ``stamp_ns``, which any peer can set. A frame whose ``rig`` (it comes from
 the message) is not the rig the pipeline serves is rejected before it is queued,
 so sinks never see a foreign or forged rig name.
@@ -285,7 +286,7 @@ class Pipeline:
         if frame.rig != self.rig:  # the rig comes from the message: only the served rig's frames go on
             self._reject(f"frame seq={frame.seq}: rig {frame.rig[:64]!r} is not the served rig {self.rig!r}")
             return False
-        frame.meta.setdefault("recv_ns", time.time_ns())  # sources that receive stamp it earlier
+        frame.meta.setdefault("recv_ns", time.monotonic_ns())  # sources that receive stamp it earlier
         if self.pool is not None and not self.pool.admit(frame):
             return True  # another worker's share (the pool holds it for a takeover)
         return self._enqueue(frame)
@@ -379,7 +380,7 @@ class Pipeline:
         # latency from when this service received the frame, never from the sender's stamp_ns (a peer sets it)
         recv_ns = result.frame.meta.get("recv_ns")
         if isinstance(recv_ns, int):
-            self.timer.add("latency", (time.time_ns() - recv_ns) / 1e6)
+            self.timer.add("latency", (time.monotonic_ns() - recv_ns) / 1e6)
         self._inc("published")
         if self.pool is not None and self.pool.answer_on_publish:
             self.pool.answered(result.frame.seq)

@@ -198,7 +198,7 @@ class ZenohSource(Source):
         full ring makes it wait for room (back-pressure through Zenoh); under
         ``latest`` it never waits (the oldest sample is dropped and counted).
         """
-        recv_ns = time.time_ns()
+        recv_ns = time.monotonic_ns()  # for durations (latency): a monotonic clock, immune to clock steps
         n = len(sample.payload)
         if n > self._limits.max_message_bytes:  # by its length, before the payload is copied out of Zenoh
             with self._ring_lock:
