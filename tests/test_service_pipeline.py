@@ -415,3 +415,17 @@ def test_latency_is_measured_from_receive_time_not_the_senders_stamp():
     lat = pipe.status()["timing_ms"]["latency"]
     assert lat["n"] == 4
     assert 0 <= lat["p99"] < 60_000  # the stamps would say 56 years, 0 or minus 236 years
+
+
+def test_summary_line_says_what_it_waits_on_before_the_first_frame(sessions):
+    from vpp_service.sources.base import SourceContext, build_source
+
+    listener, _ = sessions
+    src = build_source("zenoh", {}, SourceContext(rig="r1", prefix="vpp", session=listener))
+    pipe = Pipeline(src, lambda f: None, [], rig="r1")  # type: ignore[arg-type, return-value]
+    src.open()
+    try:
+        line = pipe.summary_line()
+    finally:
+        src.stop(1.0)
+    assert line == "waiting for frames on vpp/r1/in/frame: nothing has arrived yet"

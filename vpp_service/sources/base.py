@@ -141,6 +141,10 @@ class Source(Plugin):
         """Valid input this source lost before emitting it, by cause (none by default)."""
         return {}
 
+    def waits_on(self) -> str:
+        """What this source takes frames from, for the live line while nothing has arrived (e.g. a key expression)."""
+        return f"the {type(self).__name__}"
+
 
 def parse_source_options(name: str, options: Mapping[str, Any] | None, section: str | None = None) -> object:
     """Validate ``options`` for source ``name`` without building it."""

@@ -96,6 +96,10 @@ class Ros2Source(Source):
             self._rings[role] = deque(maxlen=o.ring_size)
             self._node.subscribe(o.topic(role), o.ros_type(role), functools.partial(self._on_sample, role))
 
+    def waits_on(self) -> str:
+        """The ROS topics subscribed to."""
+        return "ROS topics " + ", ".join(self.options.topic(role) for role in self.options.roles())
+
     def _on_sample(self, role: str, sample: zenoh.Sample) -> None:
         """Zenoh callback: buffer the sample and wake the source's thread."""
         ring = self._rings[role]

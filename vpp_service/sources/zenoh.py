@@ -185,6 +185,10 @@ class ZenohSource(Source):
             handler = zenoh.handlers.Callback(partial(self._on_sample, part), indirect=False)
             self._subs[part] = session.declare_subscriber(key, handler)
 
+    def waits_on(self) -> str:
+        """The key expressions subscribed to."""
+        return ", ".join(wire.topic(self.context.prefix, self.context.rig, f"in/{part}") for part in self._rings)
+
     def start(self, emit: Emit, reject: Reject | None = None, on_finished: Callable[[], None] | None = None) -> None:
         """Start the receive thread; ``reject`` also hears of messages the subscriber callback turns away."""
         self._reject = reject
