@@ -583,7 +583,7 @@ class Pipeline:
         """
         st = self.status() if status is None else status
         c = st["counters"]
-        if c["received"] == 0 and not self.done.is_set():
+        if c["received"] == 0 and not self._stop.is_set():  # running, nothing yet (the final line has counters)
             return f"waiting for frames on {self.source.waits_on()}: nothing has arrived yet"
         lat = st["timing_ms"].get("latency")
         lat_s = f"lat p50 {lat['p50']:.0f} ms p99 {lat['p99']:.0f} ms" if lat else "lat -"
