@@ -151,3 +151,10 @@ def test_startup_and_closing_lines_say_where_things_are(tmp_path):
     assert f"rerun ({tmp_path / 'vpp.rrd'})" in line and "status vpp/rig0/@status" in line
     end = closing_line(cfg, {"processed": 7})
     assert "after 7 frames" in end and str(tmp_path / "summary.json") in end and str(tmp_path / "vpp.rrd") in end
+
+
+def test_check_reports_a_missing_sim_dataset_root(tmp_path, capsys):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[source]\ntype = "sim"\nscene = "dataset"\nroot = "{tmp_path / "nope"}"\n')
+    rc, _, err = _check(capsys, "--config", str(cfg))
+    assert rc == EXIT_STARTUP and "source.root: no such folder" in err and str(tmp_path / "nope") in err

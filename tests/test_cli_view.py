@@ -70,7 +70,8 @@ def test_view_records_a_running_service(tmp_path, zenoh_endpoint):
         service.send_signal(signal.SIGINT)
         finish(service, 30)
     assert rc == 0, err[-2000:]
-    summary = json.loads(out.strip().splitlines()[-1])
+    summary = json.loads(out)  # stdout is pure JSON: the banner goes to stderr
+    assert "view: watching vpp/rigT/out/*" in err
     got = summary["rigs"]["rigT"]
     assert got["received"]["disparity"] == 6 and got["rerun"]["errors"] == 0 and summary["rejected"] == 0
     assert summary["saved"] == [str(rrd)]
@@ -176,3 +177,25 @@ def test_viewer_logs_each_output_in_seq_order_once(tmp_path):
     order = summary["rigs"]["r1"]["order"]["disparity"]  # type: ignore[index]
     assert order["duplicates"] == 1 and order["gaps"] == 1 and order["late"] == 0
     assert read_rrd(tmp_path / "v.rrd")["/r1/disparity"]["seq"] == [0, 1, 2, 3, 4, 5, 7]
+
+
+def test_view_to_a_closed_port_says_it_could_not_connect(tmp_path, capsys):
+    from helpers.zenoh_loopback import free_port
+    from vpp_service.cli import EXIT_FAILURE, main
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"  # nothing listens there
+    rc = main(["view", "--connect", endpoint, "--save", str(tmp_path / "v.rrd"), "--duration", "5"])
+    captured = capsys.readouterr()
+    assert rc == EXIT_FAILURE and f"could not connect to {endpoint}" in captured.err
+    assert not (tmp_path / "v.rrd").exists()
+
+
+def test_view_cannot_spawn_a_viewer_without_a_display(monkeypatch, capsys):
+    from vpp_service.cli import EXIT_STARTUP, main
+
+    monkeypatch.setattr("sys.platform", "linux")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["view", "--duration", "1"]) == EXIT_STARTUP
+    err = capsys.readouterr().err
+    assert "cannot spawn a Rerun viewer: no display here" in err and "--save" in err

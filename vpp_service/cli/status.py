@@ -5,7 +5,14 @@ so --rig '*' lists every rig that answered, one entry each. The workers of a
 rig's pool (run --pool) answer on <prefix>/<rig>/@status/<worker-id>, one entry
 each, and the output adds <prefix>/<rig>/@pool: the members with their share
 and counters, and the pool's total fps. When no service answers within
---timeout it says so on stderr and exits 1.
+--timeout it says so on stderr and exits 1; when the endpoint cannot be reached
+it says it could not connect (exit 1).
+
+Which services answer: every service reachable through a Zenoh router, or, in a
+router-less mesh of peers, the services this command's session links to (the one
+at --connect, and the peers gossip leads it to that listen on an endpoint). A
+service that only connects out to another peer and listens nowhere cannot be
+reached this way: query it at its own endpoint, or run a router.
 """
 
 from __future__ import annotations

@@ -27,8 +27,10 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import queue
 import signal
+import sys
 import threading
 import time
 from collections import Counter, defaultdict
@@ -36,9 +38,12 @@ from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING
 
+from vpp_service.errors import StartupError
 from vpp_service.transport.reorder import ReorderBuffer
 
 if TYPE_CHECKING:
+    import zenoh
+
     from vpp_service.sinks.rerun import RerunSink
     from vpp_service.sinks.rerun_log import RerunParts
 
@@ -213,25 +218,16 @@ class Viewer:
 
 def main(args: argparse.Namespace) -> int:
     """Subscribe, log into Rerun until stopped, print the JSON summary."""
-    import zenoh
-
+    from vpp_service.cli import EXIT_FAILURE
     from vpp_service.service.app import zenoh_session
-    from vpp_service.service.config import ZenohSection
+    from vpp_service.service.config import ZenohSection, default_endpoint
     from vpp_service.transport.wire import topic
 
     if args.max_frames < 0 or args.duration < 0:
         raise ValueError("--max-frames and --duration must be >= 0")
     if args.rig != "*":
         topic(args.prefix, args.rig, "out")  # validates the names (ValueError: exit 2)
-    options: dict[str, object] = {"max_hz": 0, "queue_size": 64}
-    if args.save:
-        if not Path(args.save).expanduser().parent.is_dir():
-            raise FileNotFoundError(f"--save: folder {str(Path(args.save).parent)!r} does not exist")
-        options.update(mode="save", path=args.save)
-    elif args.rerun_connect:
-        options.update(mode="connect", url=args.rerun_connect)
-    else:
-        options.update(mode="spawn")
+    options = _rerun_options(args)
     if not 0 < args.reorder_ms <= 60000:
         raise ValueError(f"--reorder-ms must be in (0, 60000], got {args.reorder_ms}")
     viewer = Viewer(options, wildcard=args.rig == "*", reorder_ms=args.reorder_ms)
@@ -253,14 +249,18 @@ def main(args: argparse.Namespace) -> int:
     zsec = ZenohSection(
         mode="peer",
         listen=[],
-        connect=args.connect or ["tcp/127.0.0.1:7447"],
+        connect=args.connect or [default_endpoint()],
         multicast_scouting=args.multicast_scouting,
     )
     frames, t_end = 0, (time.monotonic() + args.duration) if args.duration else float("inf")
     try:
         with zenoh_session(zsec) as session:
+            if not _linked(session, stop, LINK_WAIT_S):
+                print(f"vpp-service view: could not connect to {', '.join(zsec.connect)}", file=sys.stderr)
+                return EXIT_FAILURE
             sub = session.declare_subscriber(f"{args.prefix}/{args.rig}/out/*", on_sample)
-            print(f"view: watching {args.prefix}/{args.rig}/out/* via {', '.join(zsec.connect)}", flush=True)
+            where = ", ".join(zsec.connect)
+            print(f"view: watching {args.prefix}/{args.rig}/out/* via {where}", file=sys.stderr, flush=True)
             while not stop.is_set() and time.monotonic() < t_end:
                 viewer.poll()
                 try:
@@ -278,4 +278,55 @@ def main(args: argparse.Namespace) -> int:
         summary = viewer.close()
     summary["lost"] = lost[0]
     print(json.dumps(summary))
+    failed = [rig for rig, sink in viewer.sinks.items() if sink.stats()["errors"] and not sink.stats()["written"]]
+    if failed:
+        print(
+            f"vpp-service view: the Rerun output ({options['mode']}) could not start for {', '.join(failed)}; "
+            "see the log above",
+            file=sys.stderr,
+        )
+        return EXIT_FAILURE
     return 0
+
+
+def _rerun_options(args: argparse.Namespace) -> dict[str, object]:
+    """The Rerun sink options of ``--save`` / ``--rerun-connect`` / a spawned viewer (checked up front).
+
+    Raises
+    ------
+    FileNotFoundError
+        ``--save`` into a folder that does not exist.
+    StartupError
+        A viewer to spawn on a Linux machine without a display.
+    """
+    options: dict[str, object] = {"max_hz": 0, "queue_size": 64}
+    if args.save:
+        if not Path(args.save).expanduser().parent.is_dir():
+            raise FileNotFoundError(f"--save: folder {str(Path(args.save).parent)!r} does not exist")
+        options.update(mode="save", path=args.save)
+    elif args.rerun_connect:
+        options.update(mode="connect", url=args.rerun_connect)
+    else:
+        if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+            raise StartupError(
+                "cannot spawn a Rerun viewer: no display here (DISPLAY and WAYLAND_DISPLAY are unset); "
+                "use --save PATH or --rerun-connect URL"
+            )
+        options.update(mode="spawn")
+    return options
+
+
+#: How long ``view`` waits for its session to reach a connect endpoint before it gives up.
+LINK_WAIT_S = 3.0
+
+
+def _linked(session: zenoh.Session, stop: threading.Event, seconds: float) -> bool:
+    """Wait up to ``seconds`` for ``session`` to reach a router or peer; True once it has."""
+    from vpp_service.service.app import has_link
+
+    deadline = time.monotonic() + seconds
+    while not has_link(session):
+        if stop.is_set() or time.monotonic() >= deadline:
+            return False
+        time.sleep(0.05)
+    return True

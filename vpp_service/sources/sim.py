@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 import cv2
@@ -169,6 +170,12 @@ class SimSource(Source):
             build_sensor_or_none(options.sensor, dict(options.sensor_options))
         except ValueError as exc:
             raise SettingsError(f"{section}.sensor_options: {exc}") from None
+
+    @classmethod
+    def check_paths(cls, options: SimSourceOptions, section: str, created_dirs: frozenset[Path] = frozenset()) -> None:
+        """``scene = "dataset"``: ``root`` must be an existing folder (as for the files source)."""
+        if options.scene == "dataset" and not Path(options.root).expanduser().is_dir():
+            raise FileNotFoundError(f"{section}.root: no such folder: {options.root}")
 
     def __init__(self, options: SimSourceOptions, context: SourceContext) -> None:
         super().__init__(options, context)
