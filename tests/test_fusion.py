@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vpp_service.evaluation.metrics import compute_metrics
+from vpp_service.evaluation.metrics import answered_metrics, compute_metrics
 from vpp_service.frame import StereoFrame
 from vpp_service.fusion import Fusion, fuse, score, sparse_disparity
 from vpp_service.matchers import build_matcher, fill_holes
@@ -36,7 +36,9 @@ def test_fuse_with_vpp_is_project_then_match(frame, matcher):
     np.testing.assert_array_equal(res.occluded, painted.occluded)
     np.testing.assert_array_equal(res.disparity, disp)
     assert res.vpp_stats == painted.stats.to_dict() and res.vpp_stats["projected"] > 0
-    assert res.metrics == compute_metrics(disp, frame.gt_disparity)  # the raw output, no *_nocc
+    raw = compute_metrics(disp, frame.gt_disparity)  # the raw output, no *_nocc, plus the three reported numbers
+    filled = compute_metrics(fill_holes(disp), frame.gt_disparity)["bad2"]
+    assert res.metrics == {**raw, **answered_metrics(raw), "bad2_filled": filled}
     c = frame.calib
     np.testing.assert_array_equal(res.depth, disparity_to_depth(disp, c.f, c.baseline, c.doffs).astype(np.float32))
     assert {"vpp", "match", "process"} <= res.timing_ms.keys()

@@ -10,10 +10,11 @@ import zenoh
 
 from helpers.frames import make_frame
 from helpers.zenoh_loopback import zenoh_test_config
-from vpp_service.evaluation.metrics import compute_metrics
+from vpp_service.evaluation.metrics import answered_metrics, compute_metrics
 from vpp_service.frame import FusionResult, StereoFrame
-from vpp_service.fusion import Fusion
-from vpp_service.service.pipeline import Pipeline, StageTimer, answered_metrics
+from vpp_service.fusion import Fusion, score
+from vpp_service.matchers import fill_holes
+from vpp_service.service.pipeline import Pipeline, StageTimer
 from vpp_service.sinks.base import Sink, SinkContext
 from vpp_service.sources.base import Source, SourceContext, build_source
 from vpp_service.transport import wire
@@ -188,12 +189,15 @@ def test_answered_metrics_split_bad2_from_density():
 
 
 def test_status_and_summary_report_bad2_of_answered_pixels_and_density():
+    last_disp, last_gt = [None], [None]
+
     def process(frame: StereoFrame) -> FusionResult:
         gt = frame.gt_disparity
         disp = gt.copy()
         disp[:, : gt.shape[1] // 4] = np.nan
         disp[::10, gt.shape[1] // 2 :] += 5.0
-        return FusionResult(frame=frame, disparity=disp, metrics=compute_metrics(disp, gt), timing_ms={"match": 1.0})
+        last_disp[0], last_gt[0] = disp, gt
+        return FusionResult(frame=frame, disparity=disp, metrics=score(disp, frame), timing_ms={"match": 1.0})
 
     pipe = Pipeline(sim_source(3), process, [CollectSink()], input_policy="block")
     assert pipe.status()["metrics"]["density_mean"] is None and "density" not in pipe.summary_line()
@@ -206,14 +210,17 @@ def test_status_and_summary_report_bad2_of_answered_pixels_and_density():
     )
     assert 70.0 < m["density_mean"] < 80.0
     assert 6.0 < m["bad2_answered_mean"] < 7.5  # every 10th row of 2/3 of the answered columns: 6.7 %
-    assert m["bad2_mean"] == pytest.approx(last["bad2"]) and m["bad2_mean"] > m["bad2_answered_mean"] + 20.0
+    filled = compute_metrics(fill_holes(last_disp[0]), last_gt[0])["bad2"]  # the eval protocol's score
+    assert m["bad2_filled_mean"] == pytest.approx(last["bad2_filled"]) and last["bad2_filled"] == pytest.approx(filled)
+    assert last["bad2"] > m["bad2_answered_mean"] + 20.0  # the raw score counts the holes as bad: not reported
     assert gt_ok > 0
     assert "density" in pipe.summary_line()
     st = pipe.status()
     st["fps"] = 1234.5  # a status the caller already has is used as given
     line = pipe.summary_line(st)
     assert line.startswith("1234.5 fps |")
-    assert f"bad-2 {m['bad2_answered_mean']:.2f} %" in line and f"density {m['density_mean']:.1f} %" in line
+    assert f"bad-2 {m['bad2_answered_mean']:.2f} % of answered, density {m['density_mean']:.1f} %" in line
+    assert f"filled {m['bad2_filled_mean']:.2f} %" in line
 
 
 def test_pipeline_bad_args():

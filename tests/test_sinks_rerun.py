@@ -532,3 +532,26 @@ def test_disparity_range():
 def test_colorize_errors(args, exc, key):
     with pytest.raises(exc, match=key):
         colorize_disparity(*args)
+
+
+def test_accuracy_against_ground_truth_is_logged_as_scalars(tmp_path):
+    from vpp_service.fusion import score
+
+    sink = save_sink(tmp_path)
+    results = [make_result(i) for i in range(2)]
+    for r in results:
+        r.frame.gt_disparity = np.where(np.isfinite(r.disparity), r.disparity, 10.0) + np.float32(r.frame.seq * 3)
+        r.metrics = score(r.disparity, r.frame)  # what the service's fusion step reports
+        sink.write(r)
+    sink.close(timeout=10)
+    data = read_rrd(tmp_path / "out.rrd")
+    for name in ("bad2_answered", "density", "bad2_filled"):
+        logged = [v[0] for v in data[f"/{RIG}/accuracy/{name}"]["Scalars:scalars"]]
+        assert np.allclose(logged, [r.metrics[name] for r in results]), name
+
+
+def test_no_accuracy_entity_without_ground_truth(tmp_path):
+    sink = save_sink(tmp_path)
+    sink.write(make_result(0))
+    sink.close(timeout=10)
+    assert not [e for e in read_rrd(tmp_path / "out.rrd") if "/accuracy" in e]

@@ -35,7 +35,7 @@ import time
 
 import numpy as np
 
-from vpp_service.evaluation.metrics import compute_metrics
+from vpp_service.evaluation.metrics import answered_metrics, compute_metrics
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.matchers.base import Matcher
 from vpp_service.matchers.disparity_range import AutoRangeOptions, DisparityRange, MatcherCache
@@ -68,15 +68,19 @@ def score(disparity: np.ndarray, frame: StereoFrame, protocol: bool = False) -> 
     protocol : bool
         Score as the evaluation protocol: fill the holes first and add
         ``*_nocc`` metrics when the frame has a mask. False: the raw output
-        over all valid-GT pixels (what the service reports).
+        over all valid-GT pixels plus the three numbers every report shows,
+        ``bad2_answered``, ``density`` and ``bad2_filled`` (what the service
+        reports; see :mod:`vpp_service.evaluation.metrics`).
     """
     if frame.gt_disparity is None:
         return {}
-    if not protocol:
-        return compute_metrics(disparity, frame.gt_disparity)
     from vpp_service.matchers.holes import fill_holes
 
     filled = fill_holes(disparity)
+    if not protocol:
+        raw = compute_metrics(disparity, frame.gt_disparity)
+        bad2_filled = compute_metrics(filled, frame.gt_disparity, taus=(2.0,))["bad2"]
+        return {**raw, **answered_metrics(raw), "bad2_filled": bad2_filled}
     out = compute_metrics(filled, frame.gt_disparity)
     if frame.nocc_mask is not None:
         for k, v in compute_metrics(filled, frame.gt_disparity, mask=frame.nocc_mask.astype(bool)).items():

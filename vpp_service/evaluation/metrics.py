@@ -13,11 +13,19 @@ function, it counts as *bad for every τ* and is *left out of* ``avg`` and
 ``rms`` (which are over the finite predictions only); ``invalid`` reports the
 percentage of scored pixels without a prediction. With no scored pixel,
 every value is NaN and ``n`` is 0.
+
+**The three numbers every report shows** (``demo``, the live line, ``summary.json``,
+``@status``, Rerun), always under these names:
+
+* ``bad2_answered`` - bad-2 (%) over the pixels with ground truth that got a value;
+* ``density`` - the percentage of pixels with ground truth that got a value;
+* ``bad2_filled`` - bad-2 (%) over every pixel with ground truth after the holes are
+  filled by background interpolation, as ``eval`` and ``docs/results.md`` score.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 
@@ -122,4 +130,20 @@ def compute_metrics(
     return out
 
 
-__all__ = ["compute_metrics", "metric_key"]
+def answered_metrics(metrics: Mapping[str, float]) -> dict[str, float]:
+    """``density`` and ``bad2_answered`` (percent) from one frame's raw ``bad2`` and ``invalid``.
+
+    :func:`compute_metrics` counts a pixel without a value as bad, so
+    ``bad2 = bad_answered + invalid`` (percent of the pixels with ground
+    truth); this splits the two. ``{}`` when the metrics lack either key or
+    nothing was scored; ``bad2_answered`` is NaN when no pixel got a value.
+    """
+    bad2, invalid = metrics.get("bad2"), metrics.get("invalid")
+    if bad2 is None or invalid is None or not (np.isfinite(bad2) and np.isfinite(invalid)):
+        return {}
+    density = 100.0 - invalid
+    bad = max(0.0, (bad2 - invalid) / density * 100.0) if density > 0 else float("nan")
+    return {"density": density, "bad2_answered": bad}
+
+
+__all__ = ["answered_metrics", "compute_metrics", "metric_key"]

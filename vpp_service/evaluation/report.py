@@ -227,14 +227,89 @@ def plot_sweep(path: str | Path, rows: list[ResultRow], metric: str = "bad2", ti
     plt.close(fig)
 
 
+def error_map(disparity: np.ndarray, gt: np.ndarray, tau: float = 2.0) -> np.ndarray:
+    """RGB uint8 map of ``disparity``'s errors: green within ``tau`` px, red beyond, grey no value, black no GT.
+
+    Raises
+    ------
+    ValueError
+        ``disparity`` and ``gt`` differ in shape.
+    """
+    if disparity.shape != gt.shape:
+        raise ValueError(f"disparity {disparity.shape} and gt {gt.shape} differ in shape")
+    has_gt = np.isfinite(gt) & (gt > 0)
+    has_value = np.isfinite(disparity)
+    out = np.zeros((*gt.shape, 3), np.uint8)
+    bad = np.zeros(gt.shape, bool)
+    bad[has_gt & has_value] = np.abs(disparity[has_gt & has_value] - gt[has_gt & has_value]) > tau
+    out[has_gt & has_value & ~bad] = (60, 170, 60)
+    out[bad] = (220, 40, 40)
+    out[has_gt & ~has_value] = (128, 128, 128)
+    return out
+
+
+def plot_comparison(
+    path: str | Path,
+    image: np.ndarray,
+    gt: np.ndarray,
+    maps: Mapping[str, tuple[np.ndarray, str]],
+    title: str,
+) -> None:
+    """Save a PNG comparing disparity maps with ground truth: the maps, their bad-2 error maps, one colour bar.
+
+    Parameters
+    ----------
+    path : str or Path
+        The PNG to write.
+    image : ndarray
+        The (painted) left image shown beside the ground truth, H x W x 3 RGB or H x W uint8.
+    gt : ndarray
+        Ground-truth disparity (NaN / <= 0 = none).
+    maps : mapping
+        ``{name: (disparity, caption)}``, e.g. baseline and VPP with their scores.
+    title : str
+        Figure title.
+    """
+    import matplotlib as mpl
+
+    mpl.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    valid = np.isfinite(gt) & (gt > 0)
+    vmax = float(np.max(gt[valid])) if valid.any() else 1.0
+    cmap = mpl.colormaps["turbo"].with_extremes(bad="black")
+    cols = max(len(maps), 2)
+    fig, axes = plt.subplots(3, cols, figsize=(5.5 * cols, 12), dpi=90, squeeze=False, layout="constrained")
+    axes[0][0].imshow(image, cmap="gray" if image.ndim == 2 else None)
+    axes[0][0].set_title("left image, as the matcher saw it", fontsize=10)
+    im = axes[0][1].imshow(np.where(valid, gt, np.nan), cmap=cmap, vmin=0, vmax=vmax)
+    axes[0][1].set_title("ground truth (black: none)", fontsize=10)
+    for ax in axes[0][2:]:
+        ax.set_visible(False)
+    for k, (name, (disp, caption)) in enumerate(maps.items()):
+        axes[1][k].imshow(np.where(np.isfinite(disp), disp, np.nan), cmap=cmap, vmin=0, vmax=vmax)
+        axes[1][k].set_title(f"{name} (black: no value)\n{caption}", fontsize=10)
+        axes[2][k].imshow(error_map(disp, gt))
+        axes[2][k].set_title(f"{name}: bad-2 pixels", fontsize=10)
+    for ax in axes.ravel():
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.colorbar(im, ax=axes[:2, :].ravel().tolist(), shrink=0.7, label="disparity [px]")
+    fig.suptitle(f"{title}\nerror maps: red off by > 2 px, green within 2 px, grey no value, black no ground truth")
+    fig.savefig(str(path), format="png")
+    plt.close(fig)
+
+
 __all__ = [
     "JSON",
     "Means",
     "Summary",
     "density_key",
+    "error_map",
     "is_sweep",
     "json_safe",
     "markdown_report",
+    "plot_comparison",
     "plot_sweep",
     "summarize",
     "write_json",

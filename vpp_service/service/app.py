@@ -379,7 +379,7 @@ def _not_started(cfg: ServiceConfig) -> ServiceSummary:
         "timing_ms": {},
         "source": {},
         "sinks": {},
-        "metrics": {"last": {}, "bad2_mean": None, "bad2_answered_mean": None, "density_mean": None},
+        "metrics": {"last": {}, "bad2_answered_mean": None, "density_mean": None, "bad2_filled_mean": None},
         "shutdown_s": 0.0,
         "summary_write_errors": 0,
         "config": cfg.to_dict(),

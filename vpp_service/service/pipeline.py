@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, NotRequired, TypedDict
 
 import numpy as np
 
+from vpp_service.evaluation.metrics import answered_metrics
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.queueing import Policy, QueueWorker
 from vpp_service.service.pool import PoolStatus
@@ -76,35 +77,20 @@ class QueueStatus(TypedDict):
 class MetricsStatus(TypedDict):
     """Accuracy against ground truth (frames that carry it), means over the timing window.
 
-    ``last`` is the last frame's :func:`~vpp_service.evaluation.metrics.compute_metrics`
-    plus its ``bad2_answered`` and ``density``. The two honest numbers are
-    reported apart: ``bad2_answered_mean`` is bad-2 (percent) over the pixels
-    with ground truth that got a value, ``density_mean`` the percentage of
-    pixels with ground truth that got one. ``bad2_mean`` mixes both (a pixel
-    without a value counts as bad), as the evaluation protocol's raw score does.
-    None until a frame with ground truth was processed.
+    The three numbers of every report (:mod:`vpp_service.evaluation.metrics`):
+    ``bad2_answered_mean`` is bad-2 (percent) over the pixels with ground truth
+    that got a value, ``density_mean`` the percentage of pixels with ground truth
+    that got one, and ``bad2_filled_mean`` bad-2 with the holes filled first, as
+    ``eval`` scores. ``last`` is the last frame's
+    :func:`~vpp_service.evaluation.metrics.compute_metrics` (raw: a pixel without
+    a value counts as bad) plus the three. None until a frame with ground truth
+    was processed.
     """
 
     last: dict[str, float]
-    bad2_mean: float | None
     bad2_answered_mean: float | None
     density_mean: float | None
-
-
-def answered_metrics(metrics: Mapping[str, float]) -> dict[str, float]:
-    """``density`` and ``bad2_answered`` (percent) from one frame's ``bad2`` and ``invalid``.
-
-    ``compute_metrics`` counts a pixel without a value as bad, so
-    ``bad2 = bad_answered + invalid`` (percent of the pixels with ground
-    truth); this splits the two. ``{}`` when the metrics lack either key or
-    nothing was scored; ``bad2_answered`` is NaN when no pixel got a value.
-    """
-    bad2, invalid = metrics.get("bad2"), metrics.get("invalid")
-    if bad2 is None or invalid is None or not (np.isfinite(bad2) and np.isfinite(invalid)):
-        return {}
-    density = 100.0 - invalid
-    bad = max(0.0, (bad2 - invalid) / density * 100.0) if density > 0 else float("nan")
-    return {"density": density, "bad2_answered": bad}
+    bad2_filled_mean: float | None
 
 
 #: Seconds over which ``fps`` is measured (a recent window: it falls to 0 when frames stop coming).
@@ -256,7 +242,7 @@ class Pipeline:
         self._suppressed = 0
         self._started = 0.0
         self._last_metrics: dict[str, float] = {}
-        self._bad2: deque[float] = deque(maxlen=timing_window)
+        self._bad2_filled: deque[float] = deque(maxlen=timing_window)
         self._bad2_answered: deque[float] = deque(maxlen=timing_window)
         self._density: deque[float] = deque(maxlen=timing_window)
         self._done_at: deque[float] = deque(maxlen=10000)  # monotonic time of each processed frame (for fps)
@@ -331,8 +317,8 @@ class Pipeline:
         if result.metrics:
             split = answered_metrics(result.metrics)
             self._last_metrics = {**result.metrics, **split}
-            if "bad2" in result.metrics:
-                self._bad2.append(result.metrics["bad2"])
+            if "bad2_filled" in result.metrics:
+                self._bad2_filled.append(result.metrics["bad2_filled"])
             if split:
                 self._density.append(split["density"])
                 if np.isfinite(split["bad2_answered"]):
@@ -525,9 +511,9 @@ class Pipeline:
             "sinks": sinks,
             "metrics": {
                 "last": self._last_metrics,
-                "bad2_mean": _mean(self._bad2),
                 "bad2_answered_mean": _mean(self._bad2_answered),
                 "density_mean": _mean(self._density),
+                "bad2_filled_mean": _mean(self._bad2_filled),
             },
         }
         if self.pool is not None:
@@ -591,8 +577,10 @@ class Pipeline:
         bad_s = ""
         if m["density_mean"] is not None:
             # two numbers, never mixed: accuracy of the values given, and how many pixels got one
-            bad2 = m["bad2_answered_mean"]
-            bad_s = (" | bad-2 -" if bad2 is None else f" | bad-2 {bad2:.2f} %") + f" density {m['density_mean']:.1f} %"
+            bad2, filled = m["bad2_answered_mean"], m["bad2_filled_mean"]
+            bad_s = (" | bad-2 -" if bad2 is None else f" | bad-2 {bad2:.2f} % of answered") + (
+                f", density {m['density_mean']:.1f} %" + ("" if filled is None else f", filled {filled:.2f} %")
+            )
         throttled = sum(n for s in st["sinks"].values() if isinstance(n := s.get("throttled"), int))
         thr_s = f" throttled {throttled}" if throttled else ""  # skipped on purpose (a viewer's max_hz), not lost
         return (
@@ -613,5 +601,4 @@ __all__ = [
     "PipelineStatus",
     "QueueStatus",
     "StageTimer",
-    "answered_metrics",
 ]

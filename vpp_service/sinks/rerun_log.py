@@ -23,6 +23,9 @@ Entities (root = the rig's name)
     are left out so that the view's bounds are the scene's.
 ``<rig>/timing/<stage>``
     Per-stage milliseconds as scalars.
+``<rig>/accuracy/<name>``
+    When the frame carries ground truth: ``bad2_answered``, ``density`` and
+    ``bad2_filled`` (percent; :mod:`vpp_service.evaluation.metrics`) as scalars.
 
 Colour ranges are fixed per recording: given, or taken once from the first frame
 (robust percentiles) and then kept, so colours never jump between frames.
@@ -70,6 +73,8 @@ class RerunParts:
         N x 3 float32 rows ``(x, y, disparity)`` (pixel indices).
     timing_ms : dict
         Stage name -> milliseconds.
+    accuracy : dict
+        The reported accuracy numbers against ground truth (empty without it).
     """
 
     rig: str
@@ -82,6 +87,11 @@ class RerunParts:
     calib: Calibration | None = None
     sparse: np.ndarray | None = None
     timing_ms: dict[str, float] = field(default_factory=dict)
+    accuracy: dict[str, float] = field(default_factory=dict)
+
+
+#: The accuracy numbers logged under ``<rig>/accuracy/`` (the three every report shows).
+ACCURACY_KEYS = ("bad2_answered", "density", "bad2_filled")
 
 
 def parts_from_result(result: FusionResult, log_painted: bool = True) -> RerunParts:
@@ -99,6 +109,7 @@ def parts_from_result(result: FusionResult, log_painted: bool = True) -> RerunPa
         calib=fr.calib,
         sparse=sparse_to_points(fr.sparse_disparity),
         timing_ms=dict(result.timing_ms),
+        accuracy={k: float(result.metrics[k]) for k in ACCURACY_KEYS if k in result.metrics},
     )
 
 
@@ -196,7 +207,10 @@ class RerunLayout:
                 rrb.Horizontal(
                     rrb.Spatial2DView(origin=f"{r}/disparity", name="disparity [px]"),
                     rrb.Spatial3DView(origin=r, contents=[f"{r}/camera/**"], name="3-D", eye_controls=eye),
-                    rrb.TimeSeriesView(origin=f"{r}/timing", name="timing [ms]"),
+                    rrb.Vertical(
+                        rrb.TimeSeriesView(origin=f"{r}/timing", name="timing [ms]"),
+                        rrb.TimeSeriesView(origin=f"{r}/accuracy", name="accuracy vs GT [%]"),
+                    ),
                     column_shares=[2, 2, 1],
                 ),
             ),
@@ -278,9 +292,10 @@ class RerunLayout:
             depth = self._depth(parts)
             if depth is not None:
                 self._log_depth(rec, root, depth, parts.calib)
-        for stage, ms in parts.timing_ms.items():
-            if isinstance(ms, (int, float)) and math.isfinite(ms) and ENTITY_RE.match(str(stage)):
-                rec.log(f"{root}/timing/{stage}", rr.Scalars(float(ms)))
+        for group, values in (("timing", parts.timing_ms), ("accuracy", parts.accuracy)):
+            for name, v in values.items():
+                if isinstance(v, (int, float)) and math.isfinite(v) and ENTITY_RE.match(str(name)):
+                    rec.log(f"{root}/{group}/{name}", rr.Scalars(float(v)))
 
     def _log_depth(self, rec: rr.RecordingStream, root: str, depth: np.ndarray, c: Calibration) -> None:
         import rerun as rr

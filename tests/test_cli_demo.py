@@ -1,0 +1,67 @@
+"""``vpp-service demo``: the three reported numbers, a figure with a colour bar and error maps; error_map."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from vpp_service.cli import main
+from vpp_service.evaluation.metrics import compute_metrics
+from vpp_service.evaluation.report import error_map
+
+
+def test_demo_reports_the_three_numbers_and_draws_the_figure(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    for method in ("baseline", "vpp"):
+        s = summary[method]
+        assert set(s) == {"bad2_answered", "density", "bad2_filled", "filled"}
+        assert 0 < s["density"] <= 100 and s["filled"]["bad2"] == pytest.approx(s["bad2_filled"])
+        row = next(line for line in printed.splitlines() if line.startswith(method))
+        assert f"{s['bad2_answered']:.2f}" in row and f"{s['density']:.1f}" in row and f"{s['bad2_filled']:.2f}" in row
+    assert summary["vpp"]["bad2_filled"] < summary["baseline"]["bad2_filled"]  # against ground truth: VPP helps
+    assert "holes filled before scoring" in printed
+    figure = cv2.imread(str(tmp_path / "demo.png"))
+    assert figure is not None and figure.shape[0] > 500 and figure.shape[1] > 500
+    assert not (tmp_path / "disparity_baseline.png").exists()  # the bare colour maps are gone
+
+
+def plain_error_map(disp: np.ndarray, gt: np.ndarray, tau: float) -> np.ndarray:
+    out = np.zeros((*gt.shape, 3), np.uint8)
+    for y in range(gt.shape[0]):
+        for x in range(gt.shape[1]):
+            g, d = gt[y, x], disp[y, x]
+            if not (np.isfinite(g) and g > 0):
+                continue
+            if not np.isfinite(d):
+                out[y, x] = (128, 128, 128)
+            elif abs(d - g) > tau:
+                out[y, x] = (220, 40, 40)
+            else:
+                out[y, x] = (60, 170, 60)
+    return out
+
+
+@pytest.mark.parametrize("tau", [0.5, 2.0])
+def test_error_map_matches_a_plain_loop(tau):
+    rng = np.random.default_rng(3)
+    gt = rng.uniform(0, 20, (9, 13)).astype(np.float32)
+    gt[rng.random(gt.shape) < 0.2] = np.nan
+    gt[0, 0] = 0.0
+    disp = gt + rng.normal(0, 2, gt.shape).astype(np.float32)
+    disp[rng.random(gt.shape) < 0.2] = np.nan
+    np.testing.assert_array_equal(error_map(disp, gt, tau), plain_error_map(disp, gt, tau))
+    red = (error_map(disp, gt, tau) == (220, 40, 40)).all(axis=2).sum()
+    scored = np.isfinite(gt) & (gt > 0)
+    assert red / scored.sum() * 100 + compute_metrics(disp, gt, taus=(tau,))["invalid"] == pytest.approx(
+        compute_metrics(disp, gt, taus=(tau,))[f"bad{tau:g}"]
+    )
+
+
+def test_error_map_rejects_mismatched_shapes():
+    with pytest.raises(ValueError, match="differ in shape"):
+        error_map(np.zeros((2, 3), np.float32), np.zeros((3, 2), np.float32))
