@@ -96,3 +96,11 @@ def test_help_shows_defaults():
 def test_top_level_help_states_the_exit_statuses():
     text = build_parser().format_help()
     assert "exit status" in text and f"{EXIT_STARTUP} configuration or start-up error" in text
+
+
+def test_a_multi_line_error_is_shown_whole(tmp_path, capsys):
+    (tmp_path / "not-a-scene").mkdir()
+    assert main(["eval", "--root", str(tmp_path), "--methods", "baseline"]) == EXIT_STARTUP
+    err = capsys.readouterr().err
+    assert "no known dataset layout" in err and "looked for:" in err
+    assert "middlebury2006: <scene>/view1.png" in err and "kitti2012:" in err  # the list after the first line
