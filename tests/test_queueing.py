@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from vpp_service.queueing import BoundedQueue, QueueWorker
+from vpp_service.queueing import BoundedQueue, QueueWorker, ReceiveRings
 
 
 def reference_queue(items, size):
@@ -249,3 +249,52 @@ def test_close_without_start_discards_at_once():
     t0 = time.monotonic()
     assert w.close(5.0) is False and time.monotonic() - t0 < 0.5
     assert w.closed and w.discarded == 1 and len(w) == 0
+
+
+# ------------------------------------------------------------ ReceiveRings
+def test_receive_rings_latest_drops_the_oldest_per_topic_and_counts():
+    rings: ReceiveRings[int] = ReceiveRings({"a": 2, "b": 1}, "latest")
+    for i in range(5):
+        rings.put("a", i)
+    rings.put("b", 10)
+    rings.put("b", 11)
+    assert rings.dropped == {"a": 3, "b": 1} and rings.dropped_total == 4 and len(rings) == 3
+    assert [rings.take("a"), rings.take("a"), rings.take("a")] == [3, 4, None]
+    assert rings.take("b") == 11 and rings.keys == ["a", "b"]
+
+
+def test_receive_rings_block_waits_for_room_and_loses_nothing():
+    rings: ReceiveRings[int] = ReceiveRings({"a": 1}, "block")
+    rings.put("a", 0)
+    done = threading.Event()
+    threading.Thread(target=lambda: (rings.put("a", 1), done.set()), daemon=True).start()
+    assert not done.wait(0.2)  # the producer waits: the ring is full
+    assert rings.take("a") == 0
+    assert done.wait(2.0) and rings.take("a") == 1 and rings.dropped_total == 0
+
+
+def test_receive_rings_close_releases_a_blocked_producer_and_counts_its_drop():
+    rings: ReceiveRings[int] = ReceiveRings({"a": 1}, "block")
+    rings.put("a", 0)
+    done = threading.Event()
+    threading.Thread(target=lambda: (rings.put("a", 1), done.set()), daemon=True).start()
+    assert not done.wait(0.1)
+    rings.close()
+    assert done.wait(2.0) and rings.dropped == {"a": 1} and rings.take("a") == 1
+    assert rings.wait(0.01) is False  # closed and empty: no wait
+
+
+def test_receive_rings_wait_wakes_on_a_message():
+    rings: ReceiveRings[int] = ReceiveRings({"a": 4})
+    threading.Timer(0.1, rings.put, ("a", 7)).start()
+    t0 = time.monotonic()
+    assert rings.wait(5.0) and time.monotonic() - t0 < 2.0
+
+
+@pytest.mark.parametrize(
+    ("sizes", "policy", "match"),
+    [({}, "latest", "at least one"), ({"a": 0}, "latest", "sizes"), ({"a": 1}, "newest", "policy")],
+)
+def test_receive_rings_bad_arguments(sizes, policy, match):
+    with pytest.raises(ValueError, match=match):
+        ReceiveRings(sizes, policy)

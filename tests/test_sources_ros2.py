@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from helpers.ros2_robot import Robot, StereoRig, image_msg
+from helpers.ros2_robot import Robot, StereoRig, camera_info_from_p, cloud_msg, image_msg
 from vpp_service.sources.base import SourceContext, build_source
 
 LEGACY = (
@@ -91,3 +91,70 @@ def test_oversized_sample_refused_before_copy(sessions):
     finally:
         robot.close()
         src.stop(2.0)
+
+
+def test_ring_drops_of_the_latest_policy_reach_losses(sessions):
+    """Messages that arrive while the source's thread is not draining: a full ring drops the oldest, counted."""
+    svc, bot = sessions
+    src = build_source("ros2", {"ring_size": 2}, SourceContext(rig="r", session=svc))
+    src.open()  # subscribed, thread not started: nothing drains the rings
+    robot = Robot(bot)
+    try:
+        assert robot.wait_for_subscribers(["left/image_rect"])
+        rig = tiny_rig()
+        for k in range(5):
+            robot.put("left/image_rect", image_msg(rig.left, 1_000 + k, "l"))
+        assert wait_for(lambda: src.stats()["ring_dropped"] == 3)
+        assert src.losses()["source_ring"] == 3
+    finally:
+        robot.close()
+        src.stop(2.0)
+
+
+@pytest.mark.parametrize("policy", ["block", "latest"])
+def test_overload_loses_nothing_under_block_and_counts_every_drop_under_latest(sessions, policy):
+    """12 sets sent as fast as possible to a slow pipeline (and one set whose image is rejected)."""
+    from vpp_service.frame import FusionResult
+    from vpp_service.service.pipeline import Pipeline
+
+    svc, bot = sessions
+    # rings deep enough for every message: the overload meets the pipeline's input queue, in frames
+    opts = {"depth_wait_ms": 2000.0, "ring_size": 100, "sync_queue_size": 32}  # a 13-set burst fits the sync
+    src = build_source("ros2", opts, SourceContext(rig="r", session=svc))
+
+    def slow(frame):
+        time.sleep(0.05)
+        return FusionResult(frame=frame, disparity=np.zeros(frame.shape, np.float32), timing_ms={"match": 50.0})
+
+    pipe = Pipeline(src, slow, [], input_size=1, input_policy=policy, rig="r")
+    pipe.start()
+    robot = Robot(bot)
+    try:
+        assert robot.wait_for_subscribers(["left/image_rect", "right/image_rect", "points"])
+        rig = tiny_rig()
+        h, w = rig.left.shape[:2]  # one whole set whose left image is bgra8: joined, then refused
+        robot.put("left/image_rect", image_msg(np.zeros((h, w, 4), np.uint8), 400, "l", encoding="bgra8"))
+        robot.put("right/image_rect", image_msg(rig.right, 400, "r"))
+        robot.put("left/camera_info", camera_info_from_p(400, "l", (w, h), rig.projection(right=False)))
+        robot.put("right/camera_info", camera_info_from_p(400, "r", (w, h), rig.projection(right=True)))
+        robot.put("points", cloud_msg(rig.cloud, 400, "l"))
+        for k in range(12):
+            robot.publish(rig, 1_000 + k)
+        sent = 12
+        arrived = wait_for(
+            lambda: pipe.status()["counters"]["processed"] + pipe.status()["dropped"].get("input_queue", 0) >= sent,
+            timeout=30,
+        )
+        assert arrived, pipe.status()
+        time.sleep(0.3)
+        st = pipe.status()
+    finally:
+        robot.close()
+        pipe.stop(2.0)
+    c, d = st["counters"], st["dropped"]
+    assert c["rejected"] >= 1 and st["source"]["rejected_by"], st["source"]
+    if policy == "block":
+        assert c["processed"] == sent and c["dropped"] == 0, d
+    else:
+        assert c["processed"] + d["input_queue"] == sent and d["input_queue"] > 0, d
+        assert c["dropped"] == sum(d.values()) == d["input_queue"], d

@@ -17,6 +17,7 @@ service must know about a plugin it asks the plugin (:attr:`Plugin.needs_session
 
 from __future__ import annotations
 
+import threading
 from abc import ABC
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -139,13 +140,20 @@ class Plugin(ABC):
         self.options = options
         self.context = context
         self._counters: dict[str, int] = dict.fromkeys(self.counter_names, 0)
+        self._counters_lock = threading.Lock()
 
     def open(self) -> None:  # noqa: B027 - optional hook
         """Acquire resources (files, sessions, threads)."""
 
+    def count(self, name: str, n: int = 1) -> None:
+        """Add ``n`` to counter ``name`` under the counters' one lock (safe from any thread)."""
+        with self._counters_lock:
+            self._counters[name] = self._counters.get(name, 0) + n
+
     def stats(self) -> dict[str, int]:
         """A copy of the counters (see ``counter_names``; subclasses may add extras)."""
-        return dict(self._counters)
+        with self._counters_lock:
+            return dict(self._counters)
 
 
 P = TypeVar("P", bound=Plugin)

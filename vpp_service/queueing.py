@@ -1,4 +1,4 @@
-"""A bounded queue and the one thread that drains it: how the service hands work between threads.
+"""A bounded queue and the one thread that drains it, and a network source's receive rings.
 
 The pipeline (source -> process -> sinks) and every sink that must not block
 the pipeline (Zenoh publishing, Rerun logging) decouple a producer from a slower
@@ -337,4 +337,100 @@ class QueueWorker(Generic[T]):
         self._call("on_exit", self._on_exit)
 
 
-__all__ = ["POLICIES", "BoundedQueue", "Policy", "QueueWorker"]
+class ReceiveRings(Generic[T]):
+    """The receive rings of a network source: one bounded ring per topic, one policy, one count of drops.
+
+    The network's callback threads :meth:`put` (each message into its topic's
+    ring); the source's own thread :meth:`take` s them and :meth:`wait` s for more.
+    The pipeline's input policy applies here, in one place, for every network
+    source (Zenoh, ROS 2)::
+
+        latest   a full ring drops its OLDEST message, counted per topic in dropped
+        block    put waits for room (back-pressure through the network link);
+                 once the rings are closed (the source stops) it drops and counts instead
+
+    Parameters
+    ----------
+    sizes : mapping of str to int
+        Capacity (>= 1) of each topic's ring.
+    policy : {"latest", "block"}
+        Full-ring policy.
+
+    Attributes
+    ----------
+    dropped : dict of str to int
+        Messages dropped from each topic's ring.
+    """
+
+    def __init__(self, sizes: dict[str, int], policy: Policy = "latest") -> None:
+        if not sizes:
+            raise ValueError("sizes: at least one topic")
+        for key, n in sizes.items():
+            if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+                raise ValueError(f"sizes[{key!r}] must be an integer >= 1, got {n!r}")
+        if policy not in POLICIES:
+            raise ValueError(f"policy must be one of {', '.join(POLICIES)}, got {policy!r}")
+        self.sizes = dict(sizes)
+        self.policy: Policy = policy
+        self._rings: dict[str, deque[T]] = {k: deque() for k in sizes}
+        self._cond = threading.Condition()
+        self._closed = False
+        self.dropped: dict[str, int] = dict.fromkeys(sizes, 0)
+
+    @property
+    def keys(self) -> list[str]:
+        """The topics, in the order they were given."""
+        return list(self._rings)
+
+    @property
+    def dropped_total(self) -> int:
+        """Messages dropped from every ring."""
+        with self._cond:
+            return sum(self.dropped.values())
+
+    def put(self, key: str, item: T) -> None:
+        """Queue ``item`` in ``key``'s ring under the policy (blocks under ``block`` while the ring is full).
+
+        Raises
+        ------
+        KeyError
+            Unknown topic.
+        """
+        ring, size = self._rings[key], self.sizes[key]
+        with self._cond:
+            if self.policy == "block":
+                self._cond.wait_for(lambda: self._closed or len(ring) < size)
+            if len(ring) >= size:  # latest, or closed while waiting: the oldest goes
+                ring.popleft()
+                self.dropped[key] += 1
+            ring.append(item)
+            self._cond.notify_all()
+
+    def take(self, key: str) -> T | None:
+        """The oldest message of ``key``'s ring, None when it is empty."""
+        with self._cond:
+            ring = self._rings[key]
+            if not ring:
+                return None
+            item = ring.popleft()
+            self._cond.notify_all()
+            return item
+
+    def wait(self, timeout: float) -> bool:
+        """Wait up to ``timeout`` s for a message in any ring (or :meth:`close`); True when there is one."""
+        with self._cond:
+            self._cond.wait_for(lambda: self._closed or any(self._rings.values()), timeout)
+            return any(self._rings.values())
+
+    def close(self) -> None:
+        """Wake every waiter; from now on a full ring drops its oldest message even under ``block``."""
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+
+    def __len__(self) -> int:
+        with self._cond:
+            return sum(len(r) for r in self._rings.values())
+
+
+__all__ = ["POLICIES", "BoundedQueue", "Policy", "QueueWorker", "ReceiveRings"]

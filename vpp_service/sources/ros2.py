@@ -7,8 +7,12 @@ a depth ``Image`` registered to the left camera); every name is an option, and a
 absolute name (``/velodyne_points``) ignores the namespace. It declares a node token
 and one subscriber token per topic, so lazy publishers start sending.
 
-The Zenoh callback only appends the sample to a bounded ring per
-topic (``ring_size``; the oldest is dropped and counted in ``ring_dropped``). The
+The Zenoh callback only queues the sample in its topic's ring (the network
+sources' one ring type, :class:`~vpp_service.queueing.ReceiveRings`, ``ring_size``
+per topic): under the pipeline's ``latest`` input policy a full ring drops its
+oldest sample, under ``block`` the callback waits for room; every drop reaches the
+pipeline's ``dropped`` count through :meth:`Ros2Source.losses` (``source_ring``,
+with the synchronizer's ``sync`` and ``pending``). The
 source's thread checks each sample's size (``max_message_mb``) and attachment (both
 rmw_zenoh layouts accepted), then hands the payload to the
 :class:`~vpp_service.sources.ros2_assembler.StereoAssembler` (sync, calibration from
@@ -19,12 +23,11 @@ camera_info, cloud -> depth, counted drops). Refusals are counted by cause in
 from __future__ import annotations
 
 import functools
-import threading
-from collections import deque
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from vpp_service.frame import StereoFrame
+from vpp_service.queueing import ReceiveRings
 from vpp_service.sources.base import SOURCES, Emit, Reject, Source, SourceContext
 from vpp_service.sources.ros2_assembler import StereoAssembler, StereoTopics
 from vpp_service.transport.ros2 import attachment, keys
@@ -77,11 +80,9 @@ class Ros2Source(Source):
         super().__init__(options, context)
         self.options: Ros2SourceOptions = options
         self._node: RosNode | None = None
-        self._rings: dict[str, deque[zenoh.Sample]] = {}
-        self._ring_lock = threading.Lock()
-        self._arrived = threading.Event()
+        self._rings: ReceiveRings[zenoh.Sample] | None = None  # one ring per topic, built at open
         self._assembler: StereoAssembler | None = None
-        self._counters.update({"received": 0, "ring_dropped": 0, "attachment_legacy": 0})
+        self._counters.update({"received": 0, "attachment_legacy": 0})
         self._max_bytes = int(options.max_message_mb * 1024 * 1024)
 
     def open(self) -> None:
@@ -92,8 +93,8 @@ class Ros2Source(Source):
         o = self.options
         self._node = RosNode(session, o.domain_id, o.namespace, o.node_name)
         self._node.open()
+        self._rings = ReceiveRings(dict.fromkeys(o.roles(), o.ring_size), self.input_policy)
         for role in o.roles():
-            self._rings[role] = deque(maxlen=o.ring_size)
             self._node.subscribe(o.topic(role), o.ros_type(role), functools.partial(self._on_sample, role))
 
     def waits_on(self) -> str:
@@ -101,40 +102,32 @@ class Ros2Source(Source):
         return "ROS topics " + ", ".join(self.options.topic(role) for role in self.options.roles())
 
     def _on_sample(self, role: str, sample: zenoh.Sample) -> None:
-        """Zenoh callback: buffer the sample and wake the source's thread."""
-        ring = self._rings[role]
-        with self._ring_lock:
-            if len(ring) == ring.maxlen:
-                self._counters["ring_dropped"] += 1
-            ring.append(sample)
-        self._arrived.set()
-
-    def _next(self, role: str) -> zenoh.Sample | None:
-        with self._ring_lock:
-            ring = self._rings[role]
-            return ring.popleft() if ring else None
+        """Zenoh callback: queue the sample in its topic's ring (the input policy decides when it is full)."""
+        assert self._rings is not None  # subscribed only after open built them
+        self._rings.put(role, sample)
 
     def run(self, emit: Emit, reject: Reject) -> None:
         """Drain the rings, check, assemble and emit until stopped."""
         asm = StereoAssembler(self.options, self.context.rig, reject)
         self._assembler = asm
+        rings = self._rings
+        assert rings is not None  # run after open
         while not self.stopping():
-            self._arrived.clear()
             got = False
-            for role in list(self._rings):
-                sample = self._next(role)
+            for role in rings.keys:
+                sample = rings.take(role)
                 if sample is None:
                     continue
                 got = True
-                self._counters["received"] += 1
+                self.count("received")
                 for frame in self._handle(asm, role, sample):
-                    self._counters["emitted"] += 1
+                    self.count("emitted")
                     emit(frame)
             for frame in asm.expire():
-                self._counters["emitted"] += 1
+                self.count("emitted")
                 emit(frame)
             if not got:
-                self._arrived.wait(self.options.poll_s)
+                rings.wait(self.options.poll_s)
 
     def _handle(self, asm: StereoAssembler, role: str, sample: zenoh.Sample) -> list[StereoFrame]:
         try:
@@ -144,24 +137,26 @@ class Ros2Source(Source):
             att = sample.attachment
             _, layout = attachment.decode(att.to_bytes() if att is not None else None)
         except Ros2Error as exc:
-            self._counters["rejected"] += 1
+            self.count("rejected")
             asm.refuse(role, exc)
             return []
         if layout == "legacy":
-            self._counters["attachment_legacy"] += 1
+            self.count("attachment_legacy")
         before = sum(asm.rejected_by.values())
         frames = asm.add(role, sample.payload.to_bytes())
-        self._counters["rejected"] += sum(asm.rejected_by.values()) - before
+        self.count("rejected", sum(asm.rejected_by.values()) - before)
         return frames
 
     def request_stop(self) -> None:
-        """Ask the thread to stop and wake it."""
+        """Ask the thread to stop and wake it, and every callback waiting for room."""
         super().request_stop()
-        self._arrived.set()
+        if self._rings is not None:
+            self._rings.close()
 
     def stop(self, timeout: float = 5.0) -> None:
-        """Wake the thread, stop it within ``timeout`` s and undeclare the node."""
-        self._arrived.set()
+        """Wake the thread and the callbacks, stop within ``timeout`` s and undeclare the node."""
+        if self._rings is not None:
+            self._rings.close()
         super().stop(timeout)
 
     def close(self) -> None:
@@ -172,10 +167,20 @@ class Ros2Source(Source):
 
     def stats(self) -> dict[str, object]:  # type: ignore[override]  # nested counters, like the zenoh source
         """Counters plus the assembler's (refusals by cause, sync state, cloud point counts)."""
-        out: dict[str, object] = dict(self._counters)
+        out: dict[str, object] = dict(super().stats())
+        out["ring_dropped"] = self._rings.dropped_total if self._rings is not None else 0
         if self._assembler is not None:
             out.update(self._assembler.stats())
         return out
+
+    def losses(self) -> dict[str, int]:
+        """Valid messages lost in this source, by cause: the rings (``latest``), the stereo synchronizer."""
+        asm = self._assembler
+        return {
+            "source_ring": self._rings.dropped_total if self._rings is not None else 0,
+            "sync": asm.counters["sync_dropped"] if asm is not None else 0,
+            "pending": asm.counters["pending_dropped"] if asm is not None else 0,
+        }
 
 
 __all__ = ["Ros2Source", "Ros2SourceOptions"]

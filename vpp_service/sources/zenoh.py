@@ -1,12 +1,12 @@
 """Zenoh source: receive wire-format v1 frames from cameras on the network.
 
 Subscribes with a callback that decodes and validates each message
-(:mod:`vpp_service.transport.wire`) and buffers the valid ones in a bounded ring
-(``ring_size`` per topic), then signals an event. A bad message is rejected
-(counted, reason reported) and never enters the ring, so junk cannot displace
-valid frames; the source keeps serving. This source's thread wakes on the event
-(no polling delay), drains the rings, joins separate-topics parts and emits
-frames.
+(:mod:`vpp_service.transport.wire`) and buffers the valid ones in the network
+sources' one receive ring type (:class:`~vpp_service.queueing.ReceiveRings`,
+``ring_size`` per topic). A bad message is rejected (counted, reason reported)
+and never enters a ring, so junk cannot displace valid frames; the source keeps
+serving. This source's thread wakes as soon as a message is queued, drains the
+rings, joins separate-topics parts and emits frames.
 
 The callback runs directly on Zenoh's receive thread under both input
 policies (no channel in between: an indirect callback's channel would buffer
@@ -40,15 +40,14 @@ consume its parts: a forged part carrying another frame's ``seq`` is counted as
 from __future__ import annotations
 
 import contextlib
-import threading
 import time
-from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import partial
 from typing import TYPE_CHECKING, Any, Literal
 
 from vpp_service.frame import StereoFrame
+from vpp_service.queueing import ReceiveRings
 from vpp_service.sources.base import SOURCES, Emit, Reject, Source, SourceContext
 from vpp_service.transport import wire
 from vpp_service.transport.sync import Synchronizer
@@ -151,13 +150,10 @@ class ZenohSource(Source):
         self._limits = wire.WireLimits(
             max_message_bytes=int(options.max_message_mb * 1024 * 1024), max_pixels=options.max_pixels
         )
-        self._rings: dict[str, deque[_Received]] = {}
-        self._ring_sizes: dict[str, int] = {}
-        self._ring_lock = threading.Condition()
-        self._arrived = threading.Event()
+        self._rings: ReceiveRings[_Received] | None = None  # one ring per topic, built at open
         self._reject: Reject | None = None
         self.sync: Synchronizer[wire.Part] | None = None
-        self._counters.update({"received": 0, "ring_dropped": 0, "sync_dropped": 0, "sync_inconsistent": 0})
+        self._counters.update({"received": 0, "sync_dropped": 0, "sync_inconsistent": 0})
 
     def open(self) -> None:
         """Declare the subscribers on the service's session."""
@@ -170,10 +166,7 @@ class ZenohSource(Source):
         parts = (
             ["frame"] if o.topics == "frame" else (["left", "right", "depth"] if o.with_depth else ["left", "right"])
         )
-        for part in parts:
-            key = wire.topic(self.context.prefix, self.context.rig, f"in/{part}")
-            self._rings[part] = deque()
-            self._ring_sizes[part] = o.ring_sizes.get(part, o.ring_size)
+        self._rings = ReceiveRings({part: o.ring_sizes.get(part, o.ring_size) for part in parts}, self.input_policy)
         if o.topics == "separate":
             self.sync = Synchronizer(
                 parts, o.sync, o.sync_queue_size, int(o.sync_threshold_ms * 1e6), consistent=_parts_fit
@@ -187,7 +180,8 @@ class ZenohSource(Source):
 
     def waits_on(self) -> str:
         """The key expressions subscribed to."""
-        return ", ".join(wire.topic(self.context.prefix, self.context.rig, f"in/{part}") for part in self._rings)
+        parts = self._rings.keys if self._rings is not None else []
+        return ", ".join(wire.topic(self.context.prefix, self.context.rig, f"in/{part}") for part in parts)
 
     def start(self, emit: Emit, reject: Reject | None = None, on_finished: Callable[[], None] | None = None) -> None:
         """Start the receive thread; ``reject`` also hears of messages the subscriber callback turns away."""
@@ -205,9 +199,8 @@ class ZenohSource(Source):
         recv_ns = time.monotonic_ns()  # for durations (latency): a monotonic clock, immune to clock steps
         n = len(sample.payload)
         if n > self._limits.max_message_bytes:  # by its length, before the payload is copied out of Zenoh
-            with self._ring_lock:
-                self._counters["received"] += 1
-                self._counters["rejected"] += 1
+            self.count("received")
+            self.count("rejected")
             if self._reject is not None:
                 self._reject(
                     f"{sample.key_expr}: message: {n} bytes exceeds the limit of {self._limits.max_message_bytes}"
@@ -222,58 +215,40 @@ class ZenohSource(Source):
                 else wire.decode_part(payload, part, self._limits)
             )
         except wire.WireError as exc:
-            with self._ring_lock:  # received and rejected here; the valid ones count as received when drained
-                self._counters["received"] += 1
-                self._counters["rejected"] += 1
+            self.count("received")  # received and rejected here; the valid ones count as received when drained
+            self.count("rejected")
             if self._reject is not None:
                 self._reject(f"{sample.key_expr}: {exc}")
             return
-        item = _Received(str(sample.key_expr), value, recv_ns, (time.perf_counter() - t0) * 1e3)
-        ring, size = self._rings[part], self._ring_sizes[part]
-        with self._ring_lock:
-            if self.input_policy == "block":
-                while len(ring) >= size and not self.stopping():
-                    self._ring_lock.wait(self.options.poll_s)
-            if len(ring) >= size:  # latest, or stopping: the oldest goes
-                ring.popleft()
-                self._counters["ring_dropped"] += 1
-            ring.append(item)
-        self._arrived.set()
-
-    def _next(self, part: str) -> _Received | None:
-        with self._ring_lock:
-            ring = self._rings[part]
-            if not ring:
-                return None
-            item = ring.popleft()
-            self._ring_lock.notify_all()
-            return item
+        assert self._rings is not None  # subscribed only after open built them
+        self._rings.put(part, _Received(str(sample.key_expr), value, recv_ns, (time.perf_counter() - t0) * 1e3))
 
     def run(self, emit: Emit, reject: Reject) -> None:
         """Drain the rings, decode, validate, synchronize and emit until stopped."""
+        rings = self._rings
+        assert rings is not None  # run after open
         while not self.stopping():
-            self._arrived.clear()  # before draining: a later sample sets it again
             got = False
-            for part in list(self._rings):
-                sample = self._next(part)
+            for part in rings.keys:
+                sample = rings.take(part)
                 if sample is None:
                     continue
                 got = True
-                self._counters["received"] += 1
+                self.count("received")
                 self._handle(part, sample, emit, reject)
             if not got:
-                self._arrived.wait(self.options.poll_s)
+                rings.wait(self.options.poll_s)
 
     def request_stop(self) -> None:
-        """Ask the receive thread to stop and wake it (safe from any thread)."""
+        """Ask the receive thread to stop and wake it, and every callback waiting for room (safe from any thread)."""
         super().request_stop()
-        self._arrived.set()
-        with self._ring_lock:
-            self._ring_lock.notify_all()
+        if self._rings is not None:
+            self._rings.close()
 
     def stop(self, timeout: float = 5.0) -> None:
-        """Wake the receive thread, stop it within ``timeout`` seconds and undeclare the subscribers."""
-        self._arrived.set()
+        """Wake the receive thread and the callbacks, stop within ``timeout`` seconds, undeclare the subscribers."""
+        if self._rings is not None:
+            self._rings.close()
         super().stop(timeout)
 
     def _handle(self, part: str, item: _Received, emit: Emit, reject: Reject) -> None:
@@ -285,19 +260,19 @@ class ZenohSource(Source):
             assert self.sync is not None
             before, inconsistent = self.sync.dropped, self.sync.inconsistent
             joined = self.sync.add(part, p.seq, p.stamp_ns, p)
-            self._counters["sync_dropped"] += self.sync.dropped - before
-            self._counters["sync_inconsistent"] += self.sync.inconsistent - inconsistent
+            self.count("sync_dropped", self.sync.dropped - before)
+            self.count("sync_inconsistent", self.sync.inconsistent - inconsistent)
             if joined is None:
                 return
             try:  # the synchronizer only joins parts that fit; this guards the contract
                 frame = wire.assemble(joined["left"], joined["right"], joined.get("depth"))
             except wire.WireError as exc:
-                self._counters["rejected"] += 1
+                self.count("rejected")
                 reject(f"{item.key_expr}: {exc}")
                 return
         frame.meta["recv_ns"] = item.recv_ns
         frame.meta["timing_ms"] = {"decode": item.decode_ms + (time.perf_counter() - t0) * 1e3}
-        self._counters["emitted"] += 1
+        self.count("emitted")
         emit(frame)
 
     def close(self) -> None:
@@ -311,14 +286,15 @@ class ZenohSource(Source):
 
     def stats(self) -> dict[str, Any]:
         """Counters (``received``, ``ring_dropped``, ``sync_dropped``, ``sync_inconsistent``, base ones), ``sync``."""
-        out: dict[str, Any] = dict(self._counters)
+        out: dict[str, Any] = super().stats()
+        out["ring_dropped"] = self._rings.dropped_total if self._rings is not None else 0
         if self.sync is not None:
             out["sync"] = self.sync.stats()
         return out
 
     def losses(self) -> dict[str, int]:
         """Valid messages lost in this source, by cause: the ring (``latest``), the synchronizer."""
-        c = self._counters
+        c = self.stats()
         return {
             "source_ring": c["ring_dropped"],
             "sync": c["sync_dropped"],
