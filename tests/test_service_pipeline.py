@@ -14,9 +14,10 @@ from vpp_service.evaluation.metrics import answered_metrics, compute_metrics
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.fusion import Fusion, score
 from vpp_service.matchers import fill_holes
-from vpp_service.service.pipeline import Pipeline, StageTimer
+from vpp_service.service.pipeline import Pipeline
 from vpp_service.sinks.base import Sink, SinkContext
 from vpp_service.sources.base import Source, SourceContext, build_source
+from vpp_service.timing import StageTimer
 from vpp_service.transport import wire
 
 

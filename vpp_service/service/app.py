@@ -175,8 +175,8 @@ def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> 
     extra: dict[str, object] = {}
     if pool is not None:
         extra["seq_expected"] = pool.state.expects  # ordered sinks: another worker's frame is never a gap
-        if any(sp.name == "zenoh" for sp in cfg.sinks):
-            pool.answer_on_publish = False  # the zenoh sink announces each frame once its outputs are out
+        if any(SINKS.get(sp.name).answers_pool for sp in cfg.sinks):
+            pool.answer_on_publish = False  # such a sink announces each frame once its outputs are out
             extra["on_written"] = pool.answered
     sink_ctx = SinkContext(rig=s.rig, prefix=s.prefix, session=session, extra=extra)
     sinks = [SINKS.get(sp.name)(sp.options, sink_ctx) for sp in cfg.sinks]

@@ -53,6 +53,7 @@ from vpp_service.evaluation.metrics import answered_metrics
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.queueing import Policy, QueueWorker
 from vpp_service.service.pool import PoolStatus
+from vpp_service.timing import StageTimer
 
 if TYPE_CHECKING:  # zenoh, sources and sinks are imported where they are used
     import zenoh
@@ -114,38 +115,6 @@ class PipelineStatus(TypedDict):
     sinks: dict[str, Mapping[str, object]]
     metrics: MetricsStatus
     pool: NotRequired[PoolStatus]
-
-
-class StageTimer:
-    """Sliding-window statistics (mean, p50, p99, last) of named durations in ms."""
-
-    def __init__(self, window: int = 200) -> None:
-        if window < 1:
-            raise ValueError(f"window must be >= 1, got {window}")
-        self.window = window
-        self._data: dict[str, deque[float]] = {}
-        self._lock = threading.Lock()
-
-    def add(self, stage: str, ms: float) -> None:
-        """Record one duration of ``stage``."""
-        with self._lock:
-            self._data.setdefault(stage, deque(maxlen=self.window)).append(float(ms))
-
-    def summary(self) -> dict[str, dict[str, float]]:
-        """``{stage: {mean, p50, p99, last, n}}``."""
-        with self._lock:
-            items = {k: np.array(v) for k, v in self._data.items() if v}
-        out: dict[str, dict[str, float]] = {}
-        for k, a in items.items():
-            p50, p99 = np.percentile(a, [50, 99])  # one call: the same values as two, at half the cost
-            out[k] = {
-                "mean": float(a.mean()),
-                "p50": float(p50),
-                "p99": float(p99),
-                "last": float(a[-1]),
-                "n": int(a.size),
-            }
-        return out
 
 
 class Pipeline:
@@ -600,5 +569,4 @@ __all__ = [
     "Pipeline",
     "PipelineStatus",
     "QueueStatus",
-    "StageTimer",
 ]

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 from vpp_service.frame import FusionResult
 from vpp_service.plugin import Plugin, PluginContext, parse_plugin_options
@@ -53,6 +53,10 @@ class Sink(Plugin):
     """
 
     counter_names = ("written", "dropped", "errors")
+    #: True for a sink whose ``write`` puts the frame's outputs on the network: in a worker pool the
+    #: frame counts as answered once this sink has written it (it calls ``context.extra["on_written"]``
+    #: with the ``seq``); without such a sink the pipeline announces a frame when every sink is done.
+    answers_pool: ClassVar[bool] = False
 
     def __init__(self, options: Any, context: SinkContext) -> None:
         super().__init__(options, context)

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import logging
 import time
-from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -38,6 +37,7 @@ import numpy as np
 from vpp_service.frame import Calibration, FusionResult
 from vpp_service.queueing import QueueWorker
 from vpp_service.sinks.base import SINKS, Sink, SinkContext
+from vpp_service.timing import StageTimer
 from vpp_service.transport.ros2 import keys
 from vpp_service.transport.ros2 import messages as rm
 from vpp_service.transport.ros2.attachment import Layout
@@ -218,7 +218,7 @@ class Ros2Sink(Sink):
         self._worker: QueueWorker[FusionResult] = QueueWorker(
             self._publish, size=options.queue_size, policy="latest", name="sink-ros2", on_error=self._failed
         )
-        self._encode_ms: deque[float] = deque(maxlen=200)
+        self._timer = StageTimer()  # per-result encode + publish durations (ms), the median in stats()
         self._counters.update({"lazy_skipped": 0, "missing": 0})
         self._encoder = Ros2Encoder(options)
 
@@ -251,7 +251,7 @@ class Ros2Sink(Sink):
                 self._counters["missing"] += 1
                 continue
             pub.put(payload, self.options.attachment)
-        self._encode_ms.append((time.perf_counter() - t0) * 1e3)
+        self._timer.add("publish", (time.perf_counter() - t0) * 1e3)
         self._counters["written"] += 1
 
     def _failed(self, result: FusionResult, exc: Exception) -> None:
@@ -270,8 +270,7 @@ class Ros2Sink(Sink):
         """Counters plus ``timing_ms.publish``: median encode + put time per result (recent window)."""
         out: dict[str, object] = dict(self._counters)
         out["dropped"] = self._worker.dropped + self._worker.discarded
-        vals = sorted(self._encode_ms)
-        out["timing_ms"] = {"publish": vals[len(vals) // 2]} if vals else {}
+        out["timing_ms"] = self._timer.medians()
         return out
 
 

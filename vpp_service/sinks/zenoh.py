@@ -33,13 +33,13 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
-from collections import deque
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
 from vpp_service.frame import FusionResult
 from vpp_service.queueing import QueueWorker
 from vpp_service.sinks.base import SINKS, Sink, SinkContext
+from vpp_service.timing import StageTimer
 from vpp_service.transport import wire
 from vpp_service.transport.shm import ShmPutter
 
@@ -115,6 +115,7 @@ class ZenohSink(Sink):
     Options = ZenohSinkOptions
     options: ZenohSinkOptions
     needs_session = True
+    answers_pool = True  # its outputs on the network are what a pool's consumers wait for
 
     @classmethod
     def needs_depth(cls, options: ZenohSinkOptions) -> bool:
@@ -127,9 +128,7 @@ class ZenohSink(Sink):
         self._worker: QueueWorker[FusionResult] = QueueWorker(
             self._publish, size=options.queue_size, policy="latest", name="sink-zenoh", on_error=self._failed
         )
-        # per-result serialization / put durations (ms), reported by stats()
-        self._encode_ms: deque[float] = deque(maxlen=200)
-        self._put_ms: deque[float] = deque(maxlen=200)
+        self._timer = StageTimer()  # per-result serialization / put durations (ms), medians in stats()
         self._putter = ShmPutter(options.shm_pool_mb)
         self._on_request: list[str] = []
         self._counters["unrequested"] = 0  # on_request outputs not serialized: nobody subscribed
@@ -172,8 +171,8 @@ class ZenohSink(Sink):
                 self._putter.put(pub, payload)
             enc_s += t1 - t0
             put_s += time.perf_counter() - t1
-        self._encode_ms.append(enc_s * 1e3)
-        self._put_ms.append(put_s * 1e3)
+        self._timer.add("encode", enc_s * 1e3)
+        self._timer.add("put", put_s * 1e3)
         self._counters["written"] += 1
         on_written = self.context.extra.get("on_written")
         if callable(on_written):
@@ -199,12 +198,7 @@ class ZenohSink(Sink):
         out: dict[str, Any] = dict(self._counters)
         out["dropped"] = self._worker.dropped + self._worker.discarded
         out["shm"] = self._putter.stats()
-        timing: dict[str, float] = {}
-        for key, d in (("encode", self._encode_ms), ("put", self._put_ms)):
-            vals = sorted(d)
-            if vals:
-                timing[key] = vals[len(vals) // 2]
-        out["timing_ms"] = timing
+        out["timing_ms"] = self._timer.medians()
         return out
 
 
