@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 
 import numpy as np
@@ -437,3 +438,24 @@ def test_summary_line_says_what_it_waits_on_before_the_first_frame(sessions):
     finally:
         src.stop(1.0)
     assert line == "waiting for frames on vpp/r1/in/frame: nothing has arrived yet"
+
+
+def test_a_status_query_flood_is_served_from_one_snapshot_per_period(sessions):
+    """300 @status queries as fast as a peer sends them: at most one status build per 100 ms, the rest counted."""
+    from vpp_service.service.pipeline import STATUS_SNAPSHOT_S
+
+    listener, peer = sessions
+    pipe = Pipeline(sim_source(0, rate_hz=50.0), lambda f: None, [], session=listener, rig="rig0")  # type: ignore[arg-type, return-value]
+    pipe.start()
+    try:
+        t0 = time.monotonic()
+        replies = []
+        for _ in range(300):
+            replies += [r.ok.payload.to_string() for r in peer.get("vpp/rig0/@status", timeout=5.0) if r.ok]
+        elapsed = time.monotonic() - t0
+        q = pipe.status()["status_queries"]
+    finally:
+        pipe.stop(2.0)
+    assert len(replies) == 300 and all(json.loads(r)["rig"] == "rig0" for r in replies)
+    assert q["queries"] == 300 and q["snapshots"] + q["cached"] == 300
+    assert q["snapshots"] <= elapsed / STATUS_SNAPSHOT_S + 2 and q["cached"] > 0, (q, elapsed)

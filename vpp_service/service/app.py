@@ -377,6 +377,7 @@ def _not_started(cfg: ServiceConfig) -> ServiceSummary:
         "fps": 0.0,
         "queues": {},
         "timing_ms": {},
+        "status_queries": {"queries": 0, "snapshots": 0, "cached": 0},
         "source": {},
         "sinks": {},
         "metrics": {"last": {}, "bad2_answered_mean": None, "density_mean": None, "bad2_filled_mean": None},

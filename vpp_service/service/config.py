@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import copy
 import os
+import re
 import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -43,6 +44,10 @@ P = TypeVar("P", bound=Plugin)
 
 #: ``parse(name, raw_options, section)``: a plugin's parsed ``Options`` (raises SettingsError).
 ParseOptions = Callable[[str, Mapping[str, Any], str], object]
+
+#: A rig name: it becomes a Zenoh key part, a Rerun entity and part of file names, so a plain word
+#: (no "..", no separators, at most 64 characters).
+RIG_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,63}")
 
 #: The endpoint every command meets on unless told otherwise: ``run`` listens on it, ``publish`` and
 #: ``status`` connect to it.
@@ -68,7 +73,8 @@ class ServiceSection:
     Attributes
     ----------
     rig : str
-        Rig name: topics are ``<prefix>/<rig>/...``.
+        Rig name: topics are ``<prefix>/<rig>/...``; 1-64 of ``A-Z a-z 0-9 _ . -``,
+        starting with a letter, digit or ``_`` (:data:`RIG_NAME`).
     prefix : str
         Zenoh key prefix.
     max_frames : int
@@ -127,6 +133,12 @@ class ServiceSection:
         from vpp_service.transport.wire import topic
 
         topic(self.prefix, self.rig, "x")  # validates both
+        if not isinstance(self.rig, str) or not RIG_NAME.fullmatch(self.rig):
+            raise ValueError(
+                f"rig must be 1-64 of A-Z a-z 0-9 _ . - starting with a letter, digit or _, got {self.rig[:80]!r}"
+                if isinstance(self.rig, str)
+                else f"rig must be a string, got {self.rig!r}"
+            )
         if self.max_frames < 0:
             raise ValueError(f"max_frames must be >= 0, got {self.max_frames}")
         if not self.out:

@@ -94,6 +94,8 @@ class MetricsStatus(TypedDict):
     bad2_filled_mean: float | None
 
 
+#: ``@status`` replies within this many seconds of a snapshot reuse it (a query flood cannot load the service).
+STATUS_SNAPSHOT_S = 0.1
 #: Seconds over which ``fps`` is measured (a recent window: it falls to 0 when frames stop coming).
 FPS_WINDOW_S = 5.0
 
@@ -111,6 +113,7 @@ class PipelineStatus(TypedDict):
     fps: float
     queues: dict[str, QueueStatus]
     timing_ms: dict[str, dict[str, float]]
+    status_queries: dict[str, int]
     source: Mapping[str, object]
     sinks: dict[str, Mapping[str, object]]
     metrics: MetricsStatus
@@ -219,6 +222,9 @@ class Pipeline:
         self._token: zenoh.LivelinessToken | None = None
         self._opened: list[Sink] = []
         self._refused = 0  # frames the source emitted while the pipeline was stopping
+        self._snapshot_lock = threading.Lock()
+        self._snapshot: tuple[float, str] | None = None  # (monotonic time, JSON) of the last @status reply built
+        self._status_queries = {"queries": 0, "snapshots": 0, "cached": 0}
 
     # ----------------------------------------------------------- counters
     def _inc(self, key: str, n: int = 1) -> None:
@@ -383,12 +389,27 @@ class Pipeline:
         return key if self.pool is None else f"{key}/{self.pool.worker_id}"
 
     def _on_query(self, query: zenoh.Query) -> None:
-        # runs on a Zenoh thread: build a small JSON reply, never block
+        # runs on a Zenoh thread: reply with the cached snapshot, never block
         try:
             # the service's own key, not the query's: a wildcard query gets one entry per rig (and worker)
-            query.reply(self.status_key, json.dumps(self.status()))
+            query.reply(self.status_key, self._status_snapshot())
         except Exception as exc:  # noqa: BLE001 - session closing; nothing may raise into Zenoh's thread
             log.debug("@status reply failed: %s", exc)
+
+    def _status_snapshot(self) -> str:
+        """The ``@status`` reply: one JSON snapshot per :data:`STATUS_SNAPSHOT_S`, shared by the queries meanwhile.
+
+        A query flood costs a lookup per query, not a status build each (counted as ``cached``).
+        """
+        with self._snapshot_lock:
+            self._status_queries["queries"] += 1
+            now = time.monotonic()
+            if self._snapshot is None or now - self._snapshot[0] >= STATUS_SNAPSHOT_S:
+                self._status_queries["snapshots"] += 1
+                self._snapshot = (now, json.dumps(self.status()))
+            else:
+                self._status_queries["cached"] += 1
+            return self._snapshot[1]
 
     def wait(self, timeout: float | None = None) -> bool:
         """Block until the pipeline is done (source exhausted / max_frames) or ``timeout``."""
@@ -476,6 +497,7 @@ class Pipeline:
                 },
             },
             "timing_ms": self.timer.summary(),
+            "status_queries": self._status_queries_copy(),
             "source": self.source.stats(),
             "sinks": sinks,
             "metrics": {
@@ -488,6 +510,11 @@ class Pipeline:
         if self.pool is not None:
             status["pool"] = self.pool.status()
         return status
+
+    def _status_queries_copy(self) -> dict[str, int]:
+        """``@status`` queries: ``queries`` answered, ``snapshots`` built, ``cached`` (answered from a snapshot)."""
+        # not under _snapshot_lock: status() runs inside it when a query builds a snapshot
+        return dict(self._status_queries)
 
     def connectivity(self) -> dict[str, int] | None:
         """Routers and peers the session reaches now (None without a session)."""
