@@ -459,3 +459,37 @@ def test_a_status_query_flood_is_served_from_one_snapshot_per_period(sessions):
     assert len(replies) == 300 and all(json.loads(r)["rig"] == "rig0" for r in replies)
     assert q["queries"] == 300 and q["snapshots"] + q["cached"] == 300
     assert q["snapshots"] <= elapsed / STATUS_SNAPSHOT_S + 2 and q["cached"] > 0, (q, elapsed)
+
+
+class HangingSink(CollectSink):
+    """A sink whose library hangs in close (a Rerun stream stuck disconnecting from a full disk)."""
+
+    def close(self, timeout: float = 5.0) -> None:
+        time.sleep(30)
+
+
+def test_shutdown_is_bounded_whatever_a_sink_does_and_names_it():
+    pipe = Pipeline(
+        sim_source(2),
+        lambda f: FusionResult(frame=f, disparity=np.zeros(f.shape, np.float32)),
+        [HangingSink(), CollectSink()],
+        input_policy="block",
+    )
+    pipe.start()
+    assert pipe.wait(20)
+    t0 = time.monotonic()
+    pipe.stop(1.0)
+    assert time.monotonic() - t0 < 4.0
+    assert pipe.unfinished_sinks == ["HangingSink"]
+
+
+def test_closing_line_never_claims_a_file_it_did_not_write(tmp_path):
+    from vpp_service.cli.run import closing_line
+    from vpp_service.service.config import DEFAULT_CONFIG, validate_config
+
+    cfg = validate_config({**DEFAULT_CONFIG, "service": {"out": str(tmp_path)}})
+    line = closing_line(cfg, {"processed": 2})
+    assert "wrote" not in line and f"NOT written: {tmp_path / 'summary.json'}, {tmp_path / 'vpp.rrd'}" in line
+    (tmp_path / "summary.json").write_text("{}")
+    line = closing_line(cfg, {"processed": 2})
+    assert f"wrote {tmp_path / 'summary.json'}; NOT written: {tmp_path / 'vpp.rrd'}" in line

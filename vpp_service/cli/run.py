@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import copy
 import json
+import os
 import signal
 import sys
 import threading
@@ -262,6 +263,17 @@ def main(args: argparse.Namespace) -> int:
     if status["source_error"] is not None:  # a dead source is a runtime failure: exit 1 so systemd restarts it
         print(f"vpp-service run: the source failed: {status['source_error']}", file=sys.stderr)
         return 1
+    if status["unfinished_sinks"]:
+        print(
+            f"vpp-service run: {', '.join(status['unfinished_sinks'])} could not finish within "
+            f"{cfg.service.shutdown_timeout_s:g} s: their outputs may be incomplete",
+            file=sys.stderr,
+        )
+        # a sink library stuck at interpreter exit (Rerun's atexit flush on a full disk) must not hang the
+        # process: leave now, with the streams flushed and a failure status
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(1)
     return 0
 
 
@@ -338,10 +350,14 @@ def closing_line(cfg: ServiceConfig, counters: dict[str, int], dropped: Mapping[
     files = [str(Path(cfg.service.out) / "summary.json")]
     files += [str(sp.raw["path"]) for sp in cfg.sinks if sp.name == "rerun" and sp.raw.get("mode", "save") == "save"]
     files += [str(sp.raw["dir"]) for sp in cfg.sinks if "dir" in sp.raw]
+    missing = [f for f in files if not Path(f).exists()]  # never claim a file that is not there
+    files = [f for f in files if f not in missing]
     lost = ""
     if counters.get("dropped", 0):
         causes = ", ".join(f"{k} {v}" for k, v in sorted((dropped or {}).items()) if v)
         lost = f"; dropped {plural(counters['dropped'], 'frame')}" + (f" ({causes})" if causes else "")
     rejected = f"; rejected {counters['rejected']}" if counters.get("rejected", 0) else ""
     processed = plural(counters.get("processed", 0), "frame")
-    return f"vpp-service run: stopped after {processed}{lost}{rejected}; wrote {', '.join(files)}"
+    wrote = f"; wrote {', '.join(files)}" if files else ""
+    not_written = f"; NOT written: {', '.join(missing)}" if missing else ""
+    return f"vpp-service run: stopped after {processed}{lost}{rejected}{wrote}{not_written}"

@@ -45,6 +45,8 @@ class ServiceSummary(PipelineStatus):
 
     shutdown_s: float
     summary_write_errors: int
+    #: Sinks that could not finish within the shutdown timeout (their outputs may be incomplete).
+    unfinished_sinks: list[str]
     config: dict[str, Any]
 
 
@@ -292,6 +294,7 @@ def _run(
                 **pipe.status(),
                 "shutdown_s": time.monotonic() - t0,
                 "summary_write_errors": write_errors[0],
+                "unfinished_sinks": list(pipe.unfinished_sinks),
                 "config": cfg.to_dict(),
             }
             if not _write_json(summary_path, status, write_errors):
@@ -383,6 +386,7 @@ def _not_started(cfg: ServiceConfig) -> ServiceSummary:
         "metrics": {"last": {}, "bad2_answered_mean": None, "density_mean": None, "bad2_filled_mean": None},
         "shutdown_s": 0.0,
         "summary_write_errors": 0,
+        "unfinished_sinks": [],
         "config": cfg.to_dict(),
     }
 

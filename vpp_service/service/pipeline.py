@@ -222,6 +222,8 @@ class Pipeline:
         self._token: zenoh.LivelinessToken | None = None
         self._opened: list[Sink] = []
         self._refused = 0  # frames the source emitted while the pipeline was stopping
+        #: Sinks whose close raised or did not return within the shutdown timeout (their output may be incomplete).
+        self.unfinished_sinks: list[str] = []
         self._snapshot_lock = threading.Lock()
         self._snapshot: tuple[float, str] | None = None  # (monotonic time, JSON) of the last @status reply built
         self._status_queries = {"queries": 0, "snapshots": 0, "cached": 0}
@@ -442,10 +444,8 @@ class Pipeline:
                 worker.join(1.0)
         self._stop.set()
         for sink in self._opened:
-            try:
-                sink.close(timeout)
-            except Exception as exc:  # noqa: BLE001 - one failing sink must not keep the others open
-                log.warning("closing sink %s: %s", type(sink).__name__, exc)
+            if not _close_within(sink, timeout):
+                self.unfinished_sinks.append(type(sink).__name__)
         for obj in (self._queryable, self._token):
             if obj is not None:
                 # undeclaring fails only when the session is already closed, which undeclared it anyway
@@ -583,6 +583,32 @@ class Pipeline:
             f"{st['fps']:.1f} fps | {lat_s}{bad_s} | recv {c['received']} proc {c['processed']} "
             f"pub {c['published']} drop {c['dropped']} rej {c['rejected']} no-depth {c['no_depth']}{thr_s}"
         )
+
+
+def _close_within(sink: Sink, timeout: float) -> bool:
+    """Close ``sink`` on a helper thread; True when it returned without an error within ``timeout`` + 1 s.
+
+    Whatever a sink's library does (a Rerun stream stuck disconnecting from a full disk, a viewer gone),
+    the shutdown goes on after the bound; the thread is a daemon and is abandoned.
+    """
+    failed: list[BaseException] = []
+
+    def close() -> None:
+        try:
+            sink.close(timeout)
+        except Exception as exc:  # noqa: BLE001 - one failing sink must not keep the others open
+            failed.append(exc)
+
+    thread = threading.Thread(target=close, name=f"close-{type(sink).__name__}", daemon=True)
+    thread.start()
+    thread.join(timeout + 1.0)
+    if thread.is_alive():
+        log.error("sink %s did not close within %.1f s; its output may be incomplete", type(sink).__name__, timeout)
+        return False
+    if failed:
+        log.error("closing sink %s failed: %s", type(sink).__name__, failed[0])
+        return False
+    return True
 
 
 def _mean(values: deque[float]) -> float | None:
