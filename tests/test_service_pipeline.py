@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import threading
 import time
 
 import numpy as np
@@ -16,7 +17,7 @@ from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.fusion import Fusion, score
 from vpp_service.matchers import fill_holes
 from vpp_service.service.pipeline import Pipeline
-from vpp_service.sinks.base import Sink, SinkContext
+from vpp_service.sinks.base import QueueSpec, Sink, SinkContext
 from vpp_service.sources.base import Source, SourceContext, build_source
 from vpp_service.timing import StageTimer
 from vpp_service.transport import wire
@@ -322,7 +323,7 @@ def test_every_loss_is_in_one_dropped_count_with_its_cause():
     d = st["dropped"]
     assert d["source_ring"] == 3 and d["sync"] == 2 and d["sink.CollectSink"] == 4 and d["input_queue"] > 0
     assert st["counters"]["dropped"] == sum(d.values()) == pipe.counters["dropped"]
-    assert set(d) >= {"input_queue", "output_queue", "shutdown"}
+    assert set(d) >= {"input_queue", "shutdown", "sink.CollectSink"}  # the output stage is gone: each sink its queue
 
 
 def test_block_end_to_end_through_zenoh_loses_nothing(zenoh_endpoint):
@@ -445,17 +446,21 @@ def test_a_status_query_flood_is_served_from_one_snapshot_per_period(sessions):
     from vpp_service.service.pipeline import STATUS_SNAPSHOT_S
 
     listener, peer = sessions
-    pipe = Pipeline(sim_source(0, rate_hz=50.0), lambda f: None, [], session=listener, rig="rig0")  # type: ignore[arg-type, return-value]
+    process = lambda f: FusionResult(frame=f, disparity=np.zeros(f.shape, np.float32))  # noqa: E731
+    pipe = Pipeline(sim_source(0, rate_hz=50.0), process, [], session=listener, rig="rig0")
     pipe.start()
     try:
+        assert wait_until(lambda: any(r.ok for r in peer.get("vpp/rig0/@status", timeout=1.0)))  # routes are up
+        before = pipe.status()["status_queries"]
         t0 = time.monotonic()
         replies = []
         for _ in range(300):
             replies += [r.ok.payload.to_string() for r in peer.get("vpp/rig0/@status", timeout=5.0) if r.ok]
         elapsed = time.monotonic() - t0
-        q = pipe.status()["status_queries"]
+        after = pipe.status()["status_queries"]
     finally:
         pipe.stop(2.0)
+    q = {k: after[k] - before[k] for k in after}
     assert len(replies) == 300 and all(json.loads(r)["rig"] == "rig0" for r in replies)
     assert q["queries"] == 300 and q["snapshots"] + q["cached"] == 300
     assert q["snapshots"] <= elapsed / STATUS_SNAPSHOT_S + 2 and q["cached"] > 0, (q, elapsed)
@@ -493,3 +498,82 @@ def test_closing_line_never_claims_a_file_it_did_not_write(tmp_path):
     (tmp_path / "summary.json").write_text("{}")
     line = closing_line(cfg, {"processed": 2})
     assert f"wrote {tmp_path / 'summary.json'}; NOT written: {tmp_path / 'vpp.rrd'}" in line
+
+
+class StalledSink(CollectSink):
+    """A sink whose consumer stalls (a viewer, the network): its writes wait on ``release``."""
+
+    def __init__(self, size: int) -> None:
+        super().__init__()
+        self.size, self.release = size, threading.Event()
+
+    def queue_spec(self) -> QueueSpec:
+        return QueueSpec(size=self.size)
+
+    def write(self, result: FusionResult) -> None:
+        self.release.wait(10)
+        super().write(result)
+
+
+def test_each_sink_has_its_own_queue_a_stalled_one_drops_only_its_own():
+    """The pipeline owns the buffers: a stalled sink's full queue drops (counted as its loss); the others get all."""
+    stalled, fine = StalledSink(size=2), CollectSink()
+    pipe = Pipeline(
+        sim_source(10),
+        lambda f: FusionResult(frame=f, disparity=np.zeros(f.shape, np.float32)),
+        [stalled, fine],
+        input_policy="block",
+    )
+    pipe.start()
+    assert wait_until(lambda: pipe.status()["counters"]["processed"] == 10)
+    stalled.release.set()
+    assert pipe.wait(20)
+    st = pipe.status()
+    pipe.stop(2.0)
+    assert len(fine.results) == 10 and st["queues"]["sink.StalledSink"]["size"] == 2
+    lost = st["dropped"]["sink.StalledSink"]
+    assert lost > 0 and len(stalled.results) + lost == 10 and st["dropped"].get("sink.CollectSink") == 0
+    assert st["counters"]["published"] == 10 - lost  # a result one sink dropped is not published
+    assert [r.frame.seq for r in stalled.results] == sorted(r.frame.seq for r in stalled.results)
+
+
+def test_a_sink_that_must_not_drop_holds_the_pipeline_back():
+    stalled = StalledSink(size=1)
+    stalled.queue_spec = lambda: QueueSpec(size=1, policy="block")  # a recording: never drops
+    pipe = Pipeline(
+        sim_source(6),
+        lambda f: FusionResult(frame=f, disparity=np.zeros(f.shape, np.float32)),
+        [stalled],
+        input_policy="block",
+    )
+    pipe.start()
+    time.sleep(0.5)
+    assert pipe.status()["counters"]["processed"] <= 3  # waiting for the sink, not dropping
+    stalled.release.set()
+    assert pipe.wait(20)
+    pipe.stop(2.0)
+    assert len(stalled.results) == 6 and pipe.status()["counters"]["dropped"] == 0
+
+
+def test_start_and_finish_run_on_the_sinks_own_thread():
+    class Hooked(CollectSink):
+        def start(self) -> None:
+            self.started_on = threading.current_thread().name
+
+        def write(self, result: FusionResult) -> None:
+            self.wrote_on = threading.current_thread().name
+            super().write(result)
+
+        def finish(self) -> None:
+            self.finished_on = threading.current_thread().name
+
+    sink = Hooked()
+    run(Pipeline(sim_source(2), lambda f: FusionResult(frame=f, disparity=np.zeros(f.shape, np.float32)), [sink]))
+    assert sink.started_on == sink.wrote_on == sink.finished_on == "sink-Hooked"
+
+
+def wait_until(cond, timeout: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and not cond():
+        time.sleep(0.01)
+    return cond()

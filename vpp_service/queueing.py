@@ -53,6 +53,9 @@ class BoundedQueue(Generic[T]):
     policy : {"latest", "block"}
         ``latest``: ``put`` on a full queue drops the oldest item (counted in
         :attr:`dropped`); ``block``: ``put`` waits for room.
+    on_drop : callable or None
+        ``on_drop(item)`` for each item that leaves the queue unhandled (dropped by
+        ``latest`` or removed by :meth:`discard`), called outside the queue's lock.
 
     Attributes
     ----------
@@ -64,13 +67,14 @@ class BoundedQueue(Generic[T]):
         Largest length seen.
     """
 
-    def __init__(self, size: int, policy: Policy = "latest") -> None:
+    def __init__(self, size: int, policy: Policy = "latest", on_drop: Callable[[T], None] | None = None) -> None:
         if isinstance(size, bool) or not isinstance(size, int) or size < 1:
             raise ValueError(f"size must be an integer >= 1, got {size!r}")
         if policy not in POLICIES:
             raise ValueError(f"policy must be one of {', '.join(POLICIES)}, got {policy!r}")
         self.size = size
         self.policy: Policy = policy
+        self._on_drop = on_drop
         self._items: deque[T] = deque()
         self._cond = threading.Condition()
         self._closed = False
@@ -88,6 +92,7 @@ class BoundedQueue(Generic[T]):
         timeout : float or None
             ``block`` only: longest wait for room in seconds (None = until room or close).
         """
+        dropped: list[T] = []
         with self._cond:
             if self.policy == "block":
                 ok = self._cond.wait_for(lambda: self._closed or len(self._items) < self.size, timeout)
@@ -96,12 +101,19 @@ class BoundedQueue(Generic[T]):
             elif self._closed:
                 return False
             elif len(self._items) >= self.size:
-                self._items.popleft()
+                dropped.append(self._items.popleft())
                 self.dropped += 1
             self._items.append(item)
             self.high_water = max(self.high_water, len(self._items))
             self._cond.notify_all()
-            return True
+        self._dropped(dropped)
+        return True
+
+    def _dropped(self, items: list[T]) -> None:
+        """Tell ``on_drop`` of items that left the queue unhandled (outside the lock)."""
+        if self._on_drop is not None:
+            for item in items:
+                self._on_drop(item)
 
     def get(self, timeout: float | None = None) -> T | None:
         """Remove and return the oldest item; None on timeout or when closed and empty."""
@@ -123,11 +135,12 @@ class BoundedQueue(Generic[T]):
     def discard(self) -> int:
         """Remove every queued item unhandled (counted in :attr:`discarded`); returns how many."""
         with self._cond:
-            n = len(self._items)
+            items = list(self._items)
             self._items.clear()
-            self.discarded += n
+            self.discarded += len(items)
             self._cond.notify_all()
-            return n
+        self._dropped(items)
+        return len(items)
 
     @property
     def closed(self) -> bool:
@@ -159,6 +172,8 @@ class QueueWorker(Generic[T]):
         :meth:`abort` (e.g. flush, or finish the next stage).
     on_error : callable or None
         ``on_error(item, exc)`` for an exception from ``handle``; None = log it.
+    on_drop : callable or None
+        ``on_drop(item)`` for each item dropped or discarded unhandled (see :class:`BoundedQueue`).
 
     Attributes
     ----------
@@ -184,10 +199,11 @@ class QueueWorker(Generic[T]):
         on_start: Callable[[], None] | None = None,
         on_exit: Callable[[], None] | None = None,
         on_error: Callable[[T, Exception], None] | None = None,
+        on_drop: Callable[[T], None] | None = None,
     ) -> None:
         if not callable(handle):
             raise TypeError("handle must be callable")
-        self.queue: BoundedQueue[T] = BoundedQueue(size, policy)
+        self.queue: BoundedQueue[T] = BoundedQueue(size, policy, on_drop)
         self.name = name
         self._handle = handle
         self._on_start, self._on_exit, self._on_error = on_start, on_exit, on_error
@@ -239,22 +255,6 @@ class QueueWorker(Generic[T]):
     def put(self, item: T, timeout: float | None = None) -> bool:
         """Queue ``item`` under the policy; False when refused (closed, or ``block`` timed out)."""
         return self.queue.put(item, timeout)
-
-    def set_policy(self, policy: Policy) -> None:
-        """Change the full-queue policy before :meth:`start` (a sink takes the pipeline's output policy at open).
-
-        Raises
-        ------
-        ValueError
-            Unknown policy.
-        RuntimeError
-            When already started.
-        """
-        if policy not in POLICIES:
-            raise ValueError(f"policy must be one of {', '.join(POLICIES)}, got {policy!r}")
-        if self._thread is not None:
-            raise RuntimeError(f"{self.name}: the policy is set before start")
-        self.queue.policy = policy
 
     def start(self) -> None:
         """Start the worker thread.

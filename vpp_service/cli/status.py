@@ -50,7 +50,13 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
 
 
 def query_status(
-    connect: list[str], prefix: str = "vpp", rig: str = "*", timeout: float = 3.0, multicast_scouting: bool = False
+    connect: list[str],
+    prefix: str = "vpp",
+    rig: str = "*",
+    timeout: float = 3.0,
+    multicast_scouting: bool = False,
+    *,
+    unreachable_error: bool = False,
 ) -> dict[str, Any]:
     """Query ``<prefix>/<rig>/@status``; returns ``{service key: reply JSON}``, one entry per answering rig.
 
@@ -59,7 +65,8 @@ def query_status(
     ValueError
         Bad ``timeout``; a reply that is not JSON.
     ConnectionError
-        None of the ``connect`` endpoints could be reached (nothing listens there).
+        With ``unreachable_error``: none of the ``connect`` endpoints could be reached (nothing
+        listens there); without it such a query just has no reply.
     """
     from vpp_service.service.app import has_link, zenoh_session
     from vpp_service.service.config import ZenohSection
@@ -76,7 +83,7 @@ def query_status(
                     out[str(reply.ok.key_expr)] = json.loads(reply.ok.payload.to_string())
                 except json.JSONDecodeError as exc:
                     raise ValueError(f"{reply.ok.key_expr}: reply is not JSON: {exc}") from None
-        if not out and connect and not has_link(session):
+        if unreachable_error and not out and connect and not has_link(session):
             raise ConnectionError(f"could not connect to {', '.join(connect)} (nothing answers there)")
     return {**dict(sorted(out.items())), **pool_summaries(out)}
 
@@ -121,7 +128,9 @@ def main(args: argparse.Namespace) -> int:
 
     connect = args.connect or [default_endpoint()]
     try:
-        replies = query_status(connect, args.prefix, args.rig, args.timeout, args.multicast_scouting)
+        replies = query_status(
+            connect, args.prefix, args.rig, args.timeout, args.multicast_scouting, unreachable_error=True
+        )
     except ConnectionError as exc:
         print(f"vpp-service status: {exc}", file=sys.stderr)
         return 1

@@ -39,6 +39,7 @@ from types import FrameType
 from typing import TYPE_CHECKING
 
 from vpp_service.errors import StartupError
+from vpp_service.queueing import QueueWorker
 from vpp_service.transport.reorder import ReorderBuffer
 
 if TYPE_CHECKING:
@@ -147,6 +148,7 @@ class Viewer:
         self.reorder_s = reorder_ms / 1e3
         self.order: dict[tuple[str, str], ReorderBuffer[RerunParts]] = {}
         self.sinks: dict[str, RerunSink] = {}
+        self.workers: dict[str, QueueWorker[RerunParts]] = {}  # each rig's queue and logging thread
         self.received: dict[str, Counter[str]] = defaultdict(Counter)
         self.rejected = 0
 
@@ -162,7 +164,19 @@ class Viewer:
             sink = build_sink("rerun", opts, SinkContext(rig=rig))
             assert isinstance(sink, RerunSink)
             sink.open()
-            self.sinks[rig] = sink
+
+            def submit(parts: RerunParts, s: RerunSink = sink) -> None:
+                s.submit(parts)  # looked up per call on the instance (tests patch it)
+
+            worker: QueueWorker[RerunParts] = QueueWorker(
+                submit,
+                size=sink.queue_spec().size or 64,
+                name=f"view-{rig}",
+                on_start=sink.start,
+                on_exit=sink.finish,
+            )
+            worker.start()
+            self.sinks[rig], self.workers[rig] = sink, worker
             log.info("view: watching rig %s", rig)
         return self.sinks[rig]
 
@@ -190,7 +204,8 @@ class Viewer:
 
     def _submit(self, rig: str, released: list[tuple[int, RerunParts]]) -> None:
         for _, parts in released:
-            self.sink(rig).submit(parts)
+            self.sink(rig)
+            self.workers[rig].put(parts)  # logged on the rig's thread; a full queue drops the oldest (counted)
 
     def poll(self) -> None:
         """Log the messages whose wait for the ones before them expired."""
@@ -201,14 +216,20 @@ class Viewer:
         """Close every sink; the summary of what was received, put in order and logged."""
         for (rig, _), buf in self.order.items():
             self._submit(rig, buf.flush())
-        for sink in self.sinks.values():
+        for rig, sink in self.sinks.items():
+            self.workers[rig].close(timeout)
             sink.close(timeout)
         order: dict[str, dict[str, object]] = defaultdict(dict)
         for (rig, name), buf in self.order.items():
             order[rig][name] = buf.stats()
         return {
             "rigs": {
-                rig: {"received": dict(self.received[rig]), "order": order[rig], "rerun": sink.stats()}
+                rig: {
+                    "received": dict(self.received[rig]),
+                    "order": order[rig],
+                    "rerun": sink.stats(),
+                    "queue_dropped": self.workers[rig].dropped + self.workers[rig].discarded,
+                }
                 for rig, sink in self.sinks.items()
             },
             "rejected": self.rejected,

@@ -2,14 +2,21 @@
 
 ::
 
-    source thread --emit--> [input queue] --> process thread --> [output queue] --> sink thread
-                                                 (Fusion)                          (every sink.write)
+    network --> [source's receive rings] --> source thread --emit--> [input queue] --> process thread
+                (Zenoh, ROS 2 only)                                                     (Fusion)
+        --> [queue of sink 1] --> sink 1's thread (sink.write)
+        --> [queue of sink 2] --> sink 2's thread ...
 
-Each stage is a :class:`~vpp_service.queueing.QueueWorker` (a bounded queue and
-its thread) with a policy: ``latest`` drops the oldest item when full (a live
+The pipeline owns every buffer after the source: the input queue, and one queue
+and thread per sink, sized from the sink's
+:meth:`~vpp_service.sinks.base.Sink.queue_spec` (a slow sink delays only itself).
+Each is a :class:`~vpp_service.queueing.QueueWorker` (a bounded queue and its
+thread) with a policy: ``latest`` drops the oldest item when full (a live
 camera: the freshest frame wins, drops are counted) or ``block`` (lossless: the
-producer waits). When the source has finished, the process stage handles what
-is queued and finishes the sink stage, which sets :attr:`Pipeline.done`.
+producer waits; always for a sink that must never drop, such as a recording).
+When the source has finished, the process stage handles what is queued and
+finishes the sink threads; the last one to exit sets :attr:`Pipeline.done`. A
+result is ``published`` once every sink has handled it (none dropped it).
 Counters (``received``, ``rejected``, ``dropped``, ``processed``, ``published``, ``no_depth``,
 ``errors``) and per-stage timings (mean, p50, p99 over a sliding window) are
 reported by :meth:`Pipeline.status`, which the service also serves as JSON on
@@ -18,9 +25,9 @@ the ``<prefix>/<rig>/@status`` queryable; a liveliness token
 
 Every loss of valid input or output anywhere is in one count: ``counters["dropped"]``
 is the sum of ``status()["dropped"]``, which names each cause (``input_queue``,
-``output_queue``, ``shutdown`` for frames still queued when a stop abandons
-them, the source's own losses such as ``source_ring`` and ``sync``, and
-``sink.<Name>`` for each sink's dropped outputs). Under the ``block`` input
+``shutdown`` for frames and results still queued when a stop abandons them, the
+source's own losses such as ``source_ring`` and ``sync``, and ``sink.<Name>``
+for each sink's: its full queue's drops plus what the sink itself lost). Under the ``block`` input
 policy the source is asked to back-pressure its producer instead of dropping.
 
 A source whose thread dies on an exception ends the pipeline like an exhausted
@@ -177,18 +184,17 @@ class Pipeline:
         source.input_policy = input_policy  # "block": the source back-pressures its producer too
         self.process = process
         self.sinks = list(sinks)
-        for sink in self.sinks:
-            sink.queue_policy = output_policy  # "block": a buffering sink waits for room too (end to end)
-        # the process stage finishes the sink stage when it ends; the sink stage then sets `done`
-        self.output: QueueWorker[FusionResult] = QueueWorker(
-            self._publish, size=output_size, policy=output_policy, name="pipeline-sinks", on_exit=self._sinks_done
-        )
+        # one queue and thread per sink, from its spec (the pipeline owns every buffer on the way out)
+        self.sink_workers: list[QueueWorker[_Delivery]] = [
+            self._sink_worker(sink, output_size, output_policy) for sink in self.sinks
+        ]
+        self._sinks_running = len(self.sinks)  # sink threads not yet exited; the last sets `done`
         self.input: QueueWorker[StereoFrame] = QueueWorker(
             self._process,
             size=input_size,
             policy=input_policy,
             name="pipeline-process",
-            on_exit=self.output.finish,
+            on_exit=self._process_done,
             on_error=self._process_failed,
         )
         self.max_frames = max_frames
@@ -304,12 +310,7 @@ class Pipeline:
             self._inc("no_depth")
         self._inc("processed")
         self._done_at.append(time.monotonic())
-        if self.output.policy == "block":
-            while not self.output.put(result, timeout=0.1):
-                if self._stop.is_set() or self.output.closed:
-                    break
-        else:
-            self.output.put(result)
+        self._deliver(result)
         prepare = getattr(self.process, "prepare_next", None)
         if prepare is not None:
             try:
@@ -332,14 +333,65 @@ class Pipeline:
             self._last_error_log = now
             log.error("processing frame seq=%s failed: %r", frame.seq, exc)
 
-    def _publish(self, result: FusionResult) -> None:
-        """Sink stage (its worker thread): one result to every sink."""
-        for sink in self.sinks:
-            try:
-                sink.write(result)
-            except Exception as exc:  # noqa: BLE001 - a broken sink must not stop the others
-                self._inc("errors")
-                log.warning("sink %s: %s", type(sink).__name__, exc)
+    def _sink_worker(self, sink: Sink, size: int, policy: Policy) -> QueueWorker[_Delivery]:
+        """The queue and thread of ``sink``, from its :meth:`~vpp_service.sinks.base.Sink.queue_spec`.
+
+        The sink's own ``block`` (a recording) or the pipeline's ``block`` output policy (a replay) make
+        the process stage wait for room; otherwise a full queue drops its oldest result (counted).
+        """
+        spec = sink.queue_spec()
+        name = type(sink).__name__
+        blocking = "block" in (policy, spec.policy)
+        return QueueWorker(
+            lambda d: self._write(sink, d),
+            size=spec.size or size,
+            policy="block" if blocking else "latest",
+            name=f"sink-{name}",
+            on_start=sink.start,
+            on_exit=lambda: self._sink_finished(sink),
+            on_error=lambda d, exc: self._sink_failed(sink, d, exc),
+            on_drop=lambda d: self._delivered(d, dropped=True),
+        )
+
+    def _deliver(self, result: FusionResult) -> None:
+        """Hand ``result`` to every sink's queue (waiting for room where it blocks)."""
+        delivery = _Delivery(result, len(self.sink_workers))
+        if not self.sink_workers:
+            self._published(result)
+            return
+        for worker in self.sink_workers:
+            if worker.policy == "block":
+                while not worker.put(delivery, timeout=0.1):
+                    if self._stop.is_set() or worker.closed:
+                        self._delivered(delivery, dropped=True)
+                        break
+            elif not worker.put(delivery):
+                self._delivered(delivery, dropped=True)
+
+    def _write(self, sink: Sink, delivery: _Delivery) -> None:
+        """One sink's thread: write one result, then count it delivered there."""
+        try:
+            sink.write(delivery.result)
+        finally:
+            self._delivered(delivery)
+
+    def _sink_failed(self, sink: Sink, delivery: _Delivery, exc: Exception) -> None:
+        """A sink raised on a result: counted (the pipeline's ``errors`` and the sink's), the others go on."""
+        self._inc("errors")
+        sink.count("errors")
+        log.warning("sink %s: %s", type(sink).__name__, exc)
+
+    def _delivered(self, delivery: _Delivery, *, dropped: bool = False) -> None:
+        """One sink is done with ``delivery`` (written, failed or dropped); the last one publishes it."""
+        with self._lock:
+            delivery.remaining -= 1
+            delivery.dropped |= dropped
+            last = delivery.remaining == 0
+        if last and not delivery.dropped:
+            self._published(delivery.result)
+
+    def _published(self, result: FusionResult) -> None:
+        """Every sink has the result: latency, ``published``, and the pool's answer (without a network sink)."""
         # latency from when this service received the frame, never from the sender's stamp_ns (a peer sets it)
         recv_ns = result.frame.meta.get("recv_ns")
         if isinstance(recv_ns, int):
@@ -348,8 +400,23 @@ class Pipeline:
         if self.pool is not None and self.pool.answer_on_publish:
             self.pool.answered(result.frame.seq)
 
-    def _sinks_done(self) -> None:
-        self.done.set()
+    def _process_done(self) -> None:
+        """The process stage ended: the sink threads finish what is queued (or ``done`` now, without sinks)."""
+        for worker in self.sink_workers:
+            worker.finish()
+        if not self.sink_workers:
+            self.done.set()
+
+    def _sink_finished(self, sink: Sink) -> None:
+        """A sink's thread is exiting: its ``finish`` hook, then ``done`` once every sink thread has."""
+        try:
+            sink.finish()
+        finally:
+            with self._lock:
+                self._sinks_running -= 1
+                last = self._sinks_running == 0
+            if last:
+                self.done.set()
 
     # ----------------------------------------------------------- lifecycle
     def start(self) -> None:
@@ -378,7 +445,8 @@ class Pipeline:
         if self.pool is not None:
             self.pool.start(self._enqueue)
         self._started = time.monotonic()
-        self.output.start()
+        for worker in self.sink_workers:
+            worker.start()
         self.input.start()
         self.source.start(self._emit, self._source_reject, on_finished=self.input.finish)
 
@@ -433,14 +501,16 @@ class Pipeline:
         deadline = time.monotonic() + timeout
         self.input.finish()
         drained = self.input.join(max(0.05, deadline - time.monotonic()))
-        drained = self.output.join(max(0.05, deadline - time.monotonic())) and drained
+        for worker in self.sink_workers:
+            drained = worker.join(max(0.05, deadline - time.monotonic())) and drained
         if not drained:
-            log.warning("pipeline threads did not drain within %.1f s; abandoning the queued frames", timeout)
+            log.warning("pipeline threads did not drain within %.1f s; abandoning the queued results", timeout)
             self._stop.set()
-            for worker in (self.input, self.output):
+            self.input.abort()
+            for worker in self.sink_workers:
                 worker.abort()
-            self.output.finish()  # in case the process stage never ends
-            for worker in (self.input, self.output):
+            self.input.join(1.0)
+            for worker in self.sink_workers:
                 worker.join(1.0)
         self._stop.set()
         for sink in self._opened:
@@ -488,12 +558,15 @@ class Pipeline:
                     "dropped": self.input.dropped,
                     "high_water": self.input.high_water,
                 },
-                "output": {
-                    "len": len(self.output),
-                    "size": self.output.size,
-                    "policy": self.output.policy,
-                    "dropped": self.output.dropped,
-                    "high_water": self.output.high_water,
+                **{
+                    f"sink.{type(sink).__name__}": {
+                        "len": len(w),
+                        "size": w.size,
+                        "policy": w.policy,
+                        "dropped": w.dropped,
+                        "high_water": w.high_water,
+                    }
+                    for sink, w in zip(self.sinks, self.sink_workers, strict=True)
                 },
             },
             "timing_ms": self.timer.summary(),
@@ -530,19 +603,19 @@ class Pipeline:
         """Every loss by cause (see the module docstring); ``counters["dropped"]`` is their sum."""
         out = {
             "input_queue": self.input.dropped,
-            "output_queue": self.output.dropped,
             # frames left queued when max_frames is reached were not wanted: only a stop's discards are losses
             "shutdown": (0 if self._enough.is_set() else self.input.discarded - self._handed_over())
-            + self.output.discarded
+            + sum(w.discarded for w in self.sink_workers)
             + self._refused,
         }
         try:
             out.update({k: int(v) for k, v in self.source.losses().items()})
         except Exception:  # a source's broken counters must not break @status
             log.debug("source.losses() failed", exc_info=True)
-        for name, st in sinks.items():
-            n = st.get("dropped", 0)
-            out[f"sink.{name}"] = n if isinstance(n, int) else 0
+        for sink, worker in zip(self.sinks, self.sink_workers, strict=True):
+            name = type(sink).__name__
+            n = sinks.get(name, {}).get("dropped", 0)  # the sink's own losses (a viewer gone, ...)
+            out[f"sink.{name}"] = (n if isinstance(n, int) else 0) + worker.dropped  # + its full queue's
         return out
 
     def _handed_over(self) -> int:
@@ -583,6 +656,17 @@ class Pipeline:
             f"{st['fps']:.1f} fps | {lat_s}{bad_s} | recv {c['received']} proc {c['processed']} "
             f"pub {c['published']} drop {c['dropped']} rej {c['rejected']} no-depth {c['no_depth']}{thr_s}"
         )
+
+
+class _Delivery:
+    """One result on its way to the sinks: how many sinks still have it queued, whether one dropped it."""
+
+    __slots__ = ("dropped", "remaining", "result")
+
+    def __init__(self, result: FusionResult, remaining: int) -> None:
+        self.result = result
+        self.remaining = remaining
+        self.dropped = False
 
 
 def _close_within(sink: Sink, timeout: float) -> bool:

@@ -9,14 +9,16 @@ produces. The pipeline calls, in order:
    opens, so a bad key fails the start, not frame 1000. ``cls.needs_depth(options)``
    tells the service whether to compute metric depth for this sink.
 2. ``sink = cls(options, context)`` then ``sink.open()`` -- acquire resources.
-3. ``sink.write(result)`` from the pipeline's sink thread, once per frame. It
-   must not block for long: a slow consumer (a Rerun viewer, the network) is
-   decoupled inside the sink (own thread + bounded queue) and drops are counted.
-   ``sink.queue_policy`` is the pipeline's output policy, set before ``open``:
-   under ``block`` (a replay) a sink that buffers makes ``write`` wait for room
-   rather than drop.
-4. ``sink.close(timeout)`` -- flush and release within ``timeout`` seconds,
-   even when a peer or viewer is gone.
+3. The pipeline owns every buffer: it gives each sink its own bounded queue and
+   thread, sized by ``sink.queue_spec()`` (a :class:`QueueSpec`: size, and
+   ``block`` for a sink that must never drop, such as a recording; otherwise the
+   ``[queues]`` output policy decides, and a full queue drops its oldest result,
+   counted as the sink's loss). On that thread it calls ``sink.start()`` once,
+   then ``sink.write(result)`` once per frame -- plain and synchronous --, then
+   ``sink.finish()`` after the last one. A slow consumer (a Rerun viewer, the
+   network) delays only its own sink's thread.
+4. ``sink.close(timeout)`` -- release within ``timeout`` seconds, even when a
+   peer or viewer is gone (the pipeline abandons a close that does not return).
 
 ``sink.stats()`` returns counters (``written``, ``dropped``, ``errors``) that
 the service reports in its ``@status`` reply.
@@ -26,11 +28,11 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from collections.abc import Mapping
-from typing import Any, ClassVar
+from dataclasses import dataclass
+from typing import Any, ClassVar, Literal
 
 from vpp_service.frame import FusionResult
 from vpp_service.plugin import Plugin, PluginContext, parse_plugin_options
-from vpp_service.queueing import Policy
 from vpp_service.registry import Registry
 
 #: Registered sink classes by name ("zenoh", "rerun", "files").
@@ -39,6 +41,30 @@ SINKS: Registry[Sink] = Registry("sink")
 
 class SinkContext(PluginContext):
     """Service-wide facts a sink may need (fields: see :class:`~vpp_service.plugin.PluginContext`)."""
+
+
+@dataclass(frozen=True)
+class QueueSpec:
+    """How the pipeline buffers results for one sink (:meth:`Sink.queue_spec`).
+
+    Attributes
+    ----------
+    size : int or None
+        Results waiting for the sink; None: ``[queues] output_size``.
+    policy : {"block"} or None
+        ``"block"``: the sink never drops (a recording): a full queue makes the
+        pipeline wait. None: the ``[queues]`` output policy decides (``latest``
+        drops the oldest result when full, counted; ``block`` waits).
+    """
+
+    size: int | None = None
+    policy: Literal["block"] | None = None
+
+    def __post_init__(self) -> None:
+        if self.size is not None and (isinstance(self.size, bool) or not isinstance(self.size, int) or self.size < 1):
+            raise ValueError(f"size must be an integer >= 1 or None, got {self.size!r}")
+        if self.policy not in (None, "block"):
+            raise ValueError(f"policy must be 'block' or None, got {self.policy!r}")
 
 
 class Sink(Plugin):
@@ -58,10 +84,15 @@ class Sink(Plugin):
     #: with the ``seq``); without such a sink the pipeline announces a frame when every sink is done.
     answers_pool: ClassVar[bool] = False
 
-    def __init__(self, options: Any, context: SinkContext) -> None:
-        super().__init__(options, context)
-        #: The pipeline's output policy (set before :meth:`open`): ``block`` asks a buffering sink to wait, not drop.
-        self.queue_policy: Policy = "latest"
+    def queue_spec(self) -> QueueSpec:
+        """How the pipeline buffers results for this sink (default: the ``[queues]`` output settings)."""
+        return QueueSpec()
+
+    def start(self) -> None:
+        """On the sink's thread, before the first :meth:`write` (attach to a viewer, create a file)."""
+
+    def finish(self) -> None:
+        """On the sink's thread, after the last :meth:`write` (flush, close a file)."""
 
     @classmethod
     def needs_depth(cls, options: Any) -> bool:
@@ -79,7 +110,7 @@ class Sink(Plugin):
 
     @abstractmethod
     def write(self, result: FusionResult) -> None:
-        """Consume one result; never blocks indefinitely."""
+        """Consume one result, synchronously (on the sink's own thread when the pipeline drives it)."""
 
     def close(self, timeout: float = 5.0) -> None:
         """Flush and release resources within ``timeout`` seconds."""

@@ -34,12 +34,14 @@ blueprint and static data re-sent) as soon as it is back.
 
 Threading and back-pressure
 ---------------------------
-:meth:`RerunSink.write` applies the ``max_hz`` throttle and hands the result
-to a :class:`~vpp_service.queueing.QueueWorker` (``queue_size``; drop-oldest,
-or waiting for room under the pipeline's ``block`` output policy, a replay)
-whose thread converts and logs. Throttled frames are counted (``throttled``:
-skipped on purpose, not a loss) and said once in the log; ``queue_dropped`` and
-``undelivered`` add up to ``dropped``. The sink uses its own
+:meth:`RerunSink.write` applies the ``max_hz`` throttle, converts and logs,
+synchronously. The pipeline runs it on this sink's own thread behind a queue of
+``queue_size`` results (:meth:`RerunSink.queue_spec`: drop-oldest, or waiting
+for room under the pipeline's ``block`` output policy, a replay), and calls
+:meth:`RerunSink.start` (attach) and :meth:`RerunSink.finish` (flush,
+disconnect) on that thread. Throttled frames are counted (``throttled``:
+skipped on purpose, not a loss) and said once in the log; ``undelivered`` is
+``dropped``. The sink uses its own
 :class:`rerun.RecordingStream` (never the global one), with per-rig ids
 (application ``vpp-service-<rig>``, recording ``<rig>-<uuid>``) so that several
 rigs coexist in one viewer, and sets the time per frame on the ``seq``
@@ -79,8 +81,7 @@ from typing import TYPE_CHECKING, Literal
 from urllib.parse import urlsplit
 
 from vpp_service.frame import FusionResult
-from vpp_service.queueing import QueueWorker
-from vpp_service.sinks.base import SINKS, Sink, SinkContext
+from vpp_service.sinks.base import SINKS, QueueSpec, Sink, SinkContext
 from vpp_service.sinks.ordered import OrderedWrites, check_reorder_options
 from vpp_service.sinks.rerun_log import ENTITY_RE, RerunLayout, RerunParts, depth_stride, parts_from_result
 
@@ -151,8 +152,8 @@ class RerunSinkOptions:
         Memory bound of the spawned viewer / the gRPC server buffer, e.g.
         ``"512MB"``, ``"2GiB"``, ``"25%"``.
     queue_size : int
-        Frames waiting for the logging thread (>= 1); when full the oldest is
-        dropped and counted.
+        Frames waiting for this sink's thread in the pipeline (>= 1); when full
+        the oldest is dropped and counted (unless the pipeline blocks).
     log_painted : bool
         Log the painted pair (when present) instead of the raw pair.
     jpeg_quality : int
@@ -314,17 +315,9 @@ class RerunSink(Sink):
         if not ENTITY_RE.match(context.rig):
             raise ValueError(f"context.rig: must be letters, digits, '_', '-', '.', got {context.rig!r}")
         super().__init__(options, context)
-        self._counters.update({"throttled": 0, "queue_dropped": 0, "undelivered": 0, "reconnects": 0, "rotations": 0})
+        self._counters.update({"throttled": 0, "undelivered": 0, "reconnects": 0, "rotations": 0})
         self._ordered = OrderedWrites(options.reorder_window, options.reorder_wait_ms, context, self._accept)
-        self._worker: QueueWorker[FusionResult | RerunParts] = QueueWorker(
-            self._log_one,
-            size=options.queue_size,
-            policy="latest",
-            name=f"rerun-sink-{context.rig}",
-            on_start=self._attach_once,
-            on_exit=self._flush,
-            on_error=self._failed,
-        )
+        self._state: Literal["new", "open", "finished", "closed"] = "new"
         o = options
         self.layout = RerunLayout(
             jpeg_quality=o.jpeg_quality,
@@ -387,7 +380,7 @@ class RerunSink(Sink):
         """
         import rerun as rr
 
-        if self._worker.started:
+        if self._state != "new":
             raise RuntimeError("rerun sink: already open")
         o = self.options
         rec_id = o.recording_id or f"{self.context.rig}-{uuid.uuid4()}"
@@ -401,8 +394,23 @@ class RerunSink(Sink):
             rec.save(str(path), default_blueprint=self._first_blueprint())
             self.layout.log_static(rec, self.context.rig)
             self._ready.set()
-        self._worker.set_policy(self.queue_policy)  # block under a replay: wait for room, lose nothing
-        self._worker.start()
+        self._state = "open"
+
+    def queue_spec(self) -> QueueSpec:
+        """``queue_size`` results wait for this sink (a full queue drops the oldest unless the pipeline blocks)."""
+        return QueueSpec(size=self.options.queue_size)
+
+    def start(self) -> None:
+        """Attach the network output (spawn, connect, serve), on the thread that logs."""
+        self._attach_once()
+
+    def finish(self) -> None:
+        """Log the results still held for ordering, flush and disconnect, on the thread that logs."""
+        if self._state != "open":
+            return
+        self._ordered.flush()
+        self._state = "finished"
+        self._flush()
 
     def _attach(self) -> None:
         """Attach the network output (runs on the logging thread)."""
@@ -469,18 +477,21 @@ class RerunSink(Sink):
         return True
 
     def wait_ready(self, timeout: float = 5.0) -> bool:
-        """Wait until the output is attached (the server runs, the viewer is spawned).
+        """Attach the output now if :meth:`start` has not (the server runs, the viewer is spawned).
 
         Returns
         -------
         bool
             True when attached (or attaching failed and was counted in
-            ``stats()["errors"]``), False on timeout or when not open.
+            ``stats()["errors"]``), False when not open.
         """
-        return self._worker.started and self._ready.wait(timeout)
+        if self._state != "open":
+            return False
+        self._attach_once()
+        return self._ready.wait(timeout)
 
     def write(self, result: FusionResult) -> None:
-        """Enqueue ``result`` for logging (non-blocking; throttled; drop-oldest).
+        """Log ``result`` (throttled by ``max_hz``; in ``seq`` order in a pool), synchronously.
 
         Raises
         ------
@@ -520,10 +531,10 @@ class RerunSink(Sink):
                     )
                 return
             self._tokens -= 1.0
-        self._worker.put(result)
+        self._log_item(result)
 
     def submit(self, parts: RerunParts) -> None:
-        """Enqueue already split pieces (``vpp-service view``); no ``max_hz`` throttle, drop-oldest.
+        """Log already split pieces (``vpp-service view``), synchronously; no ``max_hz`` throttle.
 
         Raises
         ------
@@ -535,25 +546,31 @@ class RerunSink(Sink):
         if not isinstance(parts, RerunParts):
             raise TypeError(f"parts: must be RerunParts, got {type(parts).__name__}")
         self._check_open()
-        self._worker.put(parts)
+        self._log_item(parts)
 
     def _check_open(self) -> None:
-        if not self._worker.started or self._worker.closed:
+        if self._state != "open":
             raise RuntimeError("rerun sink: write() before open() or after close()")
 
-    def close(self, timeout: float = 5.0) -> None:
-        """Drain, flush and disconnect within ``timeout`` seconds (never hangs).
+    def _log_item(self, item: FusionResult | RerunParts) -> None:
+        """Log one frame (attaching first if needed); a frame that cannot be logged is counted, never raised."""
+        self._attach_once()
+        try:
+            self._log_one(item)
+        except Exception as exc:  # noqa: BLE001 - a bad frame must not kill the sink
+            self._failed(item, exc)
 
-        Frames still queued when time runs out are dropped (counted); a logging
-        thread stuck on a dead viewer is abandoned (it is a daemon thread).
+    def close(self, timeout: float = 5.0) -> None:
+        """Flush and disconnect (unless :meth:`finish` did) within about ``timeout`` seconds, stop a server.
+
+        The flush is bounded by ``timeout``; a library call that hangs anyway is bounded by the
+        pipeline, which abandons the close (:class:`~vpp_service.service.pipeline.Pipeline`).
         """
-        if not self._worker.started or self._worker.closed:
+        if self._state in ("new", "closed"):
             return
-        self._ordered.flush()
         self._close_deadline = time.monotonic() + max(0.0, float(timeout))
-        if not self._worker.close(timeout):
-            log.warning("rerun sink: close() timed out after %.1f s; abandoning the logging thread", timeout)
-            self._counters["errors"] += 1
+        self.finish()
+        self._state = "closed"
         if self._server is not None:
             self._server.terminate()
             try:
@@ -567,25 +584,24 @@ class RerunSink(Sink):
         st = self.stats()
         if st["dropped"] or st["throttled"]:
             log.info(
-                "rerun sink: logged %d frames; not logged: %d over max_hz, %d queue overflow, %d undelivered",
+                "rerun sink: logged %d frames; not logged: %d over max_hz, %d undelivered",
                 st["written"],
                 st["throttled"],
-                st["queue_dropped"],
                 st["undelivered"],
             )
 
     def stats(self) -> dict[str, int]:
-        """Counters: ``written``, ``errors``, ``throttled``, ``queue_dropped``, ``undelivered``, ``dropped``.
+        """Counters: ``written``, ``errors``, ``throttled``, ``undelivered``, ``dropped``.
 
-        ``dropped`` (a loss) is ``queue_dropped + undelivered``; ``throttled`` frames (over ``max_hz``)
-        were skipped on purpose and are not in it.
+        ``dropped`` (a loss) is ``undelivered`` (a viewer out of reach); ``throttled`` frames (over
+        ``max_hz``) were skipped on purpose and are not in it. Results dropped from the queue in front
+        of this sink are the pipeline's to count (``sink.RerunSink``).
 
         Also ``reconnects`` (network modes) and ``rotations`` (``save`` with ``max_mb``).
         """
-        out = dict(self._counters)
+        out = super().stats()
         out.update(self._ordered.stats())
-        out["queue_dropped"] = self._worker.dropped + self._worker.discarded
-        out["dropped"] = out["queue_dropped"] + out["undelivered"]  # throttled frames were skipped on purpose
+        out["dropped"] = out["undelivered"]  # throttled frames were skipped on purpose
         return out
 
     # -- logging thread -------------------------------------------------------------
@@ -602,7 +618,7 @@ class RerunSink(Sink):
         return self._rec
 
     def _attach_once(self) -> None:
-        if self._ready.is_set():
+        if self._ready.is_set() or self._rec is None:
             return
         try:
             self._attach()

@@ -22,28 +22,24 @@ Each publisher has a liveliness token and every sample the attachment (``current
 output with no subscriber on the graph is not serialized (counted in ``lazy_skipped``).
 Frames from a non-ROS source get the header stamp ``frame.stamp_ns`` and ``frame_id``.
 
-``write`` never blocks the pipeline: results go through a
-:class:`~vpp_service.queueing.QueueWorker` (``queue_size``, oldest dropped and counted).
+``write`` encodes and publishes one result, synchronously; the pipeline runs it on this
+sink's own thread behind a queue of ``queue_size`` results (:meth:`Ros2Sink.queue_spec`).
 """
 
 from __future__ import annotations
 
-import logging
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from vpp_service.frame import Calibration, FusionResult
-from vpp_service.queueing import QueueWorker
-from vpp_service.sinks.base import SINKS, Sink, SinkContext
+from vpp_service.sinks.base import SINKS, QueueSpec, Sink, SinkContext
 from vpp_service.timing import StageTimer
 from vpp_service.transport.ros2 import keys
 from vpp_service.transport.ros2 import messages as rm
 from vpp_service.transport.ros2.attachment import Layout
 from vpp_service.transport.ros2.node import RosNode, RosPublisher
-
-log = logging.getLogger(__name__)
 
 #: Output name -> (default topic relative to the namespace, message type).
 OUTPUTS: dict[str, tuple[str, str]] = {
@@ -215,15 +211,16 @@ class Ros2Sink(Sink):
         self.options: Ros2SinkOptions = options
         self._node: RosNode | None = None
         self._pubs: dict[str, RosPublisher] = {}
-        self._worker: QueueWorker[FusionResult] = QueueWorker(
-            self._publish, size=options.queue_size, policy="latest", name="sink-ros2", on_error=self._failed
-        )
         self._timer = StageTimer()  # per-result encode + publish durations (ms), the median in stats()
         self._counters.update({"lazy_skipped": 0, "missing": 0})
         self._encoder = Ros2Encoder(options)
 
+    def queue_spec(self) -> QueueSpec:
+        """``queue_size`` results wait for this sink (a full queue drops the oldest unless the pipeline blocks)."""
+        return QueueSpec(size=self.options.queue_size)
+
     def open(self) -> None:
-        """Declare the node, one publisher (and token) per output, and start the publishing thread."""
+        """Declare the node and one publisher (and token) per output."""
         session = self.context.session
         if session is None:
             raise ValueError("sinks.ros2: needs an open zenoh session (service.zenoh section)")
@@ -233,34 +230,32 @@ class Ros2Sink(Sink):
         for name in o.outputs:
             visual = name in ("left_vpp", "right_vpp")
             self._pubs[name] = self._node.publisher(o.topic(name), OUTPUTS[name][1], block=not visual)
-        self._worker.set_policy(self.queue_policy)  # block under a replay: wait for room, lose nothing
-        self._worker.start()
 
     def write(self, result: FusionResult) -> None:
-        """Queue ``result`` for publishing; drops (and counts) the oldest when full."""
-        self._worker.put(result)
+        """Encode and publish every output of one result.
 
-    def _publish(self, result: FusionResult) -> None:
+        Raises
+        ------
+        RuntimeError
+            If the sink is not open.
+        """
+        if self._node is None:
+            raise RuntimeError("ros2 sink: not open")
         t0 = time.perf_counter()
         for name, pub in self._pubs.items():
             if self.options.lazy and not pub.matching:
-                self._counters["lazy_skipped"] += 1
+                self.count("lazy_skipped")
                 continue
             payload = self._encoder.encode(result, name)
             if payload is None:
-                self._counters["missing"] += 1
+                self.count("missing")
                 continue
             pub.put(payload, self.options.attachment)
         self._timer.add("publish", (time.perf_counter() - t0) * 1e3)
-        self._counters["written"] += 1
-
-    def _failed(self, result: FusionResult, exc: Exception) -> None:
-        self._counters["errors"] += 1
-        log.warning("ros2 sink: %s", exc)
+        self.count("written")
 
     def close(self, timeout: float = 5.0) -> None:
-        """Flush the queue within ``timeout`` seconds, then undeclare the node."""
-        self._worker.close(timeout)
+        """Undeclare the node."""
         if self._node is not None:
             self._node.close()
             self._node = None
@@ -268,8 +263,7 @@ class Ros2Sink(Sink):
 
     def stats(self) -> dict[str, object]:  # type: ignore[override]  # nested timing, like the zenoh sink
         """Counters plus ``timing_ms.publish``: median encode + put time per result (recent window)."""
-        out: dict[str, object] = dict(self._counters)
-        out["dropped"] = self._worker.dropped + self._worker.discarded
+        out: dict[str, object] = dict(super().stats())
         out["timing_ms"] = self._timer.medians()
         return out
 

@@ -3,26 +3,22 @@
 The messages are exactly what the ``ros2`` sink publishes (:class:`~vpp_service.sinks.ros2.Ros2Encoder`:
 ``disparity``, ``depth``, ``points2``, ``left_vpp``, ``right_vpp`` under ``namespace``), each
 logged at its header stamp. ``path`` is the bag folder to create: it must not exist (a
-recording never overwrites). Writing happens on the sink's own thread
-(:class:`~vpp_service.queueing.QueueWorker`, policy ``block``: a recording is lossless, the
-pipeline's output queue absorbs the wait); the thread creates the bag and, on ``close``, finishes it
-(``metadata.yaml``).
+recording never overwrites). The pipeline runs this sink on its own thread behind a queue
+that never drops (:meth:`Rosbag2Sink.queue_spec`: ``block``, a recording is lossless and the
+pipeline waits instead); that thread creates the bag (:meth:`~Rosbag2Sink.start`), writes it and
+finishes it (:meth:`~Rosbag2Sink.finish`: ``metadata.yaml``), so sqlite3 handles stay on one thread.
 """
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from pathlib import Path
 
 from vpp_service.frame import FusionResult
-from vpp_service.queueing import QueueWorker
-from vpp_service.sinks.base import SINKS, Sink, SinkContext
+from vpp_service.sinks.base import SINKS, QueueSpec, Sink, SinkContext
 from vpp_service.sinks.ros2 import OUTPUTS, Ros2Encoder, Ros2OutputOptions
 from vpp_service.transport.ros2.bag import BagWriter, Storage
 from vpp_service.transport.ros2.messages import stamp_ns
-
-log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -70,56 +66,44 @@ class Rosbag2Sink(Sink):
         self.options: Rosbag2SinkOptions = options
         self._encoder = Ros2Encoder(options)
         self._bag: BagWriter | None = None
-        self._worker: QueueWorker[FusionResult] = QueueWorker(
-            self._record,
-            size=options.queue_size,
-            policy="block",
-            name="sink-rosbag2",
-            on_start=self._open_bag,
-            on_exit=self._close_bag,
-            on_error=self._failed,
-        )
         self._counters.update({"messages": 0, "missing": 0})
 
-    def open(self) -> None:
-        """Start the writing thread (which creates the bag: sqlite3 handles stay on one thread)."""
-        Path(self.options.path).parent.mkdir(parents=True, exist_ok=True)
-        self._worker.start()
+    def queue_spec(self) -> QueueSpec:
+        """``queue_size`` results, never dropped: a recording is lossless (the pipeline waits for room)."""
+        return QueueSpec(size=self.options.queue_size, policy="block")
 
-    def _open_bag(self) -> None:
+    def open(self) -> None:
+        """Create the bag's parent folder (the bag itself is created on the writing thread)."""
+        Path(self.options.path).parent.mkdir(parents=True, exist_ok=True)
+
+    def start(self) -> None:
+        """Create the bag, on the thread that writes it (sqlite3 handles stay on one thread)."""
         self._bag = BagWriter(self.options.path, self.options.storage)
 
-    def _close_bag(self) -> None:
+    def finish(self) -> None:
+        """Finish the bag (``metadata.yaml``), on the thread that wrote it."""
         if self._bag is not None:
             self._bag.close()
             self._bag = None
 
     def write(self, result: FusionResult) -> None:
-        """Queue ``result`` for recording (waits for room: a recording is lossless)."""
-        if not self._worker.put(result):
-            self._counters["dropped"] += 1
-
-    def _record(self, result: FusionResult) -> None:
+        """Record every output of one result (creates the bag first when :meth:`start` has not run)."""
         if self._bag is None:
-            raise RuntimeError(f"the bag {self.options.path} could not be created")
+            self.start()
+        assert self._bag is not None
         t = stamp_ns(self._encoder.header(result))
         for name in self.options.outputs:
             payload = self._encoder.encode(result, name)
             if payload is None:
-                self._counters["missing"] += 1
+                self.count("missing")
                 continue
             self._bag.write(self.options.topic(name), OUTPUTS[name][1], t, payload)
-            self._counters["messages"] += 1
-        self._counters["written"] += 1
-
-    def _failed(self, result: FusionResult, exc: Exception) -> None:
-        self._counters["errors"] += 1
-        log.warning("rosbag2 sink: %s", exc)
+            self.count("messages")
+        self.count("written")
 
     def close(self, timeout: float = 5.0) -> None:
-        """Record what is queued within ``timeout`` seconds; the thread then finishes the bag."""
-        if not self._worker.close(timeout):
-            self._counters["dropped"] += self._worker.discarded
+        """Finish the bag if :meth:`finish` has not (a sink written without the pipeline)."""
+        self.finish()
 
 
 __all__ = ["Rosbag2Sink", "Rosbag2SinkOptions"]

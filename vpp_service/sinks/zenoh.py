@@ -16,12 +16,10 @@ in ``seq``). ``"block"`` suits a deployment whose consumers are all trusted
 to keep up and must not lose a map. ``left_vpp`` / ``right_vpp`` and
 ``sparse`` (for viewing) always go at ``Priority.DATA_LOW`` with ``DROP``.
 
-``write`` never blocks the pipeline: results go through a
-:class:`~vpp_service.queueing.QueueWorker` (``queue_size``, oldest dropped and
-counted) to this sink's own thread, which serializes and publishes.
-``close(timeout)`` flushes what is queued within the timeout (results still
-queued then are dropped and counted), then undeclares the publishers (the
-session belongs to the service).
+``write`` serializes and publishes one result, synchronously; the pipeline
+runs it on this sink's own thread behind a queue of ``queue_size`` results
+(:meth:`ZenohSink.queue_spec`; the oldest dropped and counted when full).
+``close`` undeclares the publishers (the session belongs to the service).
 
 A callable ``context.extra["on_written"]`` is called with each result's ``seq``
 once its outputs have been put (a pool worker announces the frame as answered
@@ -31,22 +29,18 @@ then, never before its outputs are on their way).
 from __future__ import annotations
 
 import contextlib
-import logging
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
 from vpp_service.frame import FusionResult
-from vpp_service.queueing import QueueWorker
-from vpp_service.sinks.base import SINKS, Sink, SinkContext
+from vpp_service.sinks.base import SINKS, QueueSpec, Sink, SinkContext
 from vpp_service.timing import StageTimer
 from vpp_service.transport import wire
 from vpp_service.transport.shm import ShmPutter
 
 if TYPE_CHECKING:
     import zenoh
-
-log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -125,16 +119,17 @@ class ZenohSink(Sink):
     def __init__(self, options: ZenohSinkOptions, context: SinkContext) -> None:
         super().__init__(options, context)
         self._pubs: dict[str, zenoh.Publisher] = {}
-        self._worker: QueueWorker[FusionResult] = QueueWorker(
-            self._publish, size=options.queue_size, policy="latest", name="sink-zenoh", on_error=self._failed
-        )
         self._timer = StageTimer()  # per-result serialization / put durations (ms), medians in stats()
         self._putter = ShmPutter(options.shm_pool_mb)
         self._on_request: list[str] = []
         self._counters["unrequested"] = 0  # on_request outputs not serialized: nobody subscribed
 
+    def queue_spec(self) -> QueueSpec:
+        """``queue_size`` results wait for this sink (a full queue drops the oldest unless the pipeline blocks)."""
+        return QueueSpec(size=self.options.queue_size)
+
     def open(self) -> None:
-        """Declare one publisher per output and start the publishing thread."""
+        """Declare one publisher per output."""
         import zenoh
 
         session: zenoh.Session | None = self.context.session
@@ -150,15 +145,17 @@ class ZenohSink(Sink):
                 congestion_control=zenoh.CongestionControl.DROP if visual else product,
                 priority=zenoh.Priority.DATA_LOW if visual else zenoh.Priority.DATA,
             )
-        self._worker.set_policy(self.queue_policy)  # block under a replay: wait for room, lose nothing
-        self._worker.start()
 
     def write(self, result: FusionResult) -> None:
-        """Queue ``result`` for publishing; drops (and counts) the oldest when full."""
-        self._worker.put(result)
+        """Serialize and publish every output of one result.
 
-    def _publish(self, result: FusionResult) -> None:
-        """Serialize and publish every output of one result (on the sink's thread)."""
+        Raises
+        ------
+        RuntimeError
+            If the sink is not open.
+        """
+        if not self._pubs:
+            raise RuntimeError("zenoh sink: not open")
         enc_s = put_s = 0.0
         for name, pub in self._pubs.items():
             if name in self._on_request and not _matching(pub):
@@ -173,21 +170,15 @@ class ZenohSink(Sink):
             put_s += time.perf_counter() - t1
         self._timer.add("encode", enc_s * 1e3)
         self._timer.add("put", put_s * 1e3)
-        self._counters["written"] += 1
+        self.count("written")
         on_written = self.context.extra.get("on_written")
         if callable(on_written):
             on_written(result.frame.seq)
 
-    def _failed(self, result: FusionResult, exc: Exception) -> None:
-        # a closed session, a bad result: count, keep going
-        self._counters["errors"] += 1
-        log.warning("zenoh sink: %s", exc)
-
     def close(self, timeout: float = 5.0) -> None:
-        """Flush the queue within ``timeout`` seconds, then undeclare the publishers."""
+        """Undeclare the publishers."""
         import zenoh
 
-        self._worker.close(timeout)
         for pub in self._pubs.values():
             with contextlib.suppress(zenoh.ZError):  # already undeclared
                 pub.undeclare()
@@ -195,8 +186,7 @@ class ZenohSink(Sink):
 
     def stats(self) -> dict[str, Any]:
         """Counters plus ``timing_ms``: median ``encode`` / ``put`` time per result (recent window)."""
-        out: dict[str, Any] = dict(self._counters)
-        out["dropped"] = self._worker.dropped + self._worker.discarded
+        out: dict[str, Any] = super().stats()
         out["shm"] = self._putter.stats()
         out["timing_ms"] = self._timer.medians()
         return out
