@@ -50,9 +50,10 @@ Everything invalid is NaN. Threads: every function takes ``threads``
 the matcher's ``threads`` option defaults to 1 (see :class:`CensusSGMOptions`).
 Results do not depend on the thread count nor on the build.
 
-Kernels: the C in ``_census_sgm.h`` is compiled twice, portable and for
-x86-64-v3 (AVX2); the AVX2 build runs exactly when :mod:`vpp_service.vpp.backend`
-runs the AVX2 build of the VPP kernel (a CPU with AVX2, and ``VPP_NO_AVX2``
+Kernels: the C in ``_census_sgm.h`` and the stage headers it includes is
+compiled twice, portable and for x86-64-v3 (AVX2); the AVX2 build runs
+exactly when :mod:`vpp_service.vpp.backend` runs the AVX2 build of the VPP
+kernel (a CPU with AVX2, and ``VPP_NO_AVX2``
 not set to 1). :meth:`CensusSGM.compute` runs one parallel region per call
 (three with guided stereo: census and cost volume, the modulation, the rest):
 the census of both images (rows in blocks), then the SGM: the forward pass
