@@ -200,25 +200,30 @@ static void csgm_pass(const csgm_params* p, const uint16_t* cost, const uint8_t*
     }
 }
 
-/* The census inputs of csgm_sgm when it starts with the census (else gl == NULL). */
+/* The buffers of csgm_sgm.  With sout, it writes the aggregated volume there (no WTA); else disp is the
+ * result, dl NULL stops after the aggregation (timing).  Only threads 0 and 1 use scratch (2 blocks). */
 typedef struct {
-    const uint8_t* gl;
-    const uint8_t* gr;
-    uint8_t* padl;
-    uint8_t* padr;
-    uint8_t* work; /* nthreads x csgm_cost_work_bytes(W) + 64 */
-} csgm_census_io;
+    uint16_t* vf;     /* H x W x D partial sums (when csgm_narrow holds, the passes use the first H W D bytes as */
+    uint16_t* vb;     /* uint8 sums); vb unused with one thread */
+    int* rowcnt;      /* H */
+    uint8_t* scratch; /* 2 blocks of csgm_scratch_bytes(W, D) (+ 64 for alignment) */
+    uint16_t* sout;   /* H x W x D aggregated volume, or NULL */
+    float* dl;        /* H x W left WTA (may be disp when neither check nor median runs) */
+    float* dr;        /* H x W right WTA */
+    float* lr;        /* H x W after the left-right check, border step and short gaps (may be dl) */
+    float* pad;       /* (H + 2) x (W + 2) floats for the median */
+    float* disp;      /* H x W final disparity */
+} csgm_buffers;
 
 /* SGM + WTA (+ right WTA, left-right check, median) of a cost volume (cost == NULL: of the Hamming costs of
- * p->cl, p->cr, computed row by row; with census, those codes are computed first, in the same region).
- * vf, vb: H x W x D uint16 partial-sum volumes (vb unused with one thread; when csgm_narrow holds, the
- * passes use their first H x W x D bytes as uint8 sums); rowcnt: H ints; scratch: blocks
- * of csgm_scratch_bytes(W, D); pad: (H + 2) x (W + 2) floats for the median.  With sout, writes the
- * aggregated volume there instead (no WTA).  Output: disp (H x W) = final disparity; dl, dr: left / right
- * WTA (dl may be disp when neither check nor median runs).  Only threads 0 and 1 use scratch (2 blocks). */
-static void csgm_sgm(const csgm_params* p0, const uint16_t* cost, const uint8_t* g, uint16_t* vf, uint16_t* vb,
-                     int* rowcnt, uint8_t* scratch, int nthreads, uint16_t* sout, float* dl, float* dr,
-                     float* lr, float* pad, float* disp, const csgm_census_io* census) {
+ * p->cl, p->cr, computed row by row; with census, those codes are computed first, in the same region);
+ * g: the left gray image (adaptive P2).  b: the buffers and outputs, see csgm_buffers. */
+static void csgm_sgm(const csgm_params* p0, const uint16_t* cost, const uint8_t* g, const csgm_buffers* b,
+                     const csgm_census_io* census, int nthreads) {
+    uint16_t *vf = b->vf, *vb = b->vb, *sout = b->sout;
+    int* rowcnt = b->rowcnt;
+    uint8_t* scratch = b->scratch;
+    float *dl = b->dl, *dr = b->dr, *lr = b->lr, *pad = b->pad, *disp = b->disp;
     csgm_params q = *p0;
     q.narrow = csgm_narrow(q.paths, q.p2lut, cost != NULL);
     q.narrow8 = csgm_narrow8(q.paths, q.p2lut, cost != NULL, q.D);

@@ -79,12 +79,21 @@ cdef extern from "_census_sgm.h" nogil:
         uint8_t* padl
         uint8_t* padr
         uint8_t* work
-    void csgm_sgm(const csgm_params* p, const uint16_t* cost, const uint8_t* g, uint16_t* vf, uint16_t* vb,
-                  int* rowcnt, uint8_t* scratch, int nthreads, uint16_t* sout, float* dl, float* dr,
-                  float* lr, float* pad, float* disp, const csgm_census_io* census)
-    void csgm_cost(const uint8_t* gl, const uint8_t* gr, int H, int W, int D, uint8_t* padl, uint8_t* padr,
-                   uint32_t* cl, uint32_t* cr, uint16_t* cost, uint16_t invalid_cost, uint8_t* work,
-                   int nthreads)
+    ctypedef struct csgm_buffers:
+        uint16_t* vf
+        uint16_t* vb
+        int* rowcnt
+        uint8_t* scratch
+        uint16_t* sout
+        float* dl
+        float* dr
+        float* lr
+        float* pad
+        float* disp
+    void csgm_sgm(const csgm_params* p, const uint16_t* cost, const uint8_t* g, const csgm_buffers* b,
+                  const csgm_census_io* census, int nthreads)
+    void csgm_cost(const csgm_census_io* io, int H, int W, int D, uint32_t* cl, uint32_t* cr, uint16_t* cost,
+                   uint16_t invalid_cost, int nthreads)
 
 #: True in the build compiled for x86-64-v3 (``_census_sgm_avx2``).
 AVX2 = bool(csgm_build_avx2())
@@ -159,6 +168,19 @@ def hamming_volume(const uint32_t[:, ::1] cl, const uint32_t[:, ::1] cr,
             csgm_hamming_row(&cl[y, 0], &cr[y, 0], &work[tid, 0], &out[y, 0, 0], W, D, invalid_cost)
 
 
+cdef csgm_census_io census_io(const uint8_t[:, ::1] gl, const uint8_t[:, ::1] gr, ws):
+    """The census inputs: ``gl``, ``gr`` and the scratch ``ws.padl``, ``ws.padr``, ``ws.work`` (``ws`` holds them)."""
+    cdef uint8_t[:, ::1] padl = ws.padl, padr = ws.padr
+    cdef uint8_t[::1] work = ws.work
+    cdef csgm_census_io io
+    io.gl = &gl[0, 0]
+    io.gr = &gr[0, 0]
+    io.padl = &padl[0, 0]
+    io.padr = &padr[0, 0]
+    io.work = &work[0]
+    return io
+
+
 def cost_stage(ws, const uint8_t[:, ::1] gl, const uint8_t[:, ::1] gr, uint16_t[:, :, ::1] cost,
                uint16_t invalid_cost, int nthreads):
     """Census of both gray images (``ws.cl``, ``ws.cr``) and, unless ``cost`` is None, their Hamming volume ``cost``.
@@ -166,18 +188,16 @@ def cost_stage(ws, const uint8_t[:, ::1] gl, const uint8_t[:, ::1] gr, uint16_t[
     One parallel region. ``ws``: the workspace (``census_sgm.SGMWorkspace``: ``padl``, ``padr``, (H + 4) x
     (W + 4) scratch; ``cl``, ``cr``; ``work``, :func:`cost_work_bytes` bytes).
     """
-    cdef uint8_t[:, ::1] padl = ws.padl, padr = ws.padr
     cdef uint32_t[:, ::1] cl = ws.cl, cr = ws.cr
-    cdef uint8_t[::1] work = ws.work
     cdef int H = gl.shape[0], W = gl.shape[1]
     cdef int D = 1
     cdef uint16_t* volume = NULL
+    cdef csgm_census_io io = census_io(gl, gr, ws)
     if cost is not None:
         D = cost.shape[2]
         volume = &cost[0, 0, 0]
     with nogil:
-        csgm_cost(&gl[0, 0], &gr[0, 0], H, W, D, &padl[0, 0], &padr[0, 0], &cl[0, 0], &cr[0, 0], volume,
-                  invalid_cost, &work[0], nthreads)
+        csgm_cost(&io, H, W, D, &cl[0, 0], &cr[0, 0], volume, invalid_cost, nthreads)
 
 
 # ------------------------------------------------------------------- SGM ----
@@ -221,6 +241,22 @@ cdef csgm_params make_params(int H, int W, int D, int paths, int P1, const int16
     return p
 
 
+cdef csgm_buffers buffers(uint16_t[:, :, ::1] vf, uint16_t[:, :, ::1] vb, int[::1] rowcnt, uint8_t[::1] scratch):
+    """The aggregation's buffers (partial sums, row counters, scratch); no output set."""
+    cdef csgm_buffers b
+    b.vf = &vf[0, 0, 0]
+    b.vb = &vb[0, 0, 0]
+    b.rowcnt = &rowcnt[0]
+    b.scratch = &scratch[0]
+    b.sout = NULL
+    b.dl = NULL
+    b.dr = NULL
+    b.lr = NULL
+    b.pad = NULL
+    b.disp = NULL
+    return b
+
+
 def aggregate(const uint16_t[:, :, ::1] C, const uint8_t[:, ::1] g,
               uint16_t[:, :, ::1] S, int paths, int P1,
               const int16_t[::1] p2lut, int nthreads):
@@ -232,9 +268,10 @@ def aggregate(const uint16_t[:, :, ::1] C, const uint8_t[:, ::1] g,
     cdef uint16_t[:, :, ::1] vb = np.empty((H if two else 1, W if two else 1, D if two else 1), np.uint16)
     cdef int[::1] rowcnt = np.empty(H, np.intc)
     cdef uint8_t[::1] scratch = np.empty(2 * csgm_scratch_bytes(W, D) + 64, np.uint8)
+    cdef csgm_buffers b = buffers(vf, vb, rowcnt, scratch)
+    b.sout = &S[0, 0, 0]
     with nogil:
-        csgm_sgm(&p, &C[0, 0, 0], &g[0, 0], &vf[0, 0, 0], &vb[0, 0, 0], &rowcnt[0], &scratch[0], nthreads,
-                 &S[0, 0, 0], NULL, NULL, NULL, NULL, NULL, NULL)
+        csgm_sgm(&p, &C[0, 0, 0], &g[0, 0], &b, NULL, nthreads)
 
 
 def sgm_stage(dict params, const int16_t[::1] p2lut, ws, const uint16_t[:, :, ::1] cost,
@@ -264,20 +301,22 @@ def sgm_stage(dict params, const int16_t[::1] p2lut, ws, const uint16_t[:, :, ::
     cdef float[:, ::1] dr = ws.dr, pad = ws.mpad
     cdef float[:, ::1] dl = out, lr = out  # the left WTA, the checked map: out when no later step reads them
     cdef uint32_t[:, ::1] cl, cr
-    cdef uint8_t[:, ::1] padl, padr
-    cdef uint8_t[::1] work
     cdef int H = gl.shape[0], W = gl.shape[1], D = vf.shape[2]
     cdef csgm_params p = make_params(H, W, D, s.paths, s.p1, p2lut)
+    cdef csgm_buffers b = buffers(vf, vb, rowcnt, scratch)
     cdef csgm_census_io io
     cdef const csgm_census_io* census = NULL
     cdef const uint16_t* volume = NULL
-    cdef float* left = NULL
     if s.median:
         lr = ws.lr
     if s.median or s.lr_check:
         dl = ws.dl
     if s.wta:
-        left = &dl[0, 0]
+        b.dl = &dl[0, 0]
+    b.dr = &dr[0, 0]
+    b.lr = &lr[0, 0]
+    b.pad = &pad[0, 0]
+    b.disp = &out[0, 0]
     p.uniqueness = s.uniqueness
     p.subpixel = 1 if s.subpixel else 0
     p.lr_check = 1 if s.lr_check else 0
@@ -294,18 +333,10 @@ def sgm_stage(dict params, const int16_t[::1] p2lut, ws, const uint16_t[:, :, ::
         p.cl = &cl[0, 0]
         p.cr = &cr[0, 0]
     if gr is not None:
-        padl = ws.padl
-        padr = ws.padr
-        work = ws.work
-        io.gl = &gl[0, 0]
-        io.gr = &gr[0, 0]
-        io.padl = &padl[0, 0]
-        io.padr = &padr[0, 0]
-        io.work = &work[0]
+        io = census_io(gl, gr, ws)
         census = &io
     with nogil:
-        csgm_sgm(&p, volume, &gl[0, 0], &vf[0, 0, 0], &vb[0, 0, 0], &rowcnt[0], &scratch[0], nthreads, NULL, left,
-                 &dr[0, 0], &lr[0, 0], &pad[0, 0], &out[0, 0], census)
+        csgm_sgm(&p, volume, &gl[0, 0], &b, census, nthreads)
 
 
 # ------------------------------------------------------------------- WTA ----

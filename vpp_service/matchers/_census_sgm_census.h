@@ -139,10 +139,19 @@ static void csgm_cost_team(const uint8_t* gl, const uint8_t* gr, int H, int W, i
     }
 }
 
+/* The census inputs: the gray images and the census scratch (csgm_cost; csgm_sgm when it starts with the
+ * census). */
+typedef struct {
+    const uint8_t* gl;
+    const uint8_t* gr;
+    uint8_t* padl;
+    uint8_t* padr;
+    uint8_t* work; /* nthreads x csgm_cost_work_bytes(W) + 64 */
+} csgm_census_io;
+
 /* csgm_cost_team in a parallel region of its own. */
-static void csgm_cost(const uint8_t* gl, const uint8_t* gr, int H, int W, int D, uint8_t* padl, uint8_t* padr,
-                      uint32_t* cl, uint32_t* cr, uint16_t* cost, uint16_t invalid_cost, uint8_t* work,
-                      int nthreads) {
+static void csgm_cost(const csgm_census_io* io, int H, int W, int D, uint32_t* cl, uint32_t* cr, uint16_t* cost,
+                      uint16_t invalid_cost, int nthreads) {
     int nt = nthreads < 1 ? 1 : nthreads;
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt)
@@ -150,7 +159,7 @@ static void csgm_cost(const uint8_t* gl, const uint8_t* gr, int H, int W, int D,
     {
         int tid, team;
         vpp_omp_team(&tid, &team);
-        csgm_cost_team(gl, gr, H, W, D, padl, padr, cl, cr, cost, invalid_cost, work, tid, team);
+        csgm_cost_team(io->gl, io->gr, H, W, D, io->padl, io->padr, cl, cr, cost, invalid_cost, io->work, tid, team);
     }
 }
 
