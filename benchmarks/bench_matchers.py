@@ -169,60 +169,27 @@ def stage_rows(reps: int) -> list[Row]:
     gl, gr = to_gray(left), to_gray(right)
     o = cs.CensusSGMOptions(max_disparity=D)
     lut = cs.p2_table(o.p1, o.p2_min, o.p2_alpha, o.p2_gamma)
-    padl, padr = np.empty((H + 4, W + 4), np.uint8), np.empty((H + 4, W + 4), np.uint8)
-    cl, cr = np.empty((H, W), np.uint32), np.empty((H, W), np.uint32)
-    work = np.empty(k.cost_work_bytes(W, 1), np.uint8)
+    ws = cs.SGMWorkspace(H, W, D, 1)
     cost = np.empty((H, W, D), np.uint16)
-    k.cost_stage(gl, gr, padl, padr, cl, cr, cost, cs.INVALID_COST, work, True, 1)
-    vf, vb = np.empty((H, W, D), np.uint16), np.empty((1, 1, 1), np.uint16)
-    rowcnt, scratch = np.empty(H, np.intc), np.empty(2 * k.scratch_bytes(W, D) + 64, np.uint8)
+    k.cost_stage(ws, gl, gr, cost, cs.INVALID_COST, 1)
     dl, dr, lr, out = (np.empty((H, W), np.float32) for _ in range(4))
-    mpad = np.empty((H + 2, W + 2), np.float32)
     agg = cs.aggregate_costs(cost, gl, 8, threads=1)
     k.winner_takes_all(agg, dl, o.uniqueness, o.subpixel, 1)
     k.right_disparity(agg, dr, 1)
     k.left_right_check(dl, dr, lr, o.lr_tolerance, 1)
 
     def sgm(*, volume: bool, wta: bool = True, lr_check: bool = True, median: bool = True) -> Callable[[], None]:
+        params = cs.stage_params(o, wta=wta)
+        params["lr_check"], params["median"] = lr_check, median
+
         def run() -> None:
-            k.sgm_stage(
-                cost,
-                cl,
-                cr,
-                D,
-                gl,
-                gr,
-                padl,
-                padr,
-                work,
-                False,
-                8,
-                o.p1,
-                lut,
-                o.uniqueness,
-                o.subpixel,
-                lr_check,
-                o.lr_tolerance,
-                median,
-                vf,
-                vb,
-                rowcnt,
-                scratch,
-                dl,
-                dr,
-                lr,
-                mpad,
-                out,
-                volume,
-                1,
-                wta,
-            )
+            k.sgm_stage(params, lut, ws, cost if volume else None, gl, None, out, 1)
 
         return run
 
     stages: dict[str, Callable[[], object]] = {
-        "census x2": lambda: k.cost_stage(gl, gr, padl, padr, cl, cr, cost, cs.INVALID_COST, work, False, 1),
-        "cost volume": lambda: k.hamming_volume(cl, cr, cost, cs.INVALID_COST, 1),
+        "census x2": lambda: k.cost_stage(ws, gl, gr, None, cs.INVALID_COST, 1),
+        "cost volume": lambda: k.hamming_volume(ws.cl, ws.cr, cost, cs.INVALID_COST, 1),
         "aggregation 8": sgm(volume=True, wta=False),
         "aggregation 8 + costs": sgm(volume=False, wta=False),
         "+ wta left": sgm(volume=False, lr_check=False, median=False),

@@ -8,6 +8,8 @@ written in place. ``nthreads`` >= 1.
 import numpy as np
 import numpy.typing as npt
 
+from vpp_service.matchers.census_sgm import SGMWorkspace, StageParams
+
 #: True in the build compiled for x86-64-v3.
 AVX2: bool
 
@@ -27,56 +29,26 @@ def cost_work_bytes(W: int, nthreads: int) -> int:
     """Bytes of census / Hamming scratch for ``nthreads`` threads at width ``W``."""
 
 def cost_stage(
+    ws: SGMWorkspace,
     gl: npt.NDArray[np.uint8],
     gr: npt.NDArray[np.uint8],
-    padl: npt.NDArray[np.uint8],
-    padr: npt.NDArray[np.uint8],
-    cl: npt.NDArray[np.uint32],
-    cr: npt.NDArray[np.uint32],
-    cost: npt.NDArray[np.uint16],
+    cost: npt.NDArray[np.uint16] | None,
     invalid_cost: int,
-    work: npt.NDArray[np.uint8],
-    volume: bool,
     nthreads: int,
 ) -> None:
-    """Census of both gray images and (with ``volume``) their Hamming volume ``cost``, one parallel region."""
+    """Census of both gray images into ``ws.cl``, ``ws.cr`` and (unless None) their Hamming volume ``cost``."""
 
 def sgm_stage(
-    C: npt.NDArray[np.uint16],
-    cl: npt.NDArray[np.uint32],
-    cr: npt.NDArray[np.uint32],
-    D: int,
-    g: npt.NDArray[np.uint8],
-    gr: npt.NDArray[np.uint8],
-    padl: npt.NDArray[np.uint8],
-    padr: npt.NDArray[np.uint8],
-    work: npt.NDArray[np.uint8],
-    census: bool,
-    paths: int,
-    P1: int,
+    params: StageParams,
     p2lut: npt.NDArray[np.int16],
-    uniqueness: float,
-    subpixel: bool,
-    lr_check: bool,
-    tolerance: float,
-    median: bool,
-    vf: npt.NDArray[np.uint16],
-    vb: npt.NDArray[np.uint16],
-    rowcnt: npt.NDArray[np.intc],
-    scratch: npt.NDArray[np.uint8],
-    dl: npt.NDArray[np.float32],
-    dr: npt.NDArray[np.float32],
-    lr: npt.NDArray[np.float32],
-    pad: npt.NDArray[np.float32],
-    disp: npt.NDArray[np.float32],
-    volume: bool,
+    ws: SGMWorkspace,
+    cost: npt.NDArray[np.uint16] | None,
+    gl: npt.NDArray[np.uint8],
+    gr: npt.NDArray[np.uint8] | None,
+    out: npt.NDArray[np.float32],
     nthreads: int,
-    wta: bool = True,
-    border_margin: int = 0,
-    gap_size: int = 0,
-    gap_step: float = 2.0,
 ) -> None:
-    """(Census,) SGM (costs from ``C`` with ``volume``, else ``cl``/``cr``), WTAs, LR check, border, gaps, median."""
+    """(Census of ``gl``, ``gr``,) SGM of ``cost`` (None: of ``ws.cl``, ``ws.cr``), WTAs, checks, median: ``out``."""
 
 def census5x5(img: npt.NDArray[np.uint8], out: npt.NDArray[np.uint32], nthreads: int) -> None:
     """24-bit 5x5 census of ``img`` (H x W) into ``out`` (H x W)."""

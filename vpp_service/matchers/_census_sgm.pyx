@@ -1,8 +1,16 @@
-"""Census-SGM kernels (nogil, typed memoryviews; the C is in ``_census_sgm.h``, with ``_gaps.h`` and ``_omp_team.h``).
+"""Census-SGM kernels (nogil, typed memoryviews; the C is in ``_census_sgm.h`` and the headers it includes).
 
 Low-level, unchecked kernels behind :mod:`vpp_service.matchers.census_sgm`;
 the Python wrappers there validate every argument (shape, dtype, contiguity)
 and allocate the outputs. Call those, not these.
+
+The C, by stage (``setup.py`` rebuilds this module when a header named here
+changes): ``_census_sgm.h`` (common definitions and the driver: row
+finishing, the passes, the parallel region) includes ``_census_sgm_census.h``
+(census, Hamming costs), ``_census_sgm_paths.h`` (path aggregation),
+``_census_sgm_wta.h`` (winner-takes-all, left-right check),
+``_census_sgm_median.h`` (3x3 median), ``_gaps.h`` (short gaps) and
+``_omp_team.h``.
 
 This source is compiled twice (``_census_sgm`` portable, ``_census_sgm_avx2``
 for x86-64-v3); :mod:`vpp_service.matchers.census_sgm` picks the build that
@@ -71,12 +79,21 @@ cdef extern from "_census_sgm.h" nogil:
         uint8_t* padl
         uint8_t* padr
         uint8_t* work
-    void csgm_sgm(const csgm_params* p, const uint16_t* cost, const uint8_t* g, uint16_t* vf, uint16_t* vb,
-                  int* rowcnt, uint8_t* scratch, int nthreads, uint16_t* sout, float* dl, float* dr,
-                  float* lr, float* pad, float* disp, const csgm_census_io* census)
-    void csgm_cost(const uint8_t* gl, const uint8_t* gr, int H, int W, int D, uint8_t* padl, uint8_t* padr,
-                   uint32_t* cl, uint32_t* cr, uint16_t* cost, uint16_t invalid_cost, uint8_t* work,
-                   int nthreads)
+    ctypedef struct csgm_buffers:
+        uint16_t* vf
+        uint16_t* vb
+        int* rowcnt
+        uint8_t* scratch
+        uint16_t* sout
+        float* dl
+        float* dr
+        float* lr
+        float* pad
+        float* disp
+    void csgm_sgm(const csgm_params* p, const uint16_t* cost, const uint8_t* g, const csgm_buffers* b,
+                  const csgm_census_io* census, int nthreads)
+    void csgm_cost(const csgm_census_io* io, int H, int W, int D, uint32_t* cl, uint32_t* cr, uint16_t* cost,
+                   uint16_t invalid_cost, int nthreads)
 
 #: True in the build compiled for x86-64-v3 (``_census_sgm_avx2``).
 AVX2 = bool(csgm_build_avx2())
@@ -151,23 +168,56 @@ def hamming_volume(const uint32_t[:, ::1] cl, const uint32_t[:, ::1] cr,
             csgm_hamming_row(&cl[y, 0], &cr[y, 0], &work[tid, 0], &out[y, 0, 0], W, D, invalid_cost)
 
 
-def cost_stage(const uint8_t[:, ::1] gl, const uint8_t[:, ::1] gr, uint8_t[:, ::1] padl,
-               uint8_t[:, ::1] padr, uint32_t[:, ::1] cl, uint32_t[:, ::1] cr, uint16_t[:, :, ::1] cost,
-               uint16_t invalid_cost, uint8_t[::1] work, bint volume, int nthreads):
-    """Census of both gray images (``cl``, ``cr``) and, with ``volume``, their Hamming volume ``cost``.
+cdef csgm_census_io census_io(const uint8_t[:, ::1] gl, const uint8_t[:, ::1] gr, ws):
+    """The census inputs: ``gl``, ``gr`` and the scratch ``ws.padl``, ``ws.padr``, ``ws.work`` (``ws`` holds them)."""
+    cdef uint8_t[:, ::1] padl = ws.padl, padr = ws.padr
+    cdef uint8_t[::1] work = ws.work
+    cdef csgm_census_io io
+    io.gl = &gl[0, 0]
+    io.gr = &gr[0, 0]
+    io.padl = &padl[0, 0]
+    io.padr = &padr[0, 0]
+    io.work = &work[0]
+    return io
 
-    One parallel region. ``padl``, ``padr``: (H + 4) x (W + 4) scratch; ``work``: :func:`cost_work_bytes`
-    bytes; ``cost`` is not touched (any shape) without ``volume``.
+
+def cost_stage(ws, const uint8_t[:, ::1] gl, const uint8_t[:, ::1] gr, uint16_t[:, :, ::1] cost,
+               uint16_t invalid_cost, int nthreads):
+    """Census of both gray images (``ws.cl``, ``ws.cr``) and, unless ``cost`` is None, their Hamming volume ``cost``.
+
+    One parallel region. ``ws``: the workspace (``census_sgm.SGMWorkspace``: ``padl``, ``padr``, (H + 4) x
+    (W + 4) scratch; ``cl``, ``cr``; ``work``, :func:`cost_work_bytes` bytes).
     """
-    cdef int H = gl.shape[0], W = gl.shape[1], D = cost.shape[2]
+    cdef uint32_t[:, ::1] cl = ws.cl, cr = ws.cr
+    cdef int H = gl.shape[0], W = gl.shape[1]
+    cdef int D = 1
+    cdef uint16_t* volume = NULL
+    cdef csgm_census_io io = census_io(gl, gr, ws)
+    if cost is not None:
+        D = cost.shape[2]
+        volume = &cost[0, 0, 0]
     with nogil:
-        csgm_cost(&gl[0, 0], &gr[0, 0], H, W, D, &padl[0, 0], &padr[0, 0], &cl[0, 0], &cr[0, 0],
-                  &cost[0, 0, 0] if volume else NULL, invalid_cost, &work[0], nthreads)
+        csgm_cost(&io, H, W, D, &cl[0, 0], &cr[0, 0], volume, invalid_cost, nthreads)
 
 
 # ------------------------------------------------------------------- SGM ----
-cdef csgm_params make_params(int H, int W, int D, int paths, int P1, const int16_t[::1] p2lut,
-                             double uniqueness, bint subpixel, bint lr_check, double tolerance, bint median):
+cdef struct StageParams:
+    # filled from the dict of vpp_service.matchers.census_sgm.stage_params (one key per field)
+    int paths               # 4 or 8
+    int p1                  # P1 (P2 comes from the table p2lut)
+    double uniqueness       # WTA uniqueness ratio
+    int subpixel            # parabola refinement
+    int lr_check            # right WTA and left-right check
+    double tolerance        # of the left-right check
+    int median              # 3x3 median
+    int border_margin       # border.reject_border_matches (0 = off)
+    int gap_size            # holes.fill_short_gaps (0 = off) with gap_step
+    double gap_step
+    int wta                 # 0: stop after the aggregation (benchmarks)
+
+
+cdef csgm_params make_params(int H, int W, int D, int paths, int P1, const int16_t[::1] p2lut):
+    """The C parameters of an aggregation over ``paths`` paths (no WTA step set; csgm_sgm sets the rest)."""
     cdef csgm_params p
     p.H = H
     p.W = W
@@ -175,11 +225,11 @@ cdef csgm_params make_params(int H, int W, int D, int paths, int P1, const int16
     p.paths = paths
     p.P1 = P1
     p.p2lut = &p2lut[0]
-    p.uniqueness = uniqueness
-    p.subpixel = 1 if subpixel else 0
-    p.lr_check = 1 if lr_check else 0
-    p.median = 1 if median else 0
-    p.tolerance = tolerance
+    p.uniqueness = 1.0
+    p.subpixel = 0
+    p.lr_check = 0
+    p.median = 0
+    p.tolerance = 0.0
     p.cl = NULL
     p.cr = NULL
     p.narrow = 0  # csgm_sgm decides
@@ -191,64 +241,102 @@ cdef csgm_params make_params(int H, int W, int D, int paths, int P1, const int16
     return p
 
 
+cdef csgm_buffers buffers(uint16_t[:, :, ::1] vf, uint16_t[:, :, ::1] vb, int[::1] rowcnt, uint8_t[::1] scratch):
+    """The aggregation's buffers (partial sums, row counters, scratch); no output set."""
+    cdef csgm_buffers b
+    b.vf = &vf[0, 0, 0]
+    b.vb = &vb[0, 0, 0]
+    b.rowcnt = &rowcnt[0]
+    b.scratch = &scratch[0]
+    b.sout = NULL
+    b.dl = NULL
+    b.dr = NULL
+    b.lr = NULL
+    b.pad = NULL
+    b.disp = NULL
+    return b
+
+
 def aggregate(const uint16_t[:, :, ::1] C, const uint8_t[:, ::1] g,
               uint16_t[:, :, ::1] S, int paths, int P1,
               const int16_t[::1] p2lut, int nthreads):
     """S = sum over 4 or 8 SGM paths of L_r (65535 where x < d). Costs <= 4095, P1, P2 <= 4095."""
     cdef int H = C.shape[0], W = C.shape[1], D = C.shape[2]
-    cdef csgm_params p = make_params(H, W, D, paths, P1, p2lut, 1.0, False, False, 0.0, False)
+    cdef csgm_params p = make_params(H, W, D, paths, P1, p2lut)
     cdef uint16_t[:, :, ::1] vf = np.empty((H, W, D), np.uint16)
     cdef int two = nthreads > 1  # the backward pass's partial sums (second thread)
     cdef uint16_t[:, :, ::1] vb = np.empty((H if two else 1, W if two else 1, D if two else 1), np.uint16)
     cdef int[::1] rowcnt = np.empty(H, np.intc)
     cdef uint8_t[::1] scratch = np.empty(2 * csgm_scratch_bytes(W, D) + 64, np.uint8)
+    cdef csgm_buffers b = buffers(vf, vb, rowcnt, scratch)
+    b.sout = &S[0, 0, 0]
     with nogil:
-        csgm_sgm(&p, &C[0, 0, 0], &g[0, 0], &vf[0, 0, 0], &vb[0, 0, 0], &rowcnt[0], &scratch[0], nthreads,
-                 &S[0, 0, 0], NULL, NULL, NULL, NULL, NULL, NULL)
+        csgm_sgm(&p, &C[0, 0, 0], &g[0, 0], &b, NULL, nthreads)
 
 
-def sgm_stage(const uint16_t[:, :, ::1] C, uint32_t[:, ::1] cl, uint32_t[:, ::1] cr, int D,
-              const uint8_t[:, ::1] g, const uint8_t[:, ::1] gr, uint8_t[:, ::1] padl, uint8_t[:, ::1] padr,
-              uint8_t[::1] work, bint census, int paths, int P1,
-              const int16_t[::1] p2lut, double uniqueness, bint subpixel, bint lr_check, double tolerance,
-              bint median, uint16_t[:, :, ::1] vf, uint16_t[:, :, ::1] vb, int[::1] rowcnt,
-              uint8_t[::1] scratch, float[:, ::1] dl, float[:, ::1] dr, float[:, ::1] lr,
-              float[:, ::1] pad, float[:, ::1] disp, bint volume, int nthreads, bint wta=True,
-              int border_margin=0, int gap_size=0, double gap_step=2.0):
+def sgm_stage(dict params, const int16_t[::1] p2lut, ws, const uint16_t[:, :, ::1] cost,
+              const uint8_t[:, ::1] gl, const uint8_t[:, ::1] gr, float[:, ::1] out, int nthreads):
     """(Census,) aggregation, left and right WTA, left-right check and median in one parallel region.
 
-    The costs are the volume ``C`` (H x W x D) with ``volume``, else each pass computes them row by row
-    from the census codes ``cl``, ``cr`` (H x W; ``C`` is not read). With ``census`` the region first
-    computes those codes of ``g`` and ``gr`` (the left and right gray images; ``padl``, ``padr``, ``work``
-    as for :func:`cost_stage`), so a call without guided stereo is one parallel region.
+    ``params``: the settings (the dict of ``census_sgm.stage_params``, converted to the ``StageParams``
+    struct above); ``p2lut``: the 256 P2 of ``census_sgm.p2_table``; ``ws``: the buffers
+    (``census_sgm.SGMWorkspace`` of H x W images and D disparities: ``vf``, ``vb`` H x W x D partial sums,
+    ``vb`` only read with >= 2 threads; ``rowcnt``: H ints; ``scratch``: 2 x :func:`scratch_bytes` + 64
+    bytes; ``dl``, ``dr``, ``lr``: H x W; ``mpad``: (H + 2) x (W + 2); ``cl``, ``cr``, ``padl``, ``padr``,
+    ``work`` as for :func:`cost_stage`).
 
-    ``vf``, ``vb``: H x W x D partial sums (``vb`` only read with >= 2 threads); ``rowcnt``: H ints;
-    ``scratch``: 2 x :func:`scratch_bytes` + 64 bytes; ``pad``: (H + 2) x (W + 2). The result is ``lr``
-    (``disp`` after the median when ``median``); ``lr`` may be ``dl`` when ``lr_check`` is off. ``wta``
-    False stops after the aggregation (benchmarks time the stage so). ``border_margin`` and ``gap_size``,
-    ``gap_step`` (0 = off) run ``border.reject_border_matches`` and ``holes.fill_short_gaps`` (``_gaps.h``)
-    on each row of ``lr`` right after its left-right check, before the median.
+    The costs are the volume ``cost`` (H x W x D), else (None) each pass computes them row by row from the
+    census codes ``ws.cl``, ``ws.cr``. With ``gr`` (not None) the region first computes those codes of
+    ``gl`` and ``gr`` (the left and right gray images), so a call without guided stereo is one parallel
+    region; ``gl`` also gives the adaptive P2. The final disparity goes to ``out`` (H x W float32); the
+    left WTA and the left-right check write to ``ws.dl``, ``ws.lr`` when a later step reads them, else
+    straight to ``out``. ``wta`` False stops after the aggregation (benchmarks time the stage so).
+    ``border_margin`` and ``gap_size``, ``gap_step`` (0 = off) run ``border.reject_border_matches`` and
+    ``holes.fill_short_gaps`` (``_gaps.h``) on each row right after its left-right check, before the median.
     """
-    cdef int H = g.shape[0], W = g.shape[1]
-    cdef csgm_params p = make_params(H, W, D, paths, P1, p2lut, uniqueness, subpixel, lr_check, tolerance,
-                                     median)
+    cdef StageParams s = params
+    cdef uint16_t[:, :, ::1] vf = ws.vf, vb = ws.vb
+    cdef int[::1] rowcnt = ws.rowcnt
+    cdef uint8_t[::1] scratch = ws.scratch
+    cdef float[:, ::1] dr = ws.dr, pad = ws.mpad
+    cdef float[:, ::1] dl = out, lr = out  # the left WTA, the checked map: out when no later step reads them
+    cdef uint32_t[:, ::1] cl, cr
+    cdef int H = gl.shape[0], W = gl.shape[1], D = vf.shape[2]
+    cdef csgm_params p = make_params(H, W, D, s.paths, s.p1, p2lut)
+    cdef csgm_buffers b = buffers(vf, vb, rowcnt, scratch)
     cdef csgm_census_io io
-    p.border_margin = border_margin
-    p.gap_size = gap_size
-    p.gap_step = gap_step
-    if not volume:
+    cdef const csgm_census_io* census = NULL
+    cdef const uint16_t* volume = NULL
+    if s.median:
+        lr = ws.lr
+    if s.median or s.lr_check:
+        dl = ws.dl
+    if s.wta:
+        b.dl = &dl[0, 0]
+    b.dr = &dr[0, 0]
+    b.lr = &lr[0, 0]
+    b.pad = &pad[0, 0]
+    b.disp = &out[0, 0]
+    p.uniqueness = s.uniqueness
+    p.subpixel = 1 if s.subpixel else 0
+    p.lr_check = 1 if s.lr_check else 0
+    p.median = 1 if s.median else 0
+    p.tolerance = s.tolerance
+    p.border_margin = s.border_margin
+    p.gap_size = s.gap_size
+    p.gap_step = s.gap_step
+    if cost is not None:
+        volume = &cost[0, 0, 0]
+    else:
+        cl = ws.cl
+        cr = ws.cr
         p.cl = &cl[0, 0]
         p.cr = &cr[0, 0]
-    if census:
-        io.gl = &g[0, 0]
-        io.gr = &gr[0, 0]
-        io.padl = &padl[0, 0]
-        io.padr = &padr[0, 0]
-        io.work = &work[0]
+    if gr is not None:
+        io = census_io(gl, gr, ws)
+        census = &io
     with nogil:
-        csgm_sgm(&p, &C[0, 0, 0] if volume else NULL, &g[0, 0], &vf[0, 0, 0], &vb[0, 0, 0], &rowcnt[0],
-                 &scratch[0], nthreads, NULL, &dl[0, 0] if wta else NULL, &dr[0, 0], &lr[0, 0], &pad[0, 0],
-                 &disp[0, 0], &io if census else NULL)
+        csgm_sgm(&p, volume, &gl[0, 0], &b, census, nthreads)
 
 
 # ------------------------------------------------------------------- WTA ----

@@ -50,9 +50,10 @@ Everything invalid is NaN. Threads: every function takes ``threads``
 the matcher's ``threads`` option defaults to 1 (see :class:`CensusSGMOptions`).
 Results do not depend on the thread count nor on the build.
 
-Kernels: the C in ``_census_sgm.h`` is compiled twice, portable and for
-x86-64-v3 (AVX2); the AVX2 build runs exactly when :mod:`vpp_service.vpp.backend`
-runs the AVX2 build of the VPP kernel (a CPU with AVX2, and ``VPP_NO_AVX2``
+Kernels: the C in ``_census_sgm.h`` and the stage headers it includes is
+compiled twice, portable and for x86-64-v3 (AVX2); the AVX2 build runs
+exactly when :mod:`vpp_service.vpp.backend` runs the AVX2 build of the VPP
+kernel (a CPU with AVX2, and ``VPP_NO_AVX2``
 not set to 1). :meth:`CensusSGM.compute` runs one parallel region per call
 (three with guided stereo: census and cost volume, the modulation, the rest):
 the census of both images (rows in blocks), then the SGM: the forward pass
@@ -85,6 +86,7 @@ import threading
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import ModuleType
+from typing import TypedDict
 
 import numpy as np
 
@@ -449,12 +451,65 @@ class CensusSGMOptions(MatcherOptions):
             raise ValueError(f"threads must be an integer >= 0, got {self.threads!r}")
 
 
-#: Stand-in for the cost volume where the kernels do not read it.
-_NO_VOLUME = np.zeros((1, 1, 1), np.uint16)
+class StageParams(TypedDict):
+    """The fields of ``_census_sgm.StageParams``: the settings of the SGM stage (:func:`stage_params`)."""
+
+    paths: int
+    p1: int
+    uniqueness: float
+    subpixel: bool
+    lr_check: bool
+    tolerance: float
+    median: bool
+    border_margin: int
+    gap_size: int
+    gap_step: float
+    wta: bool
 
 
-class _Workspace:
-    """The buffers of one :class:`CensusSGM` for one (H, W, D, threads), kept between calls."""
+def stage_params(options: CensusSGMOptions, *, wta: bool = True) -> StageParams:
+    """The SGM stage's settings for ``options`` (the kernel's ``StageParams`` struct, one key per field).
+
+    Parameters
+    ----------
+    options : CensusSGMOptions
+        The (validated) matcher options.
+    wta : bool
+        False stops the stage after the aggregation (benchmarks time it so).
+
+    Returns
+    -------
+    StageParams
+        The dict the kernel's ``sgm_stage`` converts to its struct.
+    """
+    return StageParams(
+        paths=int(options.paths),
+        p1=int(options.p1),
+        uniqueness=float(options.uniqueness),
+        subpixel=bool(options.subpixel),
+        lr_check=bool(options.lr_check),
+        tolerance=float(options.lr_tolerance),
+        median=bool(options.median),
+        border_margin=int(options.border_margin),
+        gap_size=int(options.gap_size),
+        gap_step=GAP_STEP,
+        wta=wta,
+    )
+
+
+class SGMWorkspace:
+    """The buffers of the census-SGM kernels for one (H, W, D, threads), kept between calls.
+
+    ``cost_stage`` and ``sgm_stage`` of the kernel read them by name (the stubs in ``_census_sgm.pyi``
+    type them); the sizes come from the kernel build in use.
+
+    Parameters
+    ----------
+    h, w, d : int
+        Image height and width, number of disparities.
+    threads : int
+        OpenMP threads of the kernels (>= 1).
+    """
 
     def __init__(self, h: int, w: int, d: int, threads: int) -> None:
         self.key = (h, w, d, threads)
@@ -500,7 +555,11 @@ class CensusSGM(Matcher):
 
     def __init__(self, options: CensusSGMOptions | Mapping[str, object] | None = None) -> None:
         super().__init__(options)
-        self._ws: _Workspace | None = None
+        o = self.options
+        self._stage = stage_params(o)  # the options are frozen: the kernel's settings are built once
+        self._p2lut = p2_table(o.p1, o.p2_min, o.p2_alpha, o.p2_gamma)
+        self._p2lut.setflags(write=False)
+        self._ws: SGMWorkspace | None = None
         self._ws_lock = threading.Lock()
 
     def _threads(self) -> int:
@@ -511,14 +570,13 @@ class CensusSGM(Matcher):
         check_pair(left, right)
         check_max_disparity(self.options.max_disparity, left.shape[1])
         gl, gr = to_gray(left), to_gray(right)
-        ws = _Workspace(gl.shape[0], gl.shape[1], self.options.max_disparity, self._threads())
+        ws = SGMWorkspace(gl.shape[0], gl.shape[1], self.options.max_disparity, self._threads())
         self._census(gl, gr, ws, volume=True)
         return ws.cost
 
-    def _census(self, gl: np.ndarray, gr: np.ndarray, ws: _Workspace, *, volume: bool) -> None:
+    def _census(self, gl: np.ndarray, gr: np.ndarray, ws: SGMWorkspace, *, volume: bool) -> None:
         """Census codes of the pair into ``ws`` and, with ``volume``, the Hamming volume ``ws.cost``."""
-        cost = ws.cost if volume else _NO_VOLUME
-        _k.cost_stage(gl, gr, ws.padl, ws.padr, ws.cl, ws.cr, cost, INVALID_COST, ws.work, volume, ws.key[3])
+        _k.cost_stage(ws, gl, gr, ws.cost if volume else None, INVALID_COST, ws.key[3])
 
     def compute_from_cost(self, cost: np.ndarray, left_gray: np.ndarray, hints: np.ndarray | None = None) -> np.ndarray:
         """Disparity from a cost volume (steps 3-10; ``fill`` is not applied here).
@@ -545,14 +603,14 @@ class CensusSGM(Matcher):
         h, w, d = cost.shape
         if hints is not None:
             hints = check_hints(hints, (h, w))
-        return self._sgm(cost, gray, hints, _Workspace(h, w, d, self._threads()), own_cost=False)
+        return self._sgm(cost, gray, hints, SGMWorkspace(h, w, d, self._threads()), own_cost=False)
 
     def _sgm(
         self,
         cost: np.ndarray | None,
         gray: np.ndarray,
         hints: np.ndarray | None,
-        ws: _Workspace,
+        ws: SGMWorkspace,
         *,
         own_cost: bool,
         right_gray: np.ndarray | None = None,
@@ -571,66 +629,31 @@ class CensusSGM(Matcher):
             if cost.max(initial=0) > COST_CAP:
                 cost = np.minimum(cost, COST_CAP, out=cost if own_cost else None)
         # The kernel finishes each row (left-right check, border step, short gaps) and runs the median in
-        # its parallel region.
+        # its parallel region (with right_gray, the census first).
         out = np.empty(gray.shape, np.float32)
-        lr = ws.lr if o.median else out
-        dl = ws.dl if (o.median or o.lr_check) else out
-        _k.sgm_stage(
-            _NO_VOLUME if cost is None else cost,
-            ws.cl,
-            ws.cr,
-            ws.key[2],
-            gray,
-            gray if right_gray is None else right_gray,
-            ws.padl,
-            ws.padr,
-            ws.work,
-            right_gray is not None,
-            int(o.paths),
-            int(o.p1),
-            p2_table(o.p1, o.p2_min, o.p2_alpha, o.p2_gamma),
-            float(o.uniqueness),
-            bool(o.subpixel),
-            bool(o.lr_check),
-            float(o.lr_tolerance),
-            bool(o.median),
-            ws.vf,
-            ws.vb,
-            ws.rowcnt,
-            ws.scratch,
-            dl,
-            ws.dr,
-            lr,
-            ws.mpad,
-            out,
-            cost is not None,
-            t,
-            border_margin=int(o.border_margin),
-            gap_size=int(o.gap_size),
-            gap_step=GAP_STEP,
-        )
+        _k.sgm_stage(self._stage, self._p2lut, ws, cost, gray, right_gray, out, t)
         if o.speckle_size:
             out = remove_speckles(out, o.speckle_size, o.speckle_diff, threads=t)
         return out
 
-    def _workspace(self, h: int, w: int) -> _Workspace:
+    def _workspace(self, h: int, w: int) -> SGMWorkspace:
         key = (h, w, self.options.max_disparity, self._threads())
         if self._ws is None or self._ws.key != key:
             self._ws = None  # free the old buffers first
-            self._ws = _Workspace(*key)
+            self._ws = SGMWorkspace(*key)
         return self._ws
 
     def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
         gl, gr = to_gray(left), to_gray(right)
         h, w = gl.shape
         if not self._ws_lock.acquire(blocking=False):  # another thread is using the kept buffers
-            return self._match(gl, gr, hints, _Workspace(h, w, self.options.max_disparity, self._threads()))
+            return self._match(gl, gr, hints, SGMWorkspace(h, w, self.options.max_disparity, self._threads()))
         try:
             return self._match(gl, gr, hints, self._workspace(h, w))
         finally:
             self._ws_lock.release()
 
-    def _match(self, gl: np.ndarray, gr: np.ndarray, hints: np.ndarray | None, ws: _Workspace) -> np.ndarray:
+    def _match(self, gl: np.ndarray, gr: np.ndarray, hints: np.ndarray | None, ws: SGMWorkspace) -> np.ndarray:
         """Census and SGM in one parallel region; with hints, the census and cost volume first, then the SGM."""
         if hints is None:
             return self._sgm(None, gl, None, ws, own_cost=True, right_gray=gr)
