@@ -254,3 +254,22 @@ def test_cli_synthetic_and_errors(tmp_path, capsys):
     assert "guidance" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["eval", "--dataset", "synthetic", "--density", "2"])
+
+
+def test_cli_offset_lidar_and_depth_filter(tmp_path, capsys):
+    def run(*extra):
+        out = tmp_path / f"{len(extra)}-{'-'.join(extra)[:40]}.json".replace("/", "_")
+        args = ["eval", "--dataset", "synthetic", "--limit", "1", "--matcher", "sgbm", "--methods", "vpp"]
+        assert main([*args, "--sensor", "lidar", "--quiet", "--json", str(out), *extra]) == 0
+        return json.loads(out.read_text())
+
+    auto = run("--sensor-opt", "pose=kitti", "--sensor-opt", "nominal_f=300")
+    off = run("--sensor-opt", "pose=[0.1,-0.05,-0.2]", "--sensor-opt", "nominal_f=300", "--depth-filter", "none")
+    assert "see_through" in auto["results"][0] and "see_through" not in off["results"][0]
+    assert auto["config"]["sensor_options"]["pose"] == "kitti"
+    assert off["config"]["depth_filter"] == {"mode": "none"}
+    tuned = run("--sensor-opt", "pose=kitti", "--sensor-opt", "nominal_f=300", "--depth-filter-opt", "window_w=31")
+    assert tuned["results"][0]["see_through"] >= auto["results"][0]["see_through"]
+    bad = ["eval", "--dataset", "synthetic", "--limit", "1", "--sensor", "lidar", "--depth-filter-opt", "window_w=2"]
+    assert main(bad) == 2
+    assert "window_w" in capsys.readouterr().err

@@ -11,7 +11,8 @@ camera: the freshest frame wins, drops are counted) or ``block`` (lossless: the
 producer waits). When the source has finished, the process stage handles what
 is queued and finishes the sink stage, which sets :attr:`Pipeline.done`.
 Counters (``received``, ``rejected``, ``dropped``, ``processed``, ``published``, ``no_depth``,
-``errors``) and per-stage timings (mean, p50, p99 over a sliding window) are
+``errors``, and ``sparse.see_through``: sparse points the fusion step's see-through filter
+removed before VPP, :mod:`vpp_service.vpp.see_through`) and per-stage timings (mean, p50, p99 over a sliding window) are
 reported by :meth:`Pipeline.status`, which the service also serves as JSON on
 the ``<prefix>/<rig>/@status`` queryable; a liveliness token
 ``<prefix>/<rig>/@alive`` is held while the pipeline runs.
@@ -243,6 +244,7 @@ class Pipeline:
             "published": 0,
             "no_depth": 0,
             "errors": 0,
+            "sparse.see_through": 0,
         }
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -336,6 +338,8 @@ class Pipeline:
                     self._bad2_answered.append(split["bad2_answered"])
         if result.frame.sparse_disparity is None and result.frame.sensor_depth is None:
             self._inc("no_depth")
+        if result.see_through:
+            self._inc("sparse.see_through", result.see_through)
         self._inc("processed")
         self._done_at.append(time.monotonic())
         if self.output.policy == "block":
