@@ -74,15 +74,15 @@ def test_exact_sync_with_cloud_and_calibration():
 def test_cloud_frames_are_lidar_like_and_their_see_through_points_are_filtered():
     from vpp_service.fusion import DEFAULT_DEPTH_FILTER, sparse_disparity
 
-    # a near return on the principal point (pixel (2, 4)) and a far one the camera cannot see beside it (2, 5)
-    xyz = np.array([[0.0, 0.0, 1.0], [1.5 * 4.0 / F, 0.0, 4.0]], np.float32)  # disparity 8 and 0.5
+    # near returns on pixels (2, 4) and (2, 6), and a far one between them (2, 5) that the camera cannot see
+    xyz = np.array([[0.0, 0.0, 1.0], [2.5 * 1.0 / F, 0.0, 1.0], [1.5 * 4.0 / F, 0.0, 4.0]], np.float32)
     asm, _ = make()
     asm.add("depth", cdr(cloud_msg(xyz, 1_000, "left"), "sensor_msgs/msg/PointCloud2"))
     (f,) = feed(asm, pair(1_000))
-    assert f.meta["lidar_like"] is True and np.isfinite(f.sensor_depth).sum() == 2
+    assert f.meta["lidar_like"] is True and np.isfinite(f.sensor_depth).sum() == 3  # disparities 8, 8, 0.5
     assert DEFAULT_DEPTH_FILTER.applies(f.meta)
     kept, dropped = DEFAULT_DEPTH_FILTER(sparse_disparity(f))
-    assert dropped == 1 and np.isfinite(kept[2, 4]) and not np.isfinite(kept[2, 5])
+    assert dropped == 1 and np.isfinite(kept[2, 4]) and np.isfinite(kept[2, 6]) and not np.isfinite(kept[2, 5])
 
 
 def test_exact_sync_needs_equal_stamps():

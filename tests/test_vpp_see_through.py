@@ -11,22 +11,30 @@ N = np.nan
 
 
 def reference(a, window_w, window_h, margin, min_gap):
-    """Plain implementation: every point against every point of its clipped window."""
+    """Plain implementation: every point against the points of the four sides of its clipped window."""
     a = np.asarray(a, np.float32)
     h, w = a.shape
     point = np.isfinite(a) & (a > 0)
     out = np.full((h, w), np.nan, np.float32)
     dropped = 0
     rx, ry = window_w // 2, window_h // 2
+
+    def nearer(t, y0, y1, x0, x1):  # any point > t in rows [y0, y1) x columns [x0, x1), clipped
+        y0, y1, x0, x1 = max(0, y0), min(h, y1), max(0, x0), min(w, x1)
+        win = a[y0:y1, x0:x1][point[y0:y1, x0:x1]]
+        return bool(np.any(win > t))
+
     for y in range(h):
         for x in range(w):
             if not point[y, x]:
                 continue
             d = a[y, x]
             t = max(d * np.float32(1 + margin), d + np.float32(min_gap))
-            y0, y1, x0, x1 = max(0, y - ry), min(h, y + ry + 1), max(0, x - rx), min(w, x + rx + 1)
-            win = a[y0:y1, x0:x1][point[y0:y1, x0:x1]]
-            if np.any(win > t):
+            left = nearer(t, y - ry, y + ry + 1, x - rx, x)
+            right = nearer(t, y - ry, y + ry + 1, x + 1, x + rx + 1)
+            above = nearer(t, y - ry, y, x - rx, x + rx + 1)
+            below = nearer(t, y + 1, y + ry + 1, x - rx, x + rx + 1)
+            if (left and right) or (above and below):
                 dropped += 1
             else:
                 out[y, x] = d
@@ -72,20 +80,28 @@ def test_kitti_size_matches_reference_on_rows(window_w, window_h):
 def test_hand_case_foreground_hides_background():
     a = np.array(
         [
-            [N, 30, N, N, N],
-            [N, N, 10, N, 10],
-            [N, 30, N, N, N],
+            [N, 30, N, 30, N, N],
+            [N, N, 10, N, 10, N],
+            [N, N, N, N, N, N],
+            [30, 10, N, N, N, 10],
+            [30, N, N, N, N, N],
         ],
         np.float32,
     )
     got, n = filter_see_through(a, window_w=3, window_h=3, margin=0.1, min_gap=1.0)
-    # the 10 beside the 30s is hidden; the 10 two columns further is not
+    # (1, 2): 30s left and right of it -> hidden; (1, 4): a 30 on its left only -> kept (a visible
+    # background point beside an edge); (3, 1): 30s on its left only -> kept; (3, 5): alone -> kept
     assert n == 1
-    np.testing.assert_array_equal(got, [[N, 30, N, N, N], [N, N, N, N, 10], [N, 30, N, N, N]])
+    want = a.copy()
+    want[1, 2] = N
+    np.testing.assert_array_equal(got, want)
+    # above and below also count as opposite sides
+    col = np.array([[30], [10], [30]], np.float32)
+    assert filter_see_through(col, 1, 3)[1] == 1 and filter_see_through(col[:2], 1, 3)[1] == 0
 
 
 def test_ties_and_margins():
-    a = np.array([[10.0, 11.0]], np.float32)
+    a = np.array([[11.0, 10.0, 11.0]], np.float32)
     assert filter_see_through(a, 3, 1, margin=0.1, min_gap=0.0)[1] == 0  # 11 is not > 10 * 1.1
     assert filter_see_through(a, 3, 1, margin=0.0, min_gap=1.0)[1] == 0  # 11 is not > 10 + 1
     assert filter_see_through(a, 3, 1, margin=0.05, min_gap=0.5)[1] == 1
@@ -111,21 +127,23 @@ def test_maps_without_neighbours(a):
 
 def test_borders_clip_the_window():
     a = np.full((5, 5), np.nan, np.float32)
-    a[0, 0], a[4, 4] = 5.0, 50.0
-    assert filter_see_through(a, 9, 9)[1] == 1  # the 50 is inside the 5's clipped window
-    a[4, 4], a[0, 4] = np.nan, 50.0
-    assert filter_see_through(a, 7, 9)[1] == 0  # 4 columns apart: outside a 7-wide window
-    assert filter_see_through(a, 9, 1)[1] == 1
+    a[0, 2], a[4, 0], a[4, 4] = 5.0, 50.0, 50.0
+    assert filter_see_through(a, 9, 9)[1] == 1  # both 50s inside the 5's clipped window, left and right
+    assert filter_see_through(a, 3, 9)[1] == 0  # 2 columns apart: outside a 3-wide window
+    assert filter_see_through(a, 9, 7)[1] == 0  # 4 rows apart: outside a 7-high window
+    a[4, 4] = np.nan
+    assert filter_see_through(a, 9, 9)[1] == 0  # one side only: the border adds no side
 
 
 def test_float64_and_non_contiguous_input_and_input_untouched():
-    a = np.array([[5.0, 50.0, 5.0]], np.float64)
+    a = np.array([[50.0, 5.0, 50.0]], np.float64)
     before = a.copy()
     got, n = filter_see_through(a, 3, 1)
-    assert got.dtype == np.float32 and n == 2
+    assert got.dtype == np.float32 and n == 1
     np.testing.assert_array_equal(a, before)
-    b = np.asfortranarray(np.array([[5.0, 50.0], [5.0, 5.0]], np.float32))
-    assert filter_see_through(b, 3, 3)[1] == 3
+    b = np.asfortranarray(np.array([[50.0, 5.0, 50.0], [5.0, 50.0, 5.0]], np.float32))
+    assert filter_see_through(b, 3, 1)[1] == 1
+    assert filter_see_through(b[:, ::-1], 3, 3)[1] == filter_see_through(np.ascontiguousarray(b[:, ::-1]), 3, 3)[1]
 
 
 @pytest.mark.parametrize(
@@ -148,13 +166,28 @@ def test_bad_input(a, kwargs, error, match):
         filter_see_through(a, **kwargs)
 
 
+def test_both_builds_agree():
+    from vpp_service.vpp import _see_through, see_through
+
+    rng = np.random.default_rng(3)
+    a = random_map(rng, 50, 300, 0.3, None)
+    for k in [_see_through, see_through.avx2_build()]:
+        if k is None:
+            continue
+        out = np.empty_like(a)
+        n = k.see_through_rows(a, out, 3, 7, 0.1, 1.0)
+        want, n_want = reference(a, 7, 15, 0.1, 1.0)
+        assert n == n_want
+        np.testing.assert_array_equal(out, want)
+
+
 def test_depth_filter_modes():
     lidar, other = {"lidar_like": True}, {"sensor": "uniform"}
     auto, on, off = DepthFilter(), DepthFilter(mode="see-through"), DepthFilter(mode="none")
     assert auto.applies(lidar) and not auto.applies(other)
     assert on.applies(lidar) and on.applies(other)
     assert not off.applies(lidar) and not off.applies(other)
-    a = np.array([[5.0, 50.0, 5.0]], np.float32)
+    a = np.array([[50.0, 5.0, 50.0]], np.float32)
     f = DepthFilter(window_w=3, window_h=1)
     np.testing.assert_array_equal(f(a)[0], filter_see_through(a, 3, 1)[0])
 

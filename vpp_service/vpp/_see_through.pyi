@@ -9,4 +9,4 @@ import numpy.typing as npt
 def see_through_rows(
     src: npt.NDArray[np.float32], dst: npt.NDArray[np.float32], rx: int, ry: int, margin: float, min_gap: float
 ) -> int:
-    """Write ``src``'s points into ``dst`` (NaN elsewhere) less those with a clearly nearer point in the window."""
+    """Write ``src``'s points into ``dst`` (NaN elsewhere) less those with nearer values on opposite sides."""

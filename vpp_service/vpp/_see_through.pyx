@@ -11,8 +11,9 @@ def see_through_rows(const float[:, ::1] src, float[:, ::1] dst, int rx, int ry,
     """Copy ``src`` into ``dst`` (points only, NaN elsewhere) without the see-through points.
 
     A point of disparity d is dropped when the (2 rx + 1) x (2 ry + 1) window around it,
-    clipped at the borders, holds a point with disparity > max(d (1 + margin), d + min_gap).
-    Returns the number of dropped points (-1 when the buffers cannot be allocated).
+    clipped at the borders, holds values > max(d (1 + margin), d + min_gap) both left and
+    right of it, or both above and below it. Returns the number of dropped points (-1 when
+    the buffers cannot be allocated).
     """
     cdef int H = src.shape[0], W = src.shape[1]
     cdef long dropped
