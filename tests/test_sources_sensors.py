@@ -289,6 +289,8 @@ def test_pose_errors(opts, match):
         build_sensor("lidar", opts)
 
 
-def test_uniform_and_tof_are_not_lidar_like(frame):
-    for name in ("uniform", "tof"):
+def test_only_an_offset_lidar_is_lidar_like(frame):
+    for name in ("uniform", "tof", "lidar"):  # the lidar at the camera centre cannot see past an edge
         assert build_sensor(name, {}).simulate(frame, 0).meta["lidar_like"] is False
+    assert build_sensor("lidar", {"zbuffer": True}).simulate(frame, 0).meta["lidar_like"] is False
+    assert build_sensor("lidar", {"pose": "kitti"}).simulate(frame, 0).meta["lidar_like"] is True

@@ -102,7 +102,7 @@ class StereoFrame:
         declares that the sparse points come from a sensor mounted away from
         the left camera (a LiDAR scan), so some may see through foreground
         edges: the fusion step's ``auto`` depth filter then removes them
-        (:mod:`vpp_service.vpp.see_through`). Set by the ``lidar`` simulator,
+        (:mod:`vpp_service.vpp.see_through`). Set by the ``lidar`` simulator with a pose,
         the KITTI reader (Velodyne scans) and the ROS 2 sources (PointCloud2).
     """
 

@@ -18,7 +18,7 @@ A LiDAR beside the camera: ``--sensor lidar --sensor-opt pose=kitti`` (or
 ``pose=[tx,ty,tz]``, the LiDAR origin in the left camera frame in metres, and
 optionally ``rotation=[rx,ry,rz]`` in degrees). ``--depth-filter`` chooses the
 see-through filter before VPP/guidance: ``auto`` (default: on for LiDAR-like
-sensors, i.e. ``lidar`` and a dataset's own LiDAR scan), ``see-through``
+sensors, i.e. ``lidar`` with a ``pose`` and a dataset's own LiDAR scan), ``see-through``
 (always) or ``none``; ``--depth-filter-opt`` sets its window and margins
 (``window_w``, ``window_h``, ``margin``, ``min_gap``).
 """

@@ -27,8 +27,8 @@ most width - 1).
 
 Before VPP and guidance the points pass the see-through filter
 (``depth_filter``, :class:`~vpp_service.vpp.see_through.DepthFilter`; by default
-``auto``: the points of LiDAR-like sensors, i.e. ``lidar`` and a dataset's own
-LiDAR scan); a row's ``see_through`` counts the points it dropped (absent when
+``auto``: the points of LiDAR-like sensors, i.e. ``lidar`` with a ``pose`` and a
+dataset's own LiDAR scan); a row's ``see_through`` counts the points it dropped (absent when
 it did not run), ``n_points`` counts the points before it.
 
 Densities apply to the ``uniform`` sensor (fraction of valid GT pixels). Other

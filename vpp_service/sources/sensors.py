@@ -37,10 +37,11 @@ Sensors (``SENSORS.names()``):
 All randomness comes from ``numpy.random.default_rng(seed)``: the same frame and
 seed give the same points.
 
-Frames from the ``lidar`` sensor carry ``meta["lidar_like"] = True`` (its points
-may see through foreground edges, so the fusion step's ``auto`` depth filter
-removes see-through points, :mod:`vpp_service.vpp.see_through`); ``uniform`` and
-``tof`` (registered to the left view) carry ``False``.
+Frames from the ``lidar`` sensor mounted away from the camera (a ``pose`` or
+``rotation``) carry ``meta["lidar_like"] = True``: its points may see through
+foreground edges, so the fusion step's ``auto`` depth filter removes
+see-through points (:mod:`vpp_service.vpp.see_through`). At the camera centre,
+and from ``uniform`` and ``tof`` (registered to the left view), ``False``.
 """
 
 from __future__ import annotations
@@ -128,8 +129,6 @@ class Sensor(Generic[OptionsT_co]):
     Options: type[OptionsT_co]
     #: Registered name, written into ``frame.meta["sensor"]``.
     name: ClassVar[str] = ""
-    #: Whether the points may see through foreground edges, written into ``frame.meta["lidar_like"]``.
-    lidar_like: ClassVar[bool] = False
 
     def __init__(self, options: OptionsT_co | None = None) -> None:
         if options is None:
@@ -205,8 +204,16 @@ class Sensor(Generic[OptionsT_co]):
             sensor_depth[rows[keep], cols[keep]] = z
         meta = dict(frame.meta)
         meta["sensor"] = self.name
-        meta[LIDAR_LIKE] = self.lidar_like
+        meta[LIDAR_LIKE] = self.sees_past_edges()
         return frame.with_(sparse_disparity=sparse, sensor_depth=sensor_depth, meta=meta)
+
+    def sees_past_edges(self) -> bool:
+        """Whether the points may see past foreground edges (written into ``frame.meta["lidar_like"]``).
+
+        False here: the sensor is registered to the left camera. The ``lidar``
+        sensor mounted away from the camera overrides it.
+        """
+        return False
 
     def simulate(self, frame: StereoFrame, seed: int = 0) -> StereoFrame:
         """Simulate one measurement of ``frame`` (a copy; the input is unchanged).
@@ -273,7 +280,6 @@ class LidarSensor(Sensor["LidarSensor.Options"]):
     """Spinning multi-beam LiDAR at the left camera centre or mounted beside it (see module docs)."""
 
     name = "lidar"
-    lidar_like = True
 
     @dataclass(frozen=True)
     class Options(NominalGeometry):
@@ -359,6 +365,10 @@ class LidarSensor(Sensor["LidarSensor.Options"]):
     def offset(self) -> bool:
         """Whether the LiDAR is mounted away from the camera centre (or rotated)."""
         return bool(np.any(self.translation() != 0) or any(a != 0 for a in self.options.rotation))
+
+    def sees_past_edges(self) -> bool:
+        """True when the LiDAR is mounted away from the camera centre (:attr:`offset`)."""
+        return self.offset
 
     def elevations(self) -> np.ndarray:
         """Beam elevations in degrees, top beam first."""

@@ -68,9 +68,9 @@ FILTER_MODES = ("auto", "see-through", "none")
 LIDAR_LIKE = "lidar_like"
 
 #: Defaults of the filter (tuned in ``benchmarks/bench_see_through.py``, see ``docs/results.md``).
-DEFAULT_WINDOW_W = 7
-DEFAULT_WINDOW_H = 15
-DEFAULT_MARGIN = 0.1
+DEFAULT_WINDOW_W = 5
+DEFAULT_WINDOW_H = 11
+DEFAULT_MARGIN = 0.3
 DEFAULT_MIN_GAP = 1.0
 
 
@@ -152,9 +152,9 @@ class DepthFilter:
         (``meta["lidar_like"]``); ``see-through``: filter every frame;
         ``none``: never.
     window_w, window_h : int
-        Window of :func:`filter_see_through` (odd, pixels). Default 7 x 15.
+        Window of :func:`filter_see_through` (odd, pixels). Default 5 x 11.
     margin : float
-        Relative margin of :func:`filter_see_through`. Default 0.1.
+        Relative margin of :func:`filter_see_through`. Default 0.3.
     min_gap : float
         Absolute margin (pixels) of :func:`filter_see_through`. Default 1.
     """
