@@ -23,9 +23,9 @@ threshold) keeps the point. Inputs: 0, negative, NaN or infinite values are
 The filter is a compiled kernel (one thread, no GIL; an AVX2 build where
 :mod:`vpp_service.vpp.backend` selects one): the window maxima of the rows
 above and below each row by van Herk / Gil-Werman blocks, then per row the
-maxima over the window's columns by doubling, every loop vectorised; under a
-millisecond for a 120k-point scan at KITTI size
-(``benchmarks/bench_see_through.py``).
+maxima over the window's columns by doubling, every loop vectorised; about
+0.7 ms for a 120k-point scan at KITTI size, one thread
+(``benchmarks/bench_see_through.py``, ``docs/results.md``).
 
 When it runs is :class:`DepthFilter`'s ``mode``: ``auto`` (the default) filters
 the frames whose points may see through, which the frame declares with
