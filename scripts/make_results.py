@@ -35,6 +35,7 @@ import json
 import math
 import os
 import platform
+import re
 import statistics
 import subprocess
 import sys
@@ -664,6 +665,19 @@ def _json_safe(obj: Any) -> Any:
     return obj
 
 
+#: Markers of a hand-written section of results.md (numbers from another script): a regeneration keeps every
+#: such section, after the generated tables.
+HAND_WRITTEN = ("<!-- hand-written:begin -->", "<!-- hand-written:end -->")
+
+
+def hand_written_sections(path: Path) -> str:
+    """The hand-written sections of an existing results page (between :data:`HAND_WRITTEN` markers), or ''."""
+    if not path.is_file():
+        return ""
+    begin, end = (re.escape(m) for m in HAND_WRITTEN)
+    return "\n\n".join(re.findall(f"{begin}.*?{end}", path.read_text(), flags=re.DOTALL))
+
+
 def write_outputs(doc: dict[str, Any], out: Path) -> None:
     """Summaries, JSON files, the plot and results.md under ``out``."""
     res_dir = out / "results"
@@ -683,7 +697,9 @@ def write_outputs(doc: dict[str, Any], out: Path) -> None:
         (res_dir / "sweep_middlebury2006.json").write_text(json.dumps(sweep_doc, indent=1) + "\n")
         n = next(iter(doc["sweep"]["baseline"].values()))["scenes"]
         plot(res_dir / "sweep_middlebury2006.png", doc["sweep"], n)
-    (out / "results.md").write_text(render(doc, out))
+    kept = hand_written_sections(out / "results.md")
+    page = render(doc, out)
+    (out / "results.md").write_text(page.rstrip("\n") + "\n\n" + kept + "\n" if kept else page)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -295,3 +295,22 @@ def test_eval_ctrl_c_writes_what_finished_marked_partial(tmp_path, monkeypatch, 
     assert len({r["scene"] for r in doc["results"]}) == 2 and len(doc["results"]) == 4
     assert "PARTIAL: interrupted after 2 of 3 scenes" in out_md.read_text()
     assert "2 of 3 scenes finished" in err and str(out_json) in err
+
+
+def test_cli_offset_lidar_and_depth_filter(tmp_path, capsys):
+    def run(*extra):
+        out = tmp_path / f"{len(extra)}-{'-'.join(extra)[:40]}.json".replace("/", "_")
+        args = ["eval", "--dataset", "synthetic", "--limit", "1", "--matcher", "sgbm", "--methods", "vpp"]
+        assert main([*args, "--sensor", "lidar", "--quiet", "--json", str(out), *extra]) == 0
+        return json.loads(out.read_text())
+
+    auto = run("--sensor-opt", "pose=kitti", "--sensor-opt", "nominal_f=300")
+    off = run("--sensor-opt", "pose=[0.1,-0.05,-0.2]", "--sensor-opt", "nominal_f=300", "--depth-filter", "none")
+    assert "see_through" in auto["results"][0] and "see_through" not in off["results"][0]
+    assert auto["config"]["sensor_options"]["pose"] == "kitti"
+    assert off["config"]["depth_filter"] == {"mode": "none"}
+    tuned = run("--sensor-opt", "pose=kitti", "--sensor-opt", "nominal_f=300", "--depth-filter-opt", "window_w=31")
+    assert tuned["results"][0]["see_through"] >= auto["results"][0]["see_through"]
+    bad = ["eval", "--dataset", "synthetic", "--limit", "1", "--sensor", "lidar", "--depth-filter-opt", "window_w=2"]
+    assert main(bad) == 2
+    assert "window_w" in capsys.readouterr().err

@@ -140,3 +140,41 @@ def test_service_fusion_auto_range_follows_the_scene():
     plain = Fusion(template, VPPConfig())
     plain(near)
     assert plain.max_disparity == 16 and plain.range is None
+
+
+def test_see_through_filter_runs_on_lidar_like_frames_and_is_counted(frame, matcher):
+    from vpp_service.vpp.see_through import DepthFilter, filter_see_through
+
+    cfg = VPPConfig()
+    plain = fuse(frame, matcher, cfg, seed=5)
+    assert plain.see_through is None and "depth_filter" not in plain.timing_ms  # not LiDAR-like: untouched
+    lidar = frame.with_(meta={**frame.meta, "lidar_like": True})
+    res = fuse(lidar, matcher, cfg, seed=5)
+    kept, dropped = filter_see_through(frame.sparse_disparity)
+    assert res.see_through == dropped > 0 and "depth_filter" in res.timing_ms
+    painted = project(frame.left, frame.right, kept, cfg, seed=5)
+    assert res.vpp_stats == painted.stats.to_dict()
+    np.testing.assert_array_equal(res.disparity, matcher.compute(painted.left, painted.right))
+    # guidance gets the filtered points too; none / see-through modes override the frame's declaration
+    guided = fuse(lidar, matcher, None, guide=True)
+    np.testing.assert_array_equal(guided.disparity, matcher.compute(frame.left, frame.right, hints=kept))
+    assert fuse(lidar, matcher, cfg, depth_filter=None).see_through is None
+    assert fuse(lidar, matcher, cfg, depth_filter=DepthFilter(mode="none")).see_through is None
+    assert fuse(frame, matcher, cfg, depth_filter=DepthFilter(mode="see-through")).see_through == dropped
+    # metric depth only (a ROS 2 cloud's form): converted, then filtered
+    c = frame.calib
+    z = disparity_to_depth(frame.sparse_disparity, c.f, c.baseline, c.doffs)
+    cloud_like = lidar.with_(sparse_disparity=None, sensor_depth=np.nan_to_num(z, nan=0.0).astype(np.float32))
+    assert fuse(cloud_like, matcher, cfg).see_through == filter_see_through(sparse_disparity(cloud_like))[1]
+
+
+def test_service_fusion_passes_its_filter(frame, matcher):
+    from vpp_service.vpp.see_through import DepthFilter
+
+    lidar = frame.with_(meta={**frame.meta, "lidar_like": True})
+    assert Fusion(matcher, VPPConfig())(lidar).see_through > 0
+    assert Fusion(matcher, VPPConfig(), depth_filter=None)(lidar).see_through is None
+    wide = Fusion(matcher, VPPConfig(), depth_filter=DepthFilter(window_w=31, window_h=31))(lidar).see_through
+    assert wide > Fusion(matcher, VPPConfig())(lidar).see_through
+    with pytest.raises(TypeError, match="depth_filter"):
+        Fusion(matcher, depth_filter="auto")

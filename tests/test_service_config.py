@@ -234,3 +234,37 @@ def test_sim_source_checks_its_own_sensor(sensor, options, message):
     assert str(exc.value).startswith("source.sensor_options: ") and message in str(exc.value), str(exc.value)
     opts = parse_source_options("sim", {"sensor": "none", "sensor_options": options}, "source")
     assert opts.sensor == "none"  # no sensor: its options are not checked
+
+
+def test_depth_filter_section():
+    cfg = load_config(EXAMPLE)
+    assert cfg.depth_filter is not None and cfg.depth_filter.mode == "auto"
+    tuned = load_config(None, {"depth_filter": {"mode": "see-through", "window_w": 9, "margin": 0.2}})
+    assert tuned.depth_filter is not None
+    assert (tuned.depth_filter.mode, tuned.depth_filter.window_w, tuned.depth_filter.margin) == ("see-through", 9, 0.2)
+    assert validate_config(tuned.to_dict()).depth_filter == tuned.depth_filter
+    data = copy.deepcopy(DEFAULT_CONFIG)
+    data["source"] |= {"sensor": "lidar", "sensor_options": {"pose": "kitti"}}
+    assert validate_config(data).source.options.sensor_options == {"pose": "kitti"}
+
+
+@pytest.mark.parametrize(
+    ("section", "match"),
+    [
+        ({"mode": "always"}, r"depth_filter\.mode"),
+        ({"window_w": 4}, "window_w"),
+        ({"window_h": "15"}, r"depth_filter\.window_h"),
+        ({"margin": -0.5}, "margin"),
+        ({"radius": 3}, r"depth_filter\.radius"),
+    ],
+)
+def test_depth_filter_errors_name_the_key(section, match):
+    with pytest.raises(SettingsError, match=match):
+        load_config(None, {"depth_filter": section})
+
+
+def test_lidar_pose_is_validated_with_the_config():
+    data = copy.deepcopy(DEFAULT_CONFIG)
+    data["source"] |= {"sensor": "lidar", "sensor_options": {"pose": "nowhere"}}
+    with pytest.raises(SettingsError, match="pose"):
+        validate_config(data)

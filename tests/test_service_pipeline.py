@@ -176,6 +176,33 @@ def test_real_fusion_counts_no_depth_and_scores_against_gt():
         assert r.depth is not None and r.depth.dtype == np.float32
 
 
+def test_see_through_points_are_counted_in_status():
+    from vpp_service.matchers import build_matcher
+    from vpp_service.vpp import VPPConfig
+    from vpp_service.vpp.see_through import DepthFilter
+
+    sink = CollectSink()
+    src = build_source(
+        "sim",
+        {
+            "scene": "synthetic",
+            "scene_options": {"height": 48, "width": 96, "max_disparity": 16},
+            "sensor": "uniform",
+            "sensor_options": {"density": 0.3},
+            "count": 3,
+            "rate_hz": 0.0,
+        },
+        SourceContext(rig="rig0"),
+    )
+    filt = DepthFilter(mode="see-through")
+    fusion = Fusion(build_matcher("sgbm", {"max_disparity": 32}), VPPConfig(), depth_filter=filt)
+    pipe = Pipeline(src, fusion, [sink], input_policy="block")
+    run(pipe)
+    counted = [r.see_through for r in sink.results]
+    assert len(counted) == 3 and all(n is not None for n in counted)
+    assert pipe.status()["counters"]["sparse.see_through"] == sum(counted) > 0
+
+
 def test_answered_metrics_split_bad2_from_density():
     gt = np.full((10, 20), 10.0, np.float32)
     disp = gt.copy()

@@ -71,6 +71,20 @@ def test_exact_sync_with_cloud_and_calibration():
     assert (st["cloud_behind"], st["cloud_outside"], st["cloud_points"], st["no_depth"]) == (1, 1, 1, 0)
 
 
+def test_cloud_frames_are_lidar_like_and_their_see_through_points_are_filtered():
+    from vpp_service.fusion import DEFAULT_DEPTH_FILTER, sparse_disparity
+
+    # near returns on pixels (2, 4) and (2, 6), and a far one between them (2, 5) that the camera cannot see
+    xyz = np.array([[0.0, 0.0, 1.0], [2.5 * 1.0 / F, 0.0, 1.0], [1.5 * 4.0 / F, 0.0, 4.0]], np.float32)
+    asm, _ = make()
+    asm.add("depth", cdr(cloud_msg(xyz, 1_000, "left"), "sensor_msgs/msg/PointCloud2"))
+    (f,) = feed(asm, pair(1_000))
+    assert f.meta["lidar_like"] is True and np.isfinite(f.sensor_depth).sum() == 3  # disparities 8, 8, 0.5
+    assert DEFAULT_DEPTH_FILTER.applies(f.meta)
+    kept, dropped = DEFAULT_DEPTH_FILTER(sparse_disparity(f))
+    assert dropped == 1 and np.isfinite(kept[2, 4]) and np.isfinite(kept[2, 6]) and not np.isfinite(kept[2, 5])
+
+
 def test_exact_sync_needs_equal_stamps():
     asm, _ = make(depth_type="none")
     p1, p2 = pair(1_000), pair(1_001)
@@ -81,6 +95,7 @@ def test_exact_sync_needs_equal_stamps():
     assert asm.add("right_image", p1["right_image"]) == []
     frames = asm.add("right_info", p1["right_info"])
     assert len(frames) == 1 and frames[0].sensor_depth is None and asm.stats()["no_depth"] == 1
+    assert frames[0].meta["lidar_like"] is False
 
 
 def test_approximate_sync_within_tolerance():

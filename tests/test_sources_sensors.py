@@ -162,3 +162,135 @@ def test_errors(frame):
         build_sensor("uniform").simulate(frame, -1)
     with pytest.raises(TypeError, match="frame"):
         build_sensor("uniform").simulate("frame", 0)
+
+
+# ---------------------------------------------------------------- a LiDAR beside the camera: see-through points
+F, B, CX, CY, H2, W2 = 400.0, 0.2, 119.3, 59.6, 120, 240
+Z_FG, Z_BG, T_X = 2.0, 8.0, 0.1  # foreground / background depth (m); the LiDAR 0.1 m right of the camera
+TWO_PLANE_OPTS = {"beams": 16, "fov_up": 8.0, "fov_down": -8.0, "azimuth_step": 0.5, "pose": [T_X, 0.0, 0.0]}
+
+
+def beam_columns_rows():
+    """Where the beams cross the LiDAR's image plane (the simulator's beam model, module docs)."""
+    az = np.deg2rad(np.arange(-40, 41) * 0.5)
+    el = np.deg2rad(np.linspace(8.0, -8.0, 16))
+    u = CX + F * np.tan(az)[None, :]
+    v = CY - F * np.tan(el)[:, None] / np.cos(az)[None, :]
+    u, v = np.broadcast_arrays(u, v)
+    return u.ravel(), v.ravel()
+
+
+def two_plane_frame(edge):
+    """Foreground plane at Z_FG over columns [0, edge), background plane at Z_BG elsewhere (fronto-parallel)."""
+    gt = np.full((H2, W2), F * B / Z_BG, np.float32)
+    gt[:, :edge] = F * B / Z_FG
+    img = np.zeros((H2, W2), np.uint8)
+    return StereoFrame(left=img, right=img, gt_disparity=gt, calib=Calibration(f=F, baseline=B, cx=CX, cy=CY))
+
+
+def hand_scan(edge):
+    """Analytic ray casting of the beams, projected into the camera (nearest wins a pixel).
+
+    Each beam from the LiDAR hits the foreground plane if its hit lies on the visible foreground (camera
+    column < edge - 0.5), else the background plane.
+    """
+    u, v = beam_columns_rows()
+    col, row = np.floor(u + 0.5), np.floor(v + 0.5)
+    inside = (col >= 0) & (col < W2) & (row >= 0) & (row < H2)
+    u, v = u[inside], v[inside]
+    dx, dy = (u - CX) / F, (v - CY) / F  # beam direction (z = 1) in the LiDAR frame = camera axes
+    best = {}
+    for x_dir, y_dir in zip(dx, dy, strict=True):
+        z = Z_FG
+        u_fg = CX + F * (T_X + Z_FG * x_dir) / Z_FG
+        if not -0.5 <= u_fg < edge - 0.5:
+            z = Z_BG  # past the foreground's silhouette: the background
+        x, y = T_X + z * x_dir, z * y_dir
+        c, r = int(np.floor(CX + F * x / z + 0.5)), int(np.floor(CY + F * y / z + 0.5))
+        if 0 <= c < W2 and 0 <= r < H2 and ((r, c) not in best or z < best[r, c]):
+            best[r, c] = z
+    return best
+
+
+def clear_edge(t_x=T_X):
+    """An edge column with no beam within 1.5 px of the foreground's silhouette as the LiDAR sees it.
+
+    The simulator's z-buffer resolves a silhouette to a pixel; the hand computation is exact.
+    """
+    u, _ = beam_columns_rows()
+    shift = F * t_x / Z_FG
+    for edge in range(100, 160):
+        if np.min(np.abs(u - (edge - 0.5 - shift))) > 1.5:
+            return edge
+    raise AssertionError("no clear edge")
+
+
+def test_offset_lidar_two_planes_see_through_matches_hand_computation():
+    edge = clear_edge()
+    frame = two_plane_frame(edge)
+    out = build_sensor("lidar", TWO_PLANE_OPTS).simulate(frame, 0)
+    sp = out.sparse_disparity
+    best = hand_scan(edge)
+    want = np.full((H2, W2), np.nan, np.float32)
+    for (r, c), z in best.items():
+        want[r, c] = F * B / z
+    np.testing.assert_array_equal(np.isfinite(sp), np.isfinite(want))
+    np.testing.assert_allclose(sp[np.isfinite(sp)], want[np.isfinite(want)], rtol=1e-5)
+    # see-through: background depth on a foreground pixel; the band is f t (1/Z_fg - 1/Z_bg) = 15 px wide
+    see_through = np.isfinite(sp) & (np.abs(sp - frame.gt_disparity) > 1)
+    hand = sum(1 for (r, c), z in best.items() if z == Z_BG and c < edge)
+    assert see_through.sum() == hand > 0
+    cols = np.nonzero(see_through)[1]
+    band = F * T_X * (1 / Z_FG - 1 / Z_BG)
+    assert cols.min() >= edge - band - 1 and cols.max() < edge
+    assert out.meta["lidar_like"] is True
+
+
+def test_offset_lidar_on_the_other_side_sees_no_hidden_background():
+    # the LiDAR left of the camera sees less around this edge: background it cannot see is hidden by the
+    # foreground in its z-buffer, and nothing lands on a foreground pixel with background depth
+    frame = two_plane_frame(clear_edge(-T_X))
+    out = build_sensor("lidar", {**TWO_PLANE_OPTS, "pose": [-T_X, 0.0, 0.0]}).simulate(frame, 0)
+    sp = out.sparse_disparity
+    assert np.isfinite(sp).sum() > 300
+    assert not np.any(np.abs(sp[np.isfinite(sp)] - frame.gt_disparity[np.isfinite(sp)]) > 1e-3)
+
+
+def test_zero_pose_zbuffer_path_matches_ground_truth(frame):
+    # the rendered path at the camera centre: every return lies on the ground truth of its pixel
+    out = build_sensor("lidar", {"zbuffer": True}).simulate(frame, 0)
+    sp, gt = out.sparse_disparity, frame.gt_disparity
+    have = np.isfinite(sp) & np.isfinite(gt)
+    assert have.sum() > 100
+    np.testing.assert_allclose(sp[have], gt[have], rtol=1e-3, atol=0.05)
+
+
+def test_pose_presets_and_rotation():
+    s = build_sensor("lidar", {"pose": "kitti"})
+    assert isinstance(s, LidarSensor) and s.offset
+    np.testing.assert_allclose(s.translation(), [-0.0028, -0.0751, -0.2721])
+    assert not build_sensor("lidar", {}).offset
+    r = build_sensor("lidar", {"rotation": [0.0, 90.0, 0.0]})
+    assert isinstance(r, LidarSensor) and r.offset
+    np.testing.assert_allclose(r.rotation() @ [0.0, 0.0, 1.0], [1.0, 0.0, 0.0], atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("opts", "match"),
+    [
+        ({"pose": "velodyne"}, "pose: unknown preset"),
+        ({"pose": [0.0, 1.0]}, "pose"),
+        ({"pose": [0.0, float("nan"), 0.0]}, "pose"),
+        ({"rotation": [0.0, 0.0, 400.0]}, "rotation"),
+    ],
+)
+def test_pose_errors(opts, match):
+    with pytest.raises(ValueError, match=match):
+        build_sensor("lidar", opts)
+
+
+def test_only_an_offset_lidar_is_lidar_like(frame):
+    for name in ("uniform", "tof", "lidar"):  # the lidar at the camera centre cannot see past an edge
+        assert build_sensor(name, {}).simulate(frame, 0).meta["lidar_like"] is False
+    assert build_sensor("lidar", {"zbuffer": True}).simulate(frame, 0).meta["lidar_like"] is False
+    assert build_sensor("lidar", {"pose": "kitti"}).simulate(frame, 0).meta["lidar_like"] is True

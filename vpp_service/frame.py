@@ -98,7 +98,12 @@ class StereoFrame:
     rig, seq, stamp_ns
         Stream identity: rig name, sequence number, capture time (ns).
     meta : dict
-        Free-form extras (dataset path, ...).
+        Free-form extras (dataset path, ...). ``meta["lidar_like"] = True``
+        declares that the sparse points come from a sensor mounted away from
+        the left camera (a LiDAR scan), so some may see through foreground
+        edges: the fusion step's ``auto`` depth filter then removes them
+        (:mod:`vpp_service.vpp.see_through`). Set by the ``lidar`` simulator with a pose,
+        the KITTI reader (Velodyne scans) and the ROS 2 sources (PointCloud2).
     """
 
     left: np.ndarray
@@ -147,6 +152,9 @@ class FusionResult:
         Per-stage wall time in milliseconds (e.g. decode, vpp, match, process).
     metrics : dict
         Accuracy vs ground truth when the frame has it (bad2, avg, ...).
+    see_through : int or None
+        Sparse points the see-through filter dropped before VPP
+        (:mod:`vpp_service.vpp.see_through`); None when it did not run.
     """
 
     frame: StereoFrame
@@ -158,3 +166,4 @@ class FusionResult:
     vpp_stats: dict[str, int] = field(default_factory=dict)
     timing_ms: dict[str, float] = field(default_factory=dict)
     metrics: dict[str, float] = field(default_factory=dict)
+    see_through: int | None = None

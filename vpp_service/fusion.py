@@ -7,6 +7,13 @@
 * **Sparse points.** The frame's ``sparse_disparity``, or its metric
   ``sensor_depth`` converted with its calibration (``d = f * b / Z - doffs``)
   (:func:`sparse_disparity`).
+* **See-through filter.** Before VPP or guidance, the sparse points pass the
+  ``depth_filter`` (:class:`~vpp_service.vpp.see_through.DepthFilter`; by
+  default ``auto``: the frames that declare LiDAR-like points with
+  ``meta["lidar_like"]``): a point with a clearly nearer point in its image
+  neighbourhood is dropped (a LiDAR beside the camera saw it past a
+  foreground edge). ``FusionResult.see_through`` counts the dropped points
+  (None when the filter did not run) and ``timing_ms["depth_filter"]`` its time.
 * **VPP.** With a :class:`~vpp_service.vpp.VPPConfig` and sparse points, the
   pair is painted (:func:`vpp_service.vpp.project`, pattern seed ``seed``) and
   the matcher runs on the painted pair. When none of the points is usable
@@ -40,6 +47,10 @@ from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.matchers.base import Matcher
 from vpp_service.matchers.disparity_range import AutoRangeOptions, DisparityRange, MatcherCache
 from vpp_service.vpp import VPPConfig, depth_to_disparity, disparity_to_depth, project
+from vpp_service.vpp.see_through import DepthFilter
+
+#: The filter :func:`fuse` and :class:`Fusion` use unless told otherwise: ``auto`` with the default window.
+DEFAULT_DEPTH_FILTER = DepthFilter()
 
 
 def sparse_disparity(frame: StereoFrame) -> np.ndarray | None:
@@ -98,6 +109,7 @@ def fuse(
     depth: bool = True,
     protocol: bool = False,
     sparse: np.ndarray | None = None,
+    depth_filter: DepthFilter | None = DEFAULT_DEPTH_FILTER,
 ) -> FusionResult:
     """Process one frame: VPP (or guidance) on its sparse points, the matcher, depth and metrics.
 
@@ -120,6 +132,9 @@ def fuse(
     sparse : ndarray or None
         The frame's :func:`sparse_disparity` when the caller already has it
         (None: derived here when needed).
+    depth_filter : DepthFilter or None
+        The see-through filter and when it runs (default ``auto``: frames with
+        ``meta["lidar_like"]``); None never filters.
 
     Returns
     -------
@@ -137,6 +152,11 @@ def fuse(
     left, right = np.ascontiguousarray(frame.left), np.ascontiguousarray(frame.right)
     if sparse is None and (vpp_config is not None or guide):
         sparse = sparse_disparity(frame)
+    see_through = None
+    if sparse is not None and depth_filter is not None and depth_filter.applies(frame.meta):
+        t0 = time.perf_counter()
+        sparse, see_through = depth_filter(sparse)
+        timing["depth_filter"] = (time.perf_counter() - t0) * 1e3
     left_vpp = right_vpp = occluded = None
     stats: dict[str, int] = {}
     m_left, m_right = left, right
@@ -173,6 +193,7 @@ def fuse(
         vpp_stats=stats,
         timing_ms=timing,
         metrics=metrics,
+        see_through=see_through,
     )
 
 
@@ -194,6 +215,9 @@ class Fusion:
         (:class:`~vpp_service.matchers.disparity_range.DisparityRange`) and the
         matcher for it is taken from a small cache built from ``matcher``'s type
         and options. None: ``matcher`` as given.
+    depth_filter : DepthFilter or None
+        The see-through filter (:func:`fuse`); the pipeline counts what it
+        drops (``sparse.see_through``).
 
     Attributes
     ----------
@@ -210,6 +234,8 @@ class Fusion:
         seed: int = 0,
         depth: bool = True,
         disparity_range: AutoRangeOptions | None = None,
+        *,
+        depth_filter: DepthFilter | None = DEFAULT_DEPTH_FILTER,
     ) -> None:
         if not isinstance(matcher, Matcher):
             raise TypeError(
@@ -217,6 +243,9 @@ class Fusion:
             )
         if vpp_config is not None and not isinstance(vpp_config, VPPConfig):
             raise TypeError(f"vpp_config must be a VPPConfig or None, got {type(vpp_config).__name__}")
+        if depth_filter is not None and not isinstance(depth_filter, DepthFilter):
+            raise TypeError(f"depth_filter must be a DepthFilter or None, got {type(depth_filter).__name__}")
+        self.depth_filter = depth_filter
         self.matcher = matcher
         self.vpp_config = vpp_config
         self.seed = int(seed)
@@ -261,7 +290,9 @@ class Fusion:
             sparse = sparse_disparity(frame)
             matcher = self._matchers.get(self.range.update(sparse, frame.calib, frame.left.shape[1]))
         seed = self.seed + int(frame.seq)
-        result = fuse(frame, matcher, self.vpp_config, seed=seed, depth=self.depth, sparse=sparse)
+        result = fuse(
+            frame, matcher, self.vpp_config, seed=seed, depth=self.depth, sparse=sparse, depth_filter=self.depth_filter
+        )
         if result.left_vpp is not None:
             self.counters["vpp"] += 1
         elif self.vpp_config is not None or not _has_points(sparse if sparse is not None else sparse_disparity(frame)):
@@ -274,4 +305,4 @@ def _has_points(sparse: np.ndarray | None) -> bool:
     return sparse is not None and bool(np.any(np.isfinite(sparse) & (sparse > 0)))
 
 
-__all__ = ["Fusion", "fuse", "score", "sparse_disparity"]
+__all__ = ["DEFAULT_DEPTH_FILTER", "Fusion", "fuse", "score", "sparse_disparity"]

@@ -13,6 +13,14 @@ A comma list in ``--density`` runs a sweep and writes a bad-2 vs density plot
 ``--max-disparity`` defaults, per scene, to the smallest multiple of 16 above the
 largest ground-truth disparity (at least 16). Progress goes to stderr, the
 Markdown summary to stdout.
+
+A LiDAR beside the camera: ``--sensor lidar --sensor-opt pose=kitti`` (or
+``pose=[tx,ty,tz]``, the LiDAR origin in the left camera frame in metres, and
+optionally ``rotation=[rx,ry,rz]`` in degrees). ``--depth-filter`` chooses the
+see-through filter before VPP/guidance: ``auto`` (default: on for LiDAR-like
+sensors, i.e. ``lidar`` with a ``pose`` and a dataset's own LiDAR scan), ``see-through``
+(always) or ``none``; ``--depth-filter-opt`` sets its window and margins
+(``window_w``, ``window_h``, ``margin``, ``min_gap``).
 """
 
 from __future__ import annotations
@@ -94,6 +102,20 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         help="fraction of valid GT pixels (uniform sensor); a comma list runs a sweep",
     )
     g.add_argument("--seed", type=int, default=0, help="seed of the points and of the VPP pattern")
+    g.add_argument(
+        "--depth-filter",
+        choices=("auto", "see-through", "none"),
+        default="auto",
+        help="see-through filter before VPP: auto (default: LiDAR-like sensors), see-through (always), none",
+    )
+    g.add_argument(
+        "--depth-filter-opt",
+        action="append",
+        type=_kv,
+        default=[],
+        metavar="KEY=VALUE",
+        help="see-through filter option (repeatable): window_w, window_h, margin, min_gap",
+    )
     g = p.add_argument_group("VPP")
     g.add_argument(
         "--pattern",
@@ -167,6 +189,12 @@ def run(args: argparse.Namespace) -> int:
     if args.limit is not None and args.limit < 1:
         raise ValueError(f"--limit: must be >= 1, got {args.limit}")
     vpp_config = _vpp_config(args) if "vpp" in methods else None
+    from vpp_service.settings import from_mapping
+    from vpp_service.vpp.see_through import DepthFilter
+
+    depth_filter = from_mapping(
+        DepthFilter, {"mode": args.depth_filter, **dict(args.depth_filter_opt)}, "--depth-filter-opt"
+    )
     frames, dataset_name = _frames(args)
     densities = args.density if args.sensor == "uniform" else None
     if args.sensor != "uniform" and len(args.density) > 1:
@@ -186,6 +214,7 @@ def run(args: argparse.Namespace) -> int:
             sensor_options=dict(args.sensor_opt),
             max_disparity=args.max_disparity,
             dataset_name=dataset_name,
+            depth_filter=depth_filter,
         )
     except EvaluationInterrupted as exc:  # Ctrl-C: keep what finished, marked partial
         if not exc.rows:
@@ -203,6 +232,7 @@ def run(args: argparse.Namespace) -> int:
         "densities": densities,
         "seed": args.seed,
         "max_disparity": args.max_disparity,
+        "depth_filter": {"mode": args.depth_filter, **dict(args.depth_filter_opt)},
         "vpp": None if vpp_config is None else {k: getattr(vpp_config, k) for k in vpp_config.__dataclass_fields__},
     }
     title = f"VPP evaluation: {dataset_name}"

@@ -36,6 +36,7 @@ from vpp_service.datasets.calibfile import kitti_calibration, parse_kitti_calib
 from vpp_service.datasets.imageio import read_image, read_scaled_disparity
 from vpp_service.datasets.velodyne import project_points, read_velodyne_bin, velo_to_camera
 from vpp_service.frame import StereoFrame
+from vpp_service.vpp.see_through import LIDAR_LIKE
 
 log = logging.getLogger(__name__)
 
@@ -121,7 +122,7 @@ class _Kitti(Dataset):
         entries = self._calib_entries(seq, frame_id)
         p_l, p_r = self._projection(entries, self.p_left), self._projection(entries, self.p_right)
         calib = kitti_calibration(p_l, p_r) if p_l is not None and p_r is not None else None
-        meta = {"dataset": self.name, "path": str(seq), "frame_id": stem}
+        meta: dict[str, object] = {"dataset": self.name, "path": str(seq), "frame_id": stem}
         sensor_depth = sparse = None
         velo = seq / "velodyne" / f"{frame_id}.bin"
         if velo.is_file() and calib is not None and p_l is not None and "Tr_velo_to_cam" in entries:
@@ -132,6 +133,7 @@ class _Kitti(Dataset):
             hit = sensor_depth > 0
             sparse[hit] = calib.f * calib.baseline / sensor_depth[hit] - calib.doffs
             meta["sensor"] = "velodyne"
+            meta[LIDAR_LIKE] = True  # the Velodyne is 0.27 m behind the camera: its scan sees past edges
         elif velo.is_file():
             log.warning("%s: %s has no Tr_velo_to_cam calibration; scan ignored", self.name, velo)
         return StereoFrame(

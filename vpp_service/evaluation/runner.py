@@ -25,6 +25,12 @@ Matcher disparity range: when the matcher is given by name, each scene gets
 strictly above the scene's largest ground-truth disparity (at least 16, at
 most width - 1).
 
+Before VPP and guidance the points pass the see-through filter
+(``depth_filter``, :class:`~vpp_service.vpp.see_through.DepthFilter`; by default
+``auto``: the points of LiDAR-like sensors, i.e. ``lidar`` with a ``pose`` and a
+dataset's own LiDAR scan); a row's ``see_through`` counts the points it dropped (absent when
+it did not run), ``n_points`` counts the points before it.
+
 Densities apply to the ``uniform`` sensor (fraction of valid GT pixels). Other
 sensors (``lidar``, ``tof``) take one run with ``densities=None`` and report
 the measured fraction of valid-GT pixels that got a point as ``density``;
@@ -40,12 +46,14 @@ from typing import TYPE_CHECKING, Union, cast
 import numpy as np
 
 from vpp_service.frame import StereoFrame
+from vpp_service.vpp.see_through import LIDAR_LIKE
 
 if TYPE_CHECKING:
     from vpp_service.datasets.base import Dataset
     from vpp_service.matchers.base import Matcher
     from vpp_service.sources.sensors import NominalGeometry, Sensor
     from vpp_service.vpp import VPPConfig
+    from vpp_service.vpp.see_through import DepthFilter
 
 #: What :func:`run_evaluation` reads frames from.
 Frames = Union["Dataset", StereoFrame, Iterable[StereoFrame]]
@@ -197,6 +205,19 @@ def _check_vpp_config(vpp_config: VPPConfig | None) -> VPPConfig:
     return vpp_config
 
 
+def _check_depth_filter(depth_filter: DepthFilter | str | None) -> DepthFilter | None:
+    """The filter to run (None: never) from a ``DepthFilter``, a mode name or None."""
+    from vpp_service.vpp.see_through import FILTER_MODES, DepthFilter
+
+    if depth_filter is None or isinstance(depth_filter, DepthFilter):
+        return depth_filter
+    if isinstance(depth_filter, str):
+        if depth_filter not in FILTER_MODES:
+            raise ValueError(f"depth_filter: must be one of {', '.join(FILTER_MODES)}, got {depth_filter!r}")
+        return DepthFilter(mode=depth_filter)  # type: ignore[arg-type]  # checked against FILTER_MODES above
+    raise TypeError(f"depth_filter: must be a DepthFilter, a mode name or None, got {type(depth_filter).__name__}")
+
+
 def _frame_with_gt(get: Callable[[int], StereoFrame], i: int) -> tuple[StereoFrame, np.ndarray]:
     """Frame ``i`` and its ground truth (raise when the item is not a frame or has none)."""
     frame = get(i)
@@ -207,13 +228,15 @@ def _frame_with_gt(get: Callable[[int], StereoFrame], i: int) -> tuple[StereoFra
     return frame, frame.gt_disparity
 
 
-def _draw_points(frame: StereoFrame, sensor: Sensor[NominalGeometry] | None, seed: int, scene: str) -> np.ndarray:
-    """The sparse points of one run: H x W float32, NaN where no point (or not ``0 < d``)."""
-    drawn = frame.sparse_disparity if sensor is None else sensor.simulate(frame, seed=seed).sparse_disparity
-    if drawn is None:
+def _draw_points(
+    frame: StereoFrame, sensor: Sensor[NominalGeometry] | None, seed: int, scene: str
+) -> tuple[np.ndarray, dict[str, object]]:
+    """The sparse points of one run (H x W float32, NaN where no point or not ``0 < d``) and the drawn frame's meta."""
+    drawn = frame if sensor is None else sensor.simulate(frame, seed=seed)
+    if drawn.sparse_disparity is None:
         raise ValueError(f"sensor: 'frame' needs sparse_disparity, frame {scene!r} has none")
-    sparse = drawn.astype(np.float32)
-    return np.where(np.isfinite(sparse) & (sparse > 0), sparse, np.nan).astype(np.float32)
+    sparse = drawn.sparse_disparity.astype(np.float32)
+    return np.where(np.isfinite(sparse) & (sparse > 0), sparse, np.nan).astype(np.float32), drawn.meta
 
 
 class EvaluationInterrupted(KeyboardInterrupt):
@@ -248,6 +271,7 @@ def run_evaluation(
     sensor_options: Mapping[str, object] | None = None,
     max_disparity: int | None = None,
     dataset_name: str | None = None,
+    depth_filter: DepthFilter | str | None = "auto",
 ) -> list[ResultRow]:
     """Evaluate methods on frames with ground truth.
 
@@ -277,6 +301,10 @@ def run_evaluation(
         Matcher disparity range for every scene (None = per-scene default, see module docs).
     dataset_name : str or None
         Value of the ``dataset`` field (default: ``frame.meta["dataset"]``).
+    depth_filter : DepthFilter, str or None
+        The see-through filter before VPP / guidance: a ``DepthFilter``, or a
+        mode (``auto``, the default: LiDAR-like points only; ``see-through``;
+        ``none``) with the default window; None = ``none``.
 
     Returns
     -------
@@ -284,7 +312,8 @@ def run_evaluation(
         One row per (scene, density, method): ``dataset``, ``scene``, ``method``,
         ``matcher``, ``sensor``, ``density``, ``bad1``..``bad4``, ``avg``, ``rms``,
         ``invalid``, ``n``, ``*_nocc`` variants (when masked), ``n_points``,
-        ``max_disparity``, ``ms`` (VPP + matching wall time).
+        ``max_disparity``, ``ms`` (VPP + matching wall time), ``see_through``
+        (points the filter dropped, when it ran).
 
     Raises
     ------
@@ -301,6 +330,7 @@ def run_evaluation(
     if "guided" in methods and not guidance:
         raise ValueError(f"methods: 'guided' needs a matcher with guidance support; {matcher_name!r} has none")
     sensor_name, sensors = _resolve_sensors(sensor, sensor_options, densities)
+    point_filter = _check_depth_filter(depth_filter)
     if "vpp" in methods:
         vpp_config = _check_vpp_config(vpp_config)
 
@@ -341,24 +371,36 @@ def run_evaluation(
                 done += 1
 
             for d, s in sensors:
-                sparse = _draw_points(frame, s, int(seed), scene)
+                sparse, drawn_meta = _draw_points(frame, s, int(seed), scene)
                 n_points = int(np.isfinite(sparse).sum())
                 n_valid = int((np.isfinite(gt) & (gt > 0)).sum())
                 density = d if d is not None else (n_points / n_valid if n_valid else 0.0)
                 base: ResultRow = {**common, "density": density, "n_points": n_points}
                 dlabel = f"{d:g}" if d is not None else sensor_name
-                with_points = frame.with_(sparse_disparity=sparse, sensor_depth=None)
+                with_points = frame.with_(
+                    sparse_disparity=sparse,
+                    sensor_depth=None,
+                    meta={**frame.meta, LIDAR_LIKE: drawn_meta.get(LIDAR_LIKE) is True},
+                )
                 for method in methods:
                     if method == "baseline":
                         rows.append({**base, "method": "baseline", **baseline_row})
                         continue
                     tick(f"{scene} {matcher_name} {method} {dlabel}")
-                    if method == "guided":
-                        res = fuse(with_points, m, None, guide=True, depth=False, protocol=True)
-                    else:
-                        res = fuse(with_points, m, vpp_config, seed=int(seed), depth=False, protocol=True)
+                    guided = method == "guided"  # guidance instead of painting: no VPP config, no pattern seed
+                    res = fuse(
+                        with_points,
+                        m,
+                        None if guided else vpp_config,
+                        seed=int(seed),
+                        guide=guided,
+                        depth=False,
+                        protocol=True,
+                        depth_filter=point_filter,
+                    )
                     ms = res.timing_ms.get("vpp", 0.0) + res.timing_ms["match"]
-                    extra = {f"vpp_{k}": v for k, v in res.vpp_stats.items()}
+                    extra: ResultRow = {f"vpp_{k}": v for k, v in res.vpp_stats.items()}
+                    extra |= {} if res.see_through is None else {"see_through": res.see_through}
                     rows.append({**base, "method": method, **res.metrics, "ms": ms, **extra})
                     done += 1
             finished, scenes_done = len(rows), i + 1

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from vpp_service.errors import StartupError
-from vpp_service.fusion import Fusion
+from vpp_service.fusion import DEFAULT_DEPTH_FILTER, Fusion
 from vpp_service.service.allocator import reuse_freed_memory, trim_freed_memory
 from vpp_service.service.config import ServiceConfig, ZenohSection
 from vpp_service.service.pipeline import Pipeline, PipelineStatus
@@ -188,7 +188,14 @@ def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> 
     matcher = MATCHERS.get(cfg.matcher.name)(options)
     # metric depth is computed only when a sink reads it (each sink says so)
     needs_depth = any(SINKS.get(sp.name).needs_depth(sp.options) for sp in cfg.sinks)
-    fusion = Fusion(matcher, cfg.vpp, seed=s.seed, depth=needs_depth, disparity_range=cfg.disparity_range)
+    fusion = Fusion(
+        matcher,
+        cfg.vpp,
+        seed=s.seed,
+        depth=needs_depth,
+        disparity_range=cfg.disparity_range,
+        depth_filter=cfg.depth_filter if cfg.depth_filter is not None else DEFAULT_DEPTH_FILTER,
+    )
     q = cfg.queues
     return Pipeline(
         source,
@@ -368,7 +375,16 @@ def _log_link(now: Mapping[str, int], linked: bool | None, endpoints: list[str])
 
 def _not_started(cfg: ServiceConfig) -> ServiceSummary:
     """The summary of a run stopped before its Zenoh session could open."""
-    empty = {"received": 0, "rejected": 0, "processed": 0, "published": 0, "no_depth": 0, "errors": 0, "dropped": 0}
+    empty = {
+        "received": 0,
+        "rejected": 0,
+        "processed": 0,
+        "published": 0,
+        "no_depth": 0,
+        "errors": 0,
+        "sparse.see_through": 0,
+        "dropped": 0,
+    }
     return {
         "rig": cfg.service.rig,
         "prefix": cfg.service.prefix,

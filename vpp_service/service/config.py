@@ -9,6 +9,8 @@ Sections (every key is documented in ``deploy/config.example.toml``)::
     [matcher]   name = "sgbm" | "bm" | "census-sgm", plus that matcher's options;
                 max_disparity = "auto" (default) | int, [matcher.auto_range] -> AutoRangeOptions
     [queues]    input_size, input_policy, output_size, output_policy
+    [depth_filter] mode = "auto" | "see-through" | "none", window_w, window_h, margin, min_gap
+                -> DepthFilter (the see-through filter before VPP)
     [[sinks]]   type = "zenoh" | "rerun" | "files", plus that sink's options
 
 :func:`load_config` reads a file (or starts from :data:`DEFAULT_CONFIG`, the
@@ -38,6 +40,7 @@ from vpp_service.settings import SettingsError, from_mapping
 if TYPE_CHECKING:
     from vpp_service.matchers.disparity_range import AutoRangeOptions
     from vpp_service.vpp import VPPConfig
+    from vpp_service.vpp.see_through import DepthFilter
 
 T = TypeVar("T")
 P = TypeVar("P", bound=Plugin)
@@ -63,7 +66,7 @@ def default_endpoint() -> str:
 
 
 #: Top-level tables a config may contain.
-SECTIONS = ("service", "zenoh", "source", "vpp", "matcher", "queues", "sinks")
+SECTIONS = ("service", "zenoh", "source", "vpp", "matcher", "queues", "depth_filter", "sinks")
 
 
 @dataclass(frozen=True)
@@ -263,12 +266,14 @@ class ServiceConfig:
     sinks: tuple[PluginSpec, ...]
     #: ``matcher.max_disparity = "auto"``: how the range is derived per frame (None: the fixed integer).
     disparity_range: AutoRangeOptions | None = None
+    #: ``[depth_filter]``: the see-through filter before VPP (None: the defaults, ``mode = "auto"``).
+    depth_filter: DepthFilter | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain mapping (the form :func:`validate_config` accepts)."""
         from vpp_service.settings import to_mapping
 
-        return {
+        out: dict[str, Any] = {
             "service": to_mapping(self.service),
             "zenoh": to_mapping(self.zenoh),
             "source": {"type": self.source.name, **self.source.raw},
@@ -277,6 +282,9 @@ class ServiceConfig:
             "queues": to_mapping(self.queues),
             "sinks": [{"type": s.name, **s.raw} for s in self.sinks],
         }
+        if self.depth_filter is not None:
+            out["depth_filter"] = to_mapping(self.depth_filter)
+        return out
 
 
 #: The embedded default of ``vpp-service run``: simulated Motorcycle + uniform 5 %,
@@ -407,6 +415,9 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
     for key in ("input_policy", "output_policy"):
         queues_raw.setdefault(key, replay)  # a replay loses nothing unless the config asks for "latest"
     queues = from_mapping(QueuesSection, queues_raw, "queues")
+    from vpp_service.vpp.see_through import DepthFilter
+
+    depth_filter = from_mapping(DepthFilter, _table(data, "depth_filter"), "depth_filter")
     sinks_raw = data.get("sinks", [])
     if not isinstance(sinks_raw, list):
         raise SettingsError(f"sinks: must be an array of tables ([[sinks]]), got {type(sinks_raw).__name__}")
@@ -433,6 +444,7 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
         queues=queues,
         sinks=tuple(sinks),
         disparity_range=ranges[0] if ranges else None,
+        depth_filter=depth_filter,
     )
 
 

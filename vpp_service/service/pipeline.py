@@ -18,7 +18,8 @@ When the source has finished, the process stage handles what is queued and
 finishes the sink threads; the last one to exit sets :attr:`Pipeline.done`. A
 result is ``published`` once every sink has handled it (none dropped it).
 Counters (``received``, ``rejected``, ``dropped``, ``processed``, ``published``, ``no_depth``,
-``errors``) and per-stage timings (mean, p50, p99 over a sliding window) are
+``errors``, and ``sparse.see_through``: sparse points the fusion step's see-through filter
+removed before VPP, :mod:`vpp_service.vpp.see_through`) and per-stage timings (mean, p50, p99 over a sliding window) are
 reported by :meth:`Pipeline.status`, which the service also serves as JSON on
 the ``<prefix>/<rig>/@status`` queryable; a liveliness token
 ``<prefix>/<rig>/@alive`` is held while the pipeline runs.
@@ -210,6 +211,7 @@ class Pipeline:
             "published": 0,
             "no_depth": 0,
             "errors": 0,
+            "sparse.see_through": 0,
         }
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -308,6 +310,8 @@ class Pipeline:
                     self._bad2_answered.append(split["bad2_answered"])
         if result.frame.sparse_disparity is None and result.frame.sensor_depth is None:
             self._inc("no_depth")
+        if result.see_through:
+            self._inc("sparse.see_through", result.see_through)
         self._inc("processed")
         self._done_at.append(time.monotonic())
         self._deliver(result)

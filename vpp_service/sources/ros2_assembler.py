@@ -16,7 +16,10 @@
 4. Calibration comes from the two camera_info messages
    (:func:`~vpp_service.transport.ros2.messages.stereo_calibration`); the cloud is moved by
    ``lidar_to_left`` and projected with the left ``P``
-   (:func:`~vpp_service.transport.ros2.cloud.cloud_to_depth`).
+   (:func:`~vpp_service.transport.ros2.cloud.cloud_to_depth`). A frame with a cloud
+   carries ``meta["lidar_like"] = True``, so the fusion step's ``auto`` depth filter
+   removes its see-through points (:mod:`vpp_service.vpp.see_through`); a depth image
+   is taken as registered to the left view (``False``).
 
 Every refused message or pair is counted by cause in :attr:`StereoAssembler.rejected_by`
 and reported through ``reject``; every message that never reaches a frame is counted
@@ -39,6 +42,7 @@ from vpp_service.transport.ros2 import messages as rm
 from vpp_service.transport.ros2.cloud import check_extrinsic, cloud_to_depth
 from vpp_service.transport.ros2.errors import Ros2Error
 from vpp_service.transport.sync import Synchronizer
+from vpp_service.vpp.see_through import LIDAR_LIKE
 
 #: Roles of the subscribed topics, in the order of the stereo set.
 STEREO_ROLES = ("left_image", "left_info", "right_image", "right_info")
@@ -326,6 +330,8 @@ class StereoAssembler:
             meta={
                 "ros": {"stamp_ns": pair.stamp_ns, "frame_id": lc.frame_id},
                 "timing_ms": {"decode": (decode_s + time.perf_counter() - t0) * 1e3},
+                # a cloud is a LiDAR's own scan (the fusion step filters its see-through points by default)
+                LIDAR_LIKE: depth is not None and isinstance(depth.msg, rm.PointCloud2),
             },
         )
 

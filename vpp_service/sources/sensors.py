@@ -14,18 +14,34 @@ Sensors (``SENSORS.names()``):
 * ``uniform`` - the paper's protocol: a fraction ``density`` of the valid
   ground-truth pixels, drawn uniformly at random (seeded), values = ground
   truth plus optional Gaussian disparity noise ``noise_px``.
-* ``lidar`` - a spinning multi-beam LiDAR at the left camera centre: ``beams``
-  elevations evenly spread over ``[fov_down, fov_up]`` degrees and azimuths every
-  ``azimuth_step`` degrees; each ray hits the image at
-  ``u = cx + f tan(az)``, ``v = cy - f tan(el) / cos(az)`` (so beams are slightly
-  curved rows), measures the range there with Gaussian noise ``noise_m`` and
-  drops returns outside ``[min_range, max_range]`` or with probability ``dropout``.
+* ``lidar`` - a spinning multi-beam LiDAR: ``beams`` elevations evenly spread
+  over ``[fov_down, fov_up]`` degrees and azimuths every ``azimuth_step``
+  degrees; each ray hits the image at ``u = cx + f tan(az)``,
+  ``v = cy - f tan(el) / cos(az)`` (so beams are slightly curved rows),
+  measures the range there with Gaussian noise ``noise_m`` and drops returns
+  outside ``[min_range, max_range]`` or with probability ``dropout``. By
+  default the LiDAR sits at the left camera centre. ``pose`` (the LiDAR
+  origin in the left camera frame, metres: x right, y down, z forward, or a
+  preset name from :data:`LIDAR_POSES`) and ``rotation`` (degrees about the
+  camera's x, y, z axes) mount it elsewhere: the beams are then cast from the
+  LiDAR's own viewpoint against the ground-truth surface
+  (:func:`~vpp_service.sources.lidar_view.render_lidar_depth`: a z-buffer of
+  the surface, with the background hidden behind foreground edges) and the
+  returns projected into the left camera (nearest wins a pixel), so returns
+  the LiDAR sees past a foreground edge land on foreground pixels with
+  background depth (*see-through points*), as on a real rig.
 * ``tof`` - a low-resolution time-of-flight camera: a ``grid_w`` x ``grid_h``
   grid of cell centres over the image, depth noise ``sigma = noise_k * z**2``,
   returns beyond ``max_range`` (or below ``min_range``) lost, ``dropout``.
 
 All randomness comes from ``numpy.random.default_rng(seed)``: the same frame and
 seed give the same points.
+
+Frames from the ``lidar`` sensor mounted away from the camera (a ``pose`` or
+``rotation``) carry ``meta["lidar_like"] = True``: its points may see through
+foreground edges, so the fusion step's ``auto`` depth filter removes
+see-through points (:mod:`vpp_service.vpp.see_through`). At the camera centre,
+and from ``uniform`` and ``tof`` (registered to the left view), ``False``.
 """
 
 from __future__ import annotations
@@ -39,6 +55,19 @@ import numpy as np
 from vpp_service.frame import StereoFrame
 from vpp_service.registry import Registry
 from vpp_service.settings import from_mapping
+from vpp_service.sources.lidar_view import render_lidar_depth, rotation_matrix
+from vpp_service.vpp.see_through import LIDAR_LIKE
+
+#: LiDAR poses by name: the LiDAR origin in the (rectified) left camera frame, metres (x right, y down,
+#: z forward). ``kitti``: KITTI's raw-data calibration ``calib_velo_to_cam.txt`` (2011_09_26, the
+#: Velodyne HDL-64E to camera 0: ``T = (-4.069766e-03, -7.631618e-02, -2.717806e-01)``) rotated by the
+#: rectifying ``R_rect_00`` of ``calib_cam_to_cam.txt``: the Velodyne is 0.27 m behind and 0.075 m above
+#: the left camera (Geiger et al., IJRR 2013, Fig. 3: 0.27 m, 1.73 - 1.65 = 0.08 m). The preset has no
+#: rotation: the remaining 0.6 degree tilt of that calibration changes where beams fall, not what they see.
+LIDAR_POSES: dict[str, tuple[float, float, float]] = {
+    "zero": (0.0, 0.0, 0.0),
+    "kitti": (-0.0028, -0.0751, -0.2721),
+}
 
 #: Sensor classes by name.
 SENSORS: Registry[Sensor[NominalGeometry]] = Registry("sensor")
@@ -175,7 +204,16 @@ class Sensor(Generic[OptionsT_co]):
             sensor_depth[rows[keep], cols[keep]] = z
         meta = dict(frame.meta)
         meta["sensor"] = self.name
+        meta[LIDAR_LIKE] = self.sees_past_edges()
         return frame.with_(sparse_disparity=sparse, sensor_depth=sensor_depth, meta=meta)
+
+    def sees_past_edges(self) -> bool:
+        """Whether the points may see past foreground edges (written into ``frame.meta["lidar_like"]``).
+
+        False here: the sensor is registered to the left camera. The ``lidar``
+        sensor mounted away from the camera overrides it.
+        """
+        return False
 
     def simulate(self, frame: StereoFrame, seed: int = 0) -> StereoFrame:
         """Simulate one measurement of ``frame`` (a copy; the input is unchanged).
@@ -239,7 +277,7 @@ class UniformSensor(Sensor["UniformSensor.Options"]):
 
 @SENSORS.register("lidar")
 class LidarSensor(Sensor["LidarSensor.Options"]):
-    """Spinning multi-beam LiDAR sharing the left camera's centre (see module docs)."""
+    """Spinning multi-beam LiDAR at the left camera centre or mounted beside it (see module docs)."""
 
     name = "lidar"
 
@@ -261,6 +299,19 @@ class LidarSensor(Sensor["LidarSensor.Options"]):
             Probability that a return is lost, in [0, 1). Default 0.
         noise_m : float
             Std of Gaussian range noise, metres. Default 0.
+        pose : str or (float, float, float)
+            The LiDAR origin in the left camera frame (metres; x right, y down,
+            z forward) or a name from :data:`LIDAR_POSES` (``kitti``). Default
+            ``(0, 0, 0)``: at the camera centre.
+        rotation : (float, float, float)
+            LiDAR orientation: rotations (degrees) about the camera's x, y and z
+            axes (applied x first); the beams' azimuth and elevation are measured
+            in the rotated frame. Default ``(0, 0, 0)``.
+        zbuffer : bool
+            Cast the beams against the z-buffered surface even at pose zero (what
+            every other pose does; its 2 x 2 splat also closes the gaps of a sparse
+            ground truth, so the scan is as dense as an offset one). Default False:
+            at pose zero the ground truth is sampled at the beams' pixels.
         nominal_f, nominal_baseline : float
             Focal length (px) and baseline (m) assumed for uncalibrated frames.
         """
@@ -273,8 +324,18 @@ class LidarSensor(Sensor["LidarSensor.Options"]):
         max_range: float = 120.0
         dropout: float = 0.0
         noise_m: float = 0.0
+        pose: str | tuple[float, float, float] = (0.0, 0.0, 0.0)
+        rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        zbuffer: bool = False
 
         def __post_init__(self) -> None:
+            if isinstance(self.pose, str):
+                if self.pose not in LIDAR_POSES:
+                    raise ValueError(f"pose: unknown preset {self.pose!r}; known: {', '.join(sorted(LIDAR_POSES))}")
+            elif len(self.pose) != 3 or not all(np.isfinite(v) and abs(v) <= 100 for v in self.pose):
+                raise ValueError(f"pose: must be [tx, ty, tz] in metres (|t| <= 100), got {self.pose!r}")
+            if len(self.rotation) != 3 or not all(np.isfinite(v) and abs(v) <= 180 for v in self.rotation):
+                raise ValueError(f"rotation: must be [rx, ry, rz] in degrees (|r| <= 180), got {self.rotation!r}")
             if self.beams < 1:
                 raise ValueError(f"beams: must be >= 1, got {self.beams}")
             if not (-90 < self.fov_down < self.fov_up < 90):
@@ -291,6 +352,24 @@ class LidarSensor(Sensor["LidarSensor.Options"]):
             _non_negative("noise_m", self.noise_m)
             super().__post_init__()
 
+    def translation(self) -> np.ndarray:
+        """The LiDAR origin in the left camera frame (metres), the preset's values for a named ``pose``."""
+        pose = self.options.pose
+        return np.array(LIDAR_POSES[pose] if isinstance(pose, str) else pose, np.float64)
+
+    def rotation(self) -> np.ndarray:
+        """3 x 3 rotation from the LiDAR frame to the left camera frame."""
+        return rotation_matrix(self.options.rotation)
+
+    @property
+    def offset(self) -> bool:
+        """Whether the LiDAR is mounted away from the camera centre (or rotated)."""
+        return bool(np.any(self.translation() != 0) or any(a != 0 for a in self.options.rotation))
+
+    def sees_past_edges(self) -> bool:
+        """True when the LiDAR is mounted away from the camera centre (:attr:`offset`)."""
+        return self.offset
+
     def elevations(self) -> np.ndarray:
         """Beam elevations in degrees, top beam first."""
         o = self.options
@@ -299,16 +378,12 @@ class LidarSensor(Sensor["LidarSensor.Options"]):
     def simulate(self, frame: StereoFrame, seed: int = 0) -> StereoFrame:
         """Cast the beams through the image and measure their ranges (see :meth:`Sensor.simulate`)."""
         gt, rng = self._begin(frame, seed)
+        if self.offset or self.options.zbuffer:
+            return self._simulate_rendered(frame, gt, rng)
         o = self.options
         h, w = frame.shape
         f, b, doffs, cx, cy = self._geometry(frame)
-        step = np.deg2rad(o.azimuth_step)
-        az_lo, az_hi = np.arctan((-0.5 - cx) / f), np.arctan((w - 0.5 - cx) / f)
-        az = np.arange(np.ceil(az_lo / step), np.floor(az_hi / step) + 1) * step
-        el = np.deg2rad(self.elevations())
-        u = cx + f * np.tan(az)[None, :]
-        v = cy - f * np.tan(el)[:, None] / np.cos(az)[None, :]
-        u, v = np.broadcast_arrays(u, v)
+        u, v = self._beam_pixels(h, w, f, cx, cy)
         cols = np.floor(u + 0.5).astype(np.int64).ravel()
         rows = np.floor(v + 0.5).astype(np.int64).ravel()
         inside = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h)
@@ -329,6 +404,54 @@ class LidarSensor(Sensor["LidarSensor.Options"]):
         d_meas = self._measured_disparity(z_meas, keep, f, b, doffs)
         rows, cols = rows[keep], cols[keep]
         return self._output(frame, rows, cols, d_meas[keep].astype(np.float32), depth=z_meas[keep].astype(np.float32))
+
+    def _beam_pixels(self, h: int, w: int, f: float, cx: float, cy: float) -> tuple[np.ndarray, np.ndarray]:
+        """Where each beam (elevation x azimuth) crosses the image plane: ``u``, ``v`` (beams x azimuths)."""
+        step = np.deg2rad(self.options.azimuth_step)
+        az_lo, az_hi = np.arctan((-0.5 - cx) / f), np.arctan((w - 0.5 - cx) / f)
+        az = np.arange(np.ceil(az_lo / step), np.floor(az_hi / step) + 1) * step
+        el = np.deg2rad(self.elevations())
+        u = cx + f * np.tan(az)[None, :]
+        v = cy - f * np.tan(el)[:, None] / np.cos(az)[None, :]
+        u, v = np.broadcast_arrays(u, v)
+        return u, v
+
+    def _simulate_rendered(self, frame: StereoFrame, gt: np.ndarray, rng: np.random.Generator) -> StereoFrame:
+        """Beams cast from the LiDAR's own pose, the returns projected into the left camera (module docs)."""
+        o = self.options
+        h, w = frame.shape
+        f, b, doffs, cx, cy = self._geometry(frame)
+        rot, t = self.rotation(), self.translation()
+        zbuf = render_lidar_depth(gt, rot, t, f=f, b=b, doffs=doffs, cx=cx, cy=cy)
+        # the beams in the LiDAR's virtual image (the left camera's intrinsics at the LiDAR's pose)
+        u, v = (a.ravel() for a in self._beam_pixels(h, w, f, cx, cy))
+        cols, rows = np.floor(u + 0.5).astype(np.int64), np.floor(v + 0.5).astype(np.int64)
+        inside = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h)
+        u, v, z_l = u[inside], v[inside], zbuf[rows[inside], cols[inside]]
+        hit = np.isfinite(z_l)
+        # the return: along the beam's exact direction, at the surface's depth there
+        ray = np.stack([(u[hit] - cx) / f, (v[hit] - cy) / f, np.ones(int(hit.sum()))])
+        r = z_l[hit] * np.sqrt((ray**2).sum(axis=0))
+        keep = (r >= o.min_range) & (r <= o.max_range)
+        keep &= ~(rng.random(r.size) < o.dropout)
+        r_meas = r + (rng.normal(0.0, o.noise_m, size=r.size) if o.noise_m > 0 else 0.0)
+        keep &= r_meas > 0
+        p_l = ray[:, keep] * (r_meas[keep] / np.sqrt((ray[:, keep] ** 2).sum(axis=0)))
+        p_c = rot @ p_l + t.reshape(3, 1)
+        front = p_c[2] > 0
+        p_c = p_c[:, front]
+        z_c = p_c[2]
+        cols = np.floor(cx + f * p_c[0] / z_c + 0.5).astype(np.int64)
+        rows = np.floor(cy + f * p_c[1] / z_c + 0.5).astype(np.int64)
+        inside = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h)
+        rows, cols, z_c = rows[inside], cols[inside], z_c[inside]
+        # where several returns land on one pixel the nearest wins (as a real scan is projected)
+        order = np.lexsort((z_c, rows * w + cols))
+        _, first = np.unique((rows * w + cols)[order], return_index=True)
+        pick = order[first]
+        rows, cols, z_c = rows[pick], cols[pick], z_c[pick]
+        disp = f * b / z_c - doffs
+        return self._output(frame, rows, cols, disp.astype(np.float32), depth=z_c.astype(np.float32))
 
 
 @SENSORS.register("tof")
@@ -417,4 +540,13 @@ def build_sensor(name: str, options: Mapping[str, object] | None = None) -> Sens
     return cls(from_mapping(cls.Options, options, f"sensor.{name}"))
 
 
-__all__ = ["SENSORS", "LidarSensor", "NominalGeometry", "Sensor", "ToFSensor", "UniformSensor", "build_sensor"]
+__all__ = [
+    "LIDAR_POSES",
+    "SENSORS",
+    "LidarSensor",
+    "NominalGeometry",
+    "Sensor",
+    "ToFSensor",
+    "UniformSensor",
+    "build_sensor",
+]
