@@ -32,7 +32,7 @@ from vpp_service.errors import StartupError
 from vpp_service.fusion import DEFAULT_DEPTH_FILTER, Fusion
 from vpp_service.service.allocator import reuse_freed_memory, trim_freed_memory
 from vpp_service.service.config import ServiceConfig, ZenohSection
-from vpp_service.service.pipeline import Pipeline, PipelineStatus
+from vpp_service.service.pipeline import COUNTER_NAMES, Pipeline, PipelineStatus
 
 if TYPE_CHECKING:  # zenoh is imported where it is used
     import zenoh
@@ -375,16 +375,7 @@ def _log_link(now: Mapping[str, int], linked: bool | None, endpoints: list[str])
 
 def _not_started(cfg: ServiceConfig) -> ServiceSummary:
     """The summary of a run stopped before its Zenoh session could open."""
-    empty = {
-        "received": 0,
-        "rejected": 0,
-        "processed": 0,
-        "published": 0,
-        "no_depth": 0,
-        "errors": 0,
-        "sparse.see_through": 0,
-        "dropped": 0,
-    }
+    empty = {**dict.fromkeys(COUNTER_NAMES, 0), "dropped": 0}
     return {
         "rig": cfg.service.rig,
         "prefix": cfg.service.prefix,

@@ -102,6 +102,8 @@ class MetricsStatus(TypedDict):
     bad2_filled_mean: float | None
 
 
+#: The pipeline's counters (``counters`` in :meth:`Pipeline.status` adds ``dropped``, the sum of every loss).
+COUNTER_NAMES = ("received", "rejected", "processed", "published", "no_depth", "errors", "sparse.see_through")
 #: ``@status`` replies within this many seconds of a snapshot reuse it (a query flood cannot load the service).
 STATUS_SNAPSHOT_S = 0.1
 #: Seconds over which ``fps`` is measured (a recent window: it falls to 0 when frames stop coming).
@@ -204,15 +206,7 @@ class Pipeline:
         self.timer = StageTimer(timing_window)
         self.reject_log_period_s = reject_log_period_s
         self.pool = pool
-        self._counts = {
-            "received": 0,
-            "rejected": 0,
-            "processed": 0,
-            "published": 0,
-            "no_depth": 0,
-            "errors": 0,
-            "sparse.see_through": 0,
-        }
+        self._counts = dict.fromkeys(COUNTER_NAMES, 0)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._enough = threading.Event()
@@ -705,6 +699,7 @@ def _mean(values: deque[float]) -> float | None:
 
 
 __all__ = [
+    "COUNTER_NAMES",
     "FPS_WINDOW_S",
     "MetricsStatus",
     "Pipeline",
