@@ -145,7 +145,7 @@ def test_publish_plays_a_calibration_less_middlebury_folder_into_run(
         rc = main(["publish", "--root", str(middlebury2006_folder), "--rate", "0", "--wait-subscriber", "30"])
         captured = capsys.readouterr()
         assert rc == 0, captured.err
-        assert '"sent": 2' in captured.out and '"confirmed": true' in captured.out
+        assert '"sent": 2' in captured.out  # (the service stops at max_frames: it may be gone before confirming)
         thread.join(60)
         assert not thread.is_alive()
     c = result["status"]["counters"]

@@ -550,6 +550,7 @@ def test_each_sink_has_its_own_queue_a_stalled_one_drops_only_its_own():
         lambda f: FusionResult(frame=f, disparity=np.zeros(f.shape, np.float32)),
         [stalled, fine],
         input_policy="block",
+        output_size=16,  # the fine sink's queue holds every result (the stalled one has its own size 2)
     )
     pipe.start()
     assert wait_until(lambda: pipe.status()["counters"]["processed"] == 10)
