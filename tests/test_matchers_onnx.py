@@ -382,3 +382,92 @@ def test_psmnet_kitti_bad3_against_ground_truth():
     assert np.isfinite(d[valid]).mean() > 0.99  # the network leaves (almost) no hole
     bad3 = float(np.mean(~(np.abs(d[valid] - gt[valid]) <= 3.0))) * 100  # NaN counts as wrong
     assert bad3 <= 3.5, f"PSMNet KITTI 2012 {frame.name} bad-3 {bad3:.2f} %"
+
+
+# ---- in the product: eval, the service's auto range, run --check ----
+
+
+def _frame(h: int, w: int, shift: int, seed: int = 0):
+    from vpp_service.frame import StereoFrame
+
+    left, right = shifted_pair(h, w, shift, seed)
+    return StereoFrame(left, right, gt_disparity=np.full((h, w), float(shift), np.float32), name=f"shift{shift}")
+
+
+def test_eval_caps_the_per_scene_range_at_the_networks_and_rejects_guided(sad16):
+    from vpp_service.evaluation import run_evaluation
+
+    opts = {"model": str(sad16), "card": card()}
+    frames = [_frame(32, 120, 5), _frame(32, 120, 12, seed=1)]  # default ranges 16 and 16; with GT 40: 48 -> 16
+    frames.append(_frame(32, 120, 9, seed=2).with_(gt_disparity=np.full((32, 120), 40.0, np.float32)))
+    rows = run_evaluation(frames, "onnx", ["baseline", "vpp"], 0.05, "uniform", matcher_options=opts)
+    assert {r["max_disparity"] for r in rows} == {16}
+    base = {r["scene"]: r for r in rows if r["method"] == "baseline"}
+    assert base["shift5"]["bad1"] < 15 and base["shift12"]["bad1"] < 15  # only the left band x < 16 can miss
+    with pytest.raises(ValueError, match=r"max_disparity: 32 exceeds the disparity range of 'onnx' \(16\)"):
+        run_evaluation(frames, "onnx", ["baseline"], 0.05, "uniform", matcher_options=opts, max_disparity=32)
+    with pytest.raises(ValueError, match=r"methods: 'guided' needs a matcher with guidance support .*'onnx' has none"):
+        run_evaluation(frames, "onnx", ["baseline", "guided"], 0.05, "uniform", matcher_options=opts)
+
+
+def test_auto_range_is_capped_at_the_networks(sad16):
+    from vpp_service.fusion import Fusion
+    from vpp_service.matchers.disparity_range import AutoRangeOptions
+
+    m = build_matcher("onnx", {"model": str(sad16), "card": card(max_disparity=40)})
+    fusion = Fusion(m, None, disparity_range=AutoRangeOptions(limit=256))
+    assert fusion.range is not None and fusion.range.options.limit == 32  # 40 rounded down to a multiple of 16
+    frame = _frame(32, 120, 5).with_(sparse_disparity=np.full((32, 120), 100.0, np.float32))  # wants 116 -> 32
+    fusion(frame)
+    assert fusion.max_disparity == 32
+
+
+def test_run_check_validates_the_card_and_runs_the_network_once(tmp_path, capsys, sad16):
+    import json
+
+    from vpp_service.cli import EXIT_STARTUP, main
+
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[matcher]\nname = "onnx"\nmodel = "{sad16}"\ncard = {{ max_disparity = 16, left_input = "L" }}\n')
+    rc = main(["run", "--config", str(cfg), "--out", str(tmp_path / "o"), "--check"])
+    err = capsys.readouterr().err
+    assert rc == EXIT_STARTUP and len(err.strip().splitlines()) == 1
+    assert "card left_input 'L' is not an input of the graph; its inputs: ['left', 'right']" in err
+    argv = [
+        "run",
+        "--matcher",
+        "onnx",
+        "--matcher-opt",
+        f"model={sad16}",
+        "--matcher-opt",
+        'card={"max_disparity": 16}',
+    ]
+    rc = main([*argv, "--out", str(tmp_path / "o"), "--check"])
+    out = capsys.readouterr().out
+    assert rc == 0 and json.loads(out)["matcher"] == {
+        "name": "onnx",
+        "model": str(sad16),
+        "card": {"max_disparity": 16},
+    }
+    rc = main(["run", "--matcher", "psmnet", "--matcher-opt", f"model={tmp_path / 'none.onnx'}", "--check"])
+    assert rc == EXIT_STARTUP and "matcher.psmnet.model: no such file" in capsys.readouterr().err
+
+
+def test_the_service_runs_a_network(tmp_path, sad16, zenoh_endpoint):
+    import json
+
+    from vpp_service.cli import main
+
+    argv = [
+        "run",
+        "--matcher",
+        "onnx",
+        "--matcher-opt",
+        f"model={sad16}",
+        "--matcher-opt",
+        'card={"max_disparity": 16}',
+    ]
+    rc = main([*argv, "--zenoh-listen", zenoh_endpoint, "--out", str(tmp_path), "--headless", "--max-frames", "2"])
+    assert rc == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["counters"]["processed"] == 2

@@ -18,25 +18,15 @@ Markdown summary to stdout.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from vpp_service.cli.options import key_value
+
 if TYPE_CHECKING:
     from vpp_service.evaluation.runner import Frames
     from vpp_service.vpp import VPPConfig
-
-
-def _kv(text: str) -> tuple[str, object]:
-    if "=" not in text:
-        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
-    key, _, value = text.partition("=")
-    try:
-        parsed = json.loads(value)
-    except json.JSONDecodeError:
-        parsed = value
-    return key.strip(), parsed
 
 
 def _densities(text: str) -> list[float]:
@@ -65,7 +55,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     g.add_argument(
         "--dataset-opt",
         action="append",
-        type=_kv,
+        type=key_value,
         default=[],
         metavar="KEY=VALUE",
         help="reader option, e.g. scale=2 (repeatable; VALUE parsed as JSON when possible)",
@@ -73,7 +63,12 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     g = p.add_argument_group("methods")
     g.add_argument("--matcher", default="census-sgm", help="registered matcher (default census-sgm)")
     g.add_argument(
-        "--matcher-opt", action="append", type=_kv, default=[], metavar="KEY=VALUE", help="matcher option (repeatable)"
+        "--matcher-opt",
+        action="append",
+        type=key_value,
+        default=[],
+        metavar="KEY=VALUE",
+        help="matcher option (repeatable)",
     )
     g.add_argument("--methods", default="baseline,guided,vpp", help="comma list of baseline, guided, vpp")
     g.add_argument("--max-disparity", type=int, help="matcher disparity range (default: per scene from GT)")
@@ -82,7 +77,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     g.add_argument(
         "--sensor-opt",
         action="append",
-        type=_kv,
+        type=key_value,
         default=[],
         metavar="KEY=VALUE",
         help="sensor option (repeatable), e.g. noise_m=0.02",

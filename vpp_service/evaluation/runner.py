@@ -23,7 +23,7 @@ For every frame (and every density of a sweep) the runner
 Matcher disparity range: when the matcher is given by name, each scene gets
 ``max_disparity`` = the given value, or by default the smallest multiple of 16
 strictly above the scene's largest ground-truth disparity (at least 16, at
-most width - 1).
+most width - 1, and at most the matcher's ``max_range``: a network's fixed range).
 
 Densities apply to the ``uniform`` sensor (fraction of valid GT pixels). Other
 sensors (``lidar``, ``tof``) take one run with ``densities=None`` and report
@@ -63,12 +63,15 @@ RowValue = str | float | None
 ResultRow = dict[str, RowValue]
 
 
-def default_max_disparity(gt: np.ndarray, width: int) -> int:
-    """Smallest multiple of 16 strictly above ``max(gt)`` (>= 16, <= width - 1)."""
+def default_max_disparity(gt: np.ndarray, width: int, limit: int | None = None) -> int:
+    """Smallest multiple of 16 strictly above ``max(gt)`` (>= 16, <= width - 1, <= ``limit`` when given).
+
+    ``limit``: the matcher's :attr:`~vpp_service.matchers.Matcher.max_range` (a network's fixed range).
+    """
     finite = gt[np.isfinite(gt)]
     top = float(finite.max()) if finite.size else 0.0
     d = max(16, int(math.floor(top / 16.0) + 1) * 16)
-    return int(min(d, width - 1))
+    return int(min(d, width - 1, limit if limit is not None else d))
 
 
 def _frames(source: Frames) -> tuple[int, Callable[[int], StereoFrame]]:
@@ -121,22 +124,23 @@ def _check_densities(densities: float | Sequence[float] | None, sensor_name: str
 
 def _resolve_matcher(
     matcher: str | Matcher, matcher_options: Mapping[str, object] | None
-) -> tuple[str, Matcher | None, dict[str, object], bool]:
-    """Check the matcher argument: ``(name, ready matcher or None, options to build it by name, guidance)``.
+) -> tuple[str, Matcher | None, dict[str, object], Matcher]:
+    """Check the matcher argument: ``(name, ready matcher or None, options to build it by name, a built one)``.
 
     A matcher given by name is built once here with ``matcher_options`` (less
-    ``max_disparity``) so that a bad name or option fails before any frame.
+    ``max_disparity``) so that a bad name or option fails before any frame; the
+    built one tells the guidance support and the range limit (``max_range``).
     """
     from vpp_service.matchers import Matcher, build_matcher
 
     if isinstance(matcher, str):
         base_opts = dict(matcher_options or {})
         probe = build_matcher(matcher, {k: v for k, v in base_opts.items() if k != "max_disparity"})
-        return matcher, None, base_opts, probe.supports_guidance
+        return matcher, None, base_opts, probe
     if isinstance(matcher, Matcher):
         if matcher_options:
             raise ValueError("matcher_options: only used when the matcher is given by name")
-        return matcher.name, matcher, {}, matcher.supports_guidance
+        return matcher.name, matcher, {}, matcher
     raise TypeError(f"matcher: must be a matcher name or a Matcher, got {type(matcher).__name__}")
 
 
@@ -279,9 +283,15 @@ def run_evaluation(
 
     methods = _check_methods(methods)
     _check_run_args(seed, max_disparity, progress)
-    matcher_name, ready, base_opts, guidance = _resolve_matcher(matcher, matcher_options)
-    if "guided" in methods and not guidance:
-        raise ValueError(f"methods: 'guided' needs a matcher with guidance support; {matcher_name!r} has none")
+    matcher_name, ready, base_opts, probe = _resolve_matcher(matcher, matcher_options)
+    if "guided" in methods and not probe.supports_guidance:
+        raise ValueError(
+            f"methods: 'guided' needs a matcher with guidance support (it modulates the matcher's cost volume); "
+            f"{matcher_name!r} has none"
+        )
+    limit = probe.max_range
+    if ready is None and max_disparity is not None and limit is not None and max_disparity > limit:
+        raise ValueError(f"max_disparity: {max_disparity} exceeds the disparity range of {matcher_name!r} ({limit})")
     sensor_name, sensors = _resolve_sensors(sensor, sensor_options, densities)
     if "vpp" in methods:
         vpp_config = _check_vpp_config(vpp_config)
@@ -302,7 +312,7 @@ def run_evaluation(
         frame, gt = _frame_with_gt(get, i)
         scene = frame.name or f"frame{i}"
         if ready is None:
-            md = max_disparity if max_disparity is not None else default_max_disparity(gt, frame.shape[1])
+            md = max_disparity if max_disparity is not None else default_max_disparity(gt, frame.shape[1], limit)
             m = build_matcher(matcher_name, {**base_opts, "max_disparity": int(md), "fill": False})
         else:
             m = ready

@@ -6,7 +6,7 @@ Sections (every key is documented in ``deploy/config.example.toml``)::
     [zenoh]     enabled, mode, listen, connect, multicast_scouting, config_file
     [source]    type = "sim" | "files" | "zenoh", plus that source's options
     [vpp]       enabled, plus VPPConfig fields
-    [matcher]   name = "sgbm" | "bm" | "census-sgm", plus that matcher's options;
+    [matcher]   name = "sgbm" | "bm" | "census-sgm" | "psmnet" | "onnx", plus that matcher's options;
                 max_disparity = "auto" (default) | int, [matcher.auto_range] -> AutoRangeOptions
     [queues]    input_size, input_policy, output_size, output_policy
     [[sinks]]   type = "zenoh" | "rerun" | "files", plus that sink's options
@@ -414,10 +414,15 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
 def check_paths(cfg: ServiceConfig) -> None:
     """Check the paths the configuration names (each plugin's ``check_paths``), before anything starts.
 
+    The matcher's ``check_files`` too: a network matcher opens its model, checks
+    its card against the graph and runs it once on a small pair.
+
     Raises
     ------
     OSError
         A dataset root, output folder or recording folder is missing or not a folder; names the key.
+    ValueError
+        The matcher's model is unusable (card and graph disagree, the dry run fails).
     """
     from vpp_service.sinks import SINKS
     from vpp_service.sources import SOURCES
@@ -429,6 +434,10 @@ def check_paths(cfg: ServiceConfig) -> None:
     SOURCES.get(cfg.source.name).check_paths(cfg.source.options, "source", made)
     for i, spec in enumerate(cfg.sinks):
         SINKS.get(spec.name).check_paths(spec.options, f"sinks[{i}]", made)
+    from vpp_service.matchers import MATCHERS, MatcherOptions
+
+    if isinstance(cfg.matcher.options, MatcherOptions):  # a network: its model, its card, one dry run
+        MATCHERS.get(cfg.matcher.name).check_files(cfg.matcher.options, "matcher")
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
