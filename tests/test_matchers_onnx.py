@@ -471,3 +471,23 @@ def test_the_service_runs_a_network(tmp_path, sad16, zenoh_endpoint):
     assert rc == 0
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["counters"]["processed"] == 2
+
+
+def test_models_list(tmp_path, monkeypatch, capsys, sad16):
+    from vpp_service.cli import main
+
+    monkeypatch.setenv(MODELS_ENV, str(tmp_path))
+    assert main(["models", "list"]) == 0
+    assert f"no .onnx in {tmp_path}" in capsys.readouterr().err
+    (tmp_path / "psmnet_kitti2015.onnx").write_bytes(sad16.read_bytes())
+    (tmp_path / "mine.onnx").write_bytes(sad16.read_bytes())
+    (tmp_path / "other.onnx").write_bytes(sad16.read_bytes())
+    (tmp_path / "other.toml").write_text(card_to_toml(ModelCard(name="other", max_disparity=16, licence="MIT")))
+    assert main(["models", "list"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == f"models in {tmp_path}:"
+    assert out[1] == "  mine.onnx: no card: write mine.toml beside it"
+    assert out[2] == "  other.onnx: other | range 16 | rgb | pad x1 | licence: MIT"
+    assert out[3].startswith(
+        "  psmnet_kitti2015.onnx: psmnet_kitti2015 | range 192 | rgb | pad x16 | licence: code MIT"
+    )

@@ -190,12 +190,13 @@ def _check_run_args(seed: int, max_disparity: int | None, progress: Progress | N
         raise TypeError("progress: must be callable")
 
 
-def _check_vpp_config(vpp_config: VPPConfig | None) -> VPPConfig:
-    """The VPP configuration to run (the defaults for None)."""
+def _check_vpp_config(vpp_config: VPPConfig | None, matcher: Matcher) -> VPPConfig:
+    """The VPP configuration to run (for None: the matcher's preferred setting over VPP's defaults)."""
+    from vpp_service.settings import from_mapping
     from vpp_service.vpp import VPPConfig
 
     if vpp_config is None:
-        return VPPConfig()
+        return from_mapping(VPPConfig, matcher.vpp_defaults, f"matcher.{matcher.name}.vpp_defaults")
     if not isinstance(vpp_config, VPPConfig):
         raise TypeError(f"vpp_config: must be a VPPConfig or None, got {type(vpp_config).__name__}")
     return vpp_config
@@ -252,7 +253,7 @@ def run_evaluation(
         ``uniform``, ``lidar``, ``tof`` (built with ``sensor_options``), ``frame``
         (the frame's own ``sparse_disparity``) or a ready sensor.
     vpp_config : VPPConfig or None
-        VPP variant (None = defaults).
+        VPP variant (None = the matcher's ``vpp_defaults`` over VPPConfig's defaults).
     seed : int
         Seed of the sensor draw and of VPP's random pattern (>= 0).
     progress : callable or None
@@ -294,7 +295,7 @@ def run_evaluation(
         raise ValueError(f"max_disparity: {max_disparity} exceeds the disparity range of {matcher_name!r} ({limit})")
     sensor_name, sensors = _resolve_sensors(sensor, sensor_options, densities)
     if "vpp" in methods:
-        vpp_config = _check_vpp_config(vpp_config)
+        vpp_config = _check_vpp_config(vpp_config, probe)
 
     n_frames, get = _frames(frames_or_dataset)
     if n_frames == 0:

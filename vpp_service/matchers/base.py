@@ -222,6 +222,9 @@ class Matcher(ABC):
     Options: ClassVar[type[MatcherOptions]] = MatcherOptions
     #: True when :meth:`compute` accepts ``hints`` (guided stereo).
     supports_guidance: ClassVar[bool] = False
+    #: :class:`~vpp_service.vpp.VPPConfig` fields that suit this matcher better than VPP's own defaults
+    #: (a network's measured best); ``eval`` and the service apply them where the user set nothing.
+    vpp_defaults: ClassVar[Mapping[str, object]] = {}
 
     #: The validated options (an instance of ``Options``).
     options: MatcherOptions

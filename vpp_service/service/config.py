@@ -5,7 +5,7 @@ Sections (every key is documented in ``deploy/config.example.toml``)::
     [service]   rig, prefix, max_frames, out, summary, ...      -> ServiceSection
     [zenoh]     enabled, mode, listen, connect, multicast_scouting, config_file
     [source]    type = "sim" | "files" | "zenoh", plus that source's options
-    [vpp]       enabled, plus VPPConfig fields
+    [vpp]       enabled, plus VPPConfig fields (unset ones: the matcher's vpp_defaults, then VPPConfig's)
     [matcher]   name = "sgbm" | "bm" | "census-sgm" | "psmnet" | "onnx", plus that matcher's options;
                 max_disparity = "auto" (default) | int, [matcher.auto_range] -> AutoRangeOptions
     [queues]    input_size, input_policy, output_size, output_policy
@@ -309,8 +309,9 @@ def _require_no_session(section: str, spec: PluginSpec, registry: Registry[P]) -
         raise SettingsError(f"zenoh.enabled: {section} ({registry.kind} {spec.name!r}) needs a zenoh session")
 
 
-def _parse_vpp(d: Mapping[str, Any]) -> VPPConfig | None:
-    raw = dict(d)
+def _parse_vpp(d: Mapping[str, Any], defaults: Mapping[str, object]) -> VPPConfig | None:
+    """The ``[vpp]`` table over the matcher's preferred VPP setting (``Matcher.vpp_defaults``); None if disabled."""
+    raw = {**defaults, **d}
     enabled = raw.pop("enabled", True)
     if not isinstance(enabled, bool):
         raise SettingsError(f"vpp.enabled: must be true or false, got {enabled!r}")
@@ -380,7 +381,7 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
 
     matcher = _plugin(data.get("matcher", {"name": "sgbm"}), "matcher", "name", MATCHERS, parse_matcher)
     vpp_raw = dict(_table(data, "vpp"))
-    vpp = _parse_vpp(vpp_raw)
+    vpp = _parse_vpp(vpp_raw, MATCHERS.get(matcher.name).vpp_defaults)
     queues = from_mapping(QueuesSection, _table(data, "queues"), "queues")
     sinks_raw = data.get("sinks", [])
     if not isinstance(sinks_raw, list):
