@@ -491,3 +491,22 @@ def test_models_list(tmp_path, monkeypatch, capsys, sad16):
     assert out[3].startswith(
         "  psmnet_kitti2015.onnx: psmnet_kitti2015 | range 192 | rgb | pad x16 | licence: code MIT"
     )
+
+
+def test_networks_get_their_vpp_setting_where_the_user_sets_none(sad16):
+    from vpp_service.cli import build_parser
+    from vpp_service.cli.eval import _vpp_config
+    from vpp_service.evaluation.runner import _check_vpp_config
+    from vpp_service.service.config import validate_config
+    from vpp_service.vpp import VPPConfig
+
+    assert OnnxMatcher.vpp_defaults["uniform_patch"] is True
+    assert validate_config({"matcher": {"name": "psmnet"}}).vpp == VPPConfig(**OnnxMatcher.vpp_defaults)
+    mine = validate_config({"matcher": {"name": "psmnet"}, "vpp": {"uniform_patch": False, "alpha": 0.6}}).vpp
+    assert mine is not None and mine.uniform_patch is False and mine.alpha == 0.6
+    assert validate_config({"matcher": {"name": "sgbm"}}).vpp == VPPConfig()  # classic matchers: VPP's defaults
+    args = build_parser().parse_args(["eval", "--matcher", "psmnet", "--alpha", "0.2"])
+    assert _vpp_config(args) == VPPConfig(**{**OnnxMatcher.vpp_defaults, "alpha": 0.2})
+    probe = build_matcher("onnx", {"model": str(sad16), "card": card()})
+    assert _check_vpp_config(None, probe) == VPPConfig(**OnnxMatcher.vpp_defaults)  # run_evaluation(vpp_config=None)
+    assert _check_vpp_config(None, build_matcher("sgbm")) == VPPConfig()
