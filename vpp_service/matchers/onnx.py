@@ -269,10 +269,10 @@ class OnnxMatcher(Matcher):
     default_file: ClassVar[str] = ""
     #: How to get a preset's model (one sentence).
     howto: ClassVar[str] = ""
-    #: VPP for networks: one random value per 3 x 3 patch (the paper's variant iv), alpha 0.4, FGD occlusion
+    #: VPP for networks: one random value per 5 x 5 patch (the paper's variant iv), alpha 0.4, FGD occlusion
     #: handling. Measured with PSMNet on 8 Middlebury 2005/06 scenes (5 % points, bad-2 VPP / baseline):
-    #: 0.671 against 0.702 for VPPConfig's per-pixel patches; docs/deep-matchers.md has the sweep.
-    vpp_defaults: ClassVar[Mapping[str, object]] = {"uniform_patch": True, "patch": 3, "alpha": 0.4, "occlusion": "fgd"}
+    #: 0.662 (3 x 3: 0.671) against 0.702 for VPPConfig's per-pixel 3 x 3 patches; docs/deep-matchers.md.
+    vpp_defaults: ClassVar[Mapping[str, object]] = {"uniform_patch": True, "patch": 5, "alpha": 0.4, "occlusion": "fgd"}
 
     def __init__(self, options: OnnxOptions | Mapping[str, object] | None = None) -> None:
         super().__init__(options)
