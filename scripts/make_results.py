@@ -367,11 +367,11 @@ def render_deep(deep: dict[str, Any], classic: dict[str, Any] | None) -> str:
                 if s is None:
                     continue
                 ratio = _f(s["bad2"] / block["baseline"]["bad2"]) if method == "vpp" and "baseline" in block else ""
-                label = f"{names[key]} ({s['scenes']})"
+                label = f"{names[key]}, {s['scenes']} scene{'s' if s['scenes'] != 1 else ''}"
                 lines.append(
                     [label, matcher, method if method != "vpp" else "**vpp**"]
                     + [_f(s.get(k)) for k in ("bad1", "bad2", "bad3", "bad4", "avg")]
-                    + [ratio, _f(s["ms"] / 1000.0, 1)]
+                    + [ratio, _f(s["ms"] / 1000.0)]
                 )
     P += [_table(header, lines, (0, 1, 2)), "", DEEP_MARKS[1]]
     return "\n".join(P)
