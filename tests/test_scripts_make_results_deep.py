@@ -61,7 +61,7 @@ def test_the_deep_section_sits_between_markers_and_replaces_only_itself(mr):
         ["psmnet", "baseline"],
         ["psmnet", "**vpp**"],
     ]
-    assert "| 0.50 | 4.0 |" in lines[3] and "uniform patches" in section  # VPP/base bad-2, s/frame
+    assert "| 0.50 | 4.00 |" in lines[3] and "uniform patches" in section  # VPP/base bad-2, s/frame
     page = "# Results\n\ntext\n\n## Beside the paper\n\nmore\n"
     once = mr.splice_deep(page, section)
     assert once.index(section) < once.index("## Beside the paper") and once.count(mr.DEEP_MARKS[0]) == 1
