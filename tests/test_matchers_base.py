@@ -27,8 +27,8 @@ def pair():
 
 
 def test_registry_names():
-    assert MATCHERS.names() == NAMES
-    with pytest.raises(ValueError, match="known: bm, census-sgm, sgbm"):
+    assert MATCHERS.names() == sorted([*NAMES, "onnx", "psmnet"])  # the networks: tests/test_matchers_onnx.py
+    with pytest.raises(ValueError, match="known: bm, census-sgm, onnx, psmnet, sgbm"):
         build_matcher("nope")
 
 

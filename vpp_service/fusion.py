@@ -39,13 +39,14 @@
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
 from vpp_service.evaluation.metrics import answered_metrics, compute_metrics
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.matchers.base import Matcher
-from vpp_service.matchers.disparity_range import AutoRangeOptions, DisparityRange, MatcherCache
+from vpp_service.matchers.disparity_range import STEP, AutoRangeOptions, DisparityRange, MatcherCache
 from vpp_service.vpp import VPPConfig, depth_to_disparity, disparity_to_depth, project
 from vpp_service.vpp.see_through import DepthFilter
 
@@ -214,7 +215,9 @@ class Fusion:
         ``max_disparity = "auto"``: the range is derived per frame
         (:class:`~vpp_service.matchers.disparity_range.DisparityRange`) and the
         matcher for it is taken from a small cache built from ``matcher``'s type
-        and options. None: ``matcher`` as given.
+        and options. None: ``matcher`` as given. Its ``limit`` is capped at the
+        matcher's :attr:`~vpp_service.matchers.Matcher.max_range` (rounded down
+        to a multiple of 16: a network's fixed range, 192 for PSMNet).
     depth_filter : DepthFilter or None
         The see-through filter (:func:`fuse`); the pipeline counts what it
         drops (``sparse.see_through``).
@@ -251,6 +254,9 @@ class Fusion:
         self.seed = int(seed)
         self.depth = bool(depth)
         self.counters = {"vpp": 0, "no_depth": 0}
+        limit = matcher.max_range  # a network's fixed range caps "auto"
+        if disparity_range is not None and limit is not None and disparity_range.limit > limit:
+            disparity_range = replace(disparity_range, limit=max(STEP, limit // STEP * STEP))
         self.range = DisparityRange(disparity_range) if disparity_range is not None else None
         self._matchers = MatcherCache(matcher)
 

@@ -23,7 +23,7 @@ from vpp_service.errors import StartupError
 from vpp_service.threads import configure_openmp
 
 #: Sub-command modules, in the order ``--help`` lists them.
-COMMANDS = ("run", "publish", "status", "view", "eval", "demo")
+COMMANDS = ("run", "publish", "status", "view", "eval", "demo", "models")
 
 #: Exit status of a configuration or start-up error (bad flag, bad config key, missing path, Zenoh cannot open).
 EXIT_STARTUP = 2

@@ -26,25 +26,15 @@ sensors, i.e. ``lidar`` with a ``pose`` and a dataset's own LiDAR scan), ``see-t
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from vpp_service.cli.options import key_value
+
 if TYPE_CHECKING:
     from vpp_service.evaluation.runner import Frames
     from vpp_service.vpp import VPPConfig
-
-
-def _kv(text: str) -> tuple[str, object]:
-    if "=" not in text:
-        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
-    key, _, value = text.partition("=")
-    try:
-        parsed = json.loads(value)
-    except json.JSONDecodeError:
-        parsed = value
-    return key.strip(), parsed
 
 
 def _densities(text: str) -> list[float]:
@@ -73,7 +63,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     g.add_argument(
         "--dataset-opt",
         action="append",
-        type=_kv,
+        type=key_value,
         default=[],
         metavar="KEY=VALUE",
         help="reader option, e.g. scale=2 (repeatable; VALUE parsed as JSON when possible)",
@@ -81,7 +71,12 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     g = p.add_argument_group("methods")
     g.add_argument("--matcher", default="census-sgm", help="registered matcher (default census-sgm)")
     g.add_argument(
-        "--matcher-opt", action="append", type=_kv, default=[], metavar="KEY=VALUE", help="matcher option (repeatable)"
+        "--matcher-opt",
+        action="append",
+        type=key_value,
+        default=[],
+        metavar="KEY=VALUE",
+        help="matcher option (repeatable)",
     )
     g.add_argument("--methods", default="baseline,guided,vpp", help="comma list of baseline, guided, vpp")
     g.add_argument("--max-disparity", type=int, help="matcher disparity range (default: per scene from GT)")
@@ -90,7 +85,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     g.add_argument(
         "--sensor-opt",
         action="append",
-        type=_kv,
+        type=key_value,
         default=[],
         metavar="KEY=VALUE",
         help="sensor option (repeatable), e.g. noise_m=0.02",
@@ -111,7 +106,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     g.add_argument(
         "--depth-filter-opt",
         action="append",
-        type=_kv,
+        type=key_value,
         default=[],
         metavar="KEY=VALUE",
         help="see-through filter option (repeatable): window_w, window_h, margin, min_gap",
@@ -147,6 +142,8 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
 
 
 def _vpp_config(args: argparse.Namespace) -> VPPConfig:
+    """The VPP flags over the matcher's preferred setting (``Matcher.vpp_defaults``) over VPP's defaults."""
+    from vpp_service.matchers import MATCHERS
     from vpp_service.vpp import VPPConfig
 
     opts = {
@@ -154,7 +151,7 @@ def _vpp_config(args: argparse.Namespace) -> VPPConfig:
         for k in ("pattern", "patch", "uniform_patch", "alpha", "splat", "occlusion", "adaptive_patch")
         if getattr(args, k) is not None
     }
-    return VPPConfig(**opts)
+    return VPPConfig(**{**MATCHERS.get(args.matcher).vpp_defaults, **opts})
 
 
 def _frames(args: argparse.Namespace) -> tuple[Frames, str]:

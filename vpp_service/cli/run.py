@@ -25,6 +25,7 @@ from types import FrameType
 from typing import TYPE_CHECKING, Any
 
 from vpp_service.cli.help import HelpFormatter, plain
+from vpp_service.cli.options import key_value
 
 if TYPE_CHECKING:
     from vpp_service.service.config import ServiceConfig
@@ -51,7 +52,15 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         help="source type: sim, files, zenoh, ros2, rosbag2 (options from the config; default: the config's, sim)",
     )
     p.add_argument("--sink", action="append", help="sink type (repeatable; replaces the config's sinks)")
-    p.add_argument("--matcher", help="matcher name: sgbm, bm, census-sgm (default: the config's, sgbm)")
+    p.add_argument("--matcher", help="matcher name: sgbm, bm, census-sgm, psmnet, onnx (default: the config's, sgbm)")
+    p.add_argument(
+        "--matcher-opt",
+        action="append",
+        type=key_value,
+        default=[],
+        metavar="KEY=VALUE",
+        help="matcher option (repeatable; VALUE parsed as JSON when possible), e.g. model=psmnet.onnx",
+    )
     p.add_argument(
         "--max-disparity",
         metavar="D",
@@ -149,6 +158,8 @@ def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[
         d.setdefault("queues", {})["input_policy"] = args.input_policy
     if args.matcher and d.get("matcher", {}).get("name") != args.matcher:
         d["matcher"] = {"name": args.matcher}
+    for key, value in getattr(args, "matcher_opt", None) or []:
+        d.setdefault("matcher", {"name": "sgbm"})[key] = value
     max_disparity = getattr(args, "max_disparity", None)
     if max_disparity is not None:
         m = d.setdefault("matcher", {"name": "sgbm"})

@@ -23,7 +23,7 @@ For every frame (and every density of a sweep) the runner
 Matcher disparity range: when the matcher is given by name, each scene gets
 ``max_disparity`` = the given value, or by default the smallest multiple of 16
 strictly above the scene's largest ground-truth disparity (at least 16, at
-most width - 1).
+most width - 1, and at most the matcher's ``max_range``: a network's fixed range).
 
 Before VPP and guidance the points pass the see-through filter
 (``depth_filter``, :class:`~vpp_service.vpp.see_through.DepthFilter`; by default
@@ -71,12 +71,15 @@ RowValue = str | float | None
 ResultRow = dict[str, RowValue]
 
 
-def default_max_disparity(gt: np.ndarray, width: int) -> int:
-    """Smallest multiple of 16 strictly above ``max(gt)`` (>= 16, <= width - 1)."""
+def default_max_disparity(gt: np.ndarray, width: int, limit: int | None = None) -> int:
+    """Smallest multiple of 16 strictly above ``max(gt)`` (>= 16, <= width - 1, <= ``limit`` when given).
+
+    ``limit``: the matcher's :attr:`~vpp_service.matchers.Matcher.max_range` (a network's fixed range).
+    """
     finite = gt[np.isfinite(gt)]
     top = float(finite.max()) if finite.size else 0.0
     d = max(16, int(math.floor(top / 16.0) + 1) * 16)
-    return int(min(d, width - 1))
+    return int(min(d, width - 1, limit if limit is not None else d))
 
 
 def _frames(source: Frames) -> tuple[int, Callable[[int], StereoFrame]]:
@@ -129,22 +132,23 @@ def _check_densities(densities: float | Sequence[float] | None, sensor_name: str
 
 def _resolve_matcher(
     matcher: str | Matcher, matcher_options: Mapping[str, object] | None
-) -> tuple[str, Matcher | None, dict[str, object], bool]:
-    """Check the matcher argument: ``(name, ready matcher or None, options to build it by name, guidance)``.
+) -> tuple[str, Matcher | None, dict[str, object], Matcher]:
+    """Check the matcher argument: ``(name, ready matcher or None, options to build it by name, a built one)``.
 
     A matcher given by name is built once here with ``matcher_options`` (less
-    ``max_disparity``) so that a bad name or option fails before any frame.
+    ``max_disparity``) so that a bad name or option fails before any frame; the
+    built one tells the guidance support and the range limit (``max_range``).
     """
     from vpp_service.matchers import Matcher, build_matcher
 
     if isinstance(matcher, str):
         base_opts = dict(matcher_options or {})
         probe = build_matcher(matcher, {k: v for k, v in base_opts.items() if k != "max_disparity"})
-        return matcher, None, base_opts, probe.supports_guidance
+        return matcher, None, base_opts, probe
     if isinstance(matcher, Matcher):
         if matcher_options:
             raise ValueError("matcher_options: only used when the matcher is given by name")
-        return matcher.name, matcher, {}, matcher.supports_guidance
+        return matcher.name, matcher, {}, matcher
     raise TypeError(f"matcher: must be a matcher name or a Matcher, got {type(matcher).__name__}")
 
 
@@ -194,12 +198,13 @@ def _check_run_args(seed: int, max_disparity: int | None, progress: Progress | N
         raise TypeError("progress: must be callable")
 
 
-def _check_vpp_config(vpp_config: VPPConfig | None) -> VPPConfig:
-    """The VPP configuration to run (the defaults for None)."""
+def _check_vpp_config(vpp_config: VPPConfig | None, matcher: Matcher) -> VPPConfig:
+    """The VPP configuration to run (for None: the matcher's preferred setting over VPP's defaults)."""
+    from vpp_service.settings import from_mapping
     from vpp_service.vpp import VPPConfig
 
     if vpp_config is None:
-        return VPPConfig()
+        return from_mapping(VPPConfig, matcher.vpp_defaults, f"matcher.{matcher.name}.vpp_defaults")
     if not isinstance(vpp_config, VPPConfig):
         raise TypeError(f"vpp_config: must be a VPPConfig or None, got {type(vpp_config).__name__}")
     return vpp_config
@@ -257,6 +262,26 @@ class EvaluationInterrupted(KeyboardInterrupt):
         self.scenes_total = scenes_total
 
 
+def _check_matcher_fits(name: str, probe: Matcher, methods: Sequence[str], max_disparity: int | None) -> int | None:
+    """The matcher's fixed disparity range (None: any); raises when the methods or the range ask too much.
+
+    Raises
+    ------
+    ValueError
+        ``guided`` with a matcher that has no cost volume to modulate (a network), or a
+        ``max_disparity`` above the matcher's range.
+    """
+    if "guided" in methods and not probe.supports_guidance:
+        raise ValueError(
+            f"methods: 'guided' needs a matcher with guidance support (it modulates the matcher's cost volume); "
+            f"{name!r} has none"
+        )
+    limit = probe.max_range
+    if max_disparity is not None and limit is not None and max_disparity > limit:
+        raise ValueError(f"max_disparity: {max_disparity} exceeds the disparity range of {name!r} ({limit})")
+    return limit
+
+
 def run_evaluation(
     frames_or_dataset: Frames,
     matcher: str | Matcher = "census-sgm",
@@ -290,7 +315,7 @@ def run_evaluation(
         ``uniform``, ``lidar``, ``tof`` (built with ``sensor_options``), ``frame``
         (the frame's own ``sparse_disparity``) or a ready sensor.
     vpp_config : VPPConfig or None
-        VPP variant (None = defaults).
+        VPP variant (None = the matcher's ``vpp_defaults`` over VPPConfig's defaults).
     seed : int
         Seed of the sensor draw and of VPP's random pattern (>= 0).
     progress : callable or None
@@ -326,13 +351,12 @@ def run_evaluation(
 
     methods = _check_methods(methods)
     _check_run_args(seed, max_disparity, progress)
-    matcher_name, ready, base_opts, guidance = _resolve_matcher(matcher, matcher_options)
-    if "guided" in methods and not guidance:
-        raise ValueError(f"methods: 'guided' needs a matcher with guidance support; {matcher_name!r} has none")
+    matcher_name, ready, base_opts, probe = _resolve_matcher(matcher, matcher_options)
+    limit = _check_matcher_fits(matcher_name, probe, methods, None if ready is not None else max_disparity)
     sensor_name, sensors = _resolve_sensors(sensor, sensor_options, densities)
     point_filter = _check_depth_filter(depth_filter)
     if "vpp" in methods:
-        vpp_config = _check_vpp_config(vpp_config)
+        vpp_config = _check_vpp_config(vpp_config, probe)
 
     n_frames, get = _frames(frames_or_dataset)
     if n_frames == 0:
@@ -351,7 +375,7 @@ def run_evaluation(
             frame, gt = _frame_with_gt(get, i)
             scene = frame.name or f"frame{i}"
             if ready is None:
-                md = max_disparity if max_disparity is not None else default_max_disparity(gt, frame.shape[1])
+                md = max_disparity if max_disparity is not None else default_max_disparity(gt, frame.shape[1], limit)
                 m = build_matcher(matcher_name, {**base_opts, "max_disparity": int(md), "fill": False})
             else:
                 m = ready

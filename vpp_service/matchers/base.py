@@ -32,7 +32,7 @@ import numpy as np
 from vpp_service.registry import Registry
 from vpp_service.settings import from_mapping
 
-#: Registered matcher classes by name ("sgbm", "bm", "census-sgm").
+#: Registered matcher classes by name ("sgbm", "bm", "census-sgm", "onnx", "psmnet").
 MATCHERS: Registry[Matcher] = Registry("matcher")
 
 
@@ -222,9 +222,33 @@ class Matcher(ABC):
     Options: ClassVar[type[MatcherOptions]] = MatcherOptions
     #: True when :meth:`compute` accepts ``hints`` (guided stereo).
     supports_guidance: ClassVar[bool] = False
+    #: :class:`~vpp_service.vpp.VPPConfig` fields that suit this matcher better than VPP's own defaults
+    #: (a network's measured best); ``eval`` and the service apply them where the user set nothing.
+    vpp_defaults: ClassVar[Mapping[str, object]] = {}
 
     #: The validated options (an instance of ``Options``).
     options: MatcherOptions
+
+    @property
+    def max_range(self) -> int | None:
+        """The largest ``max_disparity`` this matcher can search (None: only the image width limits it).
+
+        A network with a fixed cost-volume depth has one; ``max_disparity = "auto"``
+        and ``eval``'s per-scene default are capped at it.
+        """
+        return None
+
+    @classmethod  # noqa: B027 - optional hook, a no-op by default
+    def check_files(cls, options: MatcherOptions, section: str) -> None:
+        """Check what the options name on disk and load (``run --check``, before the service starts); nothing here.
+
+        Matchers that load a model override it (open it, check it, run it once).
+
+        Raises
+        ------
+        OSError, ValueError
+            A named file is missing or unusable; one line naming ``section``.
+        """
 
     def __init__(self, options: MatcherOptions | Mapping[str, object] | None = None) -> None:
         if options is None or isinstance(options, Mapping):

@@ -5,8 +5,8 @@ Sections (every key is documented in ``deploy/config.example.toml``)::
     [service]   rig, prefix, max_frames, out, summary, ...      -> ServiceSection
     [zenoh]     enabled, mode, listen, connect, multicast_scouting, config_file
     [source]    type = "sim" | "files" | "zenoh", plus that source's options
-    [vpp]       enabled, plus VPPConfig fields
-    [matcher]   name = "sgbm" | "bm" | "census-sgm", plus that matcher's options;
+    [vpp]       enabled, plus VPPConfig fields (unset ones: the matcher's vpp_defaults, then VPPConfig's)
+    [matcher]   name = "sgbm" | "bm" | "census-sgm" | "psmnet" | "onnx", plus that matcher's options;
                 max_disparity = "auto" (default) | int, [matcher.auto_range] -> AutoRangeOptions
     [queues]    input_size, input_policy, output_size, output_policy
     [depth_filter] mode = "auto" | "see-through" | "none", window_w, window_h, margin, min_gap
@@ -338,8 +338,9 @@ def _require_no_session(section: str, spec: PluginSpec, registry: Registry[P]) -
         raise SettingsError(f"zenoh.enabled: {section} ({registry.kind} {spec.name!r}) needs a zenoh session")
 
 
-def _parse_vpp(d: Mapping[str, Any]) -> VPPConfig | None:
-    raw = dict(d)
+def _parse_vpp(d: Mapping[str, Any], defaults: Mapping[str, object]) -> VPPConfig | None:
+    """The ``[vpp]`` table over the matcher's preferred VPP setting (``Matcher.vpp_defaults``); None if disabled."""
+    raw = {**defaults, **d}
     enabled = raw.pop("enabled", True)
     if not isinstance(enabled, bool):
         raise SettingsError(f"vpp.enabled: must be true or false, got {enabled!r}")
@@ -409,7 +410,7 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
 
     matcher = _plugin(data.get("matcher", {"name": "sgbm"}), "matcher", "name", MATCHERS, parse_matcher)
     vpp_raw = dict(_table(data, "vpp"))
-    vpp = _parse_vpp(vpp_raw)
+    vpp = _parse_vpp(vpp_raw, MATCHERS.get(matcher.name).vpp_defaults)
     queues_raw = dict(_table(data, "queues"))
     replay: Policy = "block" if SOURCES.get(source.name).finite else "latest"
     for key in ("input_policy", "output_policy"):
@@ -475,10 +476,15 @@ def previous_outputs(cfg: ServiceConfig) -> list[str]:
 def check_paths(cfg: ServiceConfig) -> None:
     """Check the paths the configuration names (each plugin's ``check_paths``), before anything starts.
 
+    The matcher's ``check_files`` too: a network matcher opens its model, checks
+    its card against the graph and runs it once on a small pair.
+
     Raises
     ------
     OSError
         A dataset root, output folder or recording folder is missing or not a folder; names the key.
+    ValueError
+        The matcher's model is unusable (card and graph disagree, the dry run fails).
     """
     from vpp_service.sinks import SINKS
     from vpp_service.sources import SOURCES
@@ -490,6 +496,10 @@ def check_paths(cfg: ServiceConfig) -> None:
     SOURCES.get(cfg.source.name).check_paths(cfg.source.options, "source", made)
     for i, spec in enumerate(cfg.sinks):
         SINKS.get(spec.name).check_paths(spec.options, f"sinks[{i}]", made)
+    from vpp_service.matchers import MATCHERS, MatcherOptions
+
+    if isinstance(cfg.matcher.options, MatcherOptions):  # a network: its model, its card, one dry run
+        MATCHERS.get(cfg.matcher.name).check_files(cfg.matcher.options, "matcher")
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:

@@ -1,0 +1,76 @@
+"""The models folder: where network matchers look for a model the config does not name.
+
+``$VPP_SERVICE_MODELS`` when set, else the user cache folder
+(``$XDG_CACHE_HOME/vpp-service/models``, by default ``~/.cache/vpp-service/models``).
+The project never downloads or bundles weights: the user puts (or converts) a
+model there, with its card beside it (``name.onnx`` + ``name.toml``).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from vpp_service.matchers.model_card import ModelCard, find_card, read_card
+
+#: Environment variable naming the models folder.
+MODELS_ENV = "VPP_SERVICE_MODELS"
+
+
+def models_dir() -> Path:
+    """The models folder (it may not exist): ``$VPP_SERVICE_MODELS``, else ``<user cache>/vpp-service/models``."""
+    env = os.environ.get(MODELS_ENV, "").strip()
+    if env:
+        return Path(env).expanduser()
+    cache = os.environ.get("XDG_CACHE_HOME", "").strip()
+    return (Path(cache).expanduser() if cache else Path.home() / ".cache") / "vpp-service" / "models"
+
+
+@dataclass(frozen=True)
+class StoredModel:
+    """One ``.onnx`` file of the models folder and its card.
+
+    Attributes
+    ----------
+    path : Path
+        The model file.
+    card : ModelCard or None
+        Its card (the ``.toml`` beside it, else the built-in card of a preset
+        with that file name), None when it has none.
+    error : str
+        Why its card could not be read ("" when it could or there is none).
+    """
+
+    path: Path
+    card: ModelCard | None
+    error: str = ""
+
+
+def list_models(folder: Path | None = None, builtin: dict[str, ModelCard] | None = None) -> list[StoredModel]:
+    """The ``.onnx`` files of ``folder`` (default :func:`models_dir`) with their cards, sorted by name.
+
+    Parameters
+    ----------
+    folder : Path or None
+        Folder to list (missing: an empty list).
+    builtin : dict or None
+        Built-in cards by model file name (a preset's file without a card beside it).
+    """
+    folder = models_dir() if folder is None else folder
+    if not folder.is_dir():
+        return []
+    out = []
+    for p in sorted(folder.glob("*.onnx")):
+        card_file = find_card(p)
+        if card_file is None:
+            out.append(StoredModel(p, (builtin or {}).get(p.name)))
+            continue
+        try:
+            out.append(StoredModel(p, read_card(card_file)))
+        except (OSError, ValueError) as exc:
+            out.append(StoredModel(p, None, str(exc).splitlines()[0]))
+    return out
+
+
+__all__ = ["MODELS_ENV", "StoredModel", "list_models", "models_dir"]

