@@ -788,7 +788,8 @@ def _comment(summ: dict[str, Any], rows: list[dict], sweep: dict[str, Any]) -> l
         "seed-to-seed spread of the means was not measured here.",
         f"- `sgbm` (OpenCV StereoSGBM) is not in the paper's tables; VPP takes it from {_f(sb)} to {_f(sv)} % "
         "bad-2 on Middlebury 2005/2006 (guided stereo needs a cost volume, which OpenCV does not expose).",
-        "- The paper's deep networks (RAFT-Stereo, PSMNet) are not evaluated here (no weights, CPU only).",
+        "- Of the paper's deep networks, PSMNet is evaluated (KITTI 2015 weights: section *Deep matcher*, `--deep`); "
+        "RAFT-Stereo is not (no weights here).",
         "",
     ]
 
