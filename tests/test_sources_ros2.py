@@ -153,8 +153,49 @@ def test_overload_loses_nothing_under_block_and_counts_every_drop_under_latest(s
         pipe.stop(2.0)
     c, d = st["counters"], st["dropped"]
     assert c["rejected"] >= 1 and st["source"]["rejected_by"], st["source"]
+    # the refused image never enters the synchronizer: the other parts of its set are left without a partner
+    # and counted as sync drops (at most its 4 other parts); no genuine set is lost under block
+    assert d["sync"] <= 4, d
     if policy == "block":
-        assert c["processed"] == sent and c["dropped"] == 0, d
+        assert c["processed"] == sent and c["dropped"] == d["sync"], d
     else:
         assert c["processed"] + d["input_queue"] == sent and d["input_queue"] > 0, d
-        assert c["dropped"] == sum(d.values()) == d["input_queue"], d
+        assert c["dropped"] == sum(d.values()) == d["input_queue"] + d["sync"], d
+
+
+@pytest.mark.parametrize(
+    ("bad", "cause"),
+    [
+        ("encoding", "encoding"),
+        ("step", "layout"),
+        ("info", "calibration"),
+    ],
+)
+def test_a_bad_part_with_the_genuine_stamp_does_not_take_its_slot(sessions, bad, cause):
+    """Well-formed CDR, bad content, the genuine set's stamp, sent first: refused; the genuine set completes."""
+    svc, bot = sessions
+    src = build_source("ros2", {"depth_wait_ms": 2000.0}, SourceContext(rig="r", session=svc))
+    frames, rejects = [], []
+    src.open()
+    src.start(lambda f: frames.append(f) or True, rejects.append)
+    robot = Robot(bot)
+    try:
+        assert robot.wait_for_subscribers(["left/image_rect", "left/camera_info", "points"])
+        rig = tiny_rig()
+        h, w = rig.left.shape[:2]
+        if bad == "encoding":
+            robot.put("left/image_rect", image_msg(rig.left, 1_000, "l", encoding="bgra8"))
+        elif bad == "step":
+            msg = image_msg(rig.left, 1_000, "l")
+            msg.step = w * 3 + 7  # step x height no longer matches the data
+            robot.put("left/image_rect", msg)
+        else:
+            robot.put("left/camera_info", camera_info_from_p(1_000, "l", (w, h), np.zeros((3, 4))))
+        robot.publish(rig, 1_000)  # the genuine set, same stamp
+        assert wait_for(lambda: len(frames) == 1), src.stats()
+        st = src.stats()
+        assert st["rejected"] == 1 and st["rejected_by"] == {cause: 1}, st["rejected_by"]
+        assert frames[0].stamp_ns == 1_000 and frames[0].left.shape[:2] == (h, w)
+    finally:
+        robot.close()
+        src.stop(2.0)

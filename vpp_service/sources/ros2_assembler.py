@@ -153,6 +153,8 @@ class _Msg:
     msg: object
     stamp_ns: int
     decode_s: float
+    #: The part's content, checked on arrival (image array, camera model, cloud points, depth map).
+    value: object = None
 
 
 @dataclass
@@ -237,8 +239,13 @@ class StereoAssembler:
         except Ros2Error as exc:
             self.refuse(role, exc)
             return []
+        try:  # the content too, on arrival: a bad part never takes the slot of a valid one with its stamp
+            value = self._checked(role, msg)
+        except Ros2Error as exc:
+            self.refuse(role, exc)
+            return []
         header = msg.header  # type: ignore[attr-defined]  # every supported message has one
-        item = _Msg(msg, rm.stamp_ns(header), time.perf_counter() - t0)
+        item = _Msg(msg, rm.stamp_ns(header), time.perf_counter() - t0, value)
         if role == "depth":
             self._depth.append((item, [False]))
             while len(self._depth) > 2 * self.topics.sync_queue_size:
@@ -255,6 +262,24 @@ class StereoAssembler:
                 self._pending.popleft()
                 self.counters["pending_dropped"] += 1
         return self._resolve()
+
+    def _checked(self, role: str, msg: object) -> object:
+        """The checked content of one part (what the frame is built from).
+
+        Raises
+        ------
+        Ros2Error
+            The part's content is unusable (encoding, ``step`` x ``height`` against the data, size
+            limits, a camera_info without a valid ``P``, a cloud without float ``x``/``y``/``z``).
+        """
+        if isinstance(msg, rm.CameraInfo):
+            return rm.camera_model(msg)
+        if isinstance(msg, rm.PointCloud2):
+            return rm.cloud_to_xyz(msg, self._limits)
+        assert isinstance(msg, rm.Image)
+        if role == "depth":
+            return rm.depth_image_to_array(msg, self._limits)
+        return rm.image_to_array(msg, self._limits)
 
     def expire(self) -> list[StereoFrame]:
         """Frames whose depth wait is over (call periodically)."""
@@ -297,13 +322,11 @@ class StereoAssembler:
         t0 = time.perf_counter()
         p = pair.parts
         try:
-            li, ri = p["left_info"].msg, p["right_info"].msg
-            lm, rim = p["left_image"].msg, p["right_image"].msg
-            assert isinstance(li, rm.CameraInfo) and isinstance(ri, rm.CameraInfo)
-            assert isinstance(lm, rm.Image) and isinstance(rim, rm.Image)
-            lc, rc = rm.camera_model(li), rm.camera_model(ri)
+            lc, rc = p["left_info"].value, p["right_info"].value  # checked on arrival
+            left, right = p["left_image"].value, p["right_image"].value
+            assert isinstance(lc, rm.CameraModel) and isinstance(rc, rm.CameraModel)
+            assert isinstance(left, np.ndarray) and isinstance(right, np.ndarray)
             calib = rm.stereo_calibration(lc, rc)
-            left, right = rm.image_to_array(lm, self._limits), rm.image_to_array(rim, self._limits)
             h, w = left.shape[:2]
             if left.shape != right.shape:
                 raise Ros2Error("shape", f"left {left.shape} and right {right.shape} images differ")
@@ -336,17 +359,17 @@ class StereoAssembler:
         )
 
     def _depth_map(self, depth: _Msg, p: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-        msg = depth.msg
+        msg, value = depth.msg, depth.value  # checked on arrival
+        assert isinstance(value, np.ndarray)
         if isinstance(msg, rm.PointCloud2):
-            xyz = rm.cloud_to_xyz(msg, self._limits)
+            xyz = value
             z, counts = cloud_to_depth(xyz, self._extrinsic, p, shape)
             self.counters["cloud_points"] += counts.used
             self.counters["cloud_behind"] += counts.behind
             self.counters["cloud_outside"] += counts.outside
             self.counters["cloud_nonfinite"] += counts.nonfinite
             return z
-        assert isinstance(msg, rm.Image)
-        z = rm.depth_image_to_array(msg, self._limits)
+        z = value
         if z.shape != shape:
             raise Ros2Error("shape", f"depth image is {z.shape[1]}x{z.shape[0]}, images are {shape[1]}x{shape[0]}")
         return z
