@@ -199,3 +199,34 @@ def test_a_bad_part_with_the_genuine_stamp_does_not_take_its_slot(sessions, bad,
     finally:
         robot.close()
         src.stop(2.0)
+
+
+def test_a_junk_burst_never_takes_a_ring_slot(sessions):
+    """96 junk samples (no rmw_zenoh attachment, or oversized) before each genuine set, 4-deep rings, latest policy."""
+    svc, bot = sessions
+    opts = {"depth_wait_ms": 2000.0, "ring_size": 4, "max_message_mb": 0.01}
+    src = build_source("ros2", opts, SourceContext(rig="r", session=svc))
+    frames: list = []
+    src.open()  # the pipeline's default input policy: latest
+    robot = Robot(bot)
+    try:
+        assert robot.wait_for_subscribers(["left/image_rect", "right/image_rect", "points"])
+        src.start(lambda f: frames.append(f) or True, lambda reason: None)
+        rig = tiny_rig()
+        for k in range(10):
+            for j in range(96):
+                if j % 2:  # no attachment: not an rmw_zenoh publisher
+                    name = ("left/image_rect", "right/image_rect", "left/camera_info", "points")[j // 2 % 4]
+                    robot.pubs[name].put(b"\x00\x01\x00\x00junk")
+                else:  # 12 KB > max_message_mb
+                    name = ("left/image_rect", "right/image_rect")[j // 2 % 2]
+                    robot.put(name, image_msg(np.zeros((64, 64, 3), np.uint8), 9, "j"))
+            robot.publish(rig, 1_000 + k)
+        assert wait_for(lambda: len(frames) == 10, timeout=20), src.stats()
+        st = src.stats()
+    finally:
+        robot.close()
+        src.stop(2.0)
+    assert st["ring_dropped"] == 0 and st["rejected"] == 960, st
+    assert st["rejected_by"]["attachment"] == 480 and st["rejected_by"]["too_large"] == 480
+    assert [f.stamp_ns for f in frames] == [1_000 + k for k in range(10)]

@@ -23,6 +23,7 @@ camera_info, cloud -> depth, counted drops). Refusals are counted by cause in
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -81,6 +82,7 @@ class Ros2Source(Source):
         self.options: Ros2SourceOptions = options
         self._node: RosNode | None = None
         self._rings: ReceiveRings[zenoh.Sample] | None = None  # one ring per topic, built at open
+        self._reject: Reject | None = None
         self._assembler: StereoAssembler | None = None
         self._counters.update({"received": 0, "attachment_legacy": 0})
         self._max_bytes = int(options.max_message_mb * 1024 * 1024)
@@ -101,9 +103,33 @@ class Ros2Source(Source):
         """The ROS topics subscribed to."""
         return "ROS topics " + ", ".join(self.options.topic(role) for role in self.options.roles())
 
+    def start(self, emit: Emit, reject: Reject | None = None, on_finished: Callable[[], None] | None = None) -> None:
+        """Start the source's thread; ``reject`` also hears of samples the subscriber callback turns away."""
+        self._reject = reject
+        super().start(emit, reject, on_finished)
+
     def _on_sample(self, role: str, sample: zenoh.Sample) -> None:
-        """Zenoh callback: queue the sample in its topic's ring (the input policy decides when it is full)."""
+        """Zenoh callback: the cheap checks (size, attachment), then the sample into its topic's ring.
+
+        A sample that fails them is refused here (counted by cause) and never takes a ring slot, so a junk
+        burst cannot evict genuine messages; the input policy decides what a full ring does.
+        """
         assert self._rings is not None  # subscribed only after open built them
+        try:
+            size = len(sample.payload)
+            if size > self._max_bytes:
+                raise Ros2Error("too_large", f"{size} bytes > max {self._max_bytes}")
+            att = sample.attachment
+            _, layout = attachment.decode(att.to_bytes() if att is not None else None)
+        except Ros2Error as exc:
+            self.count("received")
+            self.count("rejected")
+            self.count(f"rejected.{exc.reason}")
+            if self._reject is not None:
+                self._reject(f"{self.options.topic(role)}: {exc}")
+            return
+        if layout == "legacy":
+            self.count("attachment_legacy")
         self._rings.put(role, sample)
 
     def run(self, emit: Emit, reject: Reject) -> None:
@@ -130,18 +156,7 @@ class Ros2Source(Source):
                 rings.wait(self.options.poll_s)
 
     def _handle(self, asm: StereoAssembler, role: str, sample: zenoh.Sample) -> list[StereoFrame]:
-        try:
-            size = len(sample.payload)
-            if size > self._max_bytes:
-                raise Ros2Error("too_large", f"{size} bytes > max {self._max_bytes}")
-            att = sample.attachment
-            _, layout = attachment.decode(att.to_bytes() if att is not None else None)
-        except Ros2Error as exc:
-            self.count("rejected")
-            asm.refuse(role, exc)
-            return []
-        if layout == "legacy":
-            self.count("attachment_legacy")
+        """Assemble one sample that passed the callback's checks (the content is checked by the assembler)."""
         before = sum(asm.rejected_by.values())
         frames = asm.add(role, sample.payload.to_bytes())
         self.count("rejected", sum(asm.rejected_by.values()) - before)
@@ -167,10 +182,17 @@ class Ros2Source(Source):
 
     def stats(self) -> dict[str, object]:  # type: ignore[override]  # nested counters, like the zenoh source
         """Counters plus the assembler's (refusals by cause, sync state, cloud point counts)."""
-        out: dict[str, object] = dict(super().stats())
+        counters = super().stats()
+        early = {k.split(".", 1)[1]: v for k, v in counters.items() if k.startswith("rejected.")}
+        out: dict[str, object] = {k: v for k, v in counters.items() if not k.startswith("rejected.")}
         out["ring_dropped"] = self._rings.dropped_total if self._rings is not None else 0
         if self._assembler is not None:
             out.update(self._assembler.stats())
+        known = out.get("rejected_by")
+        by_cause: dict[str, int] = dict(known) if isinstance(known, dict) else {}
+        for cause, n in early.items():  # refused by the callback's cheap checks, before a ring slot
+            by_cause[cause] = by_cause.get(cause, 0) + n
+        out["rejected_by"] = by_cause
         return out
 
     def losses(self) -> dict[str, int]:
