@@ -442,3 +442,18 @@ def test_the_readme_pool_line_runs_twice_on_one_host(tmp_path: Path):
     assert "is taken" in texts[1] and "WARNING" not in "".join(texts), texts  # its own exit is no warning
     processed = [json.loads((tmp_path / f"w{k}" / "summary.json").read_text())["counters"]["processed"] for k in (0, 1)]
     assert sum(processed) == 12 and min(processed) > 0, processed
+
+
+def test_an_answer_from_a_non_member_skips_no_frame():
+    """Forged @answered messages under ids holding no @pool token: counted, ignored; the owner takes its frame."""
+    clock = Clock()
+    states = pool_of(["a", "b"], clock)
+    mine = [s for s in range(200) if owner(s, ["a", "b"]) == "a"][:30]
+    for seq in mine:
+        assert not states["a"].member_answered(seq, "intruder")  # before the frames arrive
+    assert all(states["a"].admit(frame(seq)) for seq in mine)
+    st = states["a"].status()
+    assert st["foreign_answers"] == 30 and st["own"] == 30
+    other = next(s for s in range(200) if owner(s, ["a", "b"]) == "a" and s not in mine)
+    assert states["a"].member_answered(other, "b")  # a member's answer still counts
+    assert not states["a"].admit(frame(other))

@@ -156,6 +156,7 @@ class PoolStatus(TypedDict):
     joins: int
     leaves: int
     bad_answers: int
+    foreign_answers: int
 
 
 @dataclass
@@ -222,6 +223,7 @@ class PoolState:
             "joins": 0,
             "leaves": 0,
             "bad_answers": 0,
+            "foreign_answers": 0,
         }
 
     @property
@@ -283,6 +285,19 @@ class PoolState:
             if self.me in who and self.me != min(who) and seq not in self._dup_counted:
                 self._dup_counted.add(seq)
                 self._counts["duplicates"] += 1
+
+    def member_answered(self, seq: int, worker: str) -> bool:
+        """:meth:`answered` when ``worker`` is a live member; otherwise counted (``foreign_answers``) and ignored.
+
+        Anyone on the network can put an ``@answered`` message: one from a worker id that holds no
+        ``@pool`` token must not make the owner skip its frame (a forged answer would silence it).
+        """
+        with self._lock:
+            if worker not in self._members:
+                self._counts["foreign_answers"] += 1
+                return False
+        self.answered(seq, worker)
+        return True
 
     def _take(self, seq: int) -> None:
         """Remember that this worker processes ``seq`` (lock held)."""
@@ -372,6 +387,7 @@ class PoolState:
             "joins": c["joins"],
             "leaves": c["leaves"],
             "bad_answers": c["bad_answers"],
+            "foreign_answers": c["foreign_answers"],
         }
 
 
@@ -505,7 +521,7 @@ class WorkerPool:
             self.state.bad_answer()
             return
         if rig == self.rig and worker != self.worker_id:
-            self.state.answered(seq, worker)
+            self.state.member_answered(seq, worker)  # the word of a non-member skips no frame
 
     def _run(self) -> None:
         """Hand taken-over frames to the pipeline (off Zenoh's thread: the input may block)."""
