@@ -17,6 +17,7 @@ import pytest
 
 pytest.importorskip("onnx", reason="the tiny test networks are built with the onnx package (the 'test' extra)")
 
+from helpers.shared_data import need_shared
 from helpers.tiny_networks import echo, nan_output, sad_stereo
 from vpp_service.matchers import MATCHERS, build_matcher
 from vpp_service.matchers.inference import EngineUnavailable, choose, clear_cache
@@ -30,10 +31,6 @@ from vpp_service.matchers.model_card import (
 from vpp_service.matchers.model_store import MODELS_ENV, list_models, models_dir
 from vpp_service.matchers.onnx import BUILTIN_CARDS, OnnxMatcher, tensor_layout, to_tensor
 from vpp_service.settings import SettingsError
-
-SHARED = Path(__file__).resolve().parents[2] / "shared"
-PSMNET = SHARED / "models" / "psmnet_kitti2015.onnx"
-KITTI = SHARED / "data" / "kitti2012_training"
 
 ENGINES = [
     pytest.param(
@@ -366,14 +363,12 @@ def test_registered_without_guidance():
 
 @pytest.mark.slow
 def test_psmnet_kitti_bad3_against_ground_truth():
-    if not PSMNET.is_file():
-        pytest.skip(f"the PSMNet model is not at {PSMNET}")
-    if not KITTI.is_dir():
-        pytest.skip(f"the shared KITTI 2012 frame is not at {KITTI}")
+    model = need_shared("psmnet_kitti2015.onnx", under="models")
+    kitti = need_shared("kitti2012_training")
     from vpp_service.datasets import open_dataset
 
-    frame = open_dataset("auto", KITTI, color=True)[0]
-    m = build_matcher("psmnet", {"model": str(PSMNET), "threads": 2})
+    frame = open_dataset("auto", kitti, color=True)[0]
+    m = build_matcher("psmnet", {"model": str(model), "threads": 2})
     assert m.check().startswith("psmnet_kitti2015.onnx (psmnet_kitti2015)")
     d = m.compute(frame.left, frame.right)
     gt = frame.gt_disparity

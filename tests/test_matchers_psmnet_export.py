@@ -23,13 +23,10 @@ pytest.importorskip("onnxruntime", reason="the exported graph is run with ONNX R
 import onnx
 import torch
 
+from helpers.shared_data import need_shared
 from vpp_service.matchers import build_matcher
 from vpp_service.matchers.model_card import PSMNET_CARD, read_card
 from vpp_service.matchers.psmnet_export import PSMNetModel, export_psmnet, load_checkpoint
-
-SHARED = Path(__file__).resolve().parents[2] / "shared"
-PSMNET = SHARED / "models" / "psmnet_kitti2015.onnx"
-KITTI = SHARED / "data" / "kitti2012_training"
 
 
 def _run(path: Path, left: np.ndarray, right: np.ndarray) -> np.ndarray:
@@ -102,19 +99,17 @@ def test_export_equals_torch_forward(tmp_path):
 
 @pytest.mark.slow
 def test_export_reproduces_the_shared_model_on_a_real_pair(tmp_path):
-    if not PSMNET.is_file():
-        pytest.skip(f"the PSMNet model is not at {PSMNET}")
-    if not KITTI.is_dir():
-        pytest.skip(f"the shared KITTI 2012 frame is not at {KITTI}")
+    psmnet = need_shared("psmnet_kitti2015.onnx", under="models")
+    kitti = need_shared("kitti2012_training")
     from vpp_service.datasets import open_dataset
 
-    state = state_from_onnx(PSMNET)
+    state = state_from_onnx(psmnet)
     ours, card = export_psmnet(None, tmp_path / "psmnet_kitti2015.onnx", state=state, height=256, width=512)
     assert read_card(card).max_disparity == PSMNET_CARD.max_disparity
-    frame = open_dataset("auto", KITTI, color=True)[0]
+    frame = open_dataset("auto", kitti, color=True)[0]
     crop = (slice(376 - 256, 376), slice(300, 300 + 640))  # a real 256 x 640 piece of the pair
     left, right = (np.ascontiguousarray(img[crop]) for img in (frame.left, frame.right))
-    d_shared = build_matcher("psmnet", {"model": str(PSMNET), "engine": "onnxruntime", "max_disparity": 192})
+    d_shared = build_matcher("psmnet", {"model": str(psmnet), "engine": "onnxruntime", "max_disparity": 192})
     d_ours = build_matcher("psmnet", {"model": str(ours), "engine": "onnxruntime", "max_disparity": 192})
     a, b = d_shared.forward(left, right), d_ours.forward(left, right)
     assert float(np.abs(a - b).max()) <= 1e-3

@@ -1,8 +1,9 @@
-"""The external evaluation data the tests read in place: ``<repo>/../shared/data`` (not part of the repository).
+"""The external data the tests read in place: ``<repo>/../shared/data`` and ``/models`` (not in the repository).
 
-The folder holds real benchmark scenes (Middlebury 2001-2006, KITTI 2012 frame 000070, ETH3D
-playground_1l; see its README.md). A fresh clone does not have it: every test that reads it asks
-:func:`need_shared` for its folder, which **skips** the test with a reason naming the missing path.
+``data`` holds real benchmark scenes (Middlebury 2001-2006, KITTI 2012 frame 000070, ETH3D
+playground_1l), ``models`` the PSMNet ONNX model; each has a README.md. A fresh clone does not
+have them: every test that reads them asks :func:`need_shared` for its folder or file, which
+**skips** the test with a reason naming the missing path.
 CI sets ``VPP_REQUIRE_SHARED_DATA=1`` (``.ci/run``): there a missing folder **fails** the test
 instead, so coverage of the real scenes cannot vanish silently.
 """
@@ -22,15 +23,17 @@ SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
 REQUIRE_ENV = "VPP_REQUIRE_SHARED_DATA"
 
 
-def need_shared(relative: str) -> Path:
-    """The path ``SHARED_DATA / relative``; skip (or fail under ``$VPP_REQUIRE_SHARED_DATA``) when absent.
+def need_shared(relative: str, under: str = "data") -> Path:
+    """The path ``<repo>/../shared/<under>/<relative>``; skip (or fail under ``$VPP_REQUIRE_SHARED_DATA``) when absent.
 
     Parameters
     ----------
     relative : str
-        A folder or file inside the shared data, e.g. ``"kitti2012_training/000070"``.
+        A folder or file inside it, e.g. ``"kitti2012_training/000070"``.
+    under : {"data", "models"}
+        The shared benchmark scenes, or the shared models (``psmnet_kitti2015.onnx``).
     """
-    path = SHARED_DATA / relative
+    path = SHARED_DATA.parent / under / relative
     if path.exists():
         return path
     reason = (
