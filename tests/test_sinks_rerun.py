@@ -391,12 +391,18 @@ def test_serve_binds_loopback_by_default(bind):
     sink.open()
     try:
         assert sink.wait_ready(15) and sink.stats()["errors"] == 0
-        listening = {
-            (c.laddr.ip, c.laddr.port)
-            for c in psutil.net_connections(kind="tcp")
-            if c.status == psutil.CONN_LISTEN and c.laddr.port in (port, web)
-        }
-        assert listening == {(bind, port), (bind, web)}
+
+        def listening() -> set[tuple[str, int]]:
+            return {
+                (c.laddr.ip, c.laddr.port)
+                for c in psutil.net_connections(kind="tcp")
+                if c.status == psutil.CONN_LISTEN and c.laddr.port in (port, web)
+            }
+
+        deadline = time.monotonic() + 10  # the web viewer's port may open a moment after the gRPC one
+        while len(listening()) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert listening() == {(bind, port), (bind, web)}
         sink.write(make_result(0))
     finally:
         sink.close(timeout=5)
