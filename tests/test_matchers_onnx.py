@@ -428,15 +428,7 @@ def test_run_check_validates_the_card_and_runs_the_network_once(tmp_path, capsys
     err = capsys.readouterr().err
     assert rc == EXIT_STARTUP and len(err.strip().splitlines()) == 1
     assert "card left_input 'L' is not an input of the graph; its inputs: ['left', 'right']" in err
-    argv = [
-        "run",
-        "--matcher",
-        "onnx",
-        "--matcher-opt",
-        f"model={sad16}",
-        "--matcher-opt",
-        'card={"max_disparity": 16}',
-    ]
+    argv = run_sad16(sad16)
     rc = main([*argv, "--out", str(tmp_path / "o"), "--check"])
     out = capsys.readouterr().out
     assert rc == 0 and json.loads(out)["matcher"] == {
@@ -448,20 +440,25 @@ def test_run_check_validates_the_card_and_runs_the_network_once(tmp_path, capsys
     assert rc == EXIT_STARTUP and "matcher.psmnet.model: no such file" in capsys.readouterr().err
 
 
+def run_sad16(model) -> list[str]:
+    """``run`` with the tiny 16-disparity SAD network as the matcher, its card given inline."""
+    return [
+        "run",
+        "--matcher",
+        "onnx",
+        "--matcher-opt",
+        f"model={model}",
+        "--matcher-opt",
+        'card={"max_disparity": 16}',
+    ]
+
+
 def test_the_service_runs_a_network(tmp_path, sad16, zenoh_endpoint):
     import json
 
     from vpp_service.cli import main
 
-    argv = [
-        "run",
-        "--matcher",
-        "onnx",
-        "--matcher-opt",
-        f"model={sad16}",
-        "--matcher-opt",
-        'card={"max_disparity": 16}',
-    ]
+    argv = run_sad16(sad16)
     rc = main([*argv, "--zenoh-listen", zenoh_endpoint, "--out", str(tmp_path), "--headless", "--max-frames", "2"])
     assert rc == 0
     summary = json.loads((tmp_path / "summary.json").read_text())

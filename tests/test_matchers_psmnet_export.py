@@ -21,12 +21,15 @@ pytest.importorskip("onnx", reason="the exporter needs onnx (the 'export' extra)
 pytest.importorskip("onnxruntime", reason="the exported graph is run with ONNX Runtime (the 'test' extra)")
 
 import onnx
-import torch
 
 from helpers.shared_data import need_shared
 from vpp_service.matchers import build_matcher
 from vpp_service.matchers.model_card import PSMNET_CARD, read_card
 from vpp_service.matchers.psmnet_export import PSMNetModel, export_psmnet, load_checkpoint
+
+# PyTorch comes only with the optional 'export' extra (otherwise a CUDA build of several GB): taken from
+# importorskip, never imported by name, so a plain `.[test]` install skips this module with the reason above.
+torch = pytest.importorskip("torch")
 
 
 def _run(path: Path, left: np.ndarray, right: np.ndarray) -> np.ndarray:
