@@ -217,12 +217,45 @@ def test_duplicates_are_counted_once_per_extra_answer(answering):
     assert sum(st.status()["duplicates"] for st in states.values()) == len(answering) - 1
 
 
-def test_an_answered_frame_is_not_admitted_again():
+def test_a_frame_its_owner_answered_is_not_recorded_and_a_repeat_is_not_admitted():
     clock = Clock()
     states = pool_of(["a", "b"], clock)
-    seq = next(s for s in range(100) if owner(s, ["a", "b"]) == "a")
+    seq = next(s for s in range(100) if owner(s, ["a", "b"]) == "b")
     answer(states, seq, "b")
-    assert not states["a"].admit(frame(seq))
+    assert not states["a"].admit(frame(seq)) and states["a"].left("b") == []  # nothing held for it
+    mine = next(s for s in range(100) if owner(s, ["a", "b"]) == "a")
+    assert states["a"].admit(frame(mine)) and not states["a"].admit(frame(mine))  # the repeat
+
+
+@pytest.mark.parametrize("forged_as", ["b", "c"])
+def test_an_owner_processes_its_frames_whatever_others_announce(forged_as):
+    """Forged @answered under a member's id, before the frames arrive: the owner still takes each one.
+
+    (On the wire anyone can put ``{rig, seq, worker}``; only the frame's owner decides about it.)
+    """
+    clock = Clock()
+    states = pool_of(["a", "b", "c"], clock)
+    mine = [s for s in range(400) if owner(s, ["a", "b", "c"]) == "a"][:30]
+    for seq in mine:
+        assert states["a"].member_answered(seq, forged_as)  # a member's id: accepted as an answer
+    assert all(states["a"].admit(frame(seq)) for seq in mine)
+    for seq in mine:
+        states["a"].answered(seq, "a")
+    st = states["a"].status()
+    assert st["own"] == 30 and st["foreign_answers"] == 0
+    assert st["duplicates"] == (30 if forged_as < "a" else 0)  # counted by the larger id of the two
+
+
+def test_an_answer_from_another_member_keeps_the_record_of_the_owners_frame():
+    """A forged answer under c's id for b's frame must not cost the takeover when b dies."""
+    clock = Clock()
+    states = pool_of(["a", "b", "c"], clock)
+    theirs = [s for s in range(600) if rendezvous_order(s, ["a", "b", "c"])[:2] == ["b", "a"]][:10]
+    for seq in theirs:
+        assert not states["a"].admit(frame(seq))
+        states["a"].member_answered(seq, "c")
+    clock.t = 0.5
+    assert [f.seq for f in states["a"].left("b")] == theirs
 
 
 def test_answered_messages_round_trip_and_junk_is_refused():
@@ -361,10 +394,11 @@ def test_a_stopped_workers_fresh_frames_are_answered_by_the_successor(tmp_path: 
         assert st["lost"] == 0 and st["taken_over"] >= 1
         assert set(answered) == set(range(count))
     else:  # what "a" left is too old: counted lost, not processed (a frame that reached b within 1 ms of the
-        # token loss is still fresh and may be taken over: seen once in ~10 runs)
-        assert st["lost"] >= 1 and st["taken_over"] <= 1
+        # token loss is still fresh and may be taken over: seen once in ~10 runs). A loaded machine can delay
+        # a's first answer past 1 s: b then finds it silent and counts its frames older than 1 ms silent_lost
+        assert st["lost"] + st["silent_lost"] >= 1 and st["taken_over"] <= 1, st
         missing = [s for s in range(count) if s not in answered]
-        assert len(missing) == st["lost"] and set(missing) <= set(owned_by_a)
+        assert len(missing) == st["lost"] + st["silent_lost"] and set(missing) <= set(owned_by_a), st
 
 
 @pytest.mark.timeout(120)
@@ -454,6 +488,118 @@ def test_an_answer_from_a_non_member_skips_no_frame():
     assert all(states["a"].admit(frame(seq)) for seq in mine)
     st = states["a"].status()
     assert st["foreign_answers"] == 30 and st["own"] == 30
-    other = next(s for s in range(200) if owner(s, ["a", "b"]) == "a" and s not in mine)
-    assert states["a"].member_answered(other, "b")  # a member's answer still counts
-    assert not states["a"].admit(frame(other))
+    theirs = next(s for s in range(200) if owner(s, ["a", "b"]) == "b")
+    assert states["a"].member_answered(theirs, "b")  # a member's answer still counts
+    assert not states["a"].admit(frame(theirs)) and states["a"].left("b") == []
+
+
+def silent_pool(clock: Clock) -> tuple[PoolState, list[int]]:
+    """Worker a of a pool {a, b, fake}; fake never answers. Frames 0..199, one per 50 ms; b answers its own."""
+    a = PoolState("a", deadline_s=1.0, clock=clock)
+    for w in ("b", "fake"):
+        a.joined(w)
+    fakes = []
+    for seq in range(200):
+        clock.t = seq * 0.05
+        who = owner(seq, ["a", "b", "fake"])
+        a.admit(frame(seq))
+        if who == "b":
+            a.member_answered(seq, "b")
+        elif who == "fake":
+            fakes.append(seq)
+    return a, fakes
+
+
+def test_a_member_that_answers_nothing_is_silenced_and_its_fresh_frames_taken_over():
+    clock = Clock()
+    a, fakes = silent_pool(clock)
+    got = a.check_silent()
+    st = a.status()
+    assert st["silent"] == ["fake"] and st["silenced"] == 1 and st["members"] == ["a", "b", "fake"]
+    # every frame of the fake is accounted for once: taken over by a, counted silent_lost by a, or b's now
+    succ_a = [s for s in fakes if rendezvous_order(s, ["a", "b", "fake"])[1] == "a"]
+    fresh = [s for s in succ_a if clock.t - s * 0.05 <= 1.0]
+    assert [f.seq for f in got] == fresh
+    assert st["taken_over"] == len(fresh) and st["silent_lost"] == len(succ_a) - len(fresh)
+    assert st["share"] == 0.5
+    # from now on the fake owns nothing
+    later = [s for s in range(200, 400) if owner(s, ["a", "b", "fake"]) == "fake"]
+    assert {s for s in later if a.admit(frame(s))} == {s for s in later if owner(s, ["a", "b"]) == "a"}
+    assert a.check_silent() == []  # found once
+    # an answer brings it back; a frame counted silent_lost that it answers after all is not lost
+    old = sorted(set(succ_a) - set(fresh))
+    assert old and a.member_answered(old[0], "fake")
+    assert a.status()["silent"] == [] and a.status()["silent_lost"] == len(old) - 1
+    nxt = next(s for s in range(400, 800) if owner(s, ["a", "b", "fake"]) == "fake")
+    assert not a.admit(frame(nxt))
+
+
+def test_a_slow_member_that_keeps_answering_is_not_silenced():
+    """Member b answers 2 s late but steadily (a backlog): once it has answered, it is never found silent.
+
+    Before its first answer (2 s, past the 1 s deadline) it cannot be told from a peer that only
+    holds a token: it may be silenced then, and its first answer brings it back.
+    """
+    clock = Clock()
+    a = PoolState("a", deadline_s=1.0, clock=clock)
+    a.joined("b")
+    pending: list[tuple[float, int]] = []
+    answers = 0
+    for seq in range(200):
+        clock.t = seq * 0.05
+        if not a.admit(frame(seq)):
+            pending.append((clock.t, seq))
+        while pending and clock.t - pending[0][0] >= 2.0:
+            a.member_answered(pending.pop(0)[1], "b")
+            answers += 1
+        found = a.check_silent()
+        if answers:
+            assert found == [] and a.status()["silent"] == []
+    assert answers > 50 and a.status()["silenced"] <= 1
+
+
+@pytest.mark.timeout(120)
+def test_forged_answers_and_fake_members_cost_the_pool_no_frame(tmp_path: Path):
+    """A hostile peer on the pool's keys costs no frame.
+
+    Six @pool tokens that never answer, and @answered for every frame under each real worker's id and
+    an id without a token, sent before the frames. (A peer whose tokens also answer is a worker as far
+    as the pool can tell: the ACL of deploy/secure/ keeps such peers off, tests/test_deploy_secure.py.)
+    """
+    import zenoh
+
+    endpoint, rig, count = f"tcp/127.0.0.1:{free_port()}", "hostile", 40
+    ids = ["w0", "w1"]
+    procs = [start_worker(worker_config(tmp_path, endpoint, rig, w), tmp_path / f"{w}.log") for w in ids]
+    with RouterProcess(endpoint) as router:
+        router.start()
+        try:
+            with (
+                zenoh.open(zenoh_test_config(connect=[endpoint], mode="client")) as session,
+                zenoh.open(zenoh_test_config(connect=[endpoint], mode="client")) as hostile,
+            ):
+                wait_members(session, rig, 2, procs)
+                fakes = [hostile.liveliness().declare_token(f"vpp/{rig}/@pool/fake{i}") for i in range(6)]
+                forger = hostile.declare_publisher(f"vpp/{rig}/@answered")
+                sub = session.declare_subscriber(f"vpp/{rig}/out/disparity", zenoh.handlers.FifoChannel(256))
+                time.sleep(0.5)
+                for seq in range(count):
+                    for w in [*ids, "intruder"]:
+                        forger.put(encode_answered(rig, seq, w))
+                time.sleep(0.3)
+                pub = publish(endpoint, rig, count, rate=10)
+                assert pub.returncode == 0, pub.stderr
+                outs = collect_outputs(sub, 4 * count, timeout=30, quiet_s=3.0)
+                replies = status_cli(endpoint, rig, cli=False)
+                del fakes
+        finally:
+            codes = stop_all(procs)
+    assert codes == [0, 0], [p.read_text()[-2000:] for p in tmp_path.glob("*.log")]
+    pools = [replies[f"vpp/{rig}/@status/{w}"]["pool"] for w in ids]
+    missing = set(range(count)) - {o.seq for o in outs}
+    # a fake is found silent once its first frame is past the deadline: that frame is lost, counted; its
+    # later frames are taken over (one more when two of its frames come within the check period)
+    assert len(missing) == sum(st["silent_lost"] for st in pools) <= 2 * 6, (missing, pools)
+    for st in pools:
+        assert len(st["members"]) == 8 and st["silent"] == [f"fake{i}" for i in range(6)], st
+        assert st["lost"] == 0 and st["foreign_answers"] == count, st

@@ -90,15 +90,16 @@ def query_status(
 
 #: The per-worker counters ``@pool`` lists for each member.
 _MEMBER_COUNTERS = ("received", "processed", "published", "dropped")
-_POOL_COUNTERS = ("seen", "own", "taken_over", "lost", "duplicates", "held")
+_POOL_COUNTERS = ("seen", "own", "taken_over", "lost", "silent_lost", "duplicates", "held")
 
 
 def pool_summaries(replies: dict[str, Any]) -> dict[str, Any]:
     """``{<prefix>/<rig>/@pool: summary}`` for each rig whose replies come from pool workers.
 
     A summary lists the ``members`` that answered (worker id -> share, fps and
-    counters), the ``live`` members the workers see, and the pool's total ``fps``,
-    ``processed``, ``taken_over``, ``lost`` and ``duplicates``.
+    counters), the ``live`` members the workers see (``silent``: those some worker found silent,
+    see :mod:`vpp_service.service.pool`), and the pool's total ``fps``, ``processed``,
+    ``taken_over``, ``lost``, ``silent_lost`` and ``duplicates``.
     """
     pools: dict[str, dict[str, Any]] = {}
     for key, st in replies.items():
@@ -107,7 +108,17 @@ def pool_summaries(replies: dict[str, Any]) -> dict[str, Any]:
             continue
         summary = pools.setdefault(
             key.split("/@status/", 1)[0] + "/@pool",
-            {"members": {}, "live": [], "fps": 0.0, "processed": 0, "taken_over": 0, "lost": 0, "duplicates": 0},
+            {
+                "members": {},
+                "live": [],
+                "silent": [],
+                "fps": 0.0,
+                "processed": 0,
+                "taken_over": 0,
+                "lost": 0,
+                "silent_lost": 0,
+                "duplicates": 0,
+            },
         )
         counters = st.get("counters", {})
         member: dict[str, Any] = {"share": pool.get("share"), "fps": st.get("fps", 0.0)}
@@ -115,9 +126,10 @@ def pool_summaries(replies: dict[str, Any]) -> dict[str, Any]:
         member.update({k: pool.get(k, 0) for k in _POOL_COUNTERS})
         summary["members"][str(pool.get("worker", key.rsplit("/", 1)[-1]))] = member
         summary["live"] = sorted(set(summary["live"]) | set(pool.get("members", [])))
+        summary["silent"] = sorted(set(summary["silent"]) | set(pool.get("silent", [])))
         summary["fps"] += float(st.get("fps", 0.0))
         summary["processed"] += int(counters.get("processed", 0))
-        for k in ("taken_over", "lost", "duplicates"):
+        for k in ("taken_over", "lost", "silent_lost", "duplicates"):
             summary[k] += int(pool.get(k, 0))
     return pools
 

@@ -29,6 +29,20 @@ Failover
     owner processes those still fresh and counts the older ones (or those whose
     image it no longer holds) as ``lost``. Each frame has one successor, so a loss is
     counted once in the pool.
+Trust
+    Anyone on the network may put an ``@answered`` message or declare an ``@pool`` token.
+    So a worker never skips a frame it owns on another's word (an answer for one of its
+    frames from any other worker makes a duplicate at most), an answer forgets another
+    member's record only when it comes from that frame's owner, and answers from ids that
+    hold no token are ignored (``foreign_answers``). A member that owns a frame older than the
+    deadline (at least 1 s) and has answered nothing since that frame arrived
+    (a peer that only declared a token, or a worker that hangs) is *silent*: it owns no frame
+    until it answers again; its frames still fresh are taken over, the older ones counted
+    ``silent_lost`` (until an answer for one of them comes after all).
+    A peer that holds a token *and* answers the frames it owns cannot be told apart from a
+    worker without its outputs: the router's ACL keeps ``@pool`` and ``@answered`` to the
+    workers' identity (``deploy/secure/``). (Forged answers under a member's id can still
+    inflate ``duplicates``: that counter cannot tell them from real second answers.)
 Duplicates
     A frame answered by two workers (a member that was cut off but kept working,
     a join seen at different times) is counted in ``duplicates`` once per extra
@@ -43,6 +57,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import logging
+import math
 import os
 import re
 import socket
@@ -157,6 +172,9 @@ class PoolStatus(TypedDict):
     leaves: int
     bad_answers: int
     foreign_answers: int
+    silent: list[str]
+    silenced: int
+    silent_lost: int
 
 
 @dataclass
@@ -185,6 +203,12 @@ class PoolState:
         or is that far behind).
     answers_kept : int
         How many recent answered ``seq`` values are remembered (duplicate detection).
+    silent_frames : int
+        A member is silent once it owns this many unanswered frames older than ``silent_s``
+        and has answered nothing since the oldest of them arrived.
+    silent_s : float or None
+        See ``silent_frames``; None: the deadline, at least 1 s (a worker's first answer may
+        take longer than a short deadline, and one found silent wrongly costs duplicates).
     clock : callable
         Monotonic seconds (tests pass their own).
     """
@@ -197,6 +221,8 @@ class PoolState:
         hold_frames: int = 64,
         record_frames: int = 4096,
         answers_kept: int = 4096,
+        silent_frames: int = 1,
+        silent_s: float | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.me = check_worker_id(me)
@@ -204,9 +230,14 @@ class PoolState:
         self.hold_frames = hold_frames
         self.record_frames = record_frames
         self.answers_kept = answers_kept
+        self.silent_frames = silent_frames
+        self.silent_s = max(deadline_s, 1.0) if silent_s is None else silent_s
         self.clock = clock
         self._lock = threading.Lock()
         self._members: set[str] = {me}
+        self._silent: set[str] = set()  # members that own no frame until they answer again
+        self._last_answer: dict[str, float] = {}  # member -> when its latest answer came
+        self._silent_lost: OrderedDict[int, None] = OrderedDict()  # counted silent_lost, until answered
         self._records: OrderedDict[int, _Record] = OrderedDict()  # by arrival
         self._held: deque[int] = deque()  # seqs whose record still holds the frame, by arrival
         self._answers: OrderedDict[int, set[str]] = OrderedDict()
@@ -224,6 +255,8 @@ class PoolState:
             "leaves": 0,
             "bad_answers": 0,
             "foreign_answers": 0,
+            "silenced": 0,
+            "silent_lost": 0,
         }
 
     @property
@@ -232,22 +265,31 @@ class PoolState:
         with self._lock:
             return sorted(self._members)
 
+    def _owners(self) -> set[str]:
+        """The members that own frames: all but the silent ones (lock held)."""
+        return self._members - self._silent
+
     def admit(self, frame: StereoFrame) -> bool:
-        """Whether this worker processes ``frame``; otherwise it is recorded (and held while fresh)."""
+        """Whether this worker processes ``frame``; otherwise it is recorded (and held while fresh).
+
+        A frame this worker owns is processed whatever others announced for it (see Trust above).
+        """
         now = self.clock()
         with self._lock:
             if self._leaving:
                 return False  # the others own every frame now
             self._counts["seen"] += 1
             seq = frame.seq
-            if seq in self._answers or seq in self._records:
-                return False  # answered already, or a repeat of a frame seen before
-            who = owner(seq, self._members)
+            if seq in self._mine or seq in self._records:
+                return False  # a repeat of a frame seen before
+            who = owner(seq, self._owners())
             if who == self.me:
                 self._counts["own"] += 1
                 self._take(seq)
                 return True
             assert who is not None
+            if who in self._answers.get(seq, ()):
+                return False  # its owner answered it already
             self._records[seq] = _Record(who, now, frame)
             self._held.append(seq)
             self._trim(now)
@@ -271,9 +313,16 @@ class PoolState:
             self._records.popitem(last=False)
 
     def answered(self, seq: int, worker: str) -> None:
-        """``worker`` answered ``seq`` (this worker's own answers too): forget its record, count duplicates."""
+        """``worker`` answered ``seq`` (this worker's own answers too): count duplicates.
+
+        The record of another member's frame is forgotten only when its owner answers it.
+        """
         with self._lock:
-            self._records.pop(seq, None)
+            rec = self._records.get(seq)
+            if rec is not None and rec.owner == worker:
+                del self._records[seq]
+            if self._silent_lost.pop(seq, False) is None:  # a silent member answered it after all
+                self._counts["silent_lost"] -= 1
             who = self._answers.get(seq)
             if who is None:
                 who = self._answers[seq] = set()
@@ -296,8 +345,48 @@ class PoolState:
             if worker not in self._members:
                 self._counts["foreign_answers"] += 1
                 return False
+            self._last_answer[worker] = self.clock()
+            if worker in self._silent:
+                self._silent.discard(worker)
+                log.info("pool: %s answers again; it owns frames again", worker)
         self.answered(seq, worker)
         return True
+
+    def check_silent(self) -> list[StereoFrame]:
+        """Find silent members (see Trust above); returns the fresh frames this worker takes over from them.
+
+        A member becomes silent when it owns at least ``silent_frames`` unanswered frames older
+        than ``silent_s`` and has answered nothing since the oldest of them arrived. Its frames
+        go to their next owner as when it leaves; those that fall to this worker are taken over
+        while fresh, the older ones counted ``silent_lost``.
+        """
+        now = self.clock()
+        with self._lock:
+            if self._leaving:
+                return []  # the others own every frame now
+            overdue: dict[str, list[float]] = {}
+            for rec in self._records.values():  # by arrival: the overdue ones come first
+                if now - rec.t <= self.silent_s:
+                    break
+                if rec.owner in self._members and rec.owner not in self._silent:
+                    overdue.setdefault(rec.owner, []).append(rec.t)
+            found = [
+                m
+                for m, times in overdue.items()
+                if len(times) >= self.silent_frames and self._last_answer.get(m, -math.inf) < times[0]
+            ]
+            if not found:
+                return []
+            for m in found:
+                self._silent.add(m)
+                self._counts["silenced"] += 1
+                log.warning(
+                    "pool: member %s owns %d frames past the deadline and answered none of them: "
+                    "its frames go to the others until it answers",
+                    m,
+                    len(overdue[m]),
+                )
+            return self._reassign(set(found), now, "silent_lost")
 
     def _take(self, seq: int) -> None:
         """Remember that this worker processes ``seq`` (lock held)."""
@@ -341,27 +430,41 @@ class PoolState:
         if worker == self.me:
             return []  # our own token is ours until we stop
         now = self.clock()
-        take: list[StereoFrame] = []
         with self._lock:
             if worker not in self._members:
                 return []
             self._members.discard(worker)
+            self._silent.discard(worker)
+            self._last_answer.pop(worker, None)
             self._counts["leaves"] += 1
-            for seq, rec in list(self._records.items()):
-                if rec.owner != worker:
-                    continue
-                succ = owner(seq, self._members)
-                assert succ is not None
-                if succ != self.me:
-                    rec.owner = succ  # another member's now; if it dies too, its successor decides
-                    continue
-                del self._records[seq]
-                if rec.frame is not None and now - rec.t <= self.deadline_s:
-                    take.append(rec.frame)
-                    self._take(seq)
-                    self._counts["taken_over"] += 1
-                else:
-                    self._counts["lost"] += 1
+            return self._reassign({worker}, now, "lost")
+
+    def _reassign(self, gone: set[str], now: float, lost: str) -> list[StereoFrame]:
+        """Give the records of ``gone`` to their next owners; returns this worker's fresh ones (lock held).
+
+        Older ones that fall to this worker (or whose image it no longer holds) are counted in ``lost``.
+        """
+        owners = self._owners()
+        take: list[StereoFrame] = []
+        for seq, rec in list(self._records.items()):
+            if rec.owner not in gone:
+                continue
+            succ = owner(seq, owners)
+            assert succ is not None
+            if succ != self.me:
+                rec.owner = succ  # another member's now; if it fails too, its successor decides
+                continue
+            del self._records[seq]
+            if rec.frame is not None and now - rec.t <= self.deadline_s:
+                take.append(rec.frame)
+                self._take(seq)
+                self._counts["taken_over"] += 1
+            else:
+                self._counts[lost] += 1
+                if lost == "silent_lost":
+                    self._silent_lost[seq] = None
+                    while len(self._silent_lost) > self.answers_kept:
+                        self._silent_lost.popitem(last=False)
         take.sort(key=lambda f: f.seq)
         return take
 
@@ -370,12 +473,14 @@ class PoolState:
         with self._lock:
             self._trim(self.clock())
             members = sorted(self._members)
+            silent = sorted(self._silent)
+            owners = len(self._owners() | {self.me})
             c = dict(self._counts)
             held = len(self._held)
         return {
             "worker": self.me,
             "members": members,
-            "share": 1.0 / len(members),
+            "share": 1.0 / owners,
             "deadline_ms": self.deadline_s * 1e3,
             "seen": c["seen"],
             "own": c["own"],
@@ -388,6 +493,9 @@ class PoolState:
             "leaves": c["leaves"],
             "bad_answers": c["bad_answers"],
             "foreign_answers": c["foreign_answers"],
+            "silent": silent,
+            "silenced": c["silenced"],
+            "silent_lost": c["silent_lost"],
         }
 
 
@@ -524,13 +632,25 @@ class WorkerPool:
             self.state.member_answered(seq, worker)  # the word of a non-member skips no frame
 
     def _run(self) -> None:
-        """Hand taken-over frames to the pipeline (off Zenoh's thread: the input may block)."""
+        """Hand taken-over frames to the pipeline (off Zenoh's thread: the input may block).
+
+        Between frames it looks for silent members every quarter of ``silent_s``.
+        """
+        period = self.state.silent_s / 4
+        next_check = time.monotonic() + period
         while True:
             with self._wake:
                 while not self._takeovers and not self._stopping:
-                    self._wake.wait()
+                    wait = next_check - time.monotonic()
+                    if wait <= 0:
+                        break
+                    self._wake.wait(wait)
                 if self._stopping:
                     return
+                if not self._takeovers:
+                    next_check = time.monotonic() + period
+                    self._takeovers.extend(self.state.check_silent())
+                    continue
                 frame = self._takeovers.popleft()
             frame.meta["worker"] = self.worker_id
             if self._inject is not None:
