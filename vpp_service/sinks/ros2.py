@@ -134,7 +134,7 @@ class Ros2SinkOptions(Ros2OutputOptions):
     node_name: str = "vpp_stereo"
     attachment: Layout = "current"
     lazy: bool = False
-    ros_distro: str = "jazzy"
+    ros_distro: keys.Distro = "jazzy"
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -64,7 +64,7 @@ class Ros2SourceOptions(StereoTopics):
     node_name: str = "vpp_stereo_input"
     ring_size: int = 4
     poll_s: float = 0.02
-    ros_distro: str = "jazzy"
+    ros_distro: keys.Distro = "jazzy"
 
     def __post_init__(self) -> None:
         super().__post_init__()
