@@ -79,7 +79,7 @@ def test_robot_receives_disparity(tmp_path, scene_name):
     att = sample.attachment.to_bytes()
     assert len(att) == 33 and att[16] == 0x10 and int.from_bytes(att[:8], "little") >= 1
     pub_tokens = [t for t in graph if "/MP/" in t and "%stereo%disparity/stereo_msgs::msg::dds_::DisparityImage_" in t]
-    assert pub_tokens and pub_tokens[0].endswith("/1:2:1,10:,:,:,,")
+    assert pub_tokens and pub_tokens[0].endswith("/::2,:,:,:,,")  # reliable + keep all (BLOCK), canonical
     assert any("/NN/" in t and t.endswith("/vpp_stereo") for t in graph)
     msg = TS.deserialize_cdr(sample.payload.to_bytes(), "stereo_msgs/msg/DisparityImage")
     assert msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec == stamp

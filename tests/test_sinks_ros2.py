@@ -68,17 +68,62 @@ def test_all_outputs(sessions, layout):
     assert sink.stats()["written"] == 1
 
 
-def test_lazy_skips_unsubscribed_outputs(sessions):
+# The data key each distro's rmw_zenoh subscriber listens on (``TopicInfo::TopicInfo`` in liveliness_utils.cpp:
+# domain/topic/type/hash; the humble branch's SubscriptionData::make passes the constant "TypeHashNotSupported",
+# jazzy's the RIHS01 hash), and the subscriber token it declares (``Entity::Entity``; SensorDataQoS "2::,5:,:,:,,").
+DISTRO_HASH = {"humble": "TypeHashNotSupported", "jazzy": key(0, "/x", TOPICS["disparity"][1]).rsplit("/", 1)[1]}
+DDS_DISP = "stereo_msgs::msg::dds_::DisparityImage_"
+
+
+def ros_subscriber(session: zenoh.Session, distro: str, topic: str = "/stereo/disparity", eid: int = 1):
+    """An rmw_zenoh subscriber of ``distro`` on ``topic``: its exact data key and its token."""
+    h = DISTRO_HASH[distro]
+    tok = session.liveliness().declare_token(
+        f"@ros2_lv/0/{session.zid()}/0/{eid}/MS/%/%stereo/viewer/{topic.replace('/', '%')}/{DDS_DISP}/{h}/2::,5:,:,:,,"
+    )
+    sub = session.declare_subscriber(f"0/{topic.strip('/')}/{DDS_DISP}/{h}", zenoh.handlers.FifoChannel(8))
+    return sub, tok
+
+
+@pytest.mark.parametrize("distro", ["humble", "jazzy"])
+def test_subscriber_of_the_distro_receives_disparity(sessions, distro):
+    """A Humble-style and a Jazzy-style subscriber (exact key, token) both get the DisparityImage, lazy or not."""
     svc, bot = sessions
-    sub = bot.declare_subscriber(key(0, "/stereo/disparity", TOPICS["disparity"][1]), zenoh.handlers.FifoChannel(8))
+    sub, tok = ros_subscriber(bot, distro)
+    sink = build_sink("ros2", {"ros_distro": distro, "lazy": True}, SinkContext(session=svc))
+    sink.open()
+    time.sleep(0.3)
+    try:
+        for _ in range(3):
+            sink.write(result())
+        got = collect(sub, 3)
+    finally:
+        sink.close(2.0)
+        tok.undeclare()
+    assert len(got) == 3
+    msg = TS.deserialize_cdr(got[0].payload.to_bytes(), TOPICS["disparity"][1])
+    assert msg.image.encoding == "32FC1" and (msg.image.height, msg.image.width) == (4, 5)
+    assert [int.from_bytes(s.attachment.to_bytes()[:8], "little") for s in got] == [1, 2, 3]
+    assert sink.stats()["lazy_skipped"] == 0
+
+
+def test_lazy_wakes_for_ros_subscriber_tokens_only(sessions):
+    """A wildcard capture (plain Zenoh) keeps lazy outputs asleep; a subscriber token wakes only its output."""
+    svc, bot = sessions
+    capture = bot.declare_subscriber("0/stereo/**", zenoh.handlers.FifoChannel(64))
+    sub, tok = ros_subscriber(bot, "jazzy")
     sink = build_sink("ros2", {"outputs": ["disparity", "depth"], "lazy": True}, SinkContext(session=svc))
     sink.open()
     time.sleep(0.3)
     try:
         sink.write(result())
         assert len(collect(sub, 1)) == 1
+        captured = collect(capture, 2, timeout=0.5)
     finally:
         sink.close(2.0)
+        tok.undeclare()
+        capture.undeclare()
+    assert [str(s.key_expr).split("/")[2] for s in captured] == ["disparity"]
     st = sink.stats()
     assert st["lazy_skipped"] == 1 and st["written"] == 1
 
@@ -118,6 +163,7 @@ def test_needs_depth():
         {"attachment": "v2"},
         {"delta_d": 0.0},
         {"domain_id": -1},
+        {"ros_distro": "iron"},
     ],
 )
 def test_bad_options(opts):

@@ -58,13 +58,43 @@ def test_frames_tokens_and_attachments(sessions):
         src.stop(2.0)
 
 
+# A subscriber token as rmw_zenoh builds it (``Entity::Entity``, liveliness_utils.cpp): the type-hash chunk is the
+# humble branch's constant "TypeHashNotSupported" or jazzy's RIHS01 hash; the QoS chunk leaves rmw_zenoh's defaults
+# (reliable, volatile, keep last, depth 42: qos.cpp) empty, so best effort + keep last 3 is "2::,3:,:,:,," and
+# best effort + keep all 3 is "2::2,3:,:,:,,".
+@pytest.mark.parametrize(
+    ("distro", "policy", "hash_", "qos"),
+    [
+        ("humble", "latest", "TypeHashNotSupported", "2::,3:,:,:,,"),
+        ("jazzy", "latest", "RIHS01_d31d41a9a4c4bc8eae9be757b0beed306564f7526c88ea6a4588fb9582527d47", "2::,3:,:,:,,"),
+        ("jazzy", "block", "RIHS01_d31d41a9a4c4bc8eae9be757b0beed306564f7526c88ea6a4588fb9582527d47", "2::2,3:,:,:,,"),
+    ],
+)
+def test_subscriber_tokens_follow_distro_and_rings(sessions, distro, policy, hash_, qos):
+    svc, bot = sessions
+    opts = {"ros_distro": distro, "ring_size": 3, "depth_type": "none"}
+    src = build_source("ros2", opts, SourceContext(rig="r", session=svc))
+    src.input_policy = policy
+    src.open()
+    robot = Robot(bot)
+    try:
+        assert robot.wait_for_subscribers(["left/image_rect"])
+        (tok,) = [t for t in robot.graph() if "/MS/" in t and "%stereo%left%image_rect/" in t]
+    finally:
+        robot.close()
+        src.close()
+    assert tok.endswith(f"/sensor_msgs::msg::dds_::Image_/{hash_}/{qos}")
+
+
 def test_needs_session():
     src = build_source("ros2", {}, SourceContext())
     with pytest.raises(ValueError, match="session"):
         src.open()
 
 
-@pytest.mark.parametrize("opts", [{"domain_id": 300}, {"node_name": "a/b"}, {"ring_size": 0}, {"poll_s": 0.0}])
+@pytest.mark.parametrize(
+    "opts", [{"domain_id": 300}, {"node_name": "a/b"}, {"ring_size": 0}, {"poll_s": 0.0}, {"ros_distro": "foxy"}]
+)
 def test_bad_options(opts):
     from vpp_service.settings import SettingsError
     from vpp_service.sources.base import parse_source_options

@@ -63,6 +63,7 @@ def _replay(
     """Publish the bag's messages of the topics in ``pubs_for`` (topic -> type hash); returns (sent, seconds)."""
     from vpp_service.service.app import open_session
     from vpp_service.transport.ros2.bag import read_bag
+    from vpp_service.transport.ros2.keys import RELIABLE_KEEP_ALL
     from vpp_service.transport.ros2.node import RosNode, RosPublisher
 
     rate = float(args.rosbag_rate)
@@ -73,7 +74,10 @@ def _replay(
             raise ValueError("publish --rosbag: no zenoh session")
         node = RosNode(session, args.ros_domain, "/", "vpp_bag_player")
         node.open()
-        pubs: dict[str, RosPublisher] = {t: node.publisher(t, topics[t], hash_=h) for t, h in hashes.items()}
+        # reliable + keep all: congestion control BLOCK (rmw_zenoh's mapping), no message of the bag lost
+        pubs: dict[str, RosPublisher] = {
+            t: node.publisher(t, topics[t], RELIABLE_KEEP_ALL, hash_=h) for t, h in hashes.items()
+        }
         deadline = time.monotonic() + max(0.0, args.wait_subscriber)
         while time.monotonic() < deadline and not stop.is_set() and not any(p.matching for p in pubs.values()):
             time.sleep(0.02)

@@ -15,11 +15,16 @@ Under ``namespace`` (default ``/stereo``) and ``domain_id`` (default 0), outputs
     ``sensor_msgs/PointCloud2``, x y z rgb in the left optical frame, valid pixels only
     (unorganized: height 1).
 ``left_vpp`` / ``right_vpp`` -> ``left/image_vpp`` / ``right/image_vpp``
-    The painted pair, ``rgb8`` (congestion control DROP: they give way under load).
+    The painted pair, ``rgb8``.
 
 Each publisher has a liveliness token and every sample the attachment (``current``
-33-byte layout, or ``legacy`` for Jazzy rmw_zenoh 0.2.0-0.2.3). With ``lazy = true`` an
-output with no subscriber on the graph is not serialized (counted in ``lazy_skipped``).
+33-byte layout, or ``legacy`` for Jazzy rmw_zenoh 0.2.0-0.2.3). ``ros_distro`` picks the
+type-hash segment of keys and tokens (``humble``: ``TypeHashNotSupported``; ``jazzy``,
+``kilted``, ``rolling``: RIHS01), so subscribers of that distro receive the samples. The
+products (disparity, depth, points2) declare reliable + keep all and publish with congestion
+control BLOCK; the painted pair reliable + keep last 10, DROP (it gives way under load), as
+rmw_zenoh maps QoS. With ``lazy = true`` an output with no ROS subscriber token for its topic,
+type and hash on the graph is not serialized (counted in ``lazy_skipped``).
 Frames from a non-ROS source get the header stamp ``frame.stamp_ns`` and ``frame_id``.
 
 ``write`` encodes and publishes one result, synchronously; the pipeline runs it on this
@@ -120,18 +125,22 @@ class Ros2SinkOptions(Ros2OutputOptions):
     attachment : {"current", "legacy"}
         Attachment layout (``legacy`` only for Jazzy rmw_zenoh 0.2.0-0.2.3 graphs).
     lazy : bool
-        Skip an output while no subscriber matches it.
+        Skip an output while no ROS subscriber token for its topic, type and hash is on the graph.
+    ros_distro : {"jazzy", "humble", "kilted", "rolling"}
+        The subscribers' ROS 2 distribution: the type-hash segment of keys and tokens.
     """
 
     domain_id: int = 0
     node_name: str = "vpp_stereo"
     attachment: Layout = "current"
     lazy: bool = False
+    ros_distro: keys.Distro = "jazzy"
 
     def __post_init__(self) -> None:
         super().__post_init__()
         keys.check_domain(self.domain_id)
         keys.check_node_name(self.node_name)
+        keys.check_distro(self.ros_distro)
 
 
 def points_xyz_rgb(depth: np.ndarray, image: np.ndarray, calib: Calibration) -> tuple[np.ndarray, np.ndarray]:
@@ -225,11 +234,12 @@ class Ros2Sink(Sink):
         if session is None:
             raise ValueError("sinks.ros2: needs an open zenoh session (service.zenoh section)")
         o = self.options
-        self._node = RosNode(session, o.domain_id, o.namespace, o.node_name)
+        self._node = RosNode(session, o.domain_id, o.namespace, o.node_name, distro=o.ros_distro)
         self._node.open()
         for name in o.outputs:
             visual = name in ("left_vpp", "right_vpp")
-            self._pubs[name] = self._node.publisher(o.topic(name), OUTPUTS[name][1], block=not visual)
+            qos = keys.DEFAULT_PUBLISHER if visual else keys.RELIABLE_KEEP_ALL
+            self._pubs[name] = self._node.publisher(o.topic(name), OUTPUTS[name][1], qos, low_priority=visual)
 
     def write(self, result: FusionResult) -> None:
         """Encode and publish every output of one result.
@@ -243,7 +253,7 @@ class Ros2Sink(Sink):
             raise RuntimeError("ros2 sink: not open")
         t0 = time.perf_counter()
         for name, pub in self._pubs.items():
-            if self.options.lazy and not pub.matching:
+            if self.options.lazy and not pub.live:
                 self.count("lazy_skipped")
                 continue
             payload = self._encoder.encode(result, name)

@@ -5,7 +5,10 @@ to ``left/image_rect``, ``left/camera_info``, ``right/image_rect``, ``right/came
 and the sparse depth on ``points`` (a ``PointCloud2``, or with ``depth_type = "image"``
 a depth ``Image`` registered to the left camera); every name is an option, and an
 absolute name (``/velodyne_points``) ignores the namespace. It declares a node token
-and one subscriber token per topic, so lazy publishers start sending.
+and one subscriber token per topic, so lazy publishers start sending. The tokens carry
+``ros_distro``'s type-hash segment (``humble``: ``TypeHashNotSupported``) and the QoS the
+source keeps: best effort, volatile, depth ``ring_size``, keep last under the ``latest``
+input policy and keep all under ``block``. Publishers of any type hash are received.
 
 The Zenoh callback only queues the sample in its topic's ring (the network
 sources' one ring type, :class:`~vpp_service.queueing.ReceiveRings`, ``ring_size``
@@ -53,17 +56,21 @@ class Ros2SourceOptions(StereoTopics):
         Samples buffered per topic between Zenoh's thread and the source's.
     poll_s : float
         Longest idle sleep between checks for a stop request or a depth wait running out.
+    ros_distro : {"jazzy", "humble", "kilted", "rolling"}
+        The graph's ROS 2 distribution (the type-hash segment of the subscriber tokens).
     """
 
     domain_id: int = 0
     node_name: str = "vpp_stereo_input"
     ring_size: int = 4
     poll_s: float = 0.02
+    ros_distro: keys.Distro = "jazzy"
 
     def __post_init__(self) -> None:
         super().__post_init__()
         keys.check_domain(self.domain_id)
         keys.check_node_name(self.node_name)
+        keys.check_distro(self.ros_distro)
         if not 1 <= self.ring_size <= 1000:
             raise ValueError(f"ring_size must be in [1, 1000], got {self.ring_size}")
         if not 0 < self.poll_s <= 1:
@@ -93,11 +100,20 @@ class Ros2Source(Source):
         if session is None:
             raise ValueError("source.ros2: needs an open zenoh session (service.zenoh section)")
         o = self.options
-        self._node = RosNode(session, o.domain_id, o.namespace, o.node_name)
+        self._node = RosNode(session, o.domain_id, o.namespace, o.node_name, distro=o.ros_distro)
         self._node.open()
         self._rings = ReceiveRings(dict.fromkeys(o.roles(), o.ring_size), self.input_policy)
         for role in o.roles():
-            self._node.subscribe(o.topic(role), o.ros_type(role), functools.partial(self._on_sample, role))
+            self._node.subscribe(
+                o.topic(role), o.ros_type(role), functools.partial(self._on_sample, role), self.subscription_qos()
+            )
+
+    def subscription_qos(self) -> keys.Qos:
+        """What the source keeps per topic: best effort, volatile, ``ring_size`` deep, keep all under ``block``."""
+        depth = self.options.ring_size
+        if self.input_policy == "block":
+            return keys.Qos(reliability=2, durability=2, history=2, depth=depth)
+        return keys.Qos(reliability=2, durability=2, history=1, depth=depth)
 
     def waits_on(self) -> str:
         """The ROS topics subscribed to."""

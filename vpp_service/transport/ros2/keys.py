@@ -4,18 +4,23 @@ A topic's data travels on the key expression ``<domain_id>/<topic>/<type>/<type_
 
 - ``<topic>``: the fully-qualified name without its leading and trailing ``/``;
 - ``<type>``: the DDS spelling ``<pkg>::msg::dds_::<Msg>_``;
-- ``<type_hash>``: ``RIHS01_`` + 64 hex digits (REP 2011), see :data:`TYPE_HASHES`.
+- ``<type_hash>``: ``RIHS01_`` + 64 hex digits (REP 2011), see :data:`TYPE_HASHES`; Humble
+  has no type hashes and its rmw_zenoh writes :data:`HUMBLE_TYPE_HASH` instead (:func:`type_hash`).
 
 Discovery uses liveliness tokens (:func:`node_token`, :func:`entity_token`): without
 them a ROS node still receives our data, but ``ros2 topic list`` does not show us
-and lazy publishers never start sending.
+and lazy publishers never start sending. A token is written byte for byte as rmw_zenoh
+rebuilds it from its parts (the QoS with default values left out, :meth:`Qos.token`),
+because an entity's gid is a hash of that string (:func:`entity_gid`).
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, get_args
+
+import xxhash
 
 #: The message types this transport reads or writes, by their ROS name.
 IMAGE = "sensor_msgs/msg/Image"
@@ -30,6 +35,13 @@ TYPE_HASHES: dict[str, str] = {
     POINT_CLOUD2: "RIHS01_9198cabf7da3796ae6fe19c4cb3bdd3525492988c70522628af5daa124bae2b5",
     DISPARITY_IMAGE: "RIHS01_1ec1ff6b5bace919e4544a37f2d96ead9f81783701b7b7a4d97a09325ecf2711",
 }
+
+#: The type-hash segment of Humble's rmw_zenoh (rmw_publisher_data.cpp / rmw_subscription_data.cpp, humble branch).
+HUMBLE_TYPE_HASH = "TypeHashNotSupported"
+
+#: ROS 2 distributions whose rmw_zenoh keys differ only in the type-hash segment.
+Distro = Literal["humble", "jazzy", "kilted", "rolling"]
+DISTROS: tuple[str, ...] = get_args(Distro)
 
 #: Largest ROS domain id (the DDS port arithmetic limit every rmw accepts).
 MAX_DOMAIN_ID = 232
@@ -50,6 +62,19 @@ def check_domain(domain_id: int) -> int:
     if isinstance(domain_id, bool) or not isinstance(domain_id, int) or not 0 <= domain_id <= MAX_DOMAIN_ID:
         raise ValueError(f"domain_id must be an integer in [0, {MAX_DOMAIN_ID}], got {domain_id!r}")
     return domain_id
+
+
+def check_distro(distro: str) -> str:
+    """``distro`` when it is one of :data:`DISTROS`.
+
+    Raises
+    ------
+    ValueError
+        Otherwise.
+    """
+    if distro not in DISTROS:
+        raise ValueError(f"ros_distro must be one of {', '.join(DISTROS)}, got {distro!r}")
+    return distro
 
 
 def check_namespace(namespace: str) -> str:
@@ -110,14 +135,19 @@ def dds_type(ros_type: str) -> str:
     return f"{m.group(1)}::msg::dds_::{m.group(2)}_"
 
 
-def type_hash(ros_type: str) -> str:
-    """The RIHS01 hash of one of the four supported types.
+def type_hash(ros_type: str, distro: str = "jazzy") -> str:
+    """The type-hash segment ``distro``'s rmw_zenoh writes for ``ros_type``.
+
+    Humble: :data:`HUMBLE_TYPE_HASH` for every type; later distros: the type's RIHS01 hash.
 
     Raises
     ------
     ValueError
-        A type not in :data:`TYPE_HASHES`.
+        An unknown distro, or (after Humble) a type not in :data:`TYPE_HASHES`.
     """
+    if check_distro(distro) == "humble":
+        dds_type(ros_type)  # still a pkg/msg/Msg name
+        return HUMBLE_TYPE_HASH
     try:
         return TYPE_HASHES[ros_type]
     except KeyError:
@@ -155,9 +185,20 @@ def mangle(name: str) -> str:
     return name.replace("/", "%") if name else "%"
 
 
+#: rmw_zenoh's QoS defaults (``qos.cpp``, ``RMW_ZENOH_DEFAULT_*``, the same in the Humble, Jazzy, Kilted and
+#: Rolling branches): reliable, volatile, keep last, depth 42; deadline, lifespan and lease infinite,
+#: liveliness automatic. A token leaves every field equal to its default empty.
+RMW_ZENOH_DEFAULT_RELIABILITY = 1
+RMW_ZENOH_DEFAULT_DURABILITY = 2
+RMW_ZENOH_DEFAULT_HISTORY = 1
+RMW_ZENOH_DEFAULT_DEPTH = 42
+
+
 @dataclass(frozen=True)
 class Qos:
     """The QoS fields ``rmw_zenoh`` writes into a liveliness token.
+
+    Deadline, lifespan and liveliness are always rmw_zenoh's defaults (infinite, automatic).
 
     Attributes
     ----------
@@ -168,7 +209,7 @@ class Qos:
     history : {1, 2}
         1 keep last, 2 keep all.
     depth : int
-        History depth (>= 0).
+        History depth (>= 0; 0 = rmw_zenoh's default, 42).
     """
 
     reliability: Literal[1, 2] = 1
@@ -184,14 +225,31 @@ class Qos:
             raise ValueError(f"depth must be an integer in [0, 1000000], got {self.depth!r}")
 
     def token(self) -> str:
-        """``reliability:durability:history,depth:,:,:,,`` (deadline, lifespan, liveliness left default)."""
-        return f"{self.reliability}:{self.durability}:{self.history},{self.depth}:,:,:,,"
+        """The token's QoS chunk as rmw_zenoh writes it: fields equal to its defaults left empty.
+
+        ``reliability:durability:history,depth:deadline_s,deadline_ns:lifespan_s,lifespan_ns:liveliness,lease_s,lease_ns``
+        (``qos_to_keyexpr`` in ``liveliness_utils.cpp``); depth 0 is written as the default 42 it becomes
+        (``QoS::best_available_qos``). A default publisher (reliable, volatile, keep last 10): ``::,10:,:,:,,``.
+        """
+        depth = self.depth or RMW_ZENOH_DEFAULT_DEPTH
+
+        def field(value: int, default: int) -> str:
+            return "" if value == default else str(value)
+
+        return (
+            f"{field(self.reliability, RMW_ZENOH_DEFAULT_RELIABILITY)}:"
+            f"{field(self.durability, RMW_ZENOH_DEFAULT_DURABILITY)}:"
+            f"{field(self.history, RMW_ZENOH_DEFAULT_HISTORY)},{field(depth, RMW_ZENOH_DEFAULT_DEPTH)}:,:,:,,"
+        )
 
 
-#: Sensor-data QoS (best effort, volatile, keep last 5): what our subscribers declare.
+#: Sensor-data QoS (best effort, volatile, keep last 5): rclcpp's SensorDataQoS.
 SENSOR_DATA = Qos(reliability=2, durability=2, history=1, depth=5)
-#: The ROS default publisher QoS (reliable, volatile, keep last 10): what our publishers declare.
+#: The ROS default publisher QoS (reliable, volatile, keep last 10).
 DEFAULT_PUBLISHER = Qos(reliability=1, durability=2, history=1, depth=10)
+#: Reliable, volatile, keep all (rclcpp's ``KeepAll()``: depth 0): the QoS rmw_zenoh publishes with congestion
+#: control BLOCK.
+RELIABLE_KEEP_ALL = Qos(reliability=1, durability=2, history=2, depth=0)
 
 
 @dataclass(frozen=True)
@@ -265,25 +323,83 @@ def entity_token(
     )
 
 
+@dataclass(frozen=True)
+class EntityKey:
+    """What a publisher or subscriber token says about its topic (see :func:`parse_entity_token`).
+
+    Attributes
+    ----------
+    kind : {"MP", "MS"}
+        Publisher or subscriber.
+    topic : str
+        Fully-qualified topic name (demangled).
+    dds_type : str
+        Type segment, ``pkg::msg::dds_::Msg_``.
+    type_hash : str
+        Type-hash segment (``RIHS01_...`` or :data:`HUMBLE_TYPE_HASH`).
+    """
+
+    kind: str
+    topic: str
+    dds_type: str
+    type_hash: str
+
+
+def parse_entity_token(token_key: str, domain_id: int) -> EntityKey | None:
+    """The topic of a publisher (``MP``) or subscriber (``MS``) token of ``domain_id``; None for anything else.
+
+    The parts are split on ``/`` as ``Entity::make(keyexpr)`` in ``liveliness_utils.cpp`` does: admin space,
+    domain, zid, nid, id, kind, enclave, namespace, node, topic, type, hash, QoS (13 parts, none empty).
+    """
+    parts = token_key.split("/")
+    if len(parts) < 13 or parts[0] != "@ros2_lv" or parts[1] != str(domain_id) or parts[5] not in ("MP", "MS"):
+        return None
+    if any(not p for p in parts[:12]):
+        return None
+    return EntityKey(parts[5], parts[9].replace("%", "/"), parts[10], parts[11])
+
+
+def entity_gid(token_key: str) -> bytes:
+    """The 16-byte gid rmw_zenoh gives the entity whose liveliness key is ``token_key``.
+
+    XXH3-128 (seed 0) of the key string, then the low 64 bits and the high 64 bits, each little
+    endian (``Entity::Entity`` in ``liveliness_utils.cpp``: ``simplified_XXH3_128bits`` and two
+    ``memcpy``). It is the gid of every sample's attachment and of ``ros2 topic info -v``.
+    """
+    return int(xxhash.xxh3_128_intdigest(token_key.encode())).to_bytes(16, "little")
+
+
 __all__ = [
     "CAMERA_INFO",
     "DEFAULT_PUBLISHER",
     "DISPARITY_IMAGE",
+    "DISTROS",
+    "HUMBLE_TYPE_HASH",
     "IMAGE",
     "MAX_DOMAIN_ID",
     "POINT_CLOUD2",
+    "RELIABLE_KEEP_ALL",
+    "RMW_ZENOH_DEFAULT_DEPTH",
+    "RMW_ZENOH_DEFAULT_DURABILITY",
+    "RMW_ZENOH_DEFAULT_HISTORY",
+    "RMW_ZENOH_DEFAULT_RELIABILITY",
     "SENSOR_DATA",
     "TYPE_HASHES",
+    "Distro",
+    "EntityKey",
     "NodeName",
     "Qos",
+    "check_distro",
     "check_domain",
     "check_namespace",
     "check_node_name",
     "dds_type",
+    "entity_gid",
     "entity_token",
     "fully_qualified",
     "mangle",
     "node_token",
+    "parse_entity_token",
     "topic_key",
     "type_hash",
 ]
