@@ -113,13 +113,35 @@ def test_depth_nearest_within_tolerance_and_wait():
     assert feed(asm, pair(100_000_000)) == []  # waits for its depth
     clock.t = 0.05
     assert asm.expire() == []
-    frames = asm.add("depth", cloud(95_000_000, z=3.0))  # within 10 ms: used
+    assert asm.add("depth", cloud(95_000_000, z=3.0)) == []  # within 10 ms, but a nearer one may still come
+    clock.t = 0.1  # the wait is over: the nearest there is
+    frames = asm.expire()
     assert len(frames) == 1 and frames[0].sensor_depth[2, 4] == 3.0
     assert feed(asm, pair(200_000_000)) == []
-    clock.t = 0.2  # 150 ms later: no depth came
+    clock.t = 0.25  # 150 ms later: no depth came
     frames = asm.expire()
     assert len(frames) == 1 and frames[0].sensor_depth is None
     assert asm.stats()["no_depth"] == 1
+
+
+@pytest.mark.parametrize("own_first", [True, False])
+def test_depth_choice_waits_for_the_sets_own_message(own_first):
+    # a set 30 ms after the last one: the last set's cloud is within the tolerance, but the set's own
+    # cloud (same stamp) is nearer; whether it comes before or after the images, the set takes it
+    asm, _ = make(depth_tolerance_ms=50.0, depth_wait_ms=10_000.0)
+    assert len(feed(asm, {"depth": cloud(100_000_000, z=3.0)} | pair(100_000_000))) == 1
+    parts = pair(130_000_000)
+    own = {"depth": cloud(130_000_000, z=5.0)}
+    frames = feed(asm, own | parts) if own_first else feed(asm, parts) + feed(asm, own)
+    assert len(frames) == 1 and frames[0].sensor_depth[2, 4] == 5.0
+
+
+def test_later_depth_decides_the_nearest():
+    asm, _ = make(depth_tolerance_ms=10.0, depth_wait_ms=10_000.0)
+    assert feed(asm, pair(100_000_000)) == []
+    assert asm.add("depth", cloud(96_000_000, z=3.0)) == []
+    frames = asm.add("depth", cloud(103_000_000, z=4.0))  # after the pair: nothing nearer can come now
+    assert len(frames) == 1 and frames[0].sensor_depth[2, 4] == 4.0
 
 
 def test_later_depth_ends_the_wait():

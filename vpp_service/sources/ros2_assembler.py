@@ -10,9 +10,13 @@
    (:class:`~vpp_service.transport.sync.Synchronizer`): ``exact`` = identical header
    stamps, ``approximate`` = stamps within ``sync_tolerance_ms``.
 3. A complete pair takes the depth message (``PointCloud2`` or a depth ``Image``) with
-   the nearest stamp within ``depth_tolerance_ms``. It waits for one at most
-   ``depth_wait_ms`` (wall clock) or until a later depth message shows none will come;
-   then it goes on without depth (counted ``no_depth``: processed without VPP).
+   the nearest stamp within ``depth_tolerance_ms``, and decides only once no message yet
+   to come can be nearer: when one has the pair's own stamp, or one stamped after the
+   pair has arrived (the depth topic is in stamp order). Until then it waits, at most
+   ``depth_wait_ms`` (wall clock); then it takes the nearest one there is within the
+   tolerance, or goes on without depth (counted ``no_depth``: processed without VPP). So
+   the choice depends on the stamps, not on whether the pair's own cloud came before or
+   after its images.
 4. Calibration comes from the two camera_info messages
    (:func:`~vpp_service.transport.ros2.messages.stereo_calibration`); the cloud is moved by
    ``lidar_to_left`` and projected with the left ``P``
@@ -22,8 +26,13 @@
    is taken as registered to the left view (``False``).
 
 Every refused message or pair is counted by cause in :attr:`StereoAssembler.rejected_by`
-and reported through ``reject``; every message that never reaches a frame is counted
-(``sync_dropped``, ``depth_unused``, ``pending_dropped``).
+and reported through ``reject``. :attr:`StereoAssembler.messages` follows every message
+offered to the end it comes to, in exactly one count: ``used`` (in a frame), ``rejected``
+(refused, alone or with its stereo set), ``sync_dropped`` (passed over by the stereo
+sync), ``pending_dropped`` (its complete set pushed out while waiting for depth),
+``depth_unused`` (a depth message pushed out unused), or, while it is still held,
+``unmatched`` (waiting for partners; at shutdown: never matched). So ``received`` is
+always the sum of the others.
 """
 
 from __future__ import annotations
@@ -164,6 +173,13 @@ class _Pair:
     since: float
 
 
+@dataclass
+class _Depth:
+    item: _Msg
+    #: ``waiting`` (no frame took it yet), ``used`` (in a frame) or ``rejected`` (its content refused a set).
+    state: Literal["waiting", "used", "rejected"] = "waiting"
+
+
 class StereoAssembler:
     """Join serialized ROS 2 messages into stereo frames (see the module docstring).
 
@@ -181,10 +197,15 @@ class StereoAssembler:
     Attributes
     ----------
     counters : dict
-        ``frames``, ``no_depth``, ``sync_dropped``, ``depth_unused``, ``pending_dropped``,
-        ``cloud_points``, ``cloud_behind``, ``cloud_outside``, ``cloud_nonfinite``.
+        ``frames``, ``no_depth``, ``sync_dropped`` (messages), ``depth_unused`` (messages),
+        ``pending_dropped`` (complete sets), ``cloud_points``, ``cloud_behind``,
+        ``cloud_outside``, ``cloud_nonfinite``.
     rejected_by : dict
-        Refused messages or pairs per cause (``too_large``, ``cdr``, ``encoding``, ...).
+        Refusals per cause (``too_large``, ``cdr``, ``encoding``, ...): one per refused message or set.
+    messages : dict
+        Where every offered message ended, in messages (see the module docstring): ``received``,
+        ``used``, ``rejected``, ``sync_dropped``, ``pending_dropped``, ``depth_unused``;
+        :meth:`stats` adds ``unmatched`` (those still held).
     """
 
     def __init__(
@@ -204,7 +225,8 @@ class StereoAssembler:
             STEREO_ROLES, topics.sync, topics.sync_queue_size, int(topics.sync_tolerance_ms * 1e6)
         )
         self._pending: deque[_Pair] = deque()
-        self._depth: deque[tuple[_Msg, list[bool]]] = deque()
+        self._depth: deque[_Depth] = deque()
+        self._depth_waiting = 0  # entries of _depth still "waiting" (kept as a count: stats() runs on other threads)
         self._seq = 0
         self.counters: dict[str, int] = dict.fromkeys(
             (
@@ -221,46 +243,61 @@ class StereoAssembler:
             0,
         )
         self.rejected_by: dict[str, int] = {}
+        self.messages: dict[str, int] = dict.fromkeys(
+            ("received", "used", "rejected", "sync_dropped", "pending_dropped", "depth_unused"), 0
+        )
 
     # ----------------------------------------------------------------- input
     def refuse(self, role: str, exc: Ros2Error) -> None:
-        """Count and report a refused message of ``role``."""
+        """Count and report a message of ``role`` refused before it was offered (e.g. recorded with another type)."""
+        self.messages["received"] += 1
+        self._refused(role, exc, 1)
+
+    def _refused(self, role: str, exc: Ros2Error, messages: int) -> None:
+        """Count one refusal of ``messages`` received messages (a message, or a stereo set) and report it."""
         self.rejected_by[exc.reason] = self.rejected_by.get(exc.reason, 0) + 1
+        self.messages["rejected"] += messages
         self._reject(f"{self.topics.topic(role) if role in ROLES else role}: {exc}")
 
     def add(self, role: str, payload: bytes | memoryview) -> list[StereoFrame]:
         """Offer one serialized message of ``role``; returns the frames it completes (oldest first)."""
         if role not in self.topics.roles():
             raise ValueError(f"role must be one of {list(self.topics.roles())}, got {role!r}")
+        self.messages["received"] += 1
         t0 = time.perf_counter()
         ros_type = self.topics.ros_type(role)
         try:
             msg: object = rm.deserialize(payload, ros_type, rm.message_class(ros_type), self._limits)
         except Ros2Error as exc:
-            self.refuse(role, exc)
+            self._refused(role, exc, 1)
             return []
         try:  # the content too, on arrival: a bad part never takes the slot of a valid one with its stamp
             value = self._checked(role, msg)
         except Ros2Error as exc:
-            self.refuse(role, exc)
+            self._refused(role, exc, 1)
             return []
         header = msg.header  # type: ignore[attr-defined]  # every supported message has one
         item = _Msg(msg, rm.stamp_ns(header), time.perf_counter() - t0, value)
         if role == "depth":
-            self._depth.append((item, [False]))
+            self._depth.append(_Depth(item))
+            self._depth_waiting += 1
             while len(self._depth) > 2 * self.topics.sync_queue_size:
-                _, used = self._depth.popleft()
-                if not used[0]:
+                if self._depth.popleft().state == "waiting":
+                    self._depth_waiting -= 1
                     self.counters["depth_unused"] += 1
+                    self.messages["depth_unused"] += 1
             return self._resolve()
-        before = self.sync.dropped
+        before = self.sync.dropped + self.sync.inconsistent
         joined = self.sync.add(role, item.stamp_ns, item.stamp_ns, item)
-        self.counters["sync_dropped"] += self.sync.dropped - before
+        passed_over = self.sync.dropped + self.sync.inconsistent - before
+        self.counters["sync_dropped"] += passed_over
+        self.messages["sync_dropped"] += passed_over
         if joined is not None:
             self._pending.append(_Pair(joined, joined["left_info"].stamp_ns, self._clock()))
             while len(self._pending) > self.topics.sync_queue_size:
-                self._pending.popleft()
+                gone = self._pending.popleft()
                 self.counters["pending_dropped"] += 1
+                self.messages["pending_dropped"] += len(gone.parts)
         return self._resolve()
 
     def _checked(self, role: str, msg: object) -> object:
@@ -290,37 +327,45 @@ class StereoAssembler:
         return self._resolve(final=True)
 
     # ---------------------------------------------------------------- output
-    def _nearest_depth(self, stamp: int) -> tuple[_Msg, list[bool]] | None:
+    def _nearest_depth(self, stamp: int) -> _Depth | None:
+        """The depth message nearest to ``stamp`` within the tolerance (the earliest received of equals)."""
         tol = int(self.topics.depth_tolerance_ms * 1e6)
-        best = min(self._depth, key=lambda d: abs(d[0].stamp_ns - stamp), default=None)
-        if best is None or abs(best[0].stamp_ns - stamp) > tol:
+        best = min(self._depth, key=lambda d: abs(d.item.stamp_ns - stamp), default=None)
+        if best is None or abs(best.item.stamp_ns - stamp) > tol:
             return None
         return best
+
+    def _depth_known(self, stamp: int) -> bool:
+        """True once no depth message yet to come can be nearer to ``stamp`` than those received.
+
+        That is when one is stamped at or after ``stamp``: the depth topic is in stamp order, so
+        every later one lies further away. Deciding earlier would take a neighbour's message
+        whenever the set's own one comes a moment after its images.
+        """
+        return any(d.item.stamp_ns >= stamp for d in self._depth)
 
     def _resolve(self, final: bool = False) -> list[StereoFrame]:
         out: list[StereoFrame] = []
         wait_s = self.topics.depth_wait_ms / 1e3
-        tol = int(self.topics.depth_tolerance_ms * 1e6)
         while self._pending:
             pair = self._pending[0]
             depth = None
             if self.topics.depth_type != "none":
-                depth = self._nearest_depth(pair.stamp_ns)
-                newest = self._depth[-1][0].stamp_ns if self._depth else None
-                hopeless = newest is not None and newest > pair.stamp_ns + tol
-                if depth is None and not (final or hopeless or self._clock() - pair.since >= wait_s):
+                waited = final or self._clock() - pair.since >= wait_s
+                if not (waited or self._depth_known(pair.stamp_ns)):
                     break  # keep waiting, and keep the order
+                depth = self._nearest_depth(pair.stamp_ns)
             self._pending.popleft()
-            if depth is not None:
-                depth[1][0] = True
-            frame = self._frame(pair, depth[0] if depth is not None else None)
+            frame = self._frame(pair, depth)
             if frame is not None:
                 out.append(frame)
         return out
 
-    def _frame(self, pair: _Pair, depth: _Msg | None) -> StereoFrame | None:
+    def _frame(self, pair: _Pair, depth_entry: _Depth | None) -> StereoFrame | None:
+        """The frame of ``pair`` with ``depth_entry`` (counts its messages used), None when refused (counted)."""
         t0 = time.perf_counter()
         p = pair.parts
+        depth = depth_entry.item if depth_entry is not None else None
         try:
             lc, rc = p["left_info"].value, p["right_info"].value  # checked on arrival
             left, right = p["left_image"].value, p["right_image"].value
@@ -332,10 +377,16 @@ class StereoAssembler:
                 raise Ros2Error("shape", f"left {left.shape} and right {right.shape} images differ")
             if (lc.width, lc.height) != (w, h):
                 raise Ros2Error("shape", f"camera_info is {lc.width}x{lc.height}, images are {w}x{h}")
-            sensor_depth = self._depth_map(depth, lc.p, (h, w)) if depth is not None else None
         except Ros2Error as exc:
-            self.refuse("stereo pair", exc)
+            self._refused("stereo pair", exc, len(p))  # the depth message stays free for another set
             return None
+        try:
+            sensor_depth = self._depth_map(depth, lc.p, (h, w)) if depth is not None else None
+        except Ros2Error as exc:  # the depth message does not fit the set: both are refused
+            assert depth_entry is not None
+            self._refused("stereo pair", exc, len(p) + self._take(depth_entry, "rejected"))
+            return None
+        self.messages["used"] += len(p) + (self._take(depth_entry, "used") if depth_entry is not None else 0)
         if sensor_depth is None:
             self.counters["no_depth"] += 1
         decode_s = sum(m.decode_s for m in p.values()) + (depth.decode_s if depth is not None else 0.0)
@@ -358,6 +409,14 @@ class StereoAssembler:
             },
         )
 
+    def _take(self, entry: _Depth, state: Literal["used", "rejected"]) -> int:
+        """Mark a depth message ``state``; 1 when it was still waiting (counted now), else 0 (counted before)."""
+        if entry.state != "waiting":
+            return 0
+        entry.state = state
+        self._depth_waiting -= 1
+        return 1
+
     def _depth_map(self, depth: _Msg, p: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
         msg, value = depth.msg, depth.value  # checked on arrival
         assert isinstance(value, np.ndarray)
@@ -374,9 +433,14 @@ class StereoAssembler:
             raise Ros2Error("shape", f"depth image is {z.shape[1]}x{z.shape[0]}, images are {shape[1]}x{shape[0]}")
         return z
 
+    def unmatched(self) -> int:
+        """Messages held now: waiting in the stereo sync, in complete sets waiting for depth, unused depth."""
+        return sum(self.sync.pending().values()) + len(STEREO_ROLES) * len(self._pending) + self._depth_waiting
+
     def stats(self) -> dict[str, object]:
-        """Counters, refusals by cause, and the synchronizer's state."""
-        return {**self.counters, "rejected_by": dict(self.rejected_by), "sync": self.sync.stats()}
+        """Counters, refusals by cause, where the messages ended (:attr:`messages`) and the synchronizer's state."""
+        messages = {**self.messages, "unmatched": self.unmatched()}
+        return {**self.counters, "rejected_by": dict(self.rejected_by), "messages": messages, "sync": self.sync.stats()}
 
 
 __all__ = ["ROLES", "STEREO_ROLES", "DepthType", "StereoAssembler", "StereoTopics"]
