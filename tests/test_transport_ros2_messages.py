@@ -170,6 +170,17 @@ def test_cloud_fields_and_layout():
         m.cloud_to_xyz(msg, LIMITS)
 
 
+def test_organized_cloud():
+    xyz = np.array([[1, 2, 3], [np.nan] * 3, [4, 5, 6], [7, 8, 9], [1, 1, 1], [2, 2, 2]], np.float32)
+    msg = roundtrip(m.xyz_cloud_message(xyz, m.make_header(0, "left"), shape=(2, 3)), POINT_CLOUD2, m.PointCloud2)
+    assert (msg.height, msg.width, msg.row_step, msg.is_dense) == (2, 3, 36, False)
+    np.testing.assert_array_equal(m.cloud_to_xyz(msg, LIMITS), xyz)
+    dense = m.xyz_cloud_message(xyz[[0, 2, 3, 4]], m.make_header(0, "left"), shape=(2, 2))
+    assert dense.is_dense and dense.height == 2
+    with pytest.raises(ValueError, match="shape"):
+        m.xyz_cloud_message(xyz, m.make_header(0, "left"), shape=(2, 2))
+
+
 def test_cloud_big_endian_float64_and_padding():
     pts = np.zeros(3, dtype=[("pad", "u1", 4), ("x", ">f8"), ("y", ">f8"), ("z", ">f8"), ("i", ">f4")])
     pts["x"], pts["y"], pts["z"] = [1, 2, 3], [4, 5, 6], [7, 8, 9]

@@ -414,13 +414,25 @@ def cloud_to_xyz(msg: PointCloud2, limits: Limits) -> np.ndarray:
     return out
 
 
-def xyz_cloud_message(xyz: np.ndarray, header: Header, rgb: np.ndarray | None = None) -> PointCloud2:
-    """An unorganized cloud (height 1) of N x 3 points, float32 x y z, plus packed ``rgb`` when given."""
+def xyz_cloud_message(
+    xyz: np.ndarray, header: Header, rgb: np.ndarray | None = None, shape: tuple[int, int] | None = None
+) -> PointCloud2:
+    """A cloud of N x 3 points, float32 x y z, plus packed ``rgb`` (N x 3 uint8) when given.
+
+    ``shape`` = ``(H, W)`` with N = H x W makes it organized as stereo_image_proc's ``points2``
+    (height H, width W, point ``v * W + u`` is pixel ``(v, u)``; invalid points are NaN);
+    None (default) gives an unorganized cloud (height 1, width N). ``is_dense`` is true only
+    when every coordinate is finite. Each point is 16 bytes, x y z rgb at offsets 0, 4, 8, 12
+    (stereo_image_proc's layout with ``avoid_point_cloud_padding``); readers go by the fields.
+    """
     from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__PointCloud2 as PointCloud2
     from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__PointField as PointField
 
     pts = np.ascontiguousarray(xyz, dtype="<f4").reshape(-1, 3)
     n = pts.shape[0]
+    height, width = (1, n) if shape is None else (int(shape[0]), int(shape[1]))
+    if height * width != n:
+        raise ValueError(f"shape {shape} holds {height * width} points, got {n}")
     names = ["x", "y", "z"] + (["rgb"] if rgb is not None else [])
     rec = np.empty((n, len(names)), "<f4")
     rec[:, :3] = pts
@@ -431,14 +443,14 @@ def xyz_cloud_message(xyz: np.ndarray, header: Header, rgb: np.ndarray | None = 
     step = 4 * len(names)
     return PointCloud2(
         header=header,
-        height=1,
-        width=n,
+        height=height,
+        width=width,
         fields=fields,
         is_bigendian=False,
         point_step=step,
-        row_step=step * n,
+        row_step=step * width,
         data=rec.reshape(-1).view(np.uint8),
-        is_dense=True,
+        is_dense=bool(np.isfinite(pts).all()),
     )
 
 
