@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from helpers.ros2_robot import Robot, StereoRig, camera_info_from_p, cloud_msg, image_msg
+from helpers.ros2_robot import Robot, StereoRig, camera_info_from_p, cloud_msg, image_msg, tf_message
 from vpp_service.sources.base import SourceContext, build_source
 
 LEGACY = (
@@ -294,3 +294,37 @@ def test_every_received_message_ends_in_exactly_one_count(sessions):
     # each good set took its own cloud (one point in view), not the rejected set's (stamped 0.6 us earlier,
     # within the tolerance, its one point behind the camera)
     assert all(np.isfinite(f.sensor_depth).sum() == 1 for f in frames)
+
+
+def test_cloud_placed_by_tf_static(sessions):
+    """A cloud in the LiDAR's own frame, 0.5 m behind the left camera: placed by the chain read from /tf_static.
+
+    tiny_rig: f 100, cx 3.5, cy 2.5; the point (0, 0, 2.5) in 'lidar' is (0, 0, 2) in the left optical frame,
+    on the principal point: pixel (rint 2.5, rint 3.5) = (2, 4) at 2 m.
+    """
+    svc, bot = sessions
+    src = build_source("ros2", {"depth_wait_ms": 2000.0}, SourceContext(rig="r", session=svc))
+    frames: list = []
+    src.open()
+    src.start(lambda f: frames.append(f) or True, lambda reason: None)
+    robot = Robot(bot)
+    try:
+        assert robot.wait_for_subscribers(["left/image_rect", "points"])
+        assert wait_for(lambda: any("/MS/" in t and "%tf_static/tf2_msgs::msg::dds_::TFMessage_/" in t
+                                    and t.endswith("/1:1:1,100:,:,:,,") for t in robot.graph()))  # fmt: skip
+        robot.publish_tf_static(tf_message([("left_optical", "lidar", (0.0, 0.0, -0.5), (0.0, 0.0, 0.0, 1.0))]))
+        assert wait_for(lambda: src.stats()["tf_messages"] == 1)
+        rig = tiny_rig()
+        rig.cloud = np.array([[0.0, 0.0, 2.5]], np.float32)
+        h, w = rig.left.shape[:2]
+        robot.put("points", cloud_msg(rig.cloud, 1_000, "lidar"))
+        robot.put("left/image_rect", image_msg(rig.left, 1_000, "left_optical"))
+        robot.put("right/image_rect", image_msg(rig.right, 1_000, "right_optical"))
+        robot.put("left/camera_info", camera_info_from_p(1_000, "left_optical", (w, h), rig.projection(right=False)))
+        robot.put("right/camera_info", camera_info_from_p(1_000, "right_optical", (w, h), rig.projection(right=True)))
+        assert wait_for(lambda: len(frames) == 1), src.stats()
+    finally:
+        robot.close()
+        src.stop(2.0)
+    assert frames[0].sensor_depth[2, 4] == pytest.approx(2.0) and np.isfinite(frames[0].sensor_depth).sum() == 1
+    assert src.stats()["rejected_by"] == {}

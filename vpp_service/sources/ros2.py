@@ -3,7 +3,8 @@
 Under ``namespace`` (default ``/stereo``) and ``domain_id`` (default 0) it subscribes
 to ``left/image_rect``, ``left/camera_info``, ``right/image_rect``, ``right/camera_info``
 and the sparse depth on ``points`` (a ``PointCloud2``, or with ``depth_type = "image"``
-a depth ``Image`` registered to the left camera); every name is an option, and an
+a depth ``Image`` registered to the left camera), and, for a cloud without a configured
+``lidar_to_left``, the static transforms on ``/tf_static``; every name is an option, and an
 absolute name (``/velodyne_points``) ignores the namespace. It declares a node token
 and one subscriber token per topic, so lazy publishers start sending.
 
@@ -33,7 +34,7 @@ from typing import TYPE_CHECKING
 from vpp_service.frame import StereoFrame
 from vpp_service.queueing import ReceiveRings
 from vpp_service.sources.base import SOURCES, Emit, Reject, Source, SourceContext
-from vpp_service.sources.ros2_assembler import StereoAssembler, StereoTopics
+from vpp_service.sources.ros2_assembler import TF_ROLE, StereoAssembler, StereoTopics
 from vpp_service.transport.ros2 import attachment, keys
 from vpp_service.transport.ros2.errors import Ros2Error
 from vpp_service.transport.ros2.node import RosNode
@@ -100,7 +101,9 @@ class Ros2Source(Source):
         self._node.open()
         self._rings = ReceiveRings(dict.fromkeys(o.roles(), o.ring_size), self.input_policy)
         for role in o.roles():
-            self._node.subscribe(o.topic(role), o.ros_type(role), functools.partial(self._on_sample, role))
+            # /tf_static with tf2_ros' static listener QoS (transient local), the rest as sensor data
+            qos = keys.TF_STATIC if role == TF_ROLE else keys.SENSOR_DATA
+            self._node.subscribe(o.topic(role), o.ros_type(role), functools.partial(self._on_sample, role), qos)
 
     def waits_on(self) -> str:
         """The ROS topics subscribed to."""

@@ -18,12 +18,18 @@
    the choice depends on the stamps, not on whether the pair's own cloud came before or
    after its images.
 4. Calibration comes from the two camera_info messages
-   (:func:`~vpp_service.transport.ros2.messages.stereo_calibration`); the cloud is moved by
-   ``lidar_to_left`` and projected with the left ``P``
+   (:func:`~vpp_service.transport.ros2.messages.stereo_calibration`); the cloud is moved into
+   the left optical frame and projected with the left ``P``
    (:func:`~vpp_service.transport.ros2.cloud.cloud_to_depth`). A frame with a cloud
    carries ``meta["lidar_like"] = True``, so the fusion step's ``auto`` depth filter
    removes its see-through points (:mod:`vpp_service.vpp.see_through`); a depth image
    is taken as registered to the left view (``False``).
+5. The cloud's transform into the left optical frame: ``lidar_to_left`` when the
+   configuration gives it; else identity when the cloud's ``header.frame_id`` is the left
+   camera_info's, else the chain of static transforms received on ``/tf_static``
+   (``tf_topic``, role ``tf_static``; :class:`~vpp_service.transport.ros2.tf.StaticTransforms`)
+   from the cloud's frame to the left camera's. Without such a chain the cloud is refused
+   (cause ``tf``) and the frame goes on without depth.
 
 Every refused message or pair is counted by cause in :attr:`StereoAssembler.rejected_by`
 and reported through ``reject``. :attr:`StereoAssembler.messages` follows every message
@@ -40,7 +46,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -50,6 +56,7 @@ from vpp_service.transport.ros2 import keys
 from vpp_service.transport.ros2 import messages as rm
 from vpp_service.transport.ros2.cloud import check_extrinsic, cloud_to_depth
 from vpp_service.transport.ros2.errors import Ros2Error
+from vpp_service.transport.ros2.tf import StaticTransforms
 from vpp_service.transport.sync import Synchronizer
 from vpp_service.vpp.see_through import LIDAR_LIKE
 
@@ -57,6 +64,8 @@ from vpp_service.vpp.see_through import LIDAR_LIKE
 STEREO_ROLES = ("left_image", "left_info", "right_image", "right_info")
 #: Every role (``depth`` only when a depth topic is used).
 ROLES = (*STEREO_ROLES, "depth")
+#: The role of the static transforms (only when the cloud's transform comes from tf).
+TF_ROLE = "tf_static"
 #: What the depth topic carries.
 DepthType = Literal["cloud", "image", "none"]
 
@@ -66,8 +75,6 @@ _ROLE_TYPES = {
     "left_info": keys.CAMERA_INFO,
     "right_info": keys.CAMERA_INFO,
 }
-
-_IDENTITY = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
 
 
 @dataclass(frozen=True)
@@ -85,8 +92,12 @@ class StereoTopics:
         registered to the left camera (``"image"``: ``32FC1`` metres or ``16UC1`` mm).
     depth_type : {"cloud", "image", "none"}
         What ``depth_topic`` carries; ``none`` = no depth subscription.
-    lidar_to_left : list of list of float
-        4 x 4 transform from the cloud's frame to the left optical frame (rows).
+    lidar_to_left : list of list of float or None
+        4 x 4 transform from the cloud's frame to the left optical frame (rows). None (default):
+        identity when the cloud's frame is the left camera's, else from ``tf_topic``.
+    tf_topic : str
+        The static transforms (``tf2_msgs/TFMessage``), subscribed when the cloud's transform
+        comes from tf (``depth_type = "cloud"`` and no ``lidar_to_left``).
     sync : {"exact", "approximate"}
         Stereo matching rule (stereo_image_proc's ``approximate_sync``).
     sync_queue_size : int
@@ -112,7 +123,8 @@ class StereoTopics:
     right_info: str = "right/camera_info"
     depth_topic: str = "points"
     depth_type: DepthType = "cloud"
-    lidar_to_left: list[list[float]] = field(default_factory=lambda: [list(r) for r in _IDENTITY])
+    lidar_to_left: list[list[float]] | None = None
+    tf_topic: str = "/tf_static"
     sync: Literal["exact", "approximate"] = "exact"
     sync_queue_size: int = 5
     sync_tolerance_ms: float = 10.0
@@ -125,7 +137,8 @@ class StereoTopics:
     def __post_init__(self) -> None:
         for role in ROLES:
             self.topic(role)  # validates the names
-        check_extrinsic(np.asarray(self.lidar_to_left, dtype=np.float64))
+        if self.lidar_to_left is not None:
+            check_extrinsic(np.asarray(self.lidar_to_left, dtype=np.float64))
         if not 1 <= self.sync_queue_size <= 1000:
             raise ValueError(f"sync_queue_size must be in [1, 1000], got {self.sync_queue_size}")
         for name in ("sync_tolerance_ms", "depth_tolerance_ms", "depth_wait_ms"):
@@ -139,15 +152,23 @@ class StereoTopics:
 
     def topic(self, role: str) -> str:
         """The fully-qualified topic of ``role``."""
-        name = self.depth_topic if role == "depth" else getattr(self, role)
+        name = {"depth": self.depth_topic, TF_ROLE: self.tf_topic}.get(role) or getattr(self, role)
         return keys.fully_qualified(self.namespace, name)
 
+    def uses_tf(self) -> bool:
+        """True when the cloud's transform may come from tf (a cloud, and no ``lidar_to_left``)."""
+        return self.depth_type == "cloud" and self.lidar_to_left is None
+
     def roles(self) -> tuple[str, ...]:
-        """The roles subscribed to (``depth`` only when ``depth_type`` is not ``none``)."""
-        return ROLES if self.depth_type != "none" else STEREO_ROLES
+        """The roles subscribed to (``depth`` unless ``depth_type`` is ``none``, ``tf_static`` when :meth:`uses_tf`)."""
+        if self.depth_type == "none":
+            return STEREO_ROLES
+        return (*ROLES, TF_ROLE) if self.uses_tf() else ROLES
 
     def ros_type(self, role: str) -> str:
         """The message type of ``role``."""
+        if role == TF_ROLE:
+            return keys.TF_MESSAGE
         if role == "depth":
             return keys.POINT_CLOUD2 if self.depth_type == "cloud" else keys.IMAGE
         return _ROLE_TYPES[role]
@@ -220,7 +241,10 @@ class StereoAssembler:
         self._reject = reject
         self._clock = clock
         self._limits = topics.limits()
-        self._extrinsic = check_extrinsic(np.asarray(topics.lidar_to_left, dtype=np.float64))
+        given = topics.lidar_to_left
+        self._extrinsic = check_extrinsic(np.asarray(given, dtype=np.float64)) if given is not None else None
+        #: The static transforms received (used when ``lidar_to_left`` is not given).
+        self.tf = StaticTransforms()
         self.sync: Synchronizer[_Msg] = Synchronizer(
             STEREO_ROLES, topics.sync, topics.sync_queue_size, int(topics.sync_tolerance_ms * 1e6)
         )
@@ -239,6 +263,7 @@ class StereoAssembler:
                 "cloud_behind",
                 "cloud_outside",
                 "cloud_nonfinite",
+                "tf_messages",
             ),
             0,
         )
@@ -257,7 +282,7 @@ class StereoAssembler:
         """Count one refusal of ``messages`` received messages (a message, or a stereo set) and report it."""
         self.rejected_by[exc.reason] = self.rejected_by.get(exc.reason, 0) + 1
         self.messages["rejected"] += messages
-        self._reject(f"{self.topics.topic(role) if role in ROLES else role}: {exc}")
+        self._reject(f"{self.topics.topic(role) if role in (*ROLES, TF_ROLE) else role}: {exc}")
 
     def add(self, role: str, payload: bytes | memoryview) -> list[StereoFrame]:
         """Offer one serialized message of ``role``; returns the frames it completes (oldest first)."""
@@ -276,7 +301,13 @@ class StereoAssembler:
         except Ros2Error as exc:
             self._refused(role, exc, 1)
             return []
-        header = msg.header  # type: ignore[attr-defined]  # every supported message has one
+        if role == TF_ROLE:  # static transforms: kept for the clouds to come, no frame of their own
+            assert isinstance(value, list)
+            self.tf.add(value)
+            self.counters["tf_messages"] += 1
+            self.messages["used"] += 1
+            return self._resolve()
+        header = msg.header  # type: ignore[attr-defined]  # every supported message but TFMessage has one
         item = _Msg(msg, rm.stamp_ns(header), time.perf_counter() - t0, value)
         if role == "depth":
             self._depth.append(_Depth(item))
@@ -307,10 +338,13 @@ class StereoAssembler:
         ------
         Ros2Error
             The part's content is unusable (encoding, ``step`` x ``height`` against the data, size
-            limits, a camera_info without a valid ``P``, a cloud without float ``x``/``y``/``z``).
+            limits, a camera_info without a valid ``P``, a cloud without float ``x``/``y``/``z``, a
+            transform that is not rigid).
         """
         if isinstance(msg, rm.CameraInfo):
             return rm.camera_model(msg)
+        if isinstance(msg, rm.TFMessage):
+            return rm.tf_transforms(msg)
         if isinstance(msg, rm.PointCloud2):
             return rm.cloud_to_xyz(msg, self._limits)
         assert isinstance(msg, rm.Image)
@@ -380,8 +414,15 @@ class StereoAssembler:
         except Ros2Error as exc:
             self._refused("stereo pair", exc, len(p))  # the depth message stays free for another set
             return None
+        extrinsic = None
+        if depth_entry is not None and isinstance(depth_entry.item.msg, rm.PointCloud2):
+            try:
+                extrinsic = self._cloud_to_left(depth_entry.item.msg.header.frame_id, lc.frame_id)
+            except Ros2Error as exc:  # the cloud cannot be placed: refused, the frame goes on without depth
+                self._refused("depth", exc, self._take(depth_entry, "rejected"))
+                depth_entry = depth = None
         try:
-            sensor_depth = self._depth_map(depth, lc.p, (h, w)) if depth is not None else None
+            sensor_depth = self._depth_map(depth, lc.p, (h, w), extrinsic) if depth is not None else None
         except Ros2Error as exc:  # the depth message does not fit the set: both are refused
             assert depth_entry is not None
             self._refused("stereo pair", exc, len(p) + self._take(depth_entry, "rejected"))
@@ -417,12 +458,32 @@ class StereoAssembler:
         self._depth_waiting -= 1
         return 1
 
-    def _depth_map(self, depth: _Msg, p: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    def _cloud_to_left(self, cloud_frame: str, left_frame: str) -> np.ndarray:
+        """The 4 x 4 transform of a cloud in ``cloud_frame`` into ``left_frame`` (see the module docstring, 5.).
+
+        Raises
+        ------
+        Ros2Error
+            ``tf``: no ``lidar_to_left`` and no chain of static transforms between the frames.
+        """
+        if self._extrinsic is not None:
+            return self._extrinsic
+        if cloud_frame.lstrip("/") == left_frame.lstrip("/"):
+            return np.eye(4)
+        try:
+            return self.tf.lookup(left_frame, cloud_frame)
+        except LookupError as exc:
+            raise Ros2Error("tf", f"{exc} (or set lidar_to_left)") from None
+
+    def _depth_map(
+        self, depth: _Msg, p: np.ndarray, shape: tuple[int, int], extrinsic: np.ndarray | None
+    ) -> np.ndarray:
         msg, value = depth.msg, depth.value  # checked on arrival
         assert isinstance(value, np.ndarray)
         if isinstance(msg, rm.PointCloud2):
+            assert extrinsic is not None
             xyz = value
-            z, counts = cloud_to_depth(xyz, self._extrinsic, p, shape)
+            z, counts = cloud_to_depth(xyz, extrinsic, p, shape)
             self.counters["cloud_points"] += counts.used
             self.counters["cloud_behind"] += counts.behind
             self.counters["cloud_outside"] += counts.outside
@@ -443,4 +504,4 @@ class StereoAssembler:
         return {**self.counters, "rejected_by": dict(self.rejected_by), "messages": messages, "sync": self.sync.stats()}
 
 
-__all__ = ["ROLES", "STEREO_ROLES", "DepthType", "StereoAssembler", "StereoTopics"]
+__all__ = ["ROLES", "STEREO_ROLES", "TF_ROLE", "DepthType", "StereoAssembler", "StereoTopics"]
