@@ -62,7 +62,9 @@ def test_bag_through_the_service_recorded_to_mcap(tmp_path, scene_name, storage)
     assert bad2 < BAD2_BOUND[scene_name]
     assert bad2 <= msgpack_bad2(scene) + 0.1  # as the same frame through the msgpack wire format
     assert bad2 < plain_bad2(scene) - 1.0  # VPP ran on the cloud's points
-    assert clouds[0].width > 1000 and [f.name for f in clouds[0].fields] == ["x", "y", "z", "rgb"]
+    # organized (the default), as stereo_image_proc's points2: one point per pixel
+    assert (clouds[0].height, clouds[0].width) == gt.shape and not clouds[0].is_dense
+    assert [f.name for f in clouds[0].fields] == ["x", "y", "z", "rgb"]
 
 
 @pytest.mark.parametrize("scene_name", SCENES)

@@ -13,6 +13,7 @@ from helpers.zenoh_loopback import collect
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
 from vpp_service.settings import SettingsError
 from vpp_service.sinks.base import SinkContext, build_sink, parse_sink_options
+from vpp_service.sinks.ros2 import Ros2Encoder, Ros2OutputOptions
 
 
 def result() -> FusionResult:
@@ -60,10 +61,12 @@ def test_all_outputs(sessions, layout):
     assert img[1, 1] == 10.0 and img[0, 0] < d.min_disparity and d.min_disparity == 3.0
     assert d.f == 100.0 and d.t == pytest.approx(0.2)
     assert msgs["depth"].encoding == "32FC1" and np.isnan(msgs["depth"].data.view("<f4")[0])
-    cloud = msgs["points2"]
-    assert cloud.width == 19 and [f.name for f in cloud.fields] == ["x", "y", "z", "rgb"]
-    pts = cloud.data.view("<f4").reshape(19, 4)
-    assert pts[0, 2] == pytest.approx(2.0) and pts[0, 0] == pytest.approx((1 - 2.0) * 2.0 / 100.0)
+    cloud = msgs["points2"]  # organized by default, as stereo_image_proc's points2
+    assert (cloud.height, cloud.width, cloud.is_dense) == (4, 5, False)
+    assert [f.name for f in cloud.fields] == ["x", "y", "z", "rgb"]
+    pts = cloud.data.view("<f4").reshape(4, 5, 4)
+    assert np.isnan(pts[0, 0, :3]).all()  # pixel (0, 0) has no disparity
+    assert pts[0, 1, 2] == pytest.approx(2.0) and pts[0, 1, 0] == pytest.approx((1 - 2.0) * 2.0 / 100.0)
     assert msgs["left_vpp"].encoding == "rgb8" and msgs["right_vpp"].encoding == "rgb8"
     assert sink.stats()["written"] == 1
 
@@ -169,3 +172,36 @@ def test_needs_depth():
 def test_bad_options(opts):
     with pytest.raises(SettingsError):
         parse_sink_options("ros2", opts)
+
+
+@pytest.mark.parametrize("layout", ["organized", "valid_only"])
+def test_points2_layouts(layout):
+    """organized: one point per pixel, row by row, NaN where the depth is invalid (colour kept); valid_only: height 1.
+
+    result(): f 100, cx 2, cy 1.5, disparity 7 + doffs 3 -> Z = 100 x 0.2 / 10 = 2 m everywhere but pixel (0, 0).
+    """
+    res = result()
+    opts = Ros2OutputOptions(outputs=["points2"], points2_layout=layout)
+    payload = Ros2Encoder(opts).encode(res, "points2")
+    cloud = TS.deserialize_cdr(bytes(payload), "sensor_msgs/msg/PointCloud2")  # an independent reader
+    n = 20 if layout == "organized" else 19
+    assert (cloud.height, cloud.width) == ((4, 5) if layout == "organized" else (1, 19))
+    assert cloud.point_step == 16 and cloud.row_step == 16 * cloud.width and cloud.is_dense == (layout != "organized")
+    rec = cloud.data.view("<f4").reshape(n, 4)
+    packed = rec[:, 3].view("<u4")
+    left = res.frame.left.reshape(-1, 3).astype(np.uint32)
+    want_rgb = (left[:, 0] << 16) | (left[:, 1] << 8) | left[:, 2]
+    if layout == "organized":
+        v, u = np.divmod(np.arange(20), 5)
+        assert np.isnan(rec[0, :3]).all() and np.isfinite(rec[1:, :3]).all()
+        np.testing.assert_allclose(rec[1:, 0], (u[1:] - 2.0) * 2.0 / 100.0, rtol=1e-6)
+        np.testing.assert_allclose(rec[1:, 1], (v[1:] - 1.5) * 2.0 / 100.0, rtol=1e-6)
+        np.testing.assert_array_equal(packed, want_rgb)  # the invalid pixel keeps its colour
+    else:
+        np.testing.assert_allclose(rec[:, 2], 2.0, rtol=1e-6)
+        np.testing.assert_array_equal(packed, want_rgb[1:])
+
+
+def test_bad_points2_layout():
+    with pytest.raises(SettingsError, match="points2_layout"):
+        parse_sink_options("ros2", {"points2_layout": "dense"})

@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from helpers.ros2_robot import Robot, StereoRig, camera_info_from_p, cloud_msg, image_msg
+from helpers.ros2_robot import Robot, StereoRig, camera_info_from_p, cloud_msg, image_msg, tf_message
 from vpp_service.sources.base import SourceContext, build_source
 
 LEGACY = (
@@ -260,3 +260,101 @@ def test_a_junk_burst_never_takes_a_ring_slot(sessions):
     assert st["ring_dropped"] == 0 and st["rejected"] == 960, st
     assert st["rejected_by"]["attachment"] == 480 and st["rejected_by"]["too_large"] == 480
     assert [f.stamp_ns for f in frames] == [1_000 + k for k in range(10)]
+
+
+def test_every_received_message_ends_in_exactly_one_count(sessions):
+    """A rejected set, a junk burst, a set refused whole, three good sets and a half set left at shutdown.
+
+    Expected ends (J = 24 junk samples): used 3 x 5; rejected J + 1 (the bgra8 image) + 4 (the set
+    whose camera_info has another size); sync_dropped 3 (the bgra8 set's partners, passed over by the
+    next match); unmatched 4 (the two clouds no set took, the half set's 2 parts).
+    """
+    svc, bot = sessions
+    opts = {"depth_wait_ms": 2000.0, "ring_size": 64, "max_message_mb": 0.01}
+    src = build_source("ros2", opts, SourceContext(rig="r", session=svc))
+    frames: list = []
+    src.open()
+    src.start(lambda f: frames.append(f) or True, lambda reason: None)
+    robot = Robot(bot)
+    try:
+        assert robot.wait_for_subscribers(["left/image_rect", "right/image_rect", "points"])
+        rig = tiny_rig()
+        h, w = rig.left.shape[:2]
+        # a set whose left image is bgra8: the image is refused, its 3 partners and its cloud stay behind
+        robot.put("left/image_rect", image_msg(np.zeros((h, w, 4), np.uint8), 400, "l", encoding="bgra8"))
+        robot.put("right/image_rect", image_msg(rig.right, 400, "r"))
+        robot.put("left/camera_info", camera_info_from_p(400, "l", (w, h), rig.projection(right=False)))
+        robot.put("right/camera_info", camera_info_from_p(400, "r", (w, h), rig.projection(right=True)))
+        robot.put("points", cloud_msg(np.array([[0, 0, -1.0]], np.float32), 400, "l"))  # a point behind the camera
+        for j in range(24):  # junk: no attachment, or over max_message_mb
+            if j % 2:
+                robot.pubs["left/camera_info"].put(b"\x00\x01\x00\x00junk")
+            else:
+                robot.put("right/image_rect", image_msg(np.zeros((64, 64, 3), np.uint8), 9, "j"))
+        for k in range(3):
+            robot.publish(rig, 1_000 + k)
+        # a set whose camera_info is for another image size: joined, then refused whole (4 messages)
+        robot.put("left/image_rect", image_msg(rig.left, 2_000, "l"))
+        robot.put("right/image_rect", image_msg(rig.right, 2_000, "r"))
+        robot.put("left/camera_info", camera_info_from_p(2_000, "l", (w + 2, h), rig.projection(right=False)))
+        robot.put("right/camera_info", camera_info_from_p(2_000, "r", (w + 2, h), rig.projection(right=True)))
+        robot.put("points", cloud_msg(rig.cloud, 2_000, "l"))
+        # half a set: pending at shutdown
+        robot.put("left/image_rect", image_msg(rig.left, 5_000, "l"))
+        robot.put("left/camera_info", camera_info_from_p(5_000, "l", (w, h), rig.projection(right=False)))
+        sent = 5 + 24 + 3 * 5 + 5 + 2
+        assert wait_for(lambda: src.stats()["messages"]["unmatched"] == 4 and len(frames) == 3, timeout=10)
+        assert wait_for(lambda: src.stats()["messages"]["received"] == sent)
+    finally:
+        robot.close()
+        src.stop(2.0)
+    m = src.stats()["messages"]
+    assert m == {
+        "received": sent,
+        "used": 15,
+        "rejected": 24 + 1 + 4,
+        "ring_dropped": 0,
+        "sync_dropped": 3,
+        "pending_dropped": 0,
+        "depth_unused": 0,
+        "unmatched": 4,
+    }, m
+    assert m["received"] == sum(v for k, v in m.items() if k != "received")
+    assert [f.stamp_ns for f in frames] == [1_000, 1_001, 1_002]
+    # each good set took its own cloud (one point in view), not the rejected set's (stamped 0.6 us earlier,
+    # within the tolerance, its one point behind the camera)
+    assert all(np.isfinite(f.sensor_depth).sum() == 1 for f in frames)
+
+
+def test_cloud_placed_by_tf_static(sessions):
+    """A cloud in the LiDAR's own frame, 0.5 m behind the left camera: placed by the chain read from /tf_static.
+
+    tiny_rig: f 100, cx 3.5, cy 2.5; the point (0, 0, 2.5) in 'lidar' is (0, 0, 2) in the left optical frame,
+    on the principal point: pixel (rint 2.5, rint 3.5) = (2, 4) at 2 m.
+    """
+    svc, bot = sessions
+    src = build_source("ros2", {"depth_wait_ms": 2000.0}, SourceContext(rig="r", session=svc))
+    frames: list = []
+    src.open()
+    src.start(lambda f: frames.append(f) or True, lambda reason: None)
+    robot = Robot(bot)
+    try:
+        assert robot.wait_for_subscribers(["left/image_rect", "points"])
+        assert wait_for(lambda: any("/MS/" in t and "%tf_static/tf2_msgs::msg::dds_::TFMessage_/" in t
+                                    and t.endswith("/1:1:1,100:,:,:,,") for t in robot.graph()))  # fmt: skip
+        robot.publish_tf_static(tf_message([("left_optical", "lidar", (0.0, 0.0, -0.5), (0.0, 0.0, 0.0, 1.0))]))
+        assert wait_for(lambda: src.stats()["tf_messages"] == 1)
+        rig = tiny_rig()
+        rig.cloud = np.array([[0.0, 0.0, 2.5]], np.float32)
+        h, w = rig.left.shape[:2]
+        robot.put("points", cloud_msg(rig.cloud, 1_000, "lidar"))
+        robot.put("left/image_rect", image_msg(rig.left, 1_000, "left_optical"))
+        robot.put("right/image_rect", image_msg(rig.right, 1_000, "right_optical"))
+        robot.put("left/camera_info", camera_info_from_p(1_000, "left_optical", (w, h), rig.projection(right=False)))
+        robot.put("right/camera_info", camera_info_from_p(1_000, "right_optical", (w, h), rig.projection(right=True)))
+        assert wait_for(lambda: len(frames) == 1), src.stats()
+    finally:
+        robot.close()
+        src.stop(2.0)
+    assert frames[0].sensor_depth[2, 4] == pytest.approx(2.0) and np.isfinite(frames[0].sensor_depth).sum() == 1
+    assert src.stats()["rejected_by"] == {}

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from helpers.ros2_robot import TS, camera_info_msg, cloud_msg, image_msg
+from helpers.ros2_robot import TS, camera_info_msg, cloud_msg, image_msg, tf_message
 from vpp_service.settings import SettingsError, from_mapping
 from vpp_service.sources.ros2_assembler import StereoAssembler, StereoTopics
 
@@ -113,13 +113,35 @@ def test_depth_nearest_within_tolerance_and_wait():
     assert feed(asm, pair(100_000_000)) == []  # waits for its depth
     clock.t = 0.05
     assert asm.expire() == []
-    frames = asm.add("depth", cloud(95_000_000, z=3.0))  # within 10 ms: used
+    assert asm.add("depth", cloud(95_000_000, z=3.0)) == []  # within 10 ms, but a nearer one may still come
+    clock.t = 0.1  # the wait is over: the nearest there is
+    frames = asm.expire()
     assert len(frames) == 1 and frames[0].sensor_depth[2, 4] == 3.0
     assert feed(asm, pair(200_000_000)) == []
-    clock.t = 0.2  # 150 ms later: no depth came
+    clock.t = 0.25  # 150 ms later: no depth came
     frames = asm.expire()
     assert len(frames) == 1 and frames[0].sensor_depth is None
     assert asm.stats()["no_depth"] == 1
+
+
+@pytest.mark.parametrize("own_first", [True, False])
+def test_depth_choice_waits_for_the_sets_own_message(own_first):
+    # a set 30 ms after the last one: the last set's cloud is within the tolerance, but the set's own
+    # cloud (same stamp) is nearer; whether it comes before or after the images, the set takes it
+    asm, _ = make(depth_tolerance_ms=50.0, depth_wait_ms=10_000.0)
+    assert len(feed(asm, {"depth": cloud(100_000_000, z=3.0)} | pair(100_000_000))) == 1
+    parts = pair(130_000_000)
+    own = {"depth": cloud(130_000_000, z=5.0)}
+    frames = feed(asm, own | parts) if own_first else feed(asm, parts) + feed(asm, own)
+    assert len(frames) == 1 and frames[0].sensor_depth[2, 4] == 5.0
+
+
+def test_later_depth_decides_the_nearest():
+    asm, _ = make(depth_tolerance_ms=10.0, depth_wait_ms=10_000.0)
+    assert feed(asm, pair(100_000_000)) == []
+    assert asm.add("depth", cloud(96_000_000, z=3.0)) == []
+    frames = asm.add("depth", cloud(103_000_000, z=4.0))  # after the pair: nothing nearer can come now
+    assert len(frames) == 1 and frames[0].sensor_depth[2, 4] == 4.0
 
 
 def test_later_depth_ends_the_wait():
@@ -156,6 +178,53 @@ def test_mono_frames():
     asm, _ = make(depth_type="none")
     frames = feed(asm, pair(3, encoding="mono8"))
     assert frames[0].left.shape == (H, W)
+
+
+def tf_static(*entries) -> bytes:
+    return cdr(tf_message(list(entries)), "tf2_msgs/msg/TFMessage")
+
+
+#: The cloud's frame 'lidar' sits 0.5 m behind the left camera (its x y z axes along the camera's).
+LIDAR_BEHIND = ("left", "lidar", (0.0, 0.0, -0.5), (0.0, 0.0, 0.0, 1.0))
+
+
+def test_cloud_transform_from_tf_static():
+    asm, rejects = make()
+    assert asm.topics.roles()[-1] == "tf_static" and asm.topics.topic("tf_static") == "/tf_static"
+    assert asm.add("tf_static", tf_static(LIDAR_BEHIND)) == []
+    xyz = np.array([[0.0, 0.0, 2.5]], np.float32)  # 2.5 m ahead of the LiDAR = 2 m ahead of the camera
+    asm.add("depth", cdr(cloud_msg(xyz, 1_000, "lidar"), "sensor_msgs/msg/PointCloud2"))
+    (f,) = feed(asm, pair(1_000))
+    assert not rejects and f.sensor_depth[2, 4] == pytest.approx(2.0) and np.isfinite(f.sensor_depth).sum() == 1
+    assert asm.stats()["tf_messages"] == 1 and asm.stats()["messages"]["used"] == 6  # tf + 4 + cloud
+
+
+def test_cloud_without_a_transform_is_refused_and_the_frame_goes_on():
+    asm, rejects = make()
+    xyz = np.array([[0.0, 0.0, 2.5]], np.float32)
+    asm.add("depth", cdr(cloud_msg(xyz, 1_000, "lidar"), "sensor_msgs/msg/PointCloud2"))
+    (f,) = feed(asm, pair(1_000))
+    assert f.sensor_depth is None and f.meta["lidar_like"] is False and asm.stats()["no_depth"] == 1
+    assert asm.rejected_by == {"tf": 1} and "no static transform chain from 'lidar' to 'left'" in rejects[0]
+    m = asm.stats()["messages"]
+    assert (m["received"], m["used"], m["rejected"], m["unmatched"]) == (5, 4, 1, 0)
+
+
+def test_configured_extrinsic_wins_and_needs_no_tf():
+    shift = [[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 1.0], [0, 0, 0, 1.0]]  # z + 1 m
+    asm, _ = make(lidar_to_left=shift)
+    assert "tf_static" not in asm.topics.roles()
+    asm.add(
+        "depth", cdr(cloud_msg(np.array([[0.0, 0.0, 1.0]], np.float32), 1_000, "lidar"), "sensor_msgs/msg/PointCloud2")
+    )
+    (f,) = feed(asm, pair(1_000))
+    assert f.sensor_depth[2, 4] == pytest.approx(2.0)
+
+
+def test_bad_tf_message_refused():
+    asm, _ = make()
+    asm.add("tf_static", tf_static(("left", "lidar", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0))))
+    assert asm.rejected_by == {"tf": 1} and asm.stats()["messages"]["rejected"] == 1
 
 
 @pytest.mark.parametrize(

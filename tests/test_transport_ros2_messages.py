@@ -1,4 +1,4 @@
-"""CDR <-> numpy for Image, CameraInfo, PointCloud2, DisparityImage: a hand-decoded Image, bounds, conventions."""
+"""CDR <-> numpy for Image, CameraInfo, PointCloud2, DisparityImage, TFMessage: a hand-decoded Image, bounds."""
 
 from __future__ import annotations
 
@@ -7,10 +7,11 @@ import struct
 import numpy as np
 import pytest
 
+from helpers.ros2_robot import TS, tf_message
 from vpp_service.frame import Calibration
 from vpp_service.transport.ros2 import messages as m
 from vpp_service.transport.ros2.errors import Ros2Error
-from vpp_service.transport.ros2.keys import CAMERA_INFO, DISPARITY_IMAGE, IMAGE, POINT_CLOUD2
+from vpp_service.transport.ros2.keys import CAMERA_INFO, DISPARITY_IMAGE, IMAGE, POINT_CLOUD2, TF_MESSAGE, type_hash
 
 LIMITS = m.Limits()
 
@@ -170,6 +171,17 @@ def test_cloud_fields_and_layout():
         m.cloud_to_xyz(msg, LIMITS)
 
 
+def test_organized_cloud():
+    xyz = np.array([[1, 2, 3], [np.nan] * 3, [4, 5, 6], [7, 8, 9], [1, 1, 1], [2, 2, 2]], np.float32)
+    msg = roundtrip(m.xyz_cloud_message(xyz, m.make_header(0, "left"), shape=(2, 3)), POINT_CLOUD2, m.PointCloud2)
+    assert (msg.height, msg.width, msg.row_step, msg.is_dense) == (2, 3, 36, False)
+    np.testing.assert_array_equal(m.cloud_to_xyz(msg, LIMITS), xyz)
+    dense = m.xyz_cloud_message(xyz[[0, 2, 3, 4]], m.make_header(0, "left"), shape=(2, 2))
+    assert dense.is_dense and dense.height == 2
+    with pytest.raises(ValueError, match="shape"):
+        m.xyz_cloud_message(xyz, m.make_header(0, "left"), shape=(2, 2))
+
+
 def test_cloud_big_endian_float64_and_padding():
     pts = np.zeros(3, dtype=[("pad", "u1", 4), ("x", ">f8"), ("y", ">f8"), ("z", ">f8"), ("i", ">f4")])
     pts["x"], pts["y"], pts["z"] = [1, 2, 3], [4, 5, 6], [7, 8, 9]
@@ -221,3 +233,36 @@ def test_array_to_image_checks():
     msg = m.array_to_image(np.zeros((2, 3), np.float32), m.make_header(0, ""), "32FC1")
     assert msg.step == 12 and msg.data.size == 24
     assert struct.unpack("<I", bytes(m.serialize(msg, IMAGE))[-28:-24])[0] == 24
+
+
+def test_tf_message_type_hash():
+    # REP 2011 hash of tf2_msgs/msg/TFMessage, computed with rosbags' Jazzy type store (an independent implementation)
+    golden = "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087"
+    assert type_hash(TF_MESSAGE) == TS.hash_rihs01(TF_MESSAGE) == golden
+
+
+def test_tf_transforms():
+    s = 0.5**0.5
+    # 90 degrees about z: (x, y, z, w) = (0, 0, sin 45, cos 45) -> R = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]
+    msg = tf_message([("/base_link", "velodyne", (1.0, 2.0, 3.0), (0.0, 0.0, s, s))])
+    payload = bytes(TS.serialize_cdr(msg, TF_MESSAGE, little_endian=True))
+    (t,) = m.tf_transforms(m.deserialize(payload, TF_MESSAGE, m.TFMessage, LIMITS))
+    assert (t.parent, t.child) == ("base_link", "velodyne")  # leading / dropped, as tf2 does
+    want = np.array([[0, -1, 0, 1], [1, 0, 0, 2], [0, 0, 1, 3], [0, 0, 0, 1]], np.float64)
+    np.testing.assert_allclose(t.matrix, want, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "entry",
+    [
+        ("base", "base", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)),  # its own parent
+        ("", "lidar", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)),  # no parent
+        ("base", "lidar", (0.0, float("nan"), 0.0), (0.0, 0.0, 0.0, 1.0)),
+        ("base", "lidar", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0)),  # not a rotation
+        ("base", "lidar", (0.0, 0.0, 0.0), (0.0, 0.0, 0.1, 1.0)),  # |q|^2 = 1.01
+    ],
+)
+def test_bad_transforms_refused(entry):
+    with pytest.raises(Ros2Error) as err:
+        m.tf_transforms(tf_message([entry]))
+    assert err.value.reason == "tf"

@@ -25,6 +25,7 @@ HASH = {
     "sensor_msgs/msg/CameraInfo": "RIHS01_b3dfd68ff46c9d56c80fd3bd4ed22c7a4ddce8c8348f2f59c299e73118e7e275",
     "sensor_msgs/msg/PointCloud2": "RIHS01_9198cabf7da3796ae6fe19c4cb3bdd3525492988c70522628af5daa124bae2b5",
     "stereo_msgs/msg/DisparityImage": "RIHS01_1ec1ff6b5bace919e4544a37f2d96ead9f81783701b7b7a4d97a09325ecf2711",
+    "tf2_msgs/msg/TFMessage": TS.hash_rihs01("tf2_msgs/msg/TFMessage"),
 }
 QOS = "1:2:1,10:,:,:,,"
 
@@ -216,6 +217,15 @@ class Robot:
         self.put("right/camera_info", camera_info_from_p(stamp_ns, "right_optical", (w, h), rig.projection(right=True)))
         self.put("points", cloud_msg(rig.cloud, stamp_ns, frame_id))
 
+    def publish_tf_static(self, msg: object) -> None:
+        """Put one ``TFMessage`` on ``/tf_static`` (a publisher declared on first use), with an attachment."""
+        ros_type = "tf2_msgs/msg/TFMessage"
+        if "/tf_static" not in self.pubs:
+            self.topics["/tf_static"] = ros_type
+            self.gid["/tf_static"] = bytes([99] * 16)
+            self.pubs["/tf_static"] = self.session.declare_publisher(key(self.domain, "/tf_static", ros_type))
+        self.put("/tf_static", msg)
+
     def subscribe_disparity(self, topic: str = "/stereo/disparity") -> zenoh.Subscriber:
         ros_type = "stereo_msgs/msg/DisparityImage"
         self.tokens.append(
@@ -275,3 +285,20 @@ def write_bag(path: str, storage: str, rig: StereoRig, stamps: list[int], namesp
             }
             for i, (n, msg) in enumerate(msgs.items()):
                 writer.write(conns[n], stamp + i * 1000, bytes(TS.serialize_cdr(msg, types[n], little_endian=True)))
+
+
+def tf_message(
+    transforms: list[tuple[str, str, tuple[float, float, float], tuple[float, float, float, float]]],
+) -> object:
+    """A ``tf2_msgs/TFMessage`` of ``(parent, child, translation xyz, rotation quaternion xyzw)`` entries."""
+    g = "geometry_msgs/msg/"
+    return T["tf2_msgs/msg/TFMessage"](
+        transforms=[
+            T[g + "TransformStamped"](
+                header=header(0, parent),
+                child_frame_id=child,
+                transform=T[g + "Transform"](translation=T[g + "Vector3"](*xyz), rotation=T[g + "Quaternion"](*q)),
+            )
+            for parent, child, xyz, q in transforms
+        ]
+    )

@@ -12,8 +12,11 @@ Under ``namespace`` (default ``/stereo``) and ``domain_id`` (default 0), outputs
 ``depth`` -> ``depth``
     ``sensor_msgs/Image`` ``32FC1``, metres, NaN = invalid.
 ``points2`` -> ``points2``
-    ``sensor_msgs/PointCloud2``, x y z rgb in the left optical frame, valid pixels only
-    (unorganized: height 1).
+    ``sensor_msgs/PointCloud2``, x y z rgb in the left optical frame. ``points2_layout =
+    "organized"`` (default) as stereo_image_proc's point_cloud_node publishes it: height =
+    image rows, width = columns, one point per pixel, invalid pixels NaN (their colour kept),
+    ``is_dense`` false, so nodes that index the cloud by pixel work on it; ``"valid_only"``:
+    the valid pixels only, unorganized (height 1), a smaller message.
 ``left_vpp`` / ``right_vpp`` -> ``left/image_vpp`` / ``right/image_vpp``
     The painted pair, ``rgb8``.
 
@@ -35,6 +38,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 
@@ -78,6 +82,9 @@ class Ros2OutputOptions:
         Smallest disparity step (1/16 for OpenCV's matchers).
     invalid : {"below_min", "nan"}
         Value of invalid disparity pixels.
+    points2_layout : {"organized", "valid_only"}
+        ``points2`` as stereo_image_proc publishes it (one point per pixel, invalid ones NaN), or
+        the valid points only (height 1).
     queue_size : int
         Results buffered between the pipeline and the writing thread.
     """
@@ -90,6 +97,7 @@ class Ros2OutputOptions:
     max_disparity: float = 0.0
     delta_d: float = 1.0 / 16.0
     invalid: rm.Invalid = "below_min"
+    points2_layout: Literal["organized", "valid_only"] = "organized"
     queue_size: int = 4
 
     def __post_init__(self) -> None:
@@ -106,6 +114,8 @@ class Ros2OutputOptions:
             raise ValueError(f"delta_d must be in (0, 1], got {self.delta_d}")
         if not 1 <= self.queue_size <= 1000:
             raise ValueError(f"queue_size must be in [1, 1000], got {self.queue_size}")
+        if self.points2_layout not in ("organized", "valid_only"):
+            raise ValueError(f"points2_layout must be 'organized' or 'valid_only', got {self.points2_layout!r}")
 
     def topic(self, output: str) -> str:
         """The fully-qualified topic of ``output``."""
@@ -143,16 +153,28 @@ class Ros2SinkOptions(Ros2OutputOptions):
         keys.check_distro(self.ros_distro)
 
 
-def points_xyz_rgb(depth: np.ndarray, image: np.ndarray, calib: Calibration) -> tuple[np.ndarray, np.ndarray]:
-    """Valid pixels of a depth map as N x 3 points in the left optical frame and N x 3 uint8 colours."""
+def points_xyz_rgb(
+    depth: np.ndarray, image: np.ndarray, calib: Calibration, organized: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """A depth map as N x 3 points in the left optical frame and N x 3 uint8 colours.
+
+    ``organized``: every pixel, row by row (N = H x W), NaN where the depth is not valid (the
+    colour kept, as stereo_image_proc does); else the valid pixels only.
+    """
     h, w = depth.shape
     cx = calib.cx if calib.cx is not None else (w - 1) / 2
     cy = calib.cy if calib.cy is not None else (h - 1) / 2
     valid = np.isfinite(depth) & (depth > 0)
-    v, u = np.nonzero(valid)
-    z = depth[valid].astype(np.float32)
+    rgb_all = image if image.ndim == 3 else np.repeat(image[:, :, None], 3, axis=2)
+    if organized:
+        v, u = np.mgrid[0:h, 0:w].reshape(2, -1)
+        z = np.where(valid, depth, np.nan).reshape(-1).astype(np.float32)
+        rgb = rgb_all.reshape(-1, 3)
+    else:
+        v, u = np.nonzero(valid)
+        z = depth[valid].astype(np.float32)
+        rgb = rgb_all[valid]
     xyz = np.stack([(u - cx) * z / calib.f, (v - cy) * z / calib.f, z], axis=1).astype(np.float32)
-    rgb = image[valid] if image.ndim == 3 else np.repeat(image[valid][:, None], 3, axis=1)
     return xyz, np.ascontiguousarray(rgb, dtype=np.uint8)
 
 
@@ -192,8 +214,9 @@ class Ros2Encoder:
         elif name == "points2":
             if result.depth is None or calib is None:
                 return None
-            xyz, rgb = points_xyz_rgb(result.depth, result.frame.left, calib)
-            msg = rm.xyz_cloud_message(xyz, header, rgb)
+            organized = self.options.points2_layout == "organized"
+            xyz, rgb = points_xyz_rgb(result.depth, result.frame.left, calib, organized)
+            msg = rm.xyz_cloud_message(xyz, header, rgb, result.depth.shape if organized else None)
         else:
             img = result.left_vpp if name == "left_vpp" else result.right_vpp
             if img is None:

@@ -7,6 +7,11 @@ recording never overwrites). The pipeline runs this sink on its own thread behin
 that never drops (:meth:`Rosbag2Sink.queue_spec`: ``block``, a recording is lossless and the
 pipeline waits instead); that thread creates the bag (:meth:`~Rosbag2Sink.start`), writes it and
 finishes it (:meth:`~Rosbag2Sink.finish`: ``metadata.yaml``), so sqlite3 handles stay on one thread.
+
+Like ``ros2 bag record``, each topic carries the QoS its publisher offers (the ``ros2`` sink's
+publishers: reliable, volatile, keep last 10, :data:`~vpp_service.transport.ros2.keys.DEFAULT_PUBLISHER`)
+and the bag the distribution it is for (``ros_distro``, in that distribution's metadata form),
+so ``ros2 bag play`` republishes with that QoS.
 """
 
 from __future__ import annotations
@@ -17,7 +22,8 @@ from pathlib import Path
 from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import SINKS, QueueSpec, Sink, SinkContext
 from vpp_service.sinks.ros2 import OUTPUTS, Ros2Encoder, Ros2OutputOptions
-from vpp_service.transport.ros2.bag import BagWriter, Storage
+from vpp_service.transport.ros2.bag import DISTRO_VERSIONS, BagWriter, RosDistro, Storage
+from vpp_service.transport.ros2.keys import DEFAULT_PUBLISHER
 from vpp_service.transport.ros2.messages import stamp_ns
 
 
@@ -31,15 +37,21 @@ class Rosbag2SinkOptions(Ros2OutputOptions):
         Bag folder to create (required; must not exist).
     storage : {"mcap", "sqlite3"}
         Storage format.
+    ros_distro : {"jazzy", "humble"}
+        The ROS distribution that plays the bag: ``metadata.yaml`` in its form (version 9, or
+        8 with Humble's QoS encoding) and its name in ``ros_distro``.
     """
 
     path: str = ""
     storage: Storage = "mcap"
+    ros_distro: RosDistro = "jazzy"
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if not self.path:
             raise ValueError("path: required (the bag folder to create)")
+        if self.ros_distro not in DISTRO_VERSIONS:
+            raise ValueError(f"ros_distro must be one of {', '.join(DISTRO_VERSIONS)}, got {self.ros_distro!r}")
 
 
 @SINKS.register("rosbag2")
@@ -78,7 +90,7 @@ class Rosbag2Sink(Sink):
 
     def start(self) -> None:
         """Create the bag, on the thread that writes it (sqlite3 handles stay on one thread)."""
-        self._bag = BagWriter(self.options.path, self.options.storage)
+        self._bag = BagWriter(self.options.path, self.options.storage, self.options.ros_distro)
 
     def finish(self) -> None:
         """Finish the bag (``metadata.yaml``), on the thread that wrote it."""
@@ -97,7 +109,8 @@ class Rosbag2Sink(Sink):
             if payload is None:
                 self.count("missing")
                 continue
-            self._bag.write(self.options.topic(name), OUTPUTS[name][1], t, payload)
+            # the QoS the ros2 sink's publisher of this output offers
+            self._bag.write(self.options.topic(name), OUTPUTS[name][1], t, payload, DEFAULT_PUBLISHER)
             self.count("messages")
         self.count("written")
 

@@ -3,7 +3,8 @@
 Under ``namespace`` (default ``/stereo``) and ``domain_id`` (default 0) it subscribes
 to ``left/image_rect``, ``left/camera_info``, ``right/image_rect``, ``right/camera_info``
 and the sparse depth on ``points`` (a ``PointCloud2``, or with ``depth_type = "image"``
-a depth ``Image`` registered to the left camera); every name is an option, and an
+a depth ``Image`` registered to the left camera), and, for a cloud without a configured
+``lidar_to_left``, the static transforms on ``/tf_static``; every name is an option, and an
 absolute name (``/velodyne_points``) ignores the namespace. It declares a node token
 and one subscriber token per topic, so lazy publishers start sending. The tokens carry
 ``ros_distro``'s type-hash segment (``humble``: ``TypeHashNotSupported``) and the QoS the
@@ -20,7 +21,10 @@ source's thread checks each sample's size (``max_message_mb``) and attachment (b
 rmw_zenoh layouts accepted), then hands the payload to the
 :class:`~vpp_service.sources.ros2_assembler.StereoAssembler` (sync, calibration from
 camera_info, cloud -> depth, counted drops). Refusals are counted by cause in
-``stats()["rejected_by"]``.
+``stats()["rejected_by"]``, and ``stats()["messages"]`` follows every sample the callback
+received to the one end it came to: ``used``, ``rejected``, ``ring_dropped``,
+``sync_dropped``, ``pending_dropped``, ``depth_unused`` or, still held (in a ring or the
+assembler; at shutdown: never matched), ``unmatched``; ``received`` is their sum.
 """
 
 from __future__ import annotations
@@ -33,7 +37,7 @@ from typing import TYPE_CHECKING
 from vpp_service.frame import StereoFrame
 from vpp_service.queueing import ReceiveRings
 from vpp_service.sources.base import SOURCES, Emit, Reject, Source, SourceContext
-from vpp_service.sources.ros2_assembler import StereoAssembler, StereoTopics
+from vpp_service.sources.ros2_assembler import TF_ROLE, StereoAssembler, StereoTopics
 from vpp_service.transport.ros2 import attachment, keys
 from vpp_service.transport.ros2.errors import Ros2Error
 from vpp_service.transport.ros2.node import RosNode
@@ -104,9 +108,9 @@ class Ros2Source(Source):
         self._node.open()
         self._rings = ReceiveRings(dict.fromkeys(o.roles(), o.ring_size), self.input_policy)
         for role in o.roles():
-            self._node.subscribe(
-                o.topic(role), o.ros_type(role), functools.partial(self._on_sample, role), self.subscription_qos()
-            )
+            # /tf_static with tf2_ros' static listener QoS (transient local), the rest as the source keeps them
+            qos = keys.TF_STATIC if role == TF_ROLE else self.subscription_qos()
+            self._node.subscribe(o.topic(role), o.ros_type(role), functools.partial(self._on_sample, role), qos)
 
     def subscription_qos(self) -> keys.Qos:
         """What the source keeps per topic: best effort, volatile, ``ring_size`` deep, keep all under ``block``."""
@@ -131,6 +135,7 @@ class Ros2Source(Source):
         burst cannot evict genuine messages; the input policy decides what a full ring does.
         """
         assert self._rings is not None  # subscribed only after open built them
+        self.count("received")
         try:
             size = len(sample.payload)
             if size > self._max_bytes:
@@ -138,7 +143,6 @@ class Ros2Source(Source):
             att = sample.attachment
             _, layout = attachment.decode(att.to_bytes() if att is not None else None)
         except Ros2Error as exc:
-            self.count("received")
             self.count("rejected")
             self.count(f"rejected.{exc.reason}")
             if self._reject is not None:
@@ -161,7 +165,6 @@ class Ros2Source(Source):
                 if sample is None:
                     continue
                 got = True
-                self.count("received")
                 for frame in self._handle(asm, role, sample):
                     self.count("emitted")
                     emit(frame)
@@ -209,7 +212,23 @@ class Ros2Source(Source):
         for cause, n in early.items():  # refused by the callback's cheap checks, before a ring slot
             by_cause[cause] = by_cause.get(cause, 0) + n
         out["rejected_by"] = by_cause
+        out["messages"] = self._ledger(counters, sum(early.values()))
         return out
+
+    def _ledger(self, counters: dict[str, int], early_rejected: int) -> dict[str, int]:
+        """Where the received samples ended (see the module docstring): the callback's share plus the assembler's."""
+        rings, asm = self._rings, self._assembler
+        held = asm.messages if asm is not None else {}
+        return {
+            "received": counters.get("received", 0),
+            "used": held.get("used", 0),
+            "rejected": early_rejected + held.get("rejected", 0),
+            "ring_dropped": rings.dropped_total if rings is not None else 0,
+            "sync_dropped": held.get("sync_dropped", 0),
+            "pending_dropped": held.get("pending_dropped", 0),
+            "depth_unused": held.get("depth_unused", 0),
+            "unmatched": (len(rings) if rings is not None else 0) + (asm.unmatched() if asm is not None else 0),
+        }
 
     def losses(self) -> dict[str, int]:
         """Valid messages lost in this source, by cause: the rings (``latest``), the stereo synchronizer."""

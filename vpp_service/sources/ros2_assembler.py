@@ -10,20 +10,35 @@
    (:class:`~vpp_service.transport.sync.Synchronizer`): ``exact`` = identical header
    stamps, ``approximate`` = stamps within ``sync_tolerance_ms``.
 3. A complete pair takes the depth message (``PointCloud2`` or a depth ``Image``) with
-   the nearest stamp within ``depth_tolerance_ms``. It waits for one at most
-   ``depth_wait_ms`` (wall clock) or until a later depth message shows none will come;
-   then it goes on without depth (counted ``no_depth``: processed without VPP).
+   the nearest stamp within ``depth_tolerance_ms``, and decides only once no message yet
+   to come can be nearer: when one has the pair's own stamp, or one stamped after the
+   pair has arrived (the depth topic is in stamp order). Until then it waits, at most
+   ``depth_wait_ms`` (wall clock); then it takes the nearest one there is within the
+   tolerance, or goes on without depth (counted ``no_depth``: processed without VPP). So
+   the choice depends on the stamps, not on whether the pair's own cloud came before or
+   after its images.
 4. Calibration comes from the two camera_info messages
-   (:func:`~vpp_service.transport.ros2.messages.stereo_calibration`); the cloud is moved by
-   ``lidar_to_left`` and projected with the left ``P``
+   (:func:`~vpp_service.transport.ros2.messages.stereo_calibration`); the cloud is moved into
+   the left optical frame and projected with the left ``P``
    (:func:`~vpp_service.transport.ros2.cloud.cloud_to_depth`). A frame with a cloud
    carries ``meta["lidar_like"] = True``, so the fusion step's ``auto`` depth filter
    removes its see-through points (:mod:`vpp_service.vpp.see_through`); a depth image
    is taken as registered to the left view (``False``).
+5. The cloud's transform into the left optical frame: ``lidar_to_left`` when the
+   configuration gives it; else identity when the cloud's ``header.frame_id`` is the left
+   camera_info's, else the chain of static transforms received on ``/tf_static``
+   (``tf_topic``, role ``tf_static``; :class:`~vpp_service.transport.ros2.tf.StaticTransforms`)
+   from the cloud's frame to the left camera's. Without such a chain the cloud is refused
+   (cause ``tf``) and the frame goes on without depth.
 
 Every refused message or pair is counted by cause in :attr:`StereoAssembler.rejected_by`
-and reported through ``reject``; every message that never reaches a frame is counted
-(``sync_dropped``, ``depth_unused``, ``pending_dropped``).
+and reported through ``reject``. :attr:`StereoAssembler.messages` follows every message
+offered to the end it comes to, in exactly one count: ``used`` (in a frame), ``rejected``
+(refused, alone or with its stereo set), ``sync_dropped`` (passed over by the stereo
+sync), ``pending_dropped`` (its complete set pushed out while waiting for depth),
+``depth_unused`` (a depth message pushed out unused), or, while it is still held,
+``unmatched`` (waiting for partners; at shutdown: never matched). So ``received`` is
+always the sum of the others.
 """
 
 from __future__ import annotations
@@ -31,7 +46,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -41,6 +56,7 @@ from vpp_service.transport.ros2 import keys
 from vpp_service.transport.ros2 import messages as rm
 from vpp_service.transport.ros2.cloud import check_extrinsic, cloud_to_depth
 from vpp_service.transport.ros2.errors import Ros2Error
+from vpp_service.transport.ros2.tf import StaticTransforms
 from vpp_service.transport.sync import Synchronizer
 from vpp_service.vpp.see_through import LIDAR_LIKE
 
@@ -48,6 +64,8 @@ from vpp_service.vpp.see_through import LIDAR_LIKE
 STEREO_ROLES = ("left_image", "left_info", "right_image", "right_info")
 #: Every role (``depth`` only when a depth topic is used).
 ROLES = (*STEREO_ROLES, "depth")
+#: The role of the static transforms (only when the cloud's transform comes from tf).
+TF_ROLE = "tf_static"
 #: What the depth topic carries.
 DepthType = Literal["cloud", "image", "none"]
 
@@ -57,8 +75,6 @@ _ROLE_TYPES = {
     "left_info": keys.CAMERA_INFO,
     "right_info": keys.CAMERA_INFO,
 }
-
-_IDENTITY = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
 
 
 @dataclass(frozen=True)
@@ -76,8 +92,12 @@ class StereoTopics:
         registered to the left camera (``"image"``: ``32FC1`` metres or ``16UC1`` mm).
     depth_type : {"cloud", "image", "none"}
         What ``depth_topic`` carries; ``none`` = no depth subscription.
-    lidar_to_left : list of list of float
-        4 x 4 transform from the cloud's frame to the left optical frame (rows).
+    lidar_to_left : list of list of float or None
+        4 x 4 transform from the cloud's frame to the left optical frame (rows). None (default):
+        identity when the cloud's frame is the left camera's, else from ``tf_topic``.
+    tf_topic : str
+        The static transforms (``tf2_msgs/TFMessage``), subscribed when the cloud's transform
+        comes from tf (``depth_type = "cloud"`` and no ``lidar_to_left``).
     sync : {"exact", "approximate"}
         Stereo matching rule (stereo_image_proc's ``approximate_sync``).
     sync_queue_size : int
@@ -103,7 +123,8 @@ class StereoTopics:
     right_info: str = "right/camera_info"
     depth_topic: str = "points"
     depth_type: DepthType = "cloud"
-    lidar_to_left: list[list[float]] = field(default_factory=lambda: [list(r) for r in _IDENTITY])
+    lidar_to_left: list[list[float]] | None = None
+    tf_topic: str = "/tf_static"
     sync: Literal["exact", "approximate"] = "exact"
     sync_queue_size: int = 5
     sync_tolerance_ms: float = 10.0
@@ -116,7 +137,8 @@ class StereoTopics:
     def __post_init__(self) -> None:
         for role in ROLES:
             self.topic(role)  # validates the names
-        check_extrinsic(np.asarray(self.lidar_to_left, dtype=np.float64))
+        if self.lidar_to_left is not None:
+            check_extrinsic(np.asarray(self.lidar_to_left, dtype=np.float64))
         if not 1 <= self.sync_queue_size <= 1000:
             raise ValueError(f"sync_queue_size must be in [1, 1000], got {self.sync_queue_size}")
         for name in ("sync_tolerance_ms", "depth_tolerance_ms", "depth_wait_ms"):
@@ -130,15 +152,23 @@ class StereoTopics:
 
     def topic(self, role: str) -> str:
         """The fully-qualified topic of ``role``."""
-        name = self.depth_topic if role == "depth" else getattr(self, role)
+        name = {"depth": self.depth_topic, TF_ROLE: self.tf_topic}.get(role) or getattr(self, role)
         return keys.fully_qualified(self.namespace, name)
 
+    def uses_tf(self) -> bool:
+        """True when the cloud's transform may come from tf (a cloud, and no ``lidar_to_left``)."""
+        return self.depth_type == "cloud" and self.lidar_to_left is None
+
     def roles(self) -> tuple[str, ...]:
-        """The roles subscribed to (``depth`` only when ``depth_type`` is not ``none``)."""
-        return ROLES if self.depth_type != "none" else STEREO_ROLES
+        """The roles subscribed to (``depth`` unless ``depth_type`` is ``none``, ``tf_static`` when :meth:`uses_tf`)."""
+        if self.depth_type == "none":
+            return STEREO_ROLES
+        return (*ROLES, TF_ROLE) if self.uses_tf() else ROLES
 
     def ros_type(self, role: str) -> str:
         """The message type of ``role``."""
+        if role == TF_ROLE:
+            return keys.TF_MESSAGE
         if role == "depth":
             return keys.POINT_CLOUD2 if self.depth_type == "cloud" else keys.IMAGE
         return _ROLE_TYPES[role]
@@ -164,6 +194,13 @@ class _Pair:
     since: float
 
 
+@dataclass
+class _Depth:
+    item: _Msg
+    #: ``waiting`` (no frame took it yet), ``used`` (in a frame) or ``rejected`` (its content refused a set).
+    state: Literal["waiting", "used", "rejected"] = "waiting"
+
+
 class StereoAssembler:
     """Join serialized ROS 2 messages into stereo frames (see the module docstring).
 
@@ -181,10 +218,15 @@ class StereoAssembler:
     Attributes
     ----------
     counters : dict
-        ``frames``, ``no_depth``, ``sync_dropped``, ``depth_unused``, ``pending_dropped``,
-        ``cloud_points``, ``cloud_behind``, ``cloud_outside``, ``cloud_nonfinite``.
+        ``frames``, ``no_depth``, ``sync_dropped`` (messages), ``depth_unused`` (messages),
+        ``pending_dropped`` (complete sets), ``cloud_points``, ``cloud_behind``,
+        ``cloud_outside``, ``cloud_nonfinite``.
     rejected_by : dict
-        Refused messages or pairs per cause (``too_large``, ``cdr``, ``encoding``, ...).
+        Refusals per cause (``too_large``, ``cdr``, ``encoding``, ...): one per refused message or set.
+    messages : dict
+        Where every offered message ended, in messages (see the module docstring): ``received``,
+        ``used``, ``rejected``, ``sync_dropped``, ``pending_dropped``, ``depth_unused``;
+        :meth:`stats` adds ``unmatched`` (those still held).
     """
 
     def __init__(
@@ -199,12 +241,16 @@ class StereoAssembler:
         self._reject = reject
         self._clock = clock
         self._limits = topics.limits()
-        self._extrinsic = check_extrinsic(np.asarray(topics.lidar_to_left, dtype=np.float64))
+        given = topics.lidar_to_left
+        self._extrinsic = check_extrinsic(np.asarray(given, dtype=np.float64)) if given is not None else None
+        #: The static transforms received (used when ``lidar_to_left`` is not given).
+        self.tf = StaticTransforms()
         self.sync: Synchronizer[_Msg] = Synchronizer(
             STEREO_ROLES, topics.sync, topics.sync_queue_size, int(topics.sync_tolerance_ms * 1e6)
         )
         self._pending: deque[_Pair] = deque()
-        self._depth: deque[tuple[_Msg, list[bool]]] = deque()
+        self._depth: deque[_Depth] = deque()
+        self._depth_waiting = 0  # entries of _depth still "waiting" (kept as a count: stats() runs on other threads)
         self._seq = 0
         self.counters: dict[str, int] = dict.fromkeys(
             (
@@ -217,50 +263,72 @@ class StereoAssembler:
                 "cloud_behind",
                 "cloud_outside",
                 "cloud_nonfinite",
+                "tf_messages",
             ),
             0,
         )
         self.rejected_by: dict[str, int] = {}
+        self.messages: dict[str, int] = dict.fromkeys(
+            ("received", "used", "rejected", "sync_dropped", "pending_dropped", "depth_unused"), 0
+        )
 
     # ----------------------------------------------------------------- input
     def refuse(self, role: str, exc: Ros2Error) -> None:
-        """Count and report a refused message of ``role``."""
+        """Count and report a message of ``role`` refused before it was offered (e.g. recorded with another type)."""
+        self.messages["received"] += 1
+        self._refused(role, exc, 1)
+
+    def _refused(self, role: str, exc: Ros2Error, messages: int) -> None:
+        """Count one refusal of ``messages`` received messages (a message, or a stereo set) and report it."""
         self.rejected_by[exc.reason] = self.rejected_by.get(exc.reason, 0) + 1
-        self._reject(f"{self.topics.topic(role) if role in ROLES else role}: {exc}")
+        self.messages["rejected"] += messages
+        self._reject(f"{self.topics.topic(role) if role in (*ROLES, TF_ROLE) else role}: {exc}")
 
     def add(self, role: str, payload: bytes | memoryview) -> list[StereoFrame]:
         """Offer one serialized message of ``role``; returns the frames it completes (oldest first)."""
         if role not in self.topics.roles():
             raise ValueError(f"role must be one of {list(self.topics.roles())}, got {role!r}")
+        self.messages["received"] += 1
         t0 = time.perf_counter()
         ros_type = self.topics.ros_type(role)
         try:
             msg: object = rm.deserialize(payload, ros_type, rm.message_class(ros_type), self._limits)
         except Ros2Error as exc:
-            self.refuse(role, exc)
+            self._refused(role, exc, 1)
             return []
         try:  # the content too, on arrival: a bad part never takes the slot of a valid one with its stamp
             value = self._checked(role, msg)
         except Ros2Error as exc:
-            self.refuse(role, exc)
+            self._refused(role, exc, 1)
             return []
-        header = msg.header  # type: ignore[attr-defined]  # every supported message has one
+        if role == TF_ROLE:  # static transforms: kept for the clouds to come, no frame of their own
+            assert isinstance(value, list)
+            self.tf.add(value)
+            self.counters["tf_messages"] += 1
+            self.messages["used"] += 1
+            return self._resolve()
+        header = msg.header  # type: ignore[attr-defined]  # every supported message but TFMessage has one
         item = _Msg(msg, rm.stamp_ns(header), time.perf_counter() - t0, value)
         if role == "depth":
-            self._depth.append((item, [False]))
+            self._depth.append(_Depth(item))
+            self._depth_waiting += 1
             while len(self._depth) > 2 * self.topics.sync_queue_size:
-                _, used = self._depth.popleft()
-                if not used[0]:
+                if self._depth.popleft().state == "waiting":
+                    self._depth_waiting -= 1
                     self.counters["depth_unused"] += 1
+                    self.messages["depth_unused"] += 1
             return self._resolve()
-        before = self.sync.dropped
+        before = self.sync.dropped + self.sync.inconsistent
         joined = self.sync.add(role, item.stamp_ns, item.stamp_ns, item)
-        self.counters["sync_dropped"] += self.sync.dropped - before
+        passed_over = self.sync.dropped + self.sync.inconsistent - before
+        self.counters["sync_dropped"] += passed_over
+        self.messages["sync_dropped"] += passed_over
         if joined is not None:
             self._pending.append(_Pair(joined, joined["left_info"].stamp_ns, self._clock()))
             while len(self._pending) > self.topics.sync_queue_size:
-                self._pending.popleft()
+                gone = self._pending.popleft()
                 self.counters["pending_dropped"] += 1
+                self.messages["pending_dropped"] += len(gone.parts)
         return self._resolve()
 
     def _checked(self, role: str, msg: object) -> object:
@@ -270,10 +338,13 @@ class StereoAssembler:
         ------
         Ros2Error
             The part's content is unusable (encoding, ``step`` x ``height`` against the data, size
-            limits, a camera_info without a valid ``P``, a cloud without float ``x``/``y``/``z``).
+            limits, a camera_info without a valid ``P``, a cloud without float ``x``/``y``/``z``, a
+            transform that is not rigid).
         """
         if isinstance(msg, rm.CameraInfo):
             return rm.camera_model(msg)
+        if isinstance(msg, rm.TFMessage):
+            return rm.tf_transforms(msg)
         if isinstance(msg, rm.PointCloud2):
             return rm.cloud_to_xyz(msg, self._limits)
         assert isinstance(msg, rm.Image)
@@ -290,37 +361,45 @@ class StereoAssembler:
         return self._resolve(final=True)
 
     # ---------------------------------------------------------------- output
-    def _nearest_depth(self, stamp: int) -> tuple[_Msg, list[bool]] | None:
+    def _nearest_depth(self, stamp: int) -> _Depth | None:
+        """The depth message nearest to ``stamp`` within the tolerance (the earliest received of equals)."""
         tol = int(self.topics.depth_tolerance_ms * 1e6)
-        best = min(self._depth, key=lambda d: abs(d[0].stamp_ns - stamp), default=None)
-        if best is None or abs(best[0].stamp_ns - stamp) > tol:
+        best = min(self._depth, key=lambda d: abs(d.item.stamp_ns - stamp), default=None)
+        if best is None or abs(best.item.stamp_ns - stamp) > tol:
             return None
         return best
+
+    def _depth_known(self, stamp: int) -> bool:
+        """True once no depth message yet to come can be nearer to ``stamp`` than those received.
+
+        That is when one is stamped at or after ``stamp``: the depth topic is in stamp order, so
+        every later one lies further away. Deciding earlier would take a neighbour's message
+        whenever the set's own one comes a moment after its images.
+        """
+        return any(d.item.stamp_ns >= stamp for d in self._depth)
 
     def _resolve(self, final: bool = False) -> list[StereoFrame]:
         out: list[StereoFrame] = []
         wait_s = self.topics.depth_wait_ms / 1e3
-        tol = int(self.topics.depth_tolerance_ms * 1e6)
         while self._pending:
             pair = self._pending[0]
             depth = None
             if self.topics.depth_type != "none":
-                depth = self._nearest_depth(pair.stamp_ns)
-                newest = self._depth[-1][0].stamp_ns if self._depth else None
-                hopeless = newest is not None and newest > pair.stamp_ns + tol
-                if depth is None and not (final or hopeless or self._clock() - pair.since >= wait_s):
+                waited = final or self._clock() - pair.since >= wait_s
+                if not (waited or self._depth_known(pair.stamp_ns)):
                     break  # keep waiting, and keep the order
+                depth = self._nearest_depth(pair.stamp_ns)
             self._pending.popleft()
-            if depth is not None:
-                depth[1][0] = True
-            frame = self._frame(pair, depth[0] if depth is not None else None)
+            frame = self._frame(pair, depth)
             if frame is not None:
                 out.append(frame)
         return out
 
-    def _frame(self, pair: _Pair, depth: _Msg | None) -> StereoFrame | None:
+    def _frame(self, pair: _Pair, depth_entry: _Depth | None) -> StereoFrame | None:
+        """The frame of ``pair`` with ``depth_entry`` (counts its messages used), None when refused (counted)."""
         t0 = time.perf_counter()
         p = pair.parts
+        depth = depth_entry.item if depth_entry is not None else None
         try:
             lc, rc = p["left_info"].value, p["right_info"].value  # checked on arrival
             left, right = p["left_image"].value, p["right_image"].value
@@ -332,10 +411,23 @@ class StereoAssembler:
                 raise Ros2Error("shape", f"left {left.shape} and right {right.shape} images differ")
             if (lc.width, lc.height) != (w, h):
                 raise Ros2Error("shape", f"camera_info is {lc.width}x{lc.height}, images are {w}x{h}")
-            sensor_depth = self._depth_map(depth, lc.p, (h, w)) if depth is not None else None
         except Ros2Error as exc:
-            self.refuse("stereo pair", exc)
+            self._refused("stereo pair", exc, len(p))  # the depth message stays free for another set
             return None
+        extrinsic = None
+        if depth_entry is not None and isinstance(depth_entry.item.msg, rm.PointCloud2):
+            try:
+                extrinsic = self._cloud_to_left(depth_entry.item.msg.header.frame_id, lc.frame_id)
+            except Ros2Error as exc:  # the cloud cannot be placed: refused, the frame goes on without depth
+                self._refused("depth", exc, self._take(depth_entry, "rejected"))
+                depth_entry = depth = None
+        try:
+            sensor_depth = self._depth_map(depth, lc.p, (h, w), extrinsic) if depth is not None else None
+        except Ros2Error as exc:  # the depth message does not fit the set: both are refused
+            assert depth_entry is not None
+            self._refused("stereo pair", exc, len(p) + self._take(depth_entry, "rejected"))
+            return None
+        self.messages["used"] += len(p) + (self._take(depth_entry, "used") if depth_entry is not None else 0)
         if sensor_depth is None:
             self.counters["no_depth"] += 1
         decode_s = sum(m.decode_s for m in p.values()) + (depth.decode_s if depth is not None else 0.0)
@@ -358,12 +450,40 @@ class StereoAssembler:
             },
         )
 
-    def _depth_map(self, depth: _Msg, p: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    def _take(self, entry: _Depth, state: Literal["used", "rejected"]) -> int:
+        """Mark a depth message ``state``; 1 when it was still waiting (counted now), else 0 (counted before)."""
+        if entry.state != "waiting":
+            return 0
+        entry.state = state
+        self._depth_waiting -= 1
+        return 1
+
+    def _cloud_to_left(self, cloud_frame: str, left_frame: str) -> np.ndarray:
+        """The 4 x 4 transform of a cloud in ``cloud_frame`` into ``left_frame`` (see the module docstring, 5.).
+
+        Raises
+        ------
+        Ros2Error
+            ``tf``: no ``lidar_to_left`` and no chain of static transforms between the frames.
+        """
+        if self._extrinsic is not None:
+            return self._extrinsic
+        if cloud_frame.lstrip("/") == left_frame.lstrip("/"):
+            return np.eye(4)
+        try:
+            return self.tf.lookup(left_frame, cloud_frame)
+        except LookupError as exc:
+            raise Ros2Error("tf", f"{exc} (or set lidar_to_left)") from None
+
+    def _depth_map(
+        self, depth: _Msg, p: np.ndarray, shape: tuple[int, int], extrinsic: np.ndarray | None
+    ) -> np.ndarray:
         msg, value = depth.msg, depth.value  # checked on arrival
         assert isinstance(value, np.ndarray)
         if isinstance(msg, rm.PointCloud2):
+            assert extrinsic is not None
             xyz = value
-            z, counts = cloud_to_depth(xyz, self._extrinsic, p, shape)
+            z, counts = cloud_to_depth(xyz, extrinsic, p, shape)
             self.counters["cloud_points"] += counts.used
             self.counters["cloud_behind"] += counts.behind
             self.counters["cloud_outside"] += counts.outside
@@ -374,9 +494,14 @@ class StereoAssembler:
             raise Ros2Error("shape", f"depth image is {z.shape[1]}x{z.shape[0]}, images are {shape[1]}x{shape[0]}")
         return z
 
+    def unmatched(self) -> int:
+        """Messages held now: waiting in the stereo sync, in complete sets waiting for depth, unused depth."""
+        return sum(self.sync.pending().values()) + len(STEREO_ROLES) * len(self._pending) + self._depth_waiting
+
     def stats(self) -> dict[str, object]:
-        """Counters, refusals by cause, and the synchronizer's state."""
-        return {**self.counters, "rejected_by": dict(self.rejected_by), "sync": self.sync.stats()}
+        """Counters, refusals by cause, where the messages ended (:attr:`messages`) and the synchronizer's state."""
+        messages = {**self.messages, "unmatched": self.unmatched()}
+        return {**self.counters, "rejected_by": dict(self.rejected_by), "messages": messages, "sync": self.sync.stats()}
 
 
-__all__ = ["ROLES", "STEREO_ROLES", "DepthType", "StereoAssembler", "StereoTopics"]
+__all__ = ["ROLES", "STEREO_ROLES", "TF_ROLE", "DepthType", "StereoAssembler", "StereoTopics"]

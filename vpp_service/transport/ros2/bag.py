@@ -5,19 +5,39 @@
 (MCAP by default, which Foxglove, rviz and ``ros2 bag`` open). A bag is a folder with
 ``metadata.yaml`` or a single ``.db3`` / ``.mcap`` file; the path comes from the
 configuration only, never from message content.
+
+A written bag carries what ``ros2 bag record`` writes, so ``ros2 bag play`` republishes
+each topic with the QoS it was offered with: per topic the publisher's offered QoS
+profile (:func:`offered_qos`), and the ROS distribution it is for (``ros_distro``), in
+that distribution's metadata form (:data:`DISTRO_VERSIONS`).
 """
 
 from __future__ import annotations
 
+import sqlite3
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
+from vpp_service.transport.ros2.keys import DEFAULT_PUBLISHER, Qos
 from vpp_service.transport.ros2.messages import typestore
+
+if TYPE_CHECKING:
+    from rosbags.interfaces import Qos as BagQos
 
 #: Storage formats a bag can be written in.
 Storage = Literal["mcap", "sqlite3"]
+#: ROS distributions a bag can be written for.
+RosDistro = Literal["humble", "jazzy"]
+#: The rosbag2 metadata version written per distribution. Jazzy's recorder writes 9
+#: (``offered_qos_profiles`` a YAML list, enums by name: ``keep_last``, ``reliable``). Humble's
+#: writes 5 with the profiles as one YAML string, enums as integers; ``rosbags`` writes 8 at the
+#: oldest, whose profiles have exactly that string form (its other additions Humble's reader skips).
+DISTRO_VERSIONS: dict[str, Literal[8, 9]] = {"humble": 8, "jazzy": 9}
+#: ``RMW_DURATION_INFINITE`` (``{9223372036, 854775807}``): deadline, lifespan and liveliness lease
+#: of a publisher that leaves them unset, as an rmw_zenoh graph reports it (its default QoS).
+INFINITE_S, INFINITE_NS = 9_223_372_036, 854_775_807
 
 
 @dataclass(frozen=True)
@@ -91,6 +111,46 @@ def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Iterato
         raise ValueError(f"rosbag: {path}: {exc}") from None
 
 
+def offered_qos(qos: Qos) -> BagQos:
+    """``qos`` as a rosbag2 offered QoS profile: the four policies given, the rest as an rmw_zenoh graph reports them.
+
+    Deadline, lifespan and liveliness lease are infinite, liveliness ``automatic`` and
+    ``avoid_ros_namespace_conventions`` false: the rmw_zenoh defaults a subscriber (``ros2 bag
+    record``) reads for a publisher token that leaves them empty, as ours do (:meth:`Qos.token`).
+    The enum values of :class:`~vpp_service.transport.ros2.keys.Qos` are the rmw ones.
+    """
+    from rosbags.interfaces import Qos as BagQos
+    from rosbags.interfaces import QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+    infinite = QosTime(INFINITE_S, INFINITE_NS)
+    return BagQos(
+        history=QosHistory(qos.history),
+        depth=qos.depth,
+        reliability=QosReliability(qos.reliability),
+        durability=QosDurability(qos.durability),
+        deadline=infinite,
+        lifespan=infinite,
+        liveliness=QosLiveliness.AUTOMATIC,
+        liveliness_lease_duration=infinite,
+        avoid_ros_namespace_conventions=False,
+    )
+
+
+def _with_distro(metadata: str, ros_distro: str, key: str | None) -> str:
+    """The metadata YAML ``metadata`` with ``ros_distro`` set (under ``key`` when given)."""
+    from io import StringIO
+
+    from ruamel.yaml import YAML
+
+    yaml = YAML(typ="safe")
+    yaml.default_flow_style = False
+    doc = yaml.load(metadata)
+    (doc[key] if key is not None else doc)["ros_distro"] = ros_distro
+    out = StringIO()
+    yaml.dump(doc, out)
+    return out.getvalue() if key is not None else out.getvalue().strip()
+
+
 class BagWriter:
     """Record CDR messages into a new bag.
 
@@ -100,9 +160,12 @@ class BagWriter:
         The bag folder to create (must not exist).
     storage : {"mcap", "sqlite3"}
         Storage format.
+    ros_distro : {"humble", "jazzy"}
+        The distribution the bag is for: its metadata version (:data:`DISTRO_VERSIONS`) and
+        ``ros_distro`` (in ``metadata.yaml`` and the copy inside the storage file).
     """
 
-    def __init__(self, path: str | Path, storage: Storage = "mcap") -> None:
+    def __init__(self, path: str | Path, storage: Storage = "mcap", ros_distro: RosDistro = "jazzy") -> None:
         from rosbags.rosbag2 import StoragePlugin, Writer
 
         p = Path(path)
@@ -110,28 +173,60 @@ class BagWriter:
             raise FileExistsError(f"rosbag: {p} exists already (a recording never overwrites)")
         if storage not in ("mcap", "sqlite3"):
             raise ValueError(f"storage must be 'mcap' or 'sqlite3', got {storage!r}")
+        if ros_distro not in DISTRO_VERSIONS:
+            raise ValueError(f"ros_distro must be one of {', '.join(DISTRO_VERSIONS)}, got {ros_distro!r}")
         plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
         self.path = p
-        self._writer = Writer(p, version=Writer.VERSION_LATEST, storage_plugin=plugin)
+        self.ros_distro = ros_distro
+        self._writer = Writer(p, version=DISTRO_VERSIONS[ros_distro], storage_plugin=plugin)
         self._writer.open()
+        # rosbags writes ros_distro "rosbags" into the storage file too (the metadata copy, and sqlite3's
+        # schema table, which rosbag2 reads when metadata.yaml is missing): the real one instead
+        storage_writer = self._writer.storage
+        assert storage_writer is not None  # open
+        close_storage = storage_writer.close
+
+        def close_with_distro(version: int, metadata: str) -> None:
+            conn = getattr(storage_writer, "conn", None)
+            if isinstance(conn, sqlite3.Connection):
+                conn.execute("UPDATE schema SET ros_distro = ?", (ros_distro,))
+            close_storage(version, _with_distro(metadata, ros_distro, None))
+
+        storage_writer.close = close_with_distro  # type: ignore[method-assign]  # one instance's close, wrapped
         self._conns: dict[str, object] = {}
         self.written = 0
 
-    def write(self, topic: str, ros_type: str, log_time_ns: int, data: bytes | bytearray) -> None:
-        """Append one message (its connection is added on the topic's first message)."""
+    def write(
+        self, topic: str, ros_type: str, log_time_ns: int, data: bytes | bytearray, qos: Qos = DEFAULT_PUBLISHER
+    ) -> None:
+        """Append one message; the topic's connection (with ``qos`` as its offered profile) is added on its first."""
         from rosbags.interfaces import Connection
 
         conn = self._conns.get(topic)
         if conn is None:
-            conn = self._writer.add_connection(topic, ros_type, typestore=typestore())
+            conn = self._writer.add_connection(
+                topic, ros_type, typestore=typestore(), offered_qos_profiles=[offered_qos(qos)]
+            )
             self._conns[topic] = conn
         assert isinstance(conn, Connection)
         self._writer.write(conn, int(log_time_ns), data if isinstance(data, bytes) else memoryview(data))
         self.written += 1
 
     def close(self) -> None:
-        """Finish the bag (writes ``metadata.yaml``)."""
+        """Finish the bag (writes ``metadata.yaml``, with the real ``ros_distro``)."""
         self._writer.close()
+        meta = self._writer.metapath
+        meta.write_text(_with_distro(meta.read_text("utf8"), self.ros_distro, "rosbag2_bagfile_information"), "utf8")
 
 
-__all__ = ["BagMessage", "BagWriter", "Storage", "bag_topics", "check_bag_path", "read_bag"]
+__all__ = [
+    "DISTRO_VERSIONS",
+    "BagMessage",
+    "BagWriter",
+    "RosDistro",
+    "Storage",
+    "bag_topics",
+    "check_bag_path",
+    "offered_qos",
+    "read_bag",
+]

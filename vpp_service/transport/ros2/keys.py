@@ -27,6 +27,7 @@ IMAGE = "sensor_msgs/msg/Image"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 POINT_CLOUD2 = "sensor_msgs/msg/PointCloud2"
 DISPARITY_IMAGE = "stereo_msgs/msg/DisparityImage"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 
 #: REP 2011 type-description hashes (identical from Iron through Rolling).
 TYPE_HASHES: dict[str, str] = {
@@ -34,6 +35,7 @@ TYPE_HASHES: dict[str, str] = {
     CAMERA_INFO: "RIHS01_b3dfd68ff46c9d56c80fd3bd4ed22c7a4ddce8c8348f2f59c299e73118e7e275",
     POINT_CLOUD2: "RIHS01_9198cabf7da3796ae6fe19c4cb3bdd3525492988c70522628af5daa124bae2b5",
     DISPARITY_IMAGE: "RIHS01_1ec1ff6b5bace919e4544a37f2d96ead9f81783701b7b7a4d97a09325ecf2711",
+    TF_MESSAGE: "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087",
 }
 
 #: The type-hash segment of Humble's rmw_zenoh (rmw_publisher_data.cpp / rmw_subscription_data.cpp, humble branch).
@@ -138,7 +140,8 @@ def dds_type(ros_type: str) -> str:
 def type_hash(ros_type: str, distro: str = "jazzy") -> str:
     """The type-hash segment ``distro``'s rmw_zenoh writes for ``ros_type``.
 
-    Humble: :data:`HUMBLE_TYPE_HASH` for every type; later distros: the type's RIHS01 hash.
+    Humble: :data:`HUMBLE_TYPE_HASH` for every type; later distros: the type's RIHS01 hash
+    (:data:`TYPE_HASHES`).
 
     Raises
     ------
@@ -250,6 +253,8 @@ DEFAULT_PUBLISHER = Qos(reliability=1, durability=2, history=1, depth=10)
 #: Reliable, volatile, keep all (rclcpp's ``KeepAll()``: depth 0): the QoS rmw_zenoh publishes with congestion
 #: control BLOCK.
 RELIABLE_KEEP_ALL = Qos(reliability=1, durability=2, history=2, depth=0)
+#: tf2_ros' static listener QoS (reliable, transient local, keep last 100): our ``/tf_static`` subscriber.
+TF_STATIC = Qos(reliability=1, durability=1, history=1, depth=100)
 
 
 @dataclass(frozen=True)
@@ -384,6 +389,8 @@ __all__ = [
     "RMW_ZENOH_DEFAULT_HISTORY",
     "RMW_ZENOH_DEFAULT_RELIABILITY",
     "SENSOR_DATA",
+    "TF_MESSAGE",
+    "TF_STATIC",
     "TYPE_HASHES",
     "Distro",
     "EntityKey",

@@ -1,4 +1,4 @@
-"""ROS 2 messages <-> numpy: ``Image``, ``CameraInfo``, ``PointCloud2``, ``DisparityImage``.
+"""ROS 2 messages <-> numpy: ``Image``, ``CameraInfo``, ``PointCloud2``, ``DisparityImage``, ``TFMessage``.
 
 The CDR codec is the ``rosbags`` type store (Jazzy definitions; these four types are
 identical from Iron through Rolling). Decoding an ``Image`` is zero-copy where the
@@ -9,7 +9,7 @@ Every decoder bounds the cost before doing work: the payload size is checked bef
 the CDR is parsed (:class:`Limits`), then the pixel or point count before any array
 is built. A refused message raises :class:`~vpp_service.transport.ros2.errors.Ros2Error`
 whose ``reason`` names the cause (``too_large``, ``cdr``, ``encoding``, ``layout``,
-``calibration``, ``fields``).
+``calibration``, ``fields``, ``tf``).
 
 Conventions of the ``DisparityImage`` we write (as stereo_image_proc fills it):
 ``image`` is ``32FC1`` with step ``4 * width``; values are ``x_l - x_r - (cx_l - cx_r)``
@@ -30,7 +30,7 @@ import numpy as np
 
 from vpp_service.frame import Calibration
 from vpp_service.transport.ros2.errors import Ros2Error
-from vpp_service.transport.ros2.keys import CAMERA_INFO, DISPARITY_IMAGE, IMAGE, POINT_CLOUD2
+from vpp_service.transport.ros2.keys import CAMERA_INFO, DISPARITY_IMAGE, IMAGE, POINT_CLOUD2, TF_MESSAGE
 from vpp_service.transport.wire import DEFAULT_LIMITS
 
 if TYPE_CHECKING:
@@ -40,6 +40,7 @@ if TYPE_CHECKING:
     from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__PointCloud2 as PointCloud2
     from rosbags.typesys.stores.ros2_jazzy import std_msgs__msg__Header as Header
     from rosbags.typesys.stores.ros2_jazzy import stereo_msgs__msg__DisparityImage as DisparityImage
+    from rosbags.typesys.stores.ros2_jazzy import tf2_msgs__msg__TFMessage as TFMessage
 
 M = TypeVar("M")
 
@@ -60,8 +61,15 @@ _CLASSES = {
     "PointField": "sensor_msgs__msg__PointField",
     "PointCloud2": "sensor_msgs__msg__PointCloud2",
     "DisparityImage": "stereo_msgs__msg__DisparityImage",
+    "TFMessage": "tf2_msgs__msg__TFMessage",
 }
-_SUPPORTED = {IMAGE: "Image", CAMERA_INFO: "CameraInfo", POINT_CLOUD2: "PointCloud2", DISPARITY_IMAGE: "DisparityImage"}
+_SUPPORTED = {
+    IMAGE: "Image",
+    CAMERA_INFO: "CameraInfo",
+    POINT_CLOUD2: "PointCloud2",
+    DISPARITY_IMAGE: "DisparityImage",
+    TF_MESSAGE: "TFMessage",
+}
 
 
 def __getattr__(name: str) -> type:
@@ -102,7 +110,7 @@ class Limits:
 
 
 def message_class(ros_type: str) -> type:
-    """The ``rosbags`` class of one of the four supported types (``sensor_msgs/msg/Image`` -> ``Image``)."""
+    """The ``rosbags`` class of one of the supported types (``sensor_msgs/msg/Image`` -> ``Image``)."""
     if ros_type not in _SUPPORTED:
         raise ValueError(f"unsupported message type {ros_type!r}; supported: {', '.join(_SUPPORTED)}")
     return __getattr__(_SUPPORTED[ros_type])
@@ -127,7 +135,7 @@ def deserialize(data: bytes | memoryview, ros_type: str, cls: type[M], limits: L
     data : bytes or memoryview
         Payload: 4-byte encapsulation header then the body.
     ros_type : str
-        ``pkg/msg/Msg`` (one of the four supported types).
+        ``pkg/msg/Msg`` (one of the supported types).
     cls : type
         The expected message class (the result is checked against it).
     limits : Limits
@@ -414,13 +422,25 @@ def cloud_to_xyz(msg: PointCloud2, limits: Limits) -> np.ndarray:
     return out
 
 
-def xyz_cloud_message(xyz: np.ndarray, header: Header, rgb: np.ndarray | None = None) -> PointCloud2:
-    """An unorganized cloud (height 1) of N x 3 points, float32 x y z, plus packed ``rgb`` when given."""
+def xyz_cloud_message(
+    xyz: np.ndarray, header: Header, rgb: np.ndarray | None = None, shape: tuple[int, int] | None = None
+) -> PointCloud2:
+    """A cloud of N x 3 points, float32 x y z, plus packed ``rgb`` (N x 3 uint8) when given.
+
+    ``shape`` = ``(H, W)`` with N = H x W makes it organized as stereo_image_proc's ``points2``
+    (height H, width W, point ``v * W + u`` is pixel ``(v, u)``; invalid points are NaN);
+    None (default) gives an unorganized cloud (height 1, width N). ``is_dense`` is true only
+    when every coordinate is finite. Each point is 16 bytes, x y z rgb at offsets 0, 4, 8, 12
+    (stereo_image_proc's layout with ``avoid_point_cloud_padding``); readers go by the fields.
+    """
     from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__PointCloud2 as PointCloud2
     from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__PointField as PointField
 
     pts = np.ascontiguousarray(xyz, dtype="<f4").reshape(-1, 3)
     n = pts.shape[0]
+    height, width = (1, n) if shape is None else (int(shape[0]), int(shape[1]))
+    if height * width != n:
+        raise ValueError(f"shape {shape} holds {height * width} points, got {n}")
     names = ["x", "y", "z"] + (["rgb"] if rgb is not None else [])
     rec = np.empty((n, len(names)), "<f4")
     rec[:, :3] = pts
@@ -431,15 +451,78 @@ def xyz_cloud_message(xyz: np.ndarray, header: Header, rgb: np.ndarray | None = 
     step = 4 * len(names)
     return PointCloud2(
         header=header,
-        height=1,
-        width=n,
+        height=height,
+        width=width,
         fields=fields,
         is_bigendian=False,
         point_step=step,
-        row_step=step * n,
+        row_step=step * width,
         data=rec.reshape(-1).view(np.uint8),
-        is_dense=True,
+        is_dense=bool(np.isfinite(pts).all()),
     )
+
+
+# ----------------------------------------------------------------------------- tf
+
+#: ``|q|^2`` farther than this from 1 makes a rotation invalid (tf2 ignores such a transform likewise).
+_QUATERNION_TOLERANCE = 1e-5
+
+
+@dataclass(frozen=True)
+class Transform:
+    """One transform of a ``TFMessage``: where ``child`` sits in ``parent``.
+
+    Attributes
+    ----------
+    parent : str
+        ``header.frame_id`` (leading ``/`` removed, as tf2 does).
+    child : str
+        ``child_frame_id`` (likewise).
+    matrix : ndarray
+        4 x 4 float64 taking a point in ``child`` to ``parent`` (rotation from the quaternion,
+        translation in the last column).
+    stamp_ns : int
+        Header stamp.
+    """
+
+    parent: str
+    child: str
+    matrix: np.ndarray
+    stamp_ns: int
+
+
+def tf_transforms(msg: TFMessage) -> list[Transform]:
+    """The transforms of a ``TFMessage`` as 4 x 4 matrices.
+
+    Raises
+    ------
+    Ros2Error
+        ``tf``: an empty frame id, a frame its own parent, a non-finite value, or a rotation
+        that is not a unit quaternion (``|q|^2`` within 1e-5 of 1, tf2's check).
+    """
+    out: list[Transform] = []
+    for t in msg.transforms:
+        parent, child = t.header.frame_id.lstrip("/"), t.child_frame_id.lstrip("/")
+        if not parent or not child or parent == child:
+            raise Ros2Error("tf", f"transform {parent!r} -> {child!r}: needs two different frame ids")
+        tr, q = t.transform.translation, t.transform.rotation
+        x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
+        offset = np.array([tr.x, tr.y, tr.z], np.float64)
+        if not (np.all(np.isfinite(offset)) and all(math.isfinite(c) for c in (x, y, z, w))):
+            raise Ros2Error("tf", f"transform {parent!r} -> {child!r}: non-finite value")
+        if abs(x * x + y * y + z * z + w * w - 1.0) > _QUATERNION_TOLERANCE:
+            raise Ros2Error(
+                "tf", f"transform {parent!r} -> {child!r}: rotation {(x, y, z, w)} is not a unit quaternion"
+            )
+        m = np.eye(4)
+        m[:3, :3] = [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+        m[:3, 3] = offset
+        out.append(Transform(parent, child, m, stamp_ns(t.header)))
+    return out
 
 
 # ------------------------------------------------------------------- disparity
@@ -556,6 +639,8 @@ __all__ = [
     "Invalid",
     "Limits",
     "PointCloud2",
+    "TFMessage",
+    "Transform",
     "array_to_image",
     "camera_info_message",
     "camera_model",
@@ -570,6 +655,7 @@ __all__ = [
     "serialize",
     "stamp_ns",
     "stereo_calibration",
+    "tf_transforms",
     "typestore",
     "xyz_cloud_message",
 ]
