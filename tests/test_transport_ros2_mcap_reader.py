@@ -1,0 +1,128 @@
+"""Damaged .mcap bags: every readable message is played, bit for bit; each damaged place is reported by cause.
+
+The bags are written with rosbags (helpers/damaged_bags.write_test_bag: 20 stamps of the five stereo topics,
+128 x 160 RGB images, about 2.5 MB in three chunks, rosbags closing a chunk past 1 MiB), uncompressed or
+zstd, with the chunk CRCs filled in as ros2 bag record writes them (helpers/damaged_bags.seal_chunk_crcs).
+What is expected is derived from the intact file, independently of the reader: a cut file keeps every
+message whose bytes all lie before the cut (uncompressed chunks hold the CDR bytes verbatim, so
+``bytes.find`` locates each), and at least every message of the chunks wholly before it (zstd); a
+garbled chunk loses exactly its own messages (helpers/damaged_bags.mcap_chunks lists them).
+"""
+
+from __future__ import annotations
+
+import struct
+import tracemalloc
+from pathlib import Path
+
+import pytest
+
+from helpers.damaged_bags import cut, garble, mcap_chunks, write_test_bag
+from vpp_service.transport.ros2.bag import bag_topics, read_bag
+from vpp_service.transport.ros2.mcap_reader import MAGIC, MAX_RECORD_BYTES
+
+TOPICS = {
+    "/stereo/left/image_rect": "sensor_msgs/msg/Image",
+    "/stereo/right/image_rect": "sensor_msgs/msg/Image",
+    "/stereo/left/camera_info": "sensor_msgs/msg/CameraInfo",
+    "/stereo/right/camera_info": "sensor_msgs/msg/CameraInfo",
+    "/stereo/points": "sensor_msgs/msg/PointCloud2",
+}
+
+
+@pytest.fixture(scope="module", params=["plain", "zstd", "no_crc"])
+def intact(request, tmp_path_factory) -> tuple[str, Path]:
+    """(kind, .mcap file): uncompressed or zstd chunks with CRCs (ros2 bag record), or rosbags' own (CRC 0)."""
+    folder = tmp_path_factory.mktemp(request.param) / "bag"
+    f = write_test_bag(folder, "mcap", zstd=request.param == "zstd", crc=request.param != "no_crc")
+    assert len(mcap_chunks(f)) == 3
+    return request.param, f
+
+
+def read(path: Path) -> tuple[list, list]:
+    damage: list = []
+    return list(read_bag(path, on_damage=damage.append)), damage
+
+
+@pytest.mark.parametrize("fraction", [0.5, 0.9, 0.99])
+def test_a_cut_file_plays_every_message_before_the_cut(intact, tmp_path, fraction):
+    kind, f = intact
+    ref, none = read(f)
+    assert len(ref) == 100 and not none
+    data = f.read_bytes()
+    damaged = cut(f, tmp_path / "cut.mcap", fraction)
+    at = damaged.stat().st_size
+    got, damage = read(damaged)
+    assert got == ref[: len(got)]  # bit for bit, in order, up to the break
+    if kind == "zstd":
+        whole = sum(len(c.log_times) for c in mcap_chunks(f) if c.end <= at)
+        assert whole <= len(got) <= 100
+    else:
+        assert len(got) == sum(1 for m in ref if data.find(m.data) + len(m.data) <= at)
+    assert [d.cause for d in damage] == ["bag.truncated"]
+    assert f"ends at byte {at}" in damage[0].where and str(damaged) in damage[0].where
+    assert f"after {len(got)} messages" in damage[0].where
+    assert bag_topics(damaged) == TOPICS  # from the records, the summary being gone
+
+
+def test_garbage_in_a_chunk_skips_that_chunk_only(intact, tmp_path):
+    kind, f = intact
+    ref, _ = read(f)
+    mid = f.stat().st_size // 2
+    (hit,) = [i for i, c in enumerate(mcap_chunks(f)) if c.start < mid < c.end - 4096]
+    got, damage = read(garble(f, tmp_path / "garbled.mcap", at=mid))
+    if kind == "no_crc":  # nothing to check the bytes against: the garbage goes unseen (documented)
+        assert not damage and len(got) == 100 and sum(a != b for a, b in zip(got, ref, strict=True)) == 1
+        return
+    lost = set(mcap_chunks(f)[hit].log_times)
+    assert got == [m for m in ref if m.log_time_ns not in lost]
+    # random pixels do not compress: zstd keeps them in raw blocks, which decode garbage and all; the CRC sees it
+    assert [d.cause for d in damage] == ["bag.crc"]
+    assert f"chunk {hit + 1} at byte {mcap_chunks(f)[hit].start} skipped" in damage[0].where
+
+
+def test_broken_framing_skips_to_the_next_indexed_chunk(intact, tmp_path):
+    _, f = intact
+    ref, _ = read(f)
+    chunks = mcap_chunks(f)
+    got, damage = read(garble(f, tmp_path / "framing.mcap", at=chunks[1].start, n=9))  # chunk 2's opcode and length
+    assert got == [m for m in ref if m.log_time_ns not in set(chunks[1].log_times)]
+    assert [d.cause for d in damage] == ["bag.corrupt_record"]
+    assert f"at byte {chunks[1].start}" in damage[0].where and f"chunk at byte {chunks[2].start}" in damage[0].where
+
+
+def test_nothing_readable_is_an_error_naming_the_file_and_the_cause(intact, tmp_path):
+    _, f = intact
+    with pytest.raises(ValueError, match=r"nothing readable.*bag\.truncated.*ends at byte 100") as err:
+        list(read_bag(cut(f, tmp_path / "stub.mcap", 100 / f.stat().st_size + 1e-9)))
+    assert str(tmp_path / "stub.mcap") in str(err.value)
+    (tmp_path / "junk.mcap").write_bytes(b"\0" * 4096)
+    with pytest.raises(ValueError, match="not an MCAP file"):
+        list(read_bag(tmp_path / "junk.mcap"))
+
+
+def record(op: int, content: bytes, length: int | None = None) -> bytes:
+    return bytes([op]) + struct.pack("<Q", len(content) if length is None else length) + content
+
+
+def test_hostile_lengths_allocate_nothing(tmp_path):
+    header = record(0x01, struct.pack("<I", 4) + b"ros2" + struct.pack("<I", 0))
+    # a chunk claiming 2^63 - 1 bytes in a file of a few: the file was cut (no footer)
+    huge = tmp_path / "huge.mcap"
+    huge.write_bytes(MAGIC + header + record(0x06, b"\0" * 64, length=2**63 - 1))
+    # a chunk of valid framing whose uncompressed size is 1 TiB: refused before decompressing
+    body = struct.pack("<QQQI", 0, 0, 2**40, 0) + struct.pack("<I", 4) + b"zstd" + struct.pack("<Q", 16) + b"\0" * 16
+    bomb = tmp_path / "bomb.mcap"
+    footer = record(0x02, struct.pack("<QQI", 0, 0, 0)) + MAGIC
+    bomb.write_bytes(MAGIC + header + record(0x06, body) + record(0x0F, b"\0" * 4) + footer)
+    tracemalloc.start()
+    try:
+        for path, cause in ((huge, "bag.truncated"), (bomb, "bag.corrupt_chunk")):
+            damage: list = []
+            with pytest.raises(ValueError, match="nothing readable"):
+                list(read_bag(path, on_damage=damage.append))
+            assert [d.cause for d in damage] == [cause]
+        assert tracemalloc.get_traced_memory()[1] < 4 * 2**20
+    finally:
+        tracemalloc.stop()
+    assert MAX_RECORD_BYTES < 2**40
