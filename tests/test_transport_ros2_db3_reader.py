@@ -72,3 +72,12 @@ def test_nothing_readable_is_an_error_naming_the_file_and_the_cause(intact, tmp_
     (tmp_path / "junk.db3").write_bytes(b"\0" * 4096)
     with pytest.raises(ValueError, match="not an sqlite3 database"):
         list(read_bag(tmp_path / "junk.db3"))
+
+
+def test_an_intact_bag_reads_as_rosbags_reads_it(intact):
+    from rosbags.rosbag2 import Reader
+
+    with Reader(intact.parent) as reader:
+        want = [(c.topic, c.msgtype, ts, bytes(raw)) for c, ts, raw in reader.messages()]
+    got, damage = read(intact)
+    assert [(m.topic, m.ros_type, m.log_time_ns, m.data) for m in got] == want and not damage

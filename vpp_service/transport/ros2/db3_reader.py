@@ -17,8 +17,8 @@ be seen.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Collection, Iterator
-from functools import cache
 from pathlib import Path
 from urllib.parse import quote
 
@@ -58,10 +58,15 @@ class _WholePagesVFS(apsw.VFS):
         return _WholePagesFile(name, flags)
 
 
-@cache
-def _whole_pages_vfs() -> _WholePagesVFS:
-    """The VFS, registered once (apsw keeps it while this reference lives)."""
-    return _WholePagesVFS()
+_vfs_lock = threading.Lock()
+_vfs: list[_WholePagesVFS] = []
+
+
+def _whole_pages_vfs() -> None:
+    """Register the VFS once per process (apsw keeps it while this module holds it)."""
+    with _vfs_lock:
+        if not _vfs:
+            _vfs.append(_WholePagesVFS())
 
 
 def _short_by(path: Path) -> int:

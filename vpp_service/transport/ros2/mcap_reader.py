@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import os
 from binascii import crc32
+from bisect import bisect_right
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -104,6 +105,7 @@ class _Summary:
 
     data_end: int
     chunk_starts: list[int] = field(default_factory=list)
+    chunk_set: frozenset[int] = frozenset()
     schemas: dict[int, str] = field(default_factory=dict)
     channels: dict[int, tuple[str, int]] = field(default_factory=dict)
 
@@ -142,6 +144,7 @@ def _read_summary(f: BinaryIO, size: int) -> _Summary | None:
     except _Bad:
         return _Summary(start)  # the index is damaged: walk without it
     summary.chunk_starts.sort()
+    summary.chunk_set = frozenset(summary.chunk_starts)
     return summary
 
 
@@ -246,7 +249,7 @@ class McapWalk:
             stop = pos + _RECORD_HEAD + length
             if op in (OP_DATA_END, OP_FOOTER):
                 break
-            indexed = summary is None or not summary.chunk_starts or pos in summary.chunk_starts
+            indexed = summary is None or not summary.chunk_starts or pos in summary.chunk_set
             if op == 0 or 0x10 <= op < 0x80 or (op == OP_CHUNK and not indexed):
                 why = f"opcode {op:#04x}" + ("" if op != OP_CHUNK else " not in the chunk index")
                 pos = self._resync(summary, pos, end, why)
@@ -268,7 +271,9 @@ class McapWalk:
                     self._damage("bag.corrupt_chunk", f"chunk {self._chunks} at byte {pos}: {length} bytes is too big")
                 else:
                     yield from self._chunk(f.read(length), pos)
-            elif op in (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE) and length <= MAX_RECORD_BYTES:
+            elif op in (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE) and length > MAX_RECORD_BYTES:
+                self._damage("bag.corrupt_record", f"record {op:#04x} at byte {pos} skipped: {length} bytes is too big")
+            elif op in (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE):
                 try:
                     msgs = list(self._apply([(op, memoryview(f.read(length)))]))
                 except _Bad as exc:
@@ -281,7 +286,9 @@ class McapWalk:
 
     def _resync(self, summary: _Summary | None, pos: int, end: int, why: str) -> int:
         """Where reading goes on after broken framing at ``pos``: the next indexed chunk, or the end."""
-        nxt = next((c for c in summary.chunk_starts if c > pos), None) if summary is not None else None
+        starts = summary.chunk_starts if summary is not None else []
+        i = bisect_right(starts, pos)
+        nxt = starts[i] if i < len(starts) else None
         if nxt is None:
             self._damage("bag.corrupt_record", f"broken record at byte {pos} ({why}): bytes {pos}-{end} unreadable")
             return end
