@@ -81,11 +81,21 @@ def test_garbage_in_a_chunk_skips_that_chunk_only(intact, tmp_path):
     assert f"chunk {hit + 1} at byte {mcap_chunks(f)[hit].start} skipped" in damage[0].where
 
 
-def test_broken_framing_skips_to_the_next_indexed_chunk(intact, tmp_path):
+@pytest.mark.parametrize("head", ["random", "data end"])
+def test_broken_framing_skips_to_the_next_indexed_chunk(intact, tmp_path, head):
+    """Chunk 2's opcode and length overwritten with random bytes, or with a Data End record's.
+
+    A Data End ends the data section only where the summary starts; anywhere else it is broken framing.
+    """
     _, f = intact
     ref, _ = read(f)
     chunks = mcap_chunks(f)
-    got, damage = read(garble(f, tmp_path / "framing.mcap", at=chunks[1].start, n=9))  # chunk 2's opcode and length
+    damaged = garble(f, tmp_path / "framing.mcap", at=chunks[1].start, n=9)
+    if head == "data end":
+        data = bytearray(damaged.read_bytes())
+        data[chunks[1].start : chunks[1].start + 9] = b"\x0f" + struct.pack("<Q", 4)
+        damaged.write_bytes(bytes(data))
+    got, damage = read(damaged)
     assert got == [m for m in ref if m.log_time_ns not in set(chunks[1].log_times)]
     assert [d.cause for d in damage] == ["bag.corrupt_record"]
     assert f"at byte {chunks[1].start}" in damage[0].where and f"chunk at byte {chunks[2].start}" in damage[0].where

@@ -247,11 +247,11 @@ class McapWalk:
                 return
             op, length = head[0], int.from_bytes(head[1:], "little")
             stop = pos + _RECORD_HEAD + length
-            if op in (OP_DATA_END, OP_FOOTER):
-                break
+            if op in (OP_DATA_END, OP_FOOTER) and (summary is None or (op == OP_DATA_END and stop == end)):
+                break  # the end of the data section (a footer here: the file's end was cut, reported below)
             indexed = summary is None or not summary.chunk_starts or pos in summary.chunk_set
-            if op == 0 or 0x10 <= op < 0x80 or (op == OP_CHUNK and not indexed):
-                why = f"opcode {op:#04x}" + ("" if op != OP_CHUNK else " not in the chunk index")
+            if op in (0, OP_DATA_END, OP_FOOTER) or 0x10 <= op < 0x80 or (op == OP_CHUNK and not indexed):
+                why = f"opcode {op:#04x}" + (" not in the chunk index" if op == OP_CHUNK else " out of place")
                 pos = self._resync(summary, pos, end, why)
                 continue
             if stop > end:
@@ -295,8 +295,8 @@ class McapWalk:
         self._damage("bag.corrupt_record", f"broken record at byte {pos} ({why}): skipped to the chunk at byte {nxt}")
         return nxt
 
-    def _chunk_records(self, content: bytes | memoryview, partial: bool) -> tuple[list[tuple[int, memoryview]], int]:
-        """A chunk's inner records (checked against its CRC unless ``partial``) and the number of bytes they held."""
+    def _chunk_records(self, content: bytes | memoryview, partial: bool) -> list[tuple[int, memoryview]]:
+        """A chunk's inner records, checked against its CRC unless ``partial`` (a cut chunk's complete ones)."""
         f = _Fields(content)
         f.take(16)  # message start and end time
         size, crc = f.uint(8), f.uint(4)
@@ -313,11 +313,11 @@ class McapWalk:
                 raise _Bad(f"it decompresses to {len(raw)} bytes, not {size}")
             if crc and crc32(raw) != crc:
                 raise _CrcMismatch(f"CRC-32 {crc32(raw):#010x}, recorded {crc:#010x}")
-        return list(_records(raw, partial)), len(raw)
+        return list(_records(raw, partial))
 
     def _chunk(self, content: bytes, pos: int) -> Iterator[BagMessage]:
         try:
-            records, _ = self._chunk_records(content, partial=False)
+            records = self._chunk_records(content, partial=False)
             msgs = list(self._apply(records))
         except _CrcMismatch as exc:
             self._damage("bag.crc", f"chunk {self._chunks} at byte {pos} skipped: {exc}")
@@ -332,7 +332,7 @@ class McapWalk:
         self._chunks += 1
         f.seek(pos + _RECORD_HEAD)
         try:
-            records, _ = self._chunk_records(f.read(min(size - pos - _RECORD_HEAD, MAX_RECORD_BYTES)), partial=True)
+            records = self._chunk_records(f.read(min(size - pos - _RECORD_HEAD, MAX_RECORD_BYTES)), partial=True)
             msgs = list(self._apply(records))
         except _Bad:
             return  # the chunk's own header is cut or damaged: nothing in it is readable
