@@ -177,36 +177,42 @@ class Db3Rows:
         finally:
             conn.close()
 
-    def _keys(self, conn: apsw.Connection, topic_ids: list[int]) -> list[tuple[int, int, int]]:
+    def _keys(self, conn: apsw.Connection, topic_ids: list[int]) -> Iterator[tuple[int, int, int]]:
         """(log time, row id, topic id) of the chosen topics' rows, sorted; a broken table gives what it can."""
-        marks = ",".join("?" * len(topic_ids))
-        where = f"topic_id IN ({marks})"
-        try:  # the table scan runs to completion before the first row comes back (a sort): all or nothing
-            return [
-                (int(t), int(i), int(k))
-                for t, i, k in conn.execute(
-                    f"SELECT timestamp, id, topic_id FROM messages NOT INDEXED WHERE {where} ORDER BY timestamp, id",
-                    topic_ids,
-                )
-            ]
+        where = f"topic_id IN ({','.join('?' * len(topic_ids))})"
+        try:  # SQLite sorts the whole table scan before the first row comes back: it fails here or not at all
+            cur = conn.execute(
+                f"SELECT timestamp, id, topic_id FROM messages NOT INDEXED WHERE {where} ORDER BY timestamp, id",
+                topic_ids,
+            )
         except apsw.Error:
-            pass
+            yield from sorted(self._scan_keys(conn, where, topic_ids))
+            return
+        try:
+            for t, i, k in cur:
+                yield int(t), int(i), int(k)
+        except apsw.Error as exc:  # not expected once sorted; counted all the same
+            self._damage(f"the sorted keys break off: {exc}")
+
+    def _scan_keys(self, conn: apsw.Connection, where: str, topic_ids: list[int]) -> list[tuple[int, int, int]]:
+        """The keys in row-id order up to each break in the table, probing past it (row ids + 1, + 2, + 4, ...)."""
         keys: list[tuple[int, int, int]] = []
         after, step, probes = -1, 0, 0
         while probes <= _PROBES:
             try:
-                for key in conn.execute(
+                for t, i, k in conn.execute(
                     f"SELECT timestamp, id, topic_id FROM messages NOT INDEXED WHERE id > ? AND {where} ORDER BY id",
                     [after + step, *topic_ids],
                 ):
-                    keys.append((int(key[0]), int(key[1]), int(key[2])))
-                    after, step = int(key[1]), 0
-                return sorted(keys)
+                    keys.append((int(t), int(i), int(k)))
+                    after, step = int(i), 0
+                return keys
             except apsw.Error as exc:
                 if step == 0:
-                    self._damage(f"the messages table breaks off after row {after}: {exc}")
+                    last = f"after row {after}" if after >= 0 else "before its first row"
+                    self._damage(f"the messages table breaks off {last}: {exc}")
                 step, probes = max(1, 2 * step), probes + 1
-        return sorted(keys)
+        return keys
 
 
 __all__ = ["Db3Rows", "db3_topics"]
