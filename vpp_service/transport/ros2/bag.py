@@ -13,7 +13,7 @@ import logging
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 from pathlib import Path, PurePath
-from typing import Literal
+from typing import Any, Literal
 
 from vpp_service.transport.ros2.bag_damage import BagDamage, OnDamage
 from vpp_service.transport.ros2.messages import typestore
@@ -66,36 +66,37 @@ def check_bag_path(path: str | Path) -> Path:
     return p
 
 
+def _bag_info(folder: Path) -> dict[str, Any]:
+    """The ``rosbag2_bagfile_information`` mapping of a bag folder's ``metadata.yaml``."""
+    from ruamel.yaml import YAML  # rosbags' own YAML reader (a dependency of rosbags)
+
+    meta = folder / "metadata.yaml"
+    try:
+        info = YAML(typ="safe").load(meta.read_text())["rosbag2_bagfile_information"]
+        if not isinstance(info, dict):
+            raise TypeError("rosbag2_bagfile_information is not a mapping")
+        return info
+    except Exception as exc:  # noqa: BLE001 - OSError, YAMLError, KeyError, TypeError: metadata.yaml does not hold
+        raise ValueError(f"rosbag: {meta} cannot be read ({type(exc).__name__}: {exc})") from None
+
+
 def _bag_files(path: Path) -> list[Path] | None:
     """The storage files of a bag, in recording order (None: a compressed bag folder, read by rosbags)."""
     if path.is_file():
         return [path]
-    from ruamel.yaml import YAML, YAMLError  # rosbags' own YAML reader (a dependency of rosbags)
-
-    meta = path / "metadata.yaml"
+    info = _bag_info(path)
     try:
-        info = YAML(typ="safe").load(meta.read_text())["rosbag2_bagfile_information"]
         mode = str(info.get("compression_mode") or "").lower()
-        names = [PurePath(str(x)).name for x in info["relative_file_paths"]]
-    except (OSError, YAMLError, KeyError, TypeError) as exc:
-        raise ValueError(f"rosbag: {meta} cannot be read ({type(exc).__name__}: {exc})") from None
+        files = [path / PurePath(str(x)).name for x in info["relative_file_paths"]]
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f"rosbag: {path / 'metadata.yaml'}: no list of files ({exc})") from None
     if mode not in ("", "none"):
         return None
-    files = [path / n for n in names]
     if missing := [str(f) for f in files if not f.is_file()]:
         raise ValueError(f"rosbag: {path}: files named in metadata.yaml are missing: {missing}")
     if odd := [str(f) for f in files if f.suffix not in (".db3", ".mcap")]:
         raise ValueError(f"rosbag: {path}: files of an unsupported storage: {odd}")
     return files
-
-
-def _topics_of_folder(path: Path) -> dict[str, str]:
-    from ruamel.yaml import YAML
-
-    info = YAML(typ="safe").load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
-    return {
-        str(t["topic_metadata"]["name"]): str(t["topic_metadata"]["type"]) for t in info["topics_with_message_count"]
-    }
 
 
 def bag_topics(path: str | Path) -> dict[str, str]:
@@ -116,9 +117,10 @@ def bag_topics(path: str | Path) -> dict[str, str]:
     p = check_bag_path(path)
     if p.is_dir():
         try:
-            return _topics_of_folder(p)
-        except Exception as exc:  # noqa: BLE001 - YAMLError, KeyError, TypeError: metadata.yaml does not hold
-            raise ValueError(f"rosbag: {p / 'metadata.yaml'} cannot be read ({type(exc).__name__}: {exc})") from None
+            topics = _bag_info(p)["topics_with_message_count"]
+            return {str(t["topic_metadata"]["name"]): str(t["topic_metadata"]["type"]) for t in topics}
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"rosbag: {p / 'metadata.yaml'}: no list of topics ({exc})") from None
     if p.suffix == ".db3":
         return db3_topics(p)
     walk = McapWalk(p, topics=())
