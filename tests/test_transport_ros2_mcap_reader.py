@@ -101,6 +101,18 @@ def test_broken_framing_skips_to_the_next_indexed_chunk(intact, tmp_path, head):
     assert f"at byte {chunks[1].start}" in damage[0].where and f"chunk at byte {chunks[2].start}" in damage[0].where
 
 
+def test_a_footer_pointing_into_the_data_is_not_believed(intact, tmp_path):
+    """The footer's summary offset (8 bytes at 37 - 9 from the end) moved onto chunk 2: every message is still read."""
+    _, f = intact
+    ref, _ = read(f)
+    data = bytearray(f.read_bytes())
+    data[-28:-20] = struct.pack("<Q", mcap_chunks(f)[1].start)
+    (tmp_path / "footer.mcap").write_bytes(bytes(data))
+    got, damage = read(tmp_path / "footer.mcap")
+    assert got == ref
+    assert [d.cause for d in damage] == ["bag.corrupt_record"] and "follows no Data End" in damage[0].where
+
+
 def test_nothing_readable_is_an_error_naming_the_file_and_the_cause(intact, tmp_path):
     _, f = intact
     with pytest.raises(ValueError, match=r"nothing readable.*bag\.truncated.*ends at byte 100") as err:

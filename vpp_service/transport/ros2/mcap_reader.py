@@ -47,6 +47,8 @@ OP_CHUNK_INDEX = 0x08
 #: Footer record (opcode, length 20, summary start, summary offset start, CRC) and the closing magic.
 _FOOTER_LEN = 9 + 20 + len(MAGIC)
 _RECORD_HEAD = 9
+#: A Data End record (its content: the data section's CRC, u32), which the summary section follows.
+_DATA_END_LEN = _RECORD_HEAD + 4
 #: A chunk's fixed fields: start and end time, uncompressed size, CRC.
 _CHUNK_HEAD = 8 + 8 + 8 + 4
 
@@ -108,6 +110,8 @@ class _Summary:
     chunk_set: frozenset[int] = frozenset()
     schemas: dict[int, str] = field(default_factory=dict)
     channels: dict[int, tuple[str, int]] = field(default_factory=dict)
+    #: Why the footer is not believed ("": it is); the data section then ends at the first Data End record.
+    untrusted: str = ""
 
 
 def _definition(op: int, content: memoryview, schemas: dict[int, str], channels: dict[int, tuple[str, int]]) -> None:
@@ -131,8 +135,11 @@ def _read_summary(f: BinaryIO, size: int) -> _Summary | None:
     if tail[-len(MAGIC) :] != MAGIC or tail[0] != OP_FOOTER or int.from_bytes(tail[1:9], "little") != 20:
         return None
     start = int.from_bytes(tail[9:17], "little")
-    if start == 0 or not len(MAGIC) <= start <= footer_start or footer_start - start > MAX_RECORD_BYTES:
+    if start == 0 or not len(MAGIC) + _DATA_END_LEN <= start <= footer_start or footer_start - start > MAX_RECORD_BYTES:
         return _Summary(footer_start)  # no (usable) summary: the data section runs to the footer
+    f.seek(start - _DATA_END_LEN)
+    if f.read(_RECORD_HEAD) != bytes([OP_DATA_END]) + (4).to_bytes(8, "little"):  # trust none of it
+        return _Summary(footer_start, untrusted=f"the footer's summary offset {start} follows no Data End record")
     summary = _Summary(start)
     f.seek(start)
     try:
@@ -234,6 +241,8 @@ class McapWalk:
             if summary is not None:
                 self.schemas.update(summary.schemas)
                 self.channels.update(summary.channels)
+                if summary.untrusted:
+                    self._damage("bag.corrupt_record", f"{summary.untrusted}: read without the file's index")
             yield from self._walk(f, size, summary)
 
     def _walk(self, f: BinaryIO, size: int, summary: _Summary | None) -> Iterator[BagMessage]:
@@ -247,7 +256,9 @@ class McapWalk:
                 return
             op, length = head[0], int.from_bytes(head[1:], "little")
             stop = pos + _RECORD_HEAD + length
-            if op in (OP_DATA_END, OP_FOOTER) and (summary is None or (op == OP_DATA_END and stop == end)):
+            if op in (OP_DATA_END, OP_FOOTER) and (
+                summary is None or summary.untrusted or (op == OP_DATA_END and stop == end)
+            ):
                 break  # the end of the data section (a footer here: the file's end was cut, reported below)
             indexed = summary is None or not summary.chunk_starts or pos in summary.chunk_set
             if op in (0, OP_DATA_END, OP_FOOTER) or 0x10 <= op < 0x80 or (op == OP_CHUNK and not indexed):
