@@ -12,7 +12,8 @@ damaged place once through an ``on_damage`` callback. The causes, used as counte
     An MCAP chunk that cannot be decoded (its compression, size or records do not hold).
 ``bag.corrupt_record``
     MCAP framing broken outside a chunk (an impossible opcode or length): the reader skips
-    to the next chunk the file's index names, or stops when there is none.
+    to the next chunk the file's index names, or stops when there is none. Also a footer
+    whose summary offset is not believed (the file is then read without its index).
 ``bag.corrupt_row``
     An sqlite3 row (or a run of rows) the database refuses in a file of full length.
 ``bag.unknown_channel``

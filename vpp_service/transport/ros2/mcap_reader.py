@@ -1,8 +1,8 @@
 """MCAP files (rosbag2's ``.mcap``) read record by record, so damage costs only the messages it touches.
 
 rosbags' reader starts from the summary section at the end of the file (gone when a
-file is cut short) and cannot see garbage in a chunk that carries no CRC. This reader
-walks the records from the start instead (magic, then ``opcode u8, length u64,
+file is cut short) and raises at the first damaged chunk. This reader walks the
+records from the start instead (magic, then ``opcode u8, length u64,
 content``), and reports every damaged place through ``on_damage``
 (:mod:`~vpp_service.transport.ros2.bag_damage`):
 
@@ -15,7 +15,8 @@ content``), and reports every damaged place through ``on_damage``
 - a file cut short plays the complete messages of its last, partial chunk, then stops
   (``bag.truncated``; also when only the summary is cut, with every message read);
 - broken framing outside a chunk (``bag.corrupt_record``) skips to the next chunk
-  named by the file's chunk index when the summary is intact, else ends the file.
+  named by the file's chunk index when the summary is intact, else ends the file; a
+  footer whose summary offset follows no Data End record is not believed.
 
 Every record's length is checked against the bytes left in the file (and chunks
 against :data:`MAX_RECORD_BYTES`) before it is read or decompressed. Messages come out
