@@ -1,18 +1,27 @@
-"""``vpp-service publish``: meets ``run`` on the shared default endpoint; says so when nobody subscribes."""
+"""``vpp-service publish``: meets ``run`` on the shared default endpoint; says so when nobody subscribes.
+
+``publish --rosbag`` of a damaged bag sends every readable message and counts the damage.
+"""
 
 from __future__ import annotations
 
+import json
 import signal
 import time
 from collections.abc import Iterator
 
 import pytest
+import zenoh
 
+from helpers.damaged_bags import cut, write_test_bag
+from helpers.ros2_robot import key
 from helpers.service_thread import service_in_thread
-from helpers.zenoh_loopback import free_port
+from helpers.zenoh_loopback import collect, free_port, zenoh_test_config
 from vpp_service.cli import EXIT_FAILURE, EXIT_STARTUP, main
 from vpp_service.cli.status import query_status
 from vpp_service.service.config import ENDPOINT_ENV
+from vpp_service.transport.ros2.bag import read_bag
+from vpp_service.transport.ros2.bag_damage import ignore_damage
 
 
 @pytest.fixture
@@ -176,3 +185,33 @@ def test_publish_always_exits_cleanly(tmp_path, middlebury2006_folder, shared_en
         rcs.append(proc.returncode)
         assert "terminate called" not in proc.stderr, proc.stderr
     assert rcs == [EXIT_FAILURE, 0] * 5  # no subscriber: exit 1 with a message; --send-anyway: sent, exit 0
+
+
+@pytest.mark.parametrize(("storage", "fraction"), [("mcap", 0.5), ("sqlite3", 0.9)])
+def test_publish_rosbag_plays_a_cut_bag_up_to_the_cut_and_counts_it(
+    tmp_path, storage, fraction, keep_signal_handlers, capsys
+):
+    """Every readable message goes out (the camera_info payloads, bit for bit); the damage is named and counted."""
+    f = write_test_bag(tmp_path / "bag", storage)
+    bad = cut(f, tmp_path / f"cut{f.suffix}", fraction)
+    readable = list(read_bag(bad, on_damage=ignore_damage))
+    infos = [m.data for m in readable if m.topic == "/stereo/left/camera_info"]
+    assert 0 < len(readable) < 100 and infos
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    with zenoh.open(zenoh_test_config(listen=[ep])) as s:
+        sub = s.declare_subscriber(
+            key(0, "/stereo/left/camera_info", "sensor_msgs/msg/CameraInfo"), zenoh.handlers.FifoChannel(64)
+        )
+        rc = main(["publish", "--rosbag", str(bad), "--rosbag-rate", "0", "--connect", ep])
+        got = collect(sub, len(infos))
+    assert rc == 0
+    assert [smp.payload.to_bytes() for smp in got] == infos
+    out, err = capsys.readouterr()
+    line = json.loads(out.strip().splitlines()[-1])
+    causes = line_causes(err)
+    assert line["sent"] == len(readable) and causes and line["damaged"] == {"bag.truncated": len(causes)}
+    assert all(str(bad) in c for c in causes)
+
+
+def line_causes(err: str) -> list[str]:
+    return [ln for ln in err.splitlines() if ln.startswith("vpp-service publish: damaged bag: bag.truncated")]

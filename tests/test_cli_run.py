@@ -1,18 +1,26 @@
-"""The ``run`` sub-command: flags (Rerun, ROS 2) via the real parser, --check on paths, start-up and closing lines."""
+"""The ``run`` sub-command: flags (Rerun, ROS 2) via the real parser, --check on paths, start-up and closing lines.
+
+Damaged bags are played by the command itself (a subprocess).
+"""
 
 from __future__ import annotations
 
 import json
+import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from helpers.cli import vpp_service_module_command
+from helpers.damaged_bags import cut, garble, write_test_bag
 from helpers.ros2_robot import StereoRig, write_bag
 from vpp_service.cli import EXIT_STARTUP, build_parser, main
 from vpp_service.cli.run import closing_line, overrides_from_args, startup_line
 from vpp_service.service.config import DEFAULT_CONFIG, validate_config
 from vpp_service.settings import SettingsError
 
+ROOT = Path(__file__).resolve().parents[1]
 CONFIGURED = {**DEFAULT_CONFIG, "sinks": [{"type": "zenoh"}, {"type": "rerun", "max_hz": 2.5, "path": "x.rrd"}]}
 
 
@@ -158,3 +166,56 @@ def test_check_reports_a_missing_sim_dataset_root(tmp_path, capsys):
     cfg.write_text(f'[source]\ntype = "sim"\nscene = "dataset"\nroot = "{tmp_path / "nope"}"\n')
     rc, _, err = _check(capsys, "--config", str(cfg))
     assert rc == EXIT_STARTUP and "source.root: no such folder" in err and str(tmp_path / "nope") in err
+
+
+RUN_BAG_TOML = """sinks = []
+[service]
+out = "{out}"
+[zenoh]
+enabled = false
+[source]
+type = "rosbag2"
+path = "unused: --rosbag names the bag"
+rate = 0.0
+[matcher]
+name = "bm"
+[queues]
+input_policy = "block"
+output_policy = "block"
+"""
+
+
+def run_bag(tmp_path: Path, bag: Path) -> tuple[subprocess.CompletedProcess[str], Path]:
+    """``vpp-service run --rosbag BAG --headless`` as a subprocess (zenoh off, replay as fast as possible)."""
+    out = tmp_path / "run"
+    cfg = tmp_path / "run.toml"
+    cfg.write_text(RUN_BAG_TOML.format(out=out))
+    cmd = [*vpp_service_module_command(), "run", "--config", str(cfg), "--rosbag", str(bag), "--headless"]
+    return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=120, check=False), out
+
+
+@pytest.mark.parametrize(
+    ("storage", "damage", "cause"), [("mcap", "cut", "bag.truncated"), ("sqlite3", "garbage", "bag.corrupt_row")]
+)
+def test_run_plays_a_damaged_bag_counts_the_damage_and_exits_0(tmp_path, storage, damage, cause):
+    f = write_test_bag(tmp_path / "bag", storage)
+    bad = cut(f, tmp_path / f"bad{f.suffix}", 0.9) if damage == "cut" else garble(f, tmp_path / f"bad{f.suffix}")
+    proc, out = run_bag(tmp_path, bad)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    n = summary["source"]["rejected_by"][cause]
+    assert n >= 1 and set(summary["source"]["rejected_by"]) == {cause}
+    assert 10 <= summary["counters"]["processed"] < 20
+    closing = proc.stderr.strip().splitlines()[-1]
+    assert f"stopped after {summary['counters']['processed']} frames; rejected {n} ({cause} {n})" in closing
+    where = "ends at byte" if damage == "cut" else "unreadable"
+    assert any(cause in line and str(bad) in line and where in line for line in proc.stderr.splitlines())
+
+
+def test_run_on_a_bag_with_nothing_readable_fails_naming_the_file_and_the_cause(tmp_path):
+    f = write_test_bag(tmp_path / "bag", "mcap")
+    stub = cut(f, tmp_path / "stub.mcap", 4096 / f.stat().st_size)
+    proc, _ = run_bag(tmp_path, stub)
+    assert proc.returncode == 1
+    assert "the source failed" in proc.stderr and "nothing readable" in proc.stderr and str(stub) in proc.stderr
+    assert "bag.truncated" in proc.stderr

@@ -260,9 +260,14 @@ class Robot:
             p.undeclare()
 
 
-def write_bag(path: str, storage: str, rig: StereoRig, stamps: list[int], namespace: str = "/stereo") -> None:
-    """A rosbag2 bag (``storage`` = "mcap" or "sqlite3") with the rig's five topics at each stamp, via rosbags."""
-    from rosbags.rosbag2 import StoragePlugin, Writer
+def write_bag(
+    path: str, storage: str, rig: StereoRig, stamps: list[int], namespace: str = "/stereo", *, zstd: bool = False
+) -> None:
+    """A rosbag2 bag (``storage`` = "mcap" or "sqlite3") with the rig's five topics at each stamp, via rosbags.
+
+    ``zstd``: MCAP chunks compressed with zstd (rosbags' storage compression), as ros2 bag record writes them.
+    """
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     h, w = rig.left.shape[:2]
@@ -273,7 +278,10 @@ def write_bag(path: str, storage: str, rig: StereoRig, stamps: list[int], namesp
         "right/camera_info": "sensor_msgs/msg/CameraInfo",
         "points": "sensor_msgs/msg/PointCloud2",
     }
-    with Writer(path, version=9, storage_plugin=plugin) as writer:
+    bag = Writer(path, version=9, storage_plugin=plugin)
+    if zstd:
+        bag.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+    with bag as writer:
         conns = {n: writer.add_connection(f"{namespace}/{n}", t, typestore=TS) for n, t in types.items()}
         for stamp in stamps:
             msgs = {

@@ -5,6 +5,10 @@ Every topic of the bag whose type hash is known (the standard ROS 2 types of the
 attachment on every sample; other topics are skipped and listed. Messages go out at
 the recorded timing times ``--rosbag-rate`` (0 = as fast as possible), ``--loop``
 replays forever, ``--count`` caps the number of messages.
+
+A damaged bag plays every readable message; each damaged place is printed to stderr
+with its cause and where it is, and the closing JSON line counts them by cause
+(``damaged``; the first pass only). A bag of which nothing can be read is an error.
 """
 
 from __future__ import annotations
@@ -38,17 +42,19 @@ def play(args: argparse.Namespace) -> int:
             hashes[topic] = typestore().hash_rihs01(ros_type)
         except Exception:  # noqa: BLE001 - rosbags raises KeyError/TypesysError for types its store lacks
             skipped.append(topic)
+    damaged: dict[str, int] = {}
     zsec = ZenohSection(
         mode="peer", listen=list(args.listen), connect=list(args.connect), multicast_scouting=args.multicast_scouting
     )
     stop = threading.Event()
     old = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        sent, elapsed = _replay(args, zsec, pubs_for=hashes, topics=topics, stop=stop)
+        sent, elapsed = _replay(args, zsec, pubs_for=hashes, topics=topics, stop=stop, damaged=damaged)
     finally:
         for s, h in old.items():
             signal.signal(s, h)
-    print(json.dumps({"sent": sent, "seconds": round(elapsed, 3), "skipped_topics": skipped}), file=sys.stdout)
+    line = {"sent": sent, "seconds": round(elapsed, 3), "skipped_topics": skipped, "damaged": damaged}
+    print(json.dumps(line), file=sys.stdout)
     return 0
 
 
@@ -59,12 +65,21 @@ def _replay(
     pubs_for: dict[str, str],
     topics: dict[str, str],
     stop: threading.Event,
+    damaged: dict[str, int],
 ) -> tuple[int, float]:
-    """Publish the bag's messages of the topics in ``pubs_for`` (topic -> type hash); returns (sent, seconds)."""
+    """Publish the bag's messages of the topics in ``pubs_for`` (topic -> type hash); returns (sent, seconds).
+
+    Each damaged place of the bag is printed to stderr and counted by cause in ``damaged`` (first pass).
+    """
     from vpp_service.service.app import open_session
     from vpp_service.transport.ros2.bag import read_bag
     from vpp_service.transport.ros2.keys import RELIABLE_KEEP_ALL
+    from vpp_service.transport.ros2.bag_damage import BagDamage, ignore_damage
     from vpp_service.transport.ros2.node import RosNode, RosPublisher
+
+    def count_damage(damage: BagDamage) -> None:
+        damaged[damage.cause] = damaged.get(damage.cause, 0) + 1
+        print(f"vpp-service publish: damaged bag: {damage}", file=sys.stderr)
 
     rate = float(args.rosbag_rate)
     hashes = pubs_for
@@ -82,9 +97,10 @@ def _replay(
         while time.monotonic() < deadline and not stop.is_set() and not any(p.matching for p in pubs.values()):
             time.sleep(0.02)
         t0 = time.monotonic()
+        first = True
         while not stop.is_set():
             start_wall, start_bag = time.monotonic(), None
-            for m in read_bag(args.rosbag, set(pubs)):
+            for m in read_bag(args.rosbag, set(pubs), count_damage if first else ignore_damage):
                 start_bag = m.log_time_ns if start_bag is None else start_bag
                 if rate > 0:
                     delay = start_wall + (m.log_time_ns - start_bag) / 1e9 / rate - time.monotonic()
@@ -94,6 +110,7 @@ def _replay(
                     break
                 pubs[m.topic].put(bytes(m.data))
                 sent += 1
+            first = False
             if not args.loop or (args.count and sent >= args.count):
                 break
         elapsed = time.monotonic() - t0

@@ -265,7 +265,9 @@ def main(args: argparse.Namespace) -> int:
     finally:
         for s, h in old.items():
             signal.signal(s, h)
-    print(closing_line(cfg, status["counters"], status["dropped"]), file=sys.stderr)
+    by_cause = status["source"].get("rejected_by")
+    rejected_by = {str(k): int(v) for k, v in by_cause.items()} if isinstance(by_cause, dict) else None
+    print(closing_line(cfg, status["counters"], status["dropped"], rejected_by), file=sys.stderr)
     print(
         json.dumps(
             {"counters": status["counters"], "out": cfg.service.out, "shutdown_s": round(status["shutdown_s"], 3)}
@@ -354,8 +356,13 @@ def plural(n: int, noun: str) -> str:
     return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
-def closing_line(cfg: ServiceConfig, counters: dict[str, int], dropped: Mapping[str, int] | None = None) -> str:
-    """The line ``run`` prints when it stops: frames processed, any frames lost (by cause), where the files went."""
+def closing_line(
+    cfg: ServiceConfig,
+    counters: dict[str, int],
+    dropped: Mapping[str, int] | None = None,
+    rejected_by: Mapping[str, int] | None = None,
+) -> str:
+    """The line ``run`` prints when it stops: frames processed, any frames lost or input refused (by cause), files."""
     from pathlib import Path
 
     files = [str(Path(cfg.service.out) / "summary.json")]
@@ -367,7 +374,10 @@ def closing_line(cfg: ServiceConfig, counters: dict[str, int], dropped: Mapping[
     if counters.get("dropped", 0):
         causes = ", ".join(f"{k} {v}" for k, v in sorted((dropped or {}).items()) if v)
         lost = f"; dropped {plural(counters['dropped'], 'frame')}" + (f" ({causes})" if causes else "")
-    rejected = f"; rejected {counters['rejected']}" if counters.get("rejected", 0) else ""
+    rejected = ""
+    if counters.get("rejected", 0):
+        causes = ", ".join(f"{k} {v}" for k, v in sorted((rejected_by or {}).items()) if v)
+        rejected = f"; rejected {counters['rejected']}" + (f" ({causes})" if causes else "")
     processed = plural(counters.get("processed", 0), "frame")
     wrote = f"; wrote {', '.join(files)}" if files else ""
     not_written = f"; NOT written: {', '.join(missing)}" if missing else ""

@@ -8,6 +8,14 @@ those topics are read. ``rate`` replays at the recorded timing times ``rate``
 number of frames (0 = no cap). The depth wait (``depth_wait_ms``) runs on the bag's
 clock, so a fast replay pairs messages exactly as a real-time one does. A message
 recorded under a topic with another type than expected is refused (``type``).
+
+A damaged bag (cut short, garbage in a chunk or a page) is bad input, not a failure:
+every readable message is played, and each damaged place is refused with its cause
+(``bag.truncated``, ``bag.crc``, ``bag.corrupt_chunk``, ... of
+:mod:`~vpp_service.transport.ros2.bag_damage`) and where it is (byte offset, chunk or
+row, messages read before it): counted in ``rejected_by`` on the first pass (a loop
+does not count the same damage again). A bag of which nothing at all can be read
+ends the source with an error naming the file and the damage.
 """
 
 from __future__ import annotations
@@ -19,6 +27,7 @@ from vpp_service.frame import StereoFrame
 from vpp_service.sources.base import SOURCES, Emit, Reject, Source, SourceContext
 from vpp_service.sources.ros2_assembler import StereoAssembler, StereoTopics
 from vpp_service.transport.ros2.bag import check_bag_path, read_bag
+from vpp_service.transport.ros2.bag_damage import BagDamage, ignore_damage
 from vpp_service.transport.ros2.errors import Ros2Error
 
 
@@ -87,7 +96,8 @@ class Rosbag2Source(Source):
         while not self.stopping():
             got = False
             start_wall, start_bag = time.monotonic(), None
-            for m in read_bag(o.path, roles):
+            on_damage = self._damaged if self._counters["passes"] == 0 else ignore_damage
+            for m in read_bag(o.path, roles, on_damage):
                 got = True
                 self._counters["read"] += 1
                 self._bag_s = m.log_time_ns / 1e9
@@ -113,6 +123,12 @@ class Rosbag2Source(Source):
             self._counters["passes"] += 1
             if not (o.loop and got):
                 return
+
+    def _damaged(self, damage: BagDamage) -> None:
+        """Count and report a damaged place of the bag (refused like a bad message)."""
+        if self._assembler is not None:
+            self._counters["rejected"] += 1
+            self._assembler.refuse("bag", Ros2Error(damage.cause, damage.where))
 
     def _emit_all(self, frames: list[StereoFrame], emit: Emit) -> bool:
         """Emit ``frames``; True when ``count`` is reached."""

@@ -14,17 +14,21 @@ that distribution's metadata form (:data:`DISTRO_VERSIONS`).
 
 from __future__ import annotations
 
+import logging
 import sqlite3
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass
-from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from pathlib import Path, PurePath
+from typing import TYPE_CHECKING, Any, Literal
 
+from vpp_service.transport.ros2.bag_damage import BagDamage, OnDamage
 from vpp_service.transport.ros2.keys import DEFAULT_PUBLISHER, Qos
 from vpp_service.transport.ros2.messages import typestore
 
 if TYPE_CHECKING:
     from rosbags.interfaces import Qos as BagQos
+
+log = logging.getLogger(__name__)
 
 #: Storage formats a bag can be written in.
 Storage = Literal["mcap", "sqlite3"]
@@ -82,26 +86,123 @@ def check_bag_path(path: str | Path) -> Path:
     return p
 
 
+def _bag_info(folder: Path) -> dict[str, Any]:
+    """The ``rosbag2_bagfile_information`` mapping of a bag folder's ``metadata.yaml``."""
+    from ruamel.yaml import YAML  # rosbags' own YAML reader (a dependency of rosbags)
+
+    meta = folder / "metadata.yaml"
+    try:
+        info = YAML(typ="safe").load(meta.read_text())["rosbag2_bagfile_information"]
+        if not isinstance(info, dict):
+            raise TypeError("rosbag2_bagfile_information is not a mapping")
+        return info
+    except Exception as exc:  # noqa: BLE001 - OSError, YAMLError, KeyError, TypeError: metadata.yaml does not hold
+        raise ValueError(f"rosbag: {meta} cannot be read ({type(exc).__name__}: {exc})") from None
+
+
+def _bag_files(path: Path) -> list[Path] | None:
+    """The storage files of a bag, in recording order (None: a compressed bag folder, read by rosbags)."""
+    if path.is_file():
+        return [path]
+    info = _bag_info(path)
+    try:
+        mode = str(info.get("compression_mode") or "").lower()
+        files = [path / PurePath(str(x)).name for x in info["relative_file_paths"]]
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f"rosbag: {path / 'metadata.yaml'}: no list of files ({exc})") from None
+    if mode not in ("", "none"):
+        return None
+    if missing := [str(f) for f in files if not f.is_file()]:
+        raise ValueError(f"rosbag: {path}: files named in metadata.yaml are missing: {missing}")
+    if odd := [str(f) for f in files if f.suffix not in (".db3", ".mcap")]:
+        raise ValueError(f"rosbag: {path}: files of an unsupported storage: {odd}")
+    return files
+
+
 def bag_topics(path: str | Path) -> dict[str, str]:
-    """Topic -> message type of every connection in the bag."""
-    from rosbags.rosbag2 import Reader
+    """Topic -> message type of every connection in the bag.
 
-    with Reader(check_bag_path(path)) as reader:
-        return {c.topic: c.msgtype for c in reader.connections}
-
-
-def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Iterator[BagMessage]:
-    """The bag's messages on ``topics`` (None = all), in log-time order.
+    A bag folder's come from its ``metadata.yaml``; an ``.mcap`` file's from its summary,
+    or when that is gone (a cut file) from a pass over its readable records; a ``.db3``
+    file's from its ``topics`` table.
 
     Raises
     ------
     FileNotFoundError, ValueError
-        Not a bag (see :func:`check_bag_path`), or the bag cannot be read.
+        Not a bag (see :func:`check_bag_path`), or its topics cannot be read.
     """
+    from vpp_service.transport.ros2.db3_reader import db3_topics
+    from vpp_service.transport.ros2.mcap_reader import McapWalk
+
+    p = check_bag_path(path)
+    if p.is_dir():
+        try:
+            topics = _bag_info(p)["topics_with_message_count"]
+            return {str(t["topic_metadata"]["name"]): str(t["topic_metadata"]["type"]) for t in topics}
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"rosbag: {p / 'metadata.yaml'}: no list of topics ({exc})") from None
+    if p.suffix == ".db3":
+        return db3_topics(p)
+    walk = McapWalk(p, topics=())
+    found = walk.summary_topics()
+    if found is None:
+        for _ in walk:
+            pass
+        found = {topic: walk.schemas.get(sid, "") for topic, sid in walk.channels.values()}
+    return found
+
+
+def _log_damage(damage: BagDamage) -> None:
+    log.warning("rosbag: damaged: %s", damage)
+
+
+def read_bag(
+    path: str | Path, topics: Collection[str] | None = None, on_damage: OnDamage | None = None
+) -> Iterator[BagMessage]:
+    """The bag's messages on ``topics`` (None = all), in log-time order.
+
+    A damaged bag (cut short, garbage in a chunk or a page) plays every message that can
+    be read; each damaged place, its cause and where it is go to ``on_damage`` (None:
+    logged as a warning) and reading goes on past it where the format allows
+    (:mod:`~vpp_service.transport.ros2.mcap_reader`, :mod:`~vpp_service.transport.ros2.db3_reader`).
+    A bag folder with ``compression_mode`` set is read by rosbags, without that.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        Not a bag (see :func:`check_bag_path`), or not one message on ``topics`` could be
+        read from a damaged bag (the error names the file and the first damage).
+    """
+    from vpp_service.transport.ros2.db3_reader import Db3Rows
+    from vpp_service.transport.ros2.mcap_reader import McapWalk
+
+    p = check_bag_path(path)
+    files = _bag_files(p)
+    if files is None:
+        yield from _read_with_rosbags(p, topics)
+        return
+    report = on_damage or _log_damage
+    first: list[BagDamage] = []
+
+    def note(damage: BagDamage) -> None:
+        first[:] = first or [damage]
+        report(damage)
+
+    played = 0
+    for f in files:
+        for m in McapWalk(f, topics, note) if f.suffix == ".mcap" else Db3Rows(f, topics, note):
+            played += 1
+            yield m
+    if not played and first:
+        raise ValueError(f"rosbag: {p}: nothing readable on the chosen topics; first damage: {first[0]}")
+
+
+def _read_with_rosbags(path: Path, topics: Collection[str] | None) -> Iterator[BagMessage]:
+    """A bag rosbags reads for us (a compressed bag folder)."""
     from rosbags.rosbag2 import Reader, ReaderError
 
     try:
-        with Reader(check_bag_path(path)) as reader:
+        with Reader(path) as reader:
             conns = [c for c in reader.connections if topics is None or c.topic in topics]
             if not conns:
                 return
