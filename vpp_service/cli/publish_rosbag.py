@@ -73,8 +73,8 @@ def _replay(
     """
     from vpp_service.service.app import open_session
     from vpp_service.transport.ros2.bag import read_bag
-    from vpp_service.transport.ros2.keys import RELIABLE_KEEP_ALL
     from vpp_service.transport.ros2.bag_damage import BagDamage, ignore_damage
+    from vpp_service.transport.ros2.keys import RELIABLE_KEEP_ALL
     from vpp_service.transport.ros2.node import RosNode, RosPublisher
 
     def count_damage(damage: BagDamage) -> None:
