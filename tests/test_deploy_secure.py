@@ -169,3 +169,71 @@ def test_another_rigs_certificate_cannot_publish_into_rig0(site):
         assert status(viewer)["counters"]["received"] == before
         assert status(rig1) is None  # nor may it read rig0's status
         assert collect(sub, 1, timeout=0.5) == []
+
+
+@pytest.fixture
+def pool_site(tmp_path):
+    """The recipe's router and two pool workers (the service's certificate), each in a thread of this process."""
+    site = Site(tmp_path)
+    router = zenoh.open(zenoh.Config.from_file(str(site.config_file("router"))))
+    stop = threading.Event()
+    results: dict[str, dict] = {}
+    threads = []
+    for worker in ("w0", "w1"):
+        data = site.service_config()
+        data["service"].update(out=str(tmp_path / worker), pool=True, worker_id=worker)
+        cfg = validate_config(data)
+        t = threading.Thread(target=lambda w=worker, c=cfg: results.update({w: run_service(c, stop, None)}))
+        t.start()
+        threads.append(t)
+    try:
+        yield site
+    finally:
+        stop.set()
+        for t in threads:
+            t.join(20)
+        router.close()
+    assert not any(t.is_alive() for t in threads) and all(r["source_error"] is None for r in results.values())
+
+
+def pool_status(session: zenoh.Session) -> dict[str, dict]:
+    """Each worker's ``pool`` section, by worker id."""
+    out = {}
+    for reply in session.get("vpp/rig0/@status/*", timeout=3.0):
+        if reply.ok is not None:
+            st = json.loads(reply.ok.payload.to_string())
+            out[st["pool"]["worker"]] = st["pool"]
+    return out
+
+
+def test_only_the_services_identity_can_join_the_pool_or_answer_for_it(pool_site):
+    """rig0's certificate declares six @pool tokens and forges @answered for every frame under a fake's id.
+
+    Without the ACL the fakes would be members whose frames are answered by nobody but the forger; with
+    it no worker sees them: every frame of rig0 is answered by w0 or w1.
+    """
+    from vpp_service.service.pool import encode_answered
+
+    count = 10
+    with pool_site.client("viewer") as viewer, pool_site.rig("rig0") as rig:
+        deadline = time.monotonic() + 15
+        while len(pool_status(viewer)) < 2 and time.monotonic() < deadline:
+            time.sleep(0.2)
+        tokens = [rig.liveliness().declare_token(f"vpp/rig0/@pool/fake{i}") for i in range(6)]
+        forger = rig.declare_publisher("vpp/rig0/@answered")
+        out = rig.declare_subscriber("vpp/rig0/out/disparity", zenoh.handlers.FifoChannel(64))
+        time.sleep(1.0)
+        for seq in range(count):
+            forger.put(encode_answered("rig0", seq, "fake0"))
+        pub = rig.declare_publisher("vpp/rig0/in/frame", congestion_control=zenoh.CongestionControl.BLOCK)
+        time.sleep(0.5)
+        for payload in frames("rig0", count):
+            pub.put(payload)
+            time.sleep(0.05)
+        got = collect(out, count, timeout=15.0)
+        pools = pool_status(viewer)
+        del tokens
+    assert sorted(wire.decode_output(s.payload.to_bytes()).seq for s in got) == list(range(count)), pools
+    assert sorted(pools) == ["w0", "w1"]
+    for st in pools.values():
+        assert st["members"] == ["w0", "w1"] and st["foreign_answers"] == 0 and st["silent"] == [], st
