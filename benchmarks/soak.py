@@ -27,10 +27,27 @@ default ``out/soak.json``, a path git ignores):
   (after the service trims freed memory);
 * latency p99 (from receive time: hostile stamps must not move it).
 
+Two more modes attack the newer paths (``--mode``):
+
+``ros2``
+    The service with the ``ros2`` source and sink; a robot (``tests/helpers/ros2_robot.py``)
+    sends, before every genuine stereo set, hostile parts carrying the set's own stamp
+    (a ``bgra8`` image, a step that does not match the data, a camera_info with a zero ``P``,
+    a cloud without ``x y z``) and a burst of junk samples (no rmw_zenoh attachment, or over
+    ``max_message_mb``) into 4-deep rings. Figures: genuine sets delivered, rejections by cause,
+    and the source's ledger (every received sample in exactly one count).
+``pool``
+    Two pool workers (processes) behind a router; a hostile peer declares six ``@pool`` tokens
+    that never answer and forges ``@answered`` for every frame under each worker's id and an id
+    without a token, before the frames. Figures: frames answered, each loss by cause
+    (``lost``, ``silent_lost``), ``foreign_answers``, ``duplicates``.
+
 Usage::
 
     python benchmarks/soak.py                      # 10,000 hostile messages, 100 valid frames
     python benchmarks/soak.py --hostile 500 --valid 20 --no-full-size   # a quick run
+    python benchmarks/soak.py --mode ros2 --valid 300 --junk 96       # ROS 2 input under attack
+    python benchmarks/soak.py --mode pool --valid 600                 # the worker pool under attack
 """
 
 from __future__ import annotations
@@ -270,6 +287,183 @@ def run(  # noqa: PLR0915 - one scenario, step by step
     return figures
 
 
+def _hostile_parts(rig: Any, stamp: int) -> list[tuple[str, object]]:
+    """Well-formed CDR with bad content and the genuine set's ``stamp``: one of each refused kind."""
+    import numpy as np
+
+    from helpers.ros2_robot import camera_info_from_p, cloud_msg, image_msg
+
+    h, w = rig.left.shape[:2]
+    step = image_msg(rig.left, stamp, "l")
+    step.step = w * 3 + 7  # step x height no longer matches the data
+    cloud = cloud_msg(rig.cloud, stamp, "l")
+    cloud.fields = cloud.fields[:1]  # x only: no y, z
+    return [
+        ("left/image_rect", image_msg(np.zeros((h, w, 4), np.uint8), stamp, "l", encoding="bgra8")),
+        ("right/image_rect", step),
+        ("left/camera_info", camera_info_from_p(stamp, "l", (w, h), np.zeros((3, 4)))),
+        ("points", cloud),
+    ]
+
+
+def run_ros2(n_sets: int = 300, junk: int = 96, timeout_s: float = 30.0) -> dict[str, Any]:
+    """ROS 2 input under attack (see the module docstring); returns the figures."""
+    import numpy as np
+    import zenoh
+
+    from helpers.ros2_robot import Robot, StereoRig
+    from vpp_service.service.app import run_service
+    from vpp_service.service.config import validate_config
+
+    port = _free_port()
+    base = Path(tempfile.mkdtemp(prefix="vpp-soak-ros2-"))
+    cfg = validate_config(
+        {
+            "service": {"rig": RIG, "out": str(base / "run"), "summary": False, "reject_log_period_s": 5.0},
+            "zenoh": {"mode": "peer", "listen": [f"tcp/127.0.0.1:{port}"], "connect": []},
+            "source": {"type": "ros2", "ring_size": 4, "max_message_mb": 0.05, "depth_wait_ms": 2000.0},
+            "vpp": {"enabled": True},
+            "matcher": {"name": "sgbm", "max_disparity": 16},
+            "queues": {"input_size": 2, "input_policy": "block", "output_size": 4, "output_policy": "block"},
+            "sinks": [{"type": "ros2", "outputs": ["disparity"]}],
+        }
+    )
+    stop = threading.Event()
+    result: dict[str, Any] = {}
+    thread = threading.Thread(target=lambda: result.update(run_service(cfg, stop, stream=None)), daemon=True)
+    thread.start()
+    rng = np.random.default_rng(0)
+    img = rng.integers(0, 256, (48, 96, 3), dtype=np.uint8)
+    cloud = np.array([[0.0, 0.0, 2.0], [0.1, 0.05, 2.5]], np.float32)
+    rig = StereoRig(img, np.roll(img, -4, axis=1), 100.0, 0.1, 47.5, 47.5, 23.5, cloud)
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    figures: dict[str, Any] = {"mode": "ros2", "junk_per_set": junk, "hostile_parts_per_set": 4}
+    stalls = 0
+    with zenoh.open(conf) as session:
+        robot = Robot(session)
+        sub = robot.subscribe_disparity()
+        if not robot.wait_for_subscribers(["left/image_rect", "right/image_rect", "points"], timeout=timeout_s):
+            raise RuntimeError("the service's subscribers never appeared")
+        got = 0
+        t0 = time.monotonic()
+        for k in range(n_sets):
+            stamp = 1_000_000 + k * 1000
+            for name, msg in _hostile_parts(rig, stamp):
+                robot.put(name, msg)
+            for j in range(junk):
+                name = ("left/image_rect", "right/image_rect", "left/camera_info", "points")[j % 4]
+                if j % 2:  # no attachment: not an rmw_zenoh publisher
+                    robot.pubs[name].put(b"\x00\x01\x00\x00junk")
+                else:  # over max_message_mb
+                    robot.pubs[name].put(b"\x00\x01\x00\x00" + bytes(64 * 1024), attachment=bytes(33))
+            robot.publish(rig, stamp)
+            deadline = time.monotonic() + timeout_s
+            while got <= k and time.monotonic() < deadline:
+                if sub.try_recv() is not None:
+                    got += 1
+                else:
+                    time.sleep(0.002)
+            if got <= k:
+                stalls += 1
+        figures["seconds"] = time.monotonic() - t0
+        robot.close()
+    stop.set()
+    thread.join(30.0)
+    summary = result.get("summary", result)
+    src = summary.get("source", {})
+    ledger = src.get("messages", {})
+    ends = sum(v for k, v in ledger.items() if k != "received")
+    figures.update(
+        {
+            "sent_sets": n_sets,
+            "delivered": got,
+            "delivered_pct": 100.0 * got / max(1, n_sets),
+            "processed": summary.get("counters", {}).get("processed"),
+            "stalls": stalls,
+            "rejected_by": src.get("rejected_by"),
+            "dropped": summary.get("dropped"),
+            "messages": ledger,
+            "messages_accounted": ledger.get("received") == ends,
+        }
+    )
+    return figures
+
+
+def run_pool(n_frames: int = 600, rate: float = 20.0, fakes: int = 6) -> dict[str, Any]:
+    """The worker pool under attack (see the module docstring); returns the figures."""
+    import zenoh
+
+    from helpers.pool import publish, start_worker, stop_all, wait_members, worker_config
+    from helpers.zenoh_loopback import zenoh_test_config
+    from helpers.zenoh_router import RouterProcess
+    from vpp_service.service.pool import encode_answered
+
+    endpoint, rig, ids = f"tcp/127.0.0.1:{_free_port()}", "soakpool", ["w0", "w1"]
+    base = Path(tempfile.mkdtemp(prefix="vpp-soak-pool-"))
+    procs = [start_worker(worker_config(base, endpoint, rig, w), base / f"{w}.log") for w in ids]
+    seqs: set[int] = set()
+    replies: dict[str, Any] = {}
+    with RouterProcess(endpoint) as router:
+        router.start()
+        try:
+            with (
+                zenoh.open(zenoh_test_config(connect=[endpoint], mode="client")) as session,
+                zenoh.open(zenoh_test_config(connect=[endpoint], mode="client")) as hostile,
+            ):
+                wait_members(session, rig, len(ids), procs)
+                tokens = [hostile.liveliness().declare_token(f"vpp/{rig}/@pool/fake{i}") for i in range(fakes)]
+                forger = hostile.declare_publisher(f"vpp/{rig}/@answered")
+                sub = session.declare_subscriber(f"vpp/{rig}/out/disparity", zenoh.handlers.FifoChannel(4096))
+                time.sleep(0.5)
+                for seq in range(n_frames):
+                    for w in [*ids, "intruder"]:
+                        forger.put(encode_answered(rig, seq, w))
+                t0 = time.monotonic()
+                pub = publish(endpoint, rig, n_frames, rate=rate)
+                if pub.returncode != 0:
+                    raise RuntimeError(pub.stderr)
+                last = time.monotonic()
+                outs = 0
+                while time.monotonic() - last < 3.0:
+                    s = sub.try_recv()
+                    if s is None:
+                        time.sleep(0.01)
+                        continue
+                    last = time.monotonic()
+                    outs += 1
+                    seqs.add(wire.decode_output(s.payload.to_bytes()).seq)
+                seconds = time.monotonic() - t0
+                for reply in session.get(f"vpp/{rig}/@status/*", timeout=3.0):
+                    if reply.ok is not None:
+                        st = json.loads(reply.ok.payload.to_string())
+                        replies[st["pool"]["worker"]] = st["pool"]
+                del tokens
+        finally:
+            codes = stop_all(procs)
+    missing = n_frames - len(seqs)
+    lost = sum(st["lost"] + st["silent_lost"] for st in replies.values())
+    return {
+        "mode": "pool",
+        "workers": len(ids),
+        "fake_members": fakes,
+        "sent_frames": n_frames,
+        "seconds": seconds,
+        "delivered": len(seqs),
+        "delivered_pct": 100.0 * len(seqs) / max(1, n_frames),
+        "outputs": outs,
+        "missing": missing,
+        "lost_counted": lost,
+        "every_loss_counted": lost == missing,
+        "silent_found": sorted({m for st in replies.values() for m in st["silent"]}),
+        "foreign_answers": sum(st["foreign_answers"] for st in replies.values()),
+        "duplicates": sum(st["duplicates"] for st in replies.values()),
+        "exit_codes": codes,
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command line: run the soak, print the figures, write them as JSON."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -278,7 +472,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--flood-mb", type=float, default=2.0, help="size the flood kinds are built to during the soak")
     ap.add_argument("--no-full-size", action="store_true", help="skip the phase of 64 MiB hostile messages")
     ap.add_argument("--json", default=str(ROOT / "out" / "soak.json"), help="where the figures go (git ignores out/)")
+    ap.add_argument("--mode", choices=("zenoh", "ros2", "pool"), default="zenoh", help="which path to attack")
+    ap.add_argument("--junk", type=int, default=96, help="ros2 mode: junk samples before every genuine set")
+    ap.add_argument("--rate", type=float, default=20.0, help="pool mode: frames per second")
     a = ap.parse_args(argv)
+    if a.mode != "zenoh":
+        figures = run_ros2(a.valid, a.junk) if a.mode == "ros2" else run_pool(a.valid, a.rate)
+        for key, value in figures.items():
+            print(f"{key:28s} {value}")
+        path = Path(a.json)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(figures, indent=2, default=str))
+        print(f"wrote {path}")
+        counted = figures.get("messages_accounted", figures.get("every_loss_counted"))
+        return 0 if figures["delivered_pct"] >= 99.0 and counted else 1
     cost = decode_cost(wire.DEFAULT_LIMITS.max_message_bytes)
     print(f"{'kind':24s} {'bytes':>10s} {'reject ms':>10s} {'peak MB':>8s}  outcome")
     for kind, row in cost.items():

@@ -37,3 +37,14 @@ def test_hostile_messages_interleaved_with_valid_frames():
     assert figures["files_outside_sinks"] == [] and figures["files_written"] == figures["recorded"] == 4
     # valid frames carried stamps of 1970, 0 and the far future: latency is from receipt
     assert 0 <= figures["latency_p99_ms"] < 60_000
+
+
+def test_ros2_mode_delivers_every_genuine_set_and_counts_every_sample():
+    """Hostile parts with each set's stamp and a junk burst before it: every set delivered, every sample counted."""
+    figures = _soak().run_ros2(n_sets=6, junk=24)
+    assert figures["delivered"] == figures["processed"] == 6 and figures["stalls"] == 0
+    by = figures["rejected_by"]
+    assert by == {"encoding": 6, "layout": 6, "calibration": 6, "fields": 6, "attachment": 72, "too_large": 72}, by
+    ledger = figures["messages"]
+    assert figures["messages_accounted"] and ledger["received"] == 6 * (4 + 24 + 5), ledger
+    assert ledger["used"] == 30 and ledger["ring_dropped"] == 0 and sum(figures["dropped"].values()) == 0
