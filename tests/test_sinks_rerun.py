@@ -562,3 +562,31 @@ def test_no_accuracy_entity_without_ground_truth(tmp_path):
     sink.write(make_result(0))
     sink.close(timeout=10)
     assert not [e for e in read_rrd(tmp_path / "out.rrd") if "/accuracy" in e]
+
+
+def test_frames_after_the_viewer_dies_are_not_counted_written(tmp_path):
+    """The viewer (a gRPC server saving what it gets) stops mid-stream: each frame counted ``written`` reached it."""
+    port = free_port()
+    url = f"rerun+http://127.0.0.1:{port}/proxy"
+    viewer = start_viewer(port, tmp_path / "a.rrd")
+    sink = build_sink("rerun", {"mode": "connect", "url": url, "max_hz": 0, "queue_size": 64}, SinkContext(rig=RIG))
+    sink.open()
+    n = 15
+    try:
+        for seq in range(5):
+            sink.write(make_result(seq))
+            time.sleep(0.05)
+        deadline = time.monotonic() + 10
+        while sink.stats()["written"] < 5 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        viewer.kill()  # dies: no goodbye on the connection
+        viewer.wait(10)
+        for seq in range(5, n):
+            sink.write(make_result(seq))
+            time.sleep(0.05)
+        sink.close(timeout=5)
+    finally:
+        if viewer.poll() is None:
+            stop(viewer)
+    st = sink.stats()
+    assert st["written"] == 5 and st["undelivered"] == n - 5, st
