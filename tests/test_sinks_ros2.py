@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 
 import numpy as np
@@ -205,3 +206,22 @@ def test_points2_layouts(layout):
 def test_bad_points2_layout():
     with pytest.raises(SettingsError, match="points2_layout"):
         parse_sink_options("ros2", {"points2_layout": "dense"})
+
+
+def test_a_subscriber_of_another_distro_is_said(sessions, caplog):
+    """A Humble-keyed subscriber next to a jazzy sink gets nothing: the sink says so, once, naming the fix."""
+    svc, bot = sessions
+    sub, tok = ros_subscriber(bot, "humble")
+    sink = build_sink("ros2", {"ros_distro": "jazzy"}, SinkContext(session=svc))
+    sink.open()
+    time.sleep(0.3)
+    try:
+        with caplog.at_level(logging.WARNING, logger="vpp_service.sinks.ros2"):
+            for _ in range(3):
+                sink.write(result())
+        got = collect(sub, 1, timeout=0.5)
+    finally:
+        sink.close(2.0)
+        tok.undeclare()
+    said = [r.getMessage() for r in caplog.records if "TypeHashNotSupported" in r.getMessage()]
+    assert got == [] and len(said) == 1 and "/stereo/disparity" in said[0] and "ros_distro" in said[0], said

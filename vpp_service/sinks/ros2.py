@@ -36,6 +36,7 @@ sink's own thread behind a queue of ``queue_size`` results (:meth:`Ros2Sink.queu
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 from typing import Literal
@@ -49,6 +50,11 @@ from vpp_service.transport.ros2 import keys
 from vpp_service.transport.ros2 import messages as rm
 from vpp_service.transport.ros2.attachment import Layout
 from vpp_service.transport.ros2.node import RosNode, RosPublisher
+
+log = logging.getLogger(__name__)
+
+#: Seconds between two looks at the graph for subscribers keyed for another distribution.
+HASH_CHECK_S = 2.0
 
 #: Output name -> (default topic relative to the namespace, message type).
 OUTPUTS: dict[str, tuple[str, str]] = {
@@ -246,6 +252,8 @@ class Ros2Sink(Sink):
         self._timer = StageTimer()  # per-result encode + publish durations (ms), the median in stats()
         self._counters.update({"lazy_skipped": 0, "missing": 0})
         self._encoder = Ros2Encoder(options)
+        self._next_hash_check = 0.0
+        self._hash_said: set[tuple[str, str]] = set()
 
     def queue_spec(self) -> QueueSpec:
         """``queue_size`` results wait for this sink (a full queue drops the oldest unless the pipeline blocks)."""
@@ -275,6 +283,7 @@ class Ros2Sink(Sink):
         if self._node is None:
             raise RuntimeError("ros2 sink: not open")
         t0 = time.perf_counter()
+        self._say_other_hashes()
         for name, pub in self._pubs.items():
             if self.options.lazy and not pub.live:
                 self.count("lazy_skipped")
@@ -286,6 +295,28 @@ class Ros2Sink(Sink):
             pub.put(payload, self.options.attachment)
         self._timer.add("publish", (time.perf_counter() - t0) * 1e3)
         self.count("written")
+
+    def _say_other_hashes(self) -> None:
+        """Warn once per topic and hash when a subscriber of another distribution waits on an output.
+
+        Looked at every :data:`HASH_CHECK_S` seconds at most: the graph is a shared dictionary.
+        """
+        now = time.monotonic()
+        if now < self._next_hash_check:
+            return
+        self._next_hash_check = now + HASH_CHECK_S
+        for pub in self._pubs.values():
+            for h in pub.other_hashes():
+                if (pub.topic, h) not in self._hash_said:
+                    self._hash_said.add((pub.topic, h))
+                    log.warning(
+                        "ros2 sink: a subscriber of %s is keyed with type hash %s, which this sink "
+                        "(ros_distro = %r) does not publish: it receives nothing. Set ros_distro to its "
+                        "distribution (humble: TypeHashNotSupported), or add a second ros2 sink for it",
+                        pub.topic,
+                        h,
+                        self.options.ros_distro,
+                    )
 
     def close(self, timeout: float = 5.0) -> None:
         """Undeclare the node."""

@@ -114,6 +114,15 @@ class RosPublisher:
         """
         return self._graph.count(self.topic, self._dds_type, self._type_hash) > 0
 
+    def other_hashes(self) -> list[str]:
+        """Type hashes of ROS subscriber tokens for this topic and type keyed unlike this publisher.
+
+        Such a subscriber (e.g. Humble's ``TypeHashNotSupported`` next to a Jazzy publisher) listens
+        on another data key and receives nothing from this publisher.
+        """
+        mine = (self.topic, self._dds_type)
+        return sorted(h for (topic, dds, h) in self._graph.topics() if (topic, dds) == mine and h != self._type_hash)
+
     def put(self, payload: bytes | bytearray, layout: attachment.Layout = "current") -> int:
         """Publish one CDR payload with its attachment; returns its sequence number."""
         with self._lock:
