@@ -47,7 +47,7 @@ Usage::
     python benchmarks/soak.py                      # 10,000 hostile messages, 100 valid frames
     python benchmarks/soak.py --hostile 500 --valid 20 --no-full-size   # a quick run
     python benchmarks/soak.py --mode ros2 --valid 300 --junk 96       # ROS 2 input under attack
-    python benchmarks/soak.py --mode pool --valid 600                 # the worker pool under attack
+    python benchmarks/soak.py --mode pool --valid 1200                # the worker pool under attack (60 s)
 """
 
 from __future__ import annotations
