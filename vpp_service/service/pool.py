@@ -34,10 +34,11 @@ Trust
     So a worker never skips a frame it owns on another's word (an answer for one of its
     frames from any other worker makes a duplicate at most), an answer forgets another
     member's record only when it comes from that frame's owner, and answers from ids that
-    hold no token are ignored (``foreign_answers``). A member that owns a frame older than the
-    deadline (at least 1 s) and has answered nothing since that frame arrived
-    (a peer that only declared a token, or a worker that hangs) is *silent*: it owns no frame
-    until it answers again; its frames still fresh are taken over, the older ones counted
+    hold no token are ignored (``foreign_answers``). Each worker also puts a heartbeat on
+    ``@answered`` four times per deadline (at least 1 s). A member that owns a frame older than
+    that time and has said nothing (answer or heartbeat) for that long (a peer that only
+    declared a token, or a worker process that hangs) is *silent*: it owns no frame until
+    it speaks again; its frames still fresh are taken over, the older ones counted
     ``silent_lost`` (until an answer for one of them comes after all).
     A peer that holds a token *and* answers the frames it owns cannot be told apart from a
     worker without its outputs: the router's ACL keeps ``@pool`` and ``@answered`` to the
@@ -122,13 +123,18 @@ def owner(seq: int, members: Iterable[str]) -> str | None:
 
 
 # ----------------------------------------------------------------- answers
-def encode_answered(rig: str, seq: int, worker: str) -> bytes:
-    """The ``@answered`` message: ``{v: 1, rig, seq, worker}`` in msgpack."""
+def encode_answered(rig: str, seq: int | None, worker: str) -> bytes:
+    """The ``@answered`` message: ``{v: 1, rig, seq, worker}`` in msgpack; ``seq`` None: a heartbeat.
+
+    A heartbeat (``{v: 1, rig, worker, alive: true}``) says the worker runs, with nothing new answered.
+    """
+    if seq is None:
+        return msgpack.packb({"v": 1, "rig": rig, "worker": worker, "alive": True}, use_bin_type=True)
     return msgpack.packb({"v": 1, "rig": rig, "seq": int(seq), "worker": worker}, use_bin_type=True)
 
 
-def decode_answered(payload: bytes) -> tuple[str, int, str]:
-    """``(rig, seq, worker)`` of an ``@answered`` message.
+def decode_answered(payload: bytes) -> tuple[str, int | None, str]:
+    """``(rig, seq, worker)`` of an ``@answered`` message; ``seq`` None for a heartbeat.
 
     Raises
     ------
@@ -146,7 +152,9 @@ def decode_answered(payload: bytes) -> tuple[str, int, str]:
     rig, seq, worker = msg.get("rig"), msg.get("seq"), msg.get("worker")
     if not isinstance(rig, str):
         raise ValueError("@answered.rig: must be a string")
-    if isinstance(seq, bool) or not isinstance(seq, int) or not 0 <= seq < 1 << 63:
+    if seq is None and msg.get("alive") is True:
+        pass  # a heartbeat
+    elif isinstance(seq, bool) or not isinstance(seq, int) or not 0 <= seq < 1 << 63:
         raise ValueError("@answered.seq: must be an int in [0, 2^63)")
     if not isinstance(worker, str) or not _WORKER_ID.match(worker):
         raise ValueError("@answered.worker: must be a worker id")
@@ -205,10 +213,10 @@ class PoolState:
         How many recent answered ``seq`` values are remembered (duplicate detection).
     silent_frames : int
         A member is silent once it owns this many unanswered frames older than ``silent_s``
-        and has answered nothing since the oldest of them arrived.
+        and has said nothing (answer or heartbeat) for ``silent_s``.
     silent_s : float or None
-        See ``silent_frames``; None: the deadline, at least 1 s (a worker's first answer may
-        take longer than a short deadline, and one found silent wrongly costs duplicates).
+        See ``silent_frames``; None: the deadline, at least 1 s (one found silent wrongly costs
+        duplicates).
     clock : callable
         Monotonic seconds (tests pass their own).
     """
@@ -236,7 +244,7 @@ class PoolState:
         self._lock = threading.Lock()
         self._members: set[str] = {me}
         self._silent: set[str] = set()  # members that own no frame until they answer again
-        self._last_answer: dict[str, float] = {}  # member -> when its latest answer came
+        self._last_heard: dict[str, float] = {}  # member -> when its latest answer or heartbeat came
         self._silent_lost: OrderedDict[int, None] = OrderedDict()  # counted silent_lost, until answered
         self._records: OrderedDict[int, _Record] = OrderedDict()  # by arrival
         self._held: deque[int] = deque()  # seqs whose record still holds the frame, by arrival
@@ -341,22 +349,33 @@ class PoolState:
         Anyone on the network can put an ``@answered`` message: one from a worker id that holds no
         ``@pool`` token must not make the owner skip its frame (a forged answer would silence it).
         """
+        if not self.heard(worker):
+            with self._lock:
+                self._counts["foreign_answers"] += 1
+            return False
+        self.answered(seq, worker)
+        return True
+
+    def heard(self, worker: str) -> bool:
+        """``worker`` spoke (an answer or a heartbeat): a silent member owns frames again.
+
+        Returns False, and changes nothing, when ``worker`` holds no token (a heartbeat can come
+        before the token of a worker that just joined: it is not counted).
+        """
         with self._lock:
             if worker not in self._members:
-                self._counts["foreign_answers"] += 1
                 return False
-            self._last_answer[worker] = self.clock()
+            self._last_heard[worker] = self.clock()
             if worker in self._silent:
                 self._silent.discard(worker)
-                log.info("pool: %s answers again; it owns frames again", worker)
-        self.answered(seq, worker)
+                log.info("pool: %s speaks again; it owns frames again", worker)
         return True
 
     def check_silent(self) -> list[StereoFrame]:
         """Find silent members (see Trust above); returns the fresh frames this worker takes over from them.
 
         A member becomes silent when it owns at least ``silent_frames`` unanswered frames older
-        than ``silent_s`` and has answered nothing since the oldest of them arrived. Its frames
+        than ``silent_s`` and has said nothing (answer or heartbeat) for ``silent_s``. Its frames
         go to their next owner as when it leaves; those that fall to this worker are taken over
         while fresh, the older ones counted ``silent_lost``.
         """
@@ -373,7 +392,7 @@ class PoolState:
             found = [
                 m
                 for m, times in overdue.items()
-                if len(times) >= self.silent_frames and self._last_answer.get(m, -math.inf) < times[0]
+                if len(times) >= self.silent_frames and self._last_heard.get(m, -math.inf) < now - self.silent_s
             ]
             if not found:
                 return []
@@ -381,8 +400,8 @@ class PoolState:
                 self._silent.add(m)
                 self._counts["silenced"] += 1
                 log.warning(
-                    "pool: member %s owns %d frames past the deadline and answered none of them: "
-                    "its frames go to the others until it answers",
+                    "pool: member %s owns %d frames past the deadline and has said nothing since: "
+                    "its frames go to the others until it speaks",
                     m,
                     len(overdue[m]),
                 )
@@ -435,7 +454,7 @@ class PoolState:
                 return []
             self._members.discard(worker)
             self._silent.discard(worker)
-            self._last_answer.pop(worker, None)
+            self._last_heard.pop(worker, None)
             self._counts["leaves"] += 1
             return self._reassign({worker}, now, "lost")
 
@@ -580,6 +599,7 @@ class WorkerPool:
         key = answered_key(self.prefix, self.rig)
         self._answers_sub = self.session.declare_subscriber(key, zenoh.handlers.Callback(self._on_answer))
         self._publisher = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+        self._heartbeat()
         self._thread = threading.Thread(target=self._run, name="pool-takeover", daemon=True)
         self._thread.start()
         log.info("pool %s: worker %s joined; members %s", self.rig, self.worker_id, self.state.members)
@@ -600,6 +620,15 @@ class WorkerPool:
                 pub.put(encode_answered(self.rig, seq, self.worker_id))
             except Exception as exc:  # noqa: BLE001 - a closing session; the answer is only bookkeeping
                 log.debug("pool: announcing seq %d failed: %s", seq, exc)
+
+    def _heartbeat(self) -> None:
+        """Tell the pool this worker runs (see Trust above)."""
+        pub = self._publisher
+        if pub is not None and not self._stopping:
+            try:
+                pub.put(encode_answered(self.rig, None, self.worker_id))
+            except Exception as exc:  # noqa: BLE001 - a closing session; the heartbeat is only bookkeeping
+                log.debug("pool: heartbeat failed: %s", exc)
 
     def _on_member(self, sample: zenoh.Sample) -> None:
         import zenoh
@@ -628,13 +657,18 @@ class WorkerPool:
         except ValueError:
             self.state.bad_answer()
             return
-        if rig == self.rig and worker != self.worker_id:
+        if rig != self.rig or worker == self.worker_id:
+            return
+        if seq is None:
+            self.state.heard(worker)
+        else:
             self.state.member_answered(seq, worker)  # the word of a non-member skips no frame
 
     def _run(self) -> None:
         """Hand taken-over frames to the pipeline (off Zenoh's thread: the input may block).
 
-        Between frames it looks for silent members every quarter of ``silent_s``.
+        Between frames, every quarter of ``silent_s``, it puts this worker's heartbeat and looks
+        for silent members.
         """
         period = self.state.silent_s / 4
         next_check = time.monotonic() + period
@@ -649,6 +683,7 @@ class WorkerPool:
                     return
                 if not self._takeovers:
                     next_check = time.monotonic() + period
+                    self._heartbeat()
                     self._takeovers.extend(self.state.check_silent())
                     continue
                 frame = self._takeovers.popleft()
