@@ -6,8 +6,10 @@ import time
 
 import numpy as np
 import pytest
+import zenoh
 
 from helpers.ros2_robot import Robot, StereoRig, camera_info_from_p, cloud_msg, image_msg, tf_message
+from helpers.zenoh_loopback import zenoh_test_config
 from vpp_service.sources.base import SourceContext, build_source
 
 LEGACY = (
@@ -324,6 +326,43 @@ def test_every_received_message_ends_in_exactly_one_count(sessions):
     # each good set took its own cloud (one point in view), not the rejected set's (stamped 0.6 us earlier,
     # within the tolerance, its one point behind the camera)
     assert all(np.isfinite(f.sensor_depth).sum() == 1 for f in frames)
+
+
+def test_tf_static_published_before_the_source_started_is_fetched(zenoh_endpoint):
+    """/tf_static is transient local on a robot: a transform sent once, before the service came, still places the cloud.
+
+    The robot's session has timestamping on and its publisher a cache, as rmw_zenoh's; the source's
+    /tf_static subscriber (tf2's static-listener QoS, transient local) asks for that history.
+    """
+    robot_conf = zenoh_test_config(listen=[zenoh_endpoint])
+    robot_conf.insert_json5("timestamping/enabled", "true")
+    with zenoh.open(robot_conf) as bot:
+        robot = Robot(bot)
+        robot.publish_tf_static(
+            tf_message([("left_optical", "lidar", (0.0, 0.0, -0.5), (0.0, 0.0, 0.0, 1.0))]), transient_local=True
+        )
+        time.sleep(0.3)
+        with zenoh.open(zenoh_test_config(connect=[zenoh_endpoint])) as svc:
+            src = build_source("ros2", {"depth_wait_ms": 2000.0}, SourceContext(rig="r", session=svc))
+            frames: list = []
+            src.open()
+            src.start(lambda f: frames.append(f) or True, lambda reason: None)
+            try:
+                assert robot.wait_for_subscribers(["left/image_rect", "points"])
+                assert wait_for(lambda: src.stats()["tf_messages"] == 1), src.stats()
+                rig = tiny_rig()
+                rig.cloud = np.array([[0.0, 0.0, 2.5]], np.float32)
+                h, w = rig.left.shape[:2]
+                robot.put("points", cloud_msg(rig.cloud, 1_000, "lidar"))
+                robot.put("left/image_rect", image_msg(rig.left, 1_000, "left_optical"))
+                robot.put("right/image_rect", image_msg(rig.right, 1_000, "right_optical"))
+                robot.put("left/camera_info", camera_info_from_p(1_000, "left_optical", (w, h), rig.projection(False)))
+                robot.put("right/camera_info", camera_info_from_p(1_000, "right_optical", (w, h), rig.projection(True)))
+                assert wait_for(lambda: len(frames) == 1), src.stats()
+            finally:
+                robot.close()
+                src.stop(2.0)
+    assert frames[0].sensor_depth[2, 4] == pytest.approx(2.0) and src.stats()["rejected_by"] == {}
 
 
 def test_cloud_placed_by_tf_static(sessions):

@@ -217,13 +217,29 @@ class Robot:
         self.put("right/camera_info", camera_info_from_p(stamp_ns, "right_optical", (w, h), rig.projection(right=True)))
         self.put("points", cloud_msg(rig.cloud, stamp_ns, frame_id))
 
-    def publish_tf_static(self, msg: object) -> None:
-        """Put one ``TFMessage`` on ``/tf_static`` (a publisher declared on first use), with an attachment."""
+    def publish_tf_static(self, msg: object, transient_local: bool = False) -> None:
+        """Put one ``TFMessage`` on ``/tf_static`` (a publisher declared on first use), with an attachment.
+
+        ``transient_local``: the publisher caches the message for subscribers that come later, as
+        rmw_zenoh's transient-local publishers do (``PublisherData::make``: an advanced publisher with a
+        cache of ``depth`` samples, detectable, with heartbeat miss detection); the session must have
+        timestamping on.
+        """
         ros_type = "tf2_msgs/msg/TFMessage"
         if "/tf_static" not in self.pubs:
             self.topics["/tf_static"] = ros_type
             self.gid["/tf_static"] = bytes([99] * 16)
-            self.pubs["/tf_static"] = self.session.declare_publisher(key(self.domain, "/tf_static", ros_type))
+            k = key(self.domain, "/tf_static", ros_type)
+            if transient_local:
+                self.pubs["/tf_static"] = zenoh.ext.declare_advanced_publisher(
+                    self.session,
+                    k,
+                    cache=zenoh.ext.CacheConfig(1),
+                    publisher_detection=True,
+                    sample_miss_detection=zenoh.ext.MissDetectionConfig(heartbeat=0.5),
+                )
+            else:
+                self.pubs["/tf_static"] = self.session.declare_publisher(k)
         self.put("/tf_static", msg)
 
     def subscribe_disparity(self, topic: str = "/stereo/disparity") -> zenoh.Subscriber:

@@ -173,7 +173,7 @@ class RosNode:
         self.distro = check_distro(distro)
         self.name = NodeName(domain_id, str(session.zid()), _next_id(), namespace, name, enclave)
         self._tokens: list[zenoh.LivelinessToken] = []
-        self._subs: list[zenoh.Subscriber[None]] = []
+        self._subs: list[zenoh.Subscriber[None] | zenoh.ext.AdvancedSubscriber[None]] = []
         self._pubs: list[RosPublisher] = []
         self._graph: SubscriberGraph | None = None
 
@@ -191,11 +191,24 @@ class RosNode:
     ) -> str:
         """Subscribe ``callback`` to a fully-qualified topic (any type hash); returns the data key.
 
-        The token declares ``qos`` and the node's distro's type hash. The callback runs on a Zenoh
-        thread: it must only hand the sample over.
+        The token declares ``qos`` and the node's distro's type hash. A transient-local ``qos``
+        (``durability`` 1) also fetches what the topic's publishers cached before we came, as
+        rmw_zenoh's subscriptions do (``SubscriptionData::init``): an advanced subscriber with
+        history (late publishers detected, at most ``depth`` samples each) that publishers can
+        detect. The callback runs on a Zenoh thread: it must only hand the sample over.
         """
         key = topic_key(self.name.domain_id, topic, ros_type, "*")
-        self._subs.append(self._session.declare_subscriber(key, callback))
+        if qos.durability == 1:
+            import zenoh.ext
+
+            history = zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=qos.depth or None)
+            self._subs.append(
+                zenoh.ext.declare_advanced_subscriber(
+                    self._session, key, callback, history=history, subscriber_detection=True
+                )
+            )
+        else:
+            self._subs.append(self._session.declare_subscriber(key, callback))
         hash_ = type_hash(ros_type, self.distro)
         tok = entity_token(self.name, _next_id(), "MS", topic, ros_type, qos=qos, hash_=hash_)
         self._tokens.append(self._session.liveliness().declare_token(tok))
