@@ -312,7 +312,10 @@ def test_workers_share_a_stream_exactly_once_and_status_lists_them(tmp_path: Pat
     ids = [f"w{i}" for i in range(n)]
     with RouterProcess(endpoint) as router:
         router.start()
-        procs = [start_worker(worker_config(tmp_path, endpoint, rig, w), tmp_path / f"{w}.log") for w in ids]
+        # a 5 s deadline: a worker starved for over a second on a loaded 2-core host (its first frame) must not
+        # be found silent here, which would have its frames answered twice (this test is about the sharing)
+        configs = [worker_config(tmp_path, endpoint, rig, w, deadline_ms=5000.0) for w in ids]
+        procs = [start_worker(cfg, tmp_path / f"{w}.log") for cfg, w in zip(configs, ids, strict=True)]
         try:
             with zenoh.open(zenoh_test_config(connect=[endpoint], mode="client")) as session:
                 assert wait_members(session, rig, n, procs) == ids
