@@ -396,10 +396,9 @@ def run_pool(n_frames: int = 600, rate: float = 20.0, fakes: int = 6) -> dict[st
     """The worker pool under attack (see the module docstring); returns the figures."""
     import zenoh
 
-    from helpers.pool import publish, start_worker, stop_all, wait_members, worker_config
+    from helpers.pool import attack, publish, start_worker, stop_all, wait_members, worker_config
     from helpers.zenoh_loopback import zenoh_test_config
     from helpers.zenoh_router import RouterProcess
-    from vpp_service.service.pool import encode_answered
 
     endpoint, rig, ids = f"tcp/127.0.0.1:{_free_port()}", "soakpool", ["w0", "w1"]
     base = Path(tempfile.mkdtemp(prefix="vpp-soak-pool-"))
@@ -414,13 +413,8 @@ def run_pool(n_frames: int = 600, rate: float = 20.0, fakes: int = 6) -> dict[st
                 zenoh.open(zenoh_test_config(connect=[endpoint], mode="client")) as hostile,
             ):
                 wait_members(session, rig, len(ids), procs)
-                tokens = [hostile.liveliness().declare_token(f"vpp/{rig}/@pool/fake{i}") for i in range(fakes)]
-                forger = hostile.declare_publisher(f"vpp/{rig}/@answered")
                 sub = session.declare_subscriber(f"vpp/{rig}/out/disparity", zenoh.handlers.FifoChannel(4096))
-                time.sleep(0.5)
-                for seq in range(n_frames):
-                    for w in [*ids, "intruder"]:
-                        forger.put(encode_answered(rig, seq, w))
+                tokens = attack(hostile, rig, ids, n_frames, fakes)
                 t0 = time.monotonic()
                 pub = publish(endpoint, rig, n_frames, rate=rate)
                 if pub.returncode != 0:

@@ -18,7 +18,7 @@ import zenoh
 
 from helpers.cli import vpp_service_module_command
 from helpers.netns import NetnsHosts, netns_available
-from helpers.pool import ROOT, publish, start_worker, stop_all, wait_members, worker_config
+from helpers.pool import ROOT, attack, publish, start_worker, stop_all, wait_members, worker_config
 from helpers.zenoh_loopback import free_port, zenoh_test_config
 from helpers.zenoh_router import RouterProcess
 from vpp_service.frame import StereoFrame
@@ -579,13 +579,8 @@ def test_forged_answers_and_fake_members_cost_the_pool_no_frame(tmp_path: Path):
                 zenoh.open(zenoh_test_config(connect=[endpoint], mode="client")) as hostile,
             ):
                 wait_members(session, rig, 2, procs)
-                fakes = [hostile.liveliness().declare_token(f"vpp/{rig}/@pool/fake{i}") for i in range(6)]
-                forger = hostile.declare_publisher(f"vpp/{rig}/@answered")
                 sub = session.declare_subscriber(f"vpp/{rig}/out/disparity", zenoh.handlers.FifoChannel(256))
-                time.sleep(0.5)
-                for seq in range(count):
-                    for w in [*ids, "intruder"]:
-                        forger.put(encode_answered(rig, seq, w))
+                fakes = attack(hostile, rig, ids, count)
                 time.sleep(0.3)
                 pub = publish(endpoint, rig, count, rate=10)
                 assert pub.returncode == 0, pub.stderr

@@ -328,6 +328,17 @@ def test_every_received_message_ends_in_exactly_one_count(sessions):
     assert all(np.isfinite(f.sensor_depth).sum() == 1 for f in frames)
 
 
+def send_set_with_lidar_cloud(robot: Robot) -> None:
+    """One set at stamp 1000 whose cloud, the point (0, 0, 2.5), is in the frame 'lidar' (the cloud first)."""
+    rig = tiny_rig()
+    h, w = rig.left.shape[:2]
+    robot.put("points", cloud_msg(np.array([[0.0, 0.0, 2.5]], np.float32), 1_000, "lidar"))
+    robot.put("left/image_rect", image_msg(rig.left, 1_000, "left_optical"))
+    robot.put("right/image_rect", image_msg(rig.right, 1_000, "right_optical"))
+    robot.put("left/camera_info", camera_info_from_p(1_000, "left_optical", (w, h), rig.projection(right=False)))
+    robot.put("right/camera_info", camera_info_from_p(1_000, "right_optical", (w, h), rig.projection(right=True)))
+
+
 def test_tf_static_published_before_the_source_started_is_fetched(zenoh_endpoint):
     """/tf_static is transient local on a robot: a transform sent once, before the service came, still places the cloud.
 
@@ -350,14 +361,7 @@ def test_tf_static_published_before_the_source_started_is_fetched(zenoh_endpoint
             try:
                 assert robot.wait_for_subscribers(["left/image_rect", "points"])
                 assert wait_for(lambda: src.stats()["tf_messages"] == 1), src.stats()
-                rig = tiny_rig()
-                rig.cloud = np.array([[0.0, 0.0, 2.5]], np.float32)
-                h, w = rig.left.shape[:2]
-                robot.put("points", cloud_msg(rig.cloud, 1_000, "lidar"))
-                robot.put("left/image_rect", image_msg(rig.left, 1_000, "left_optical"))
-                robot.put("right/image_rect", image_msg(rig.right, 1_000, "right_optical"))
-                robot.put("left/camera_info", camera_info_from_p(1_000, "left_optical", (w, h), rig.projection(False)))
-                robot.put("right/camera_info", camera_info_from_p(1_000, "right_optical", (w, h), rig.projection(True)))
+                send_set_with_lidar_cloud(robot)
                 assert wait_for(lambda: len(frames) == 1), src.stats()
             finally:
                 robot.close()
@@ -383,14 +387,7 @@ def test_cloud_placed_by_tf_static(sessions):
                                     and t.endswith("/:1:,100:,:,:,,") for t in robot.graph()))  # fmt: skip
         robot.publish_tf_static(tf_message([("left_optical", "lidar", (0.0, 0.0, -0.5), (0.0, 0.0, 0.0, 1.0))]))
         assert wait_for(lambda: src.stats()["tf_messages"] == 1)
-        rig = tiny_rig()
-        rig.cloud = np.array([[0.0, 0.0, 2.5]], np.float32)
-        h, w = rig.left.shape[:2]
-        robot.put("points", cloud_msg(rig.cloud, 1_000, "lidar"))
-        robot.put("left/image_rect", image_msg(rig.left, 1_000, "left_optical"))
-        robot.put("right/image_rect", image_msg(rig.right, 1_000, "right_optical"))
-        robot.put("left/camera_info", camera_info_from_p(1_000, "left_optical", (w, h), rig.projection(right=False)))
-        robot.put("right/camera_info", camera_info_from_p(1_000, "right_optical", (w, h), rig.projection(right=True)))
+        send_set_with_lidar_cloud(robot)
         assert wait_for(lambda: len(frames) == 1), src.stats()
     finally:
         robot.close()

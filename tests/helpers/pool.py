@@ -146,3 +146,22 @@ def stop_all(procs: list[subprocess.Popen[bytes]], timeout: float = 10.0) -> lis
             p.wait()
             codes.append(None)
     return codes
+
+
+def attack(
+    hostile: zenoh.Session, rig: str, workers: list[str], count: int, fakes: int = 6
+) -> list[zenoh.LivelinessToken]:
+    """Attack a pool as a hostile peer; returns the fake tokens (members while they are held).
+
+    ``fakes`` ``@pool`` tokens that never speak, and ``@answered`` forged for seq 0 .. count-1 under
+    every id of ``workers`` and an id without a token ("intruder").
+    """
+    from vpp_service.service.pool import encode_answered
+
+    tokens = [hostile.liveliness().declare_token(f"vpp/{rig}/@pool/fake{i}") for i in range(fakes)]
+    forger = hostile.declare_publisher(f"vpp/{rig}/@answered")
+    time.sleep(0.5)  # the tokens reach the workers before the answers
+    for seq in range(count):
+        for w in [*workers, "intruder"]:
+            forger.put(encode_answered(rig, seq, w))
+    return tokens
