@@ -324,22 +324,32 @@ def stop(proc: subprocess.Popen) -> None:
     proc.wait(timeout=10)
 
 
-def test_connect_reconnects_after_viewer_restart(tmp_path):
+def connected_sink(tmp_path) -> tuple[int, subprocess.Popen, RerunSink]:
+    """A stand-in viewer saving to ``a.rrd`` and a ``connect`` sink that has delivered frames 0-4 to it."""
     port = free_port()
     url = f"rerun+http://127.0.0.1:{port}/proxy"
     viewer = start_viewer(port, tmp_path / "a.rrd")
     sink = build_sink("rerun", {"mode": "connect", "url": url, "max_hz": 0, "queue_size": 64}, SinkContext(rig=RIG))
     sink.open()
-    seq = 0
     try:
-        for _ in range(5):
+        for seq in range(5):
             sink.write(make_result(seq))
-            seq += 1
             time.sleep(0.05)
         deadline = time.monotonic() + 10
         while sink.stats()["written"] < 5 and time.monotonic() < deadline:
             time.sleep(0.05)
         assert sink.stats()["written"] == 5
+    except BaseException:
+        stop(viewer)
+        raise
+    assert isinstance(sink, RerunSink)
+    return port, viewer, sink
+
+
+def test_connect_reconnects_after_viewer_restart(tmp_path):
+    port, viewer, sink = connected_sink(tmp_path)
+    seq = 5
+    try:
         stop(viewer)
         for _ in range(5):  # nobody listens: counted, not buffered
             sink.write(make_result(seq))
@@ -566,19 +576,9 @@ def test_no_accuracy_entity_without_ground_truth(tmp_path):
 
 def test_frames_after_the_viewer_dies_are_not_counted_written(tmp_path):
     """The viewer (a gRPC server saving what it gets) stops mid-stream: each frame counted ``written`` reached it."""
-    port = free_port()
-    url = f"rerun+http://127.0.0.1:{port}/proxy"
-    viewer = start_viewer(port, tmp_path / "a.rrd")
-    sink = build_sink("rerun", {"mode": "connect", "url": url, "max_hz": 0, "queue_size": 64}, SinkContext(rig=RIG))
-    sink.open()
+    _, viewer, sink = connected_sink(tmp_path)
     n = 15
     try:
-        for seq in range(5):
-            sink.write(make_result(seq))
-            time.sleep(0.05)
-        deadline = time.monotonic() + 10
-        while sink.stats()["written"] < 5 and time.monotonic() < deadline:
-            time.sleep(0.05)
         viewer.kill()  # dies: no goodbye on the connection
         viewer.wait(10)
         for seq in range(5, n):

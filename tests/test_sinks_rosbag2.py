@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import yaml
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import Reader
-from ruamel.yaml import YAML
 
 from helpers.ros2_robot import TS
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
@@ -107,13 +107,13 @@ def test_offered_qos_and_distro_recorded(tmp_path, storage, distro, version, pro
     res.left_vpp = np.zeros((4, 5, 3), np.uint8)
     sink.write(res)
     sink.close(5.0)
-    info = YAML(typ="safe").load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    info = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert info["ros_distro"] == distro and info["version"] == version
     for t in info["topics_with_message_count"]:
         offered = t["topic_metadata"]["offered_qos_profiles"]
         if distro == "humble":
             assert isinstance(offered, str)  # Humble's TopicMetadata holds the profiles as a YAML string
-            offered = YAML(typ="safe").load(offered)
+            offered = yaml.safe_load(offered)
         assert offered == profiles, t["topic_metadata"]["name"]
     # an independent reader: the same profile on both topics (the painted pair's publisher offers the same)
     infinite = QosTime(**INFINITE)

@@ -11,7 +11,6 @@ length u64, records), written apart from vpp_service's reader.
 from __future__ import annotations
 
 import struct
-import sys
 from binascii import crc32
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,11 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from helpers.ros2_robot import StereoRig, write_bag
+from vpp_service.transport.ros2.mcap_reader import zstd_module
 
-if sys.version_info >= (3, 14):
-    from compression import zstd
-else:
-    from backports import zstd
+zstd = zstd_module()
 
 MAGIC = b"\x89MCAP0\r\n"
 #: 20 stamps 0.1 s apart; write_bag logs message i (of five) of a stamp at stamp + i us.

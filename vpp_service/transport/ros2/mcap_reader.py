@@ -28,11 +28,13 @@ write their chunks one after another).
 from __future__ import annotations
 
 import os
+import sys
 from binascii import crc32
 from bisect import bisect_right
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import ModuleType
 from typing import BinaryIO
 
 from vpp_service.transport.ros2.bag import BagMessage
@@ -83,6 +85,15 @@ class _Fields:
 
     def rest(self) -> memoryview:
         return self.take(len(self.buf) - self.pos)
+
+
+def zstd_module() -> ModuleType:
+    """The standard library's ``compression.zstd`` (Python 3.14 on), else ``backports.zstd`` (a dependency)."""
+    if sys.version_info >= (3, 14):
+        from compression import zstd
+    else:
+        from backports import zstd
+    return zstd
 
 
 def _records(buf: bytes | memoryview, partial: bool = False) -> Iterator[tuple[int, memoryview]]:
@@ -162,13 +173,7 @@ def _decompress(compression: str, data: memoryview, size: int, partial: bool) ->
         return bytes(data[:size])
     try:
         if compression == "zstd":
-            import sys
-
-            if sys.version_info >= (3, 14):
-                from compression import zstd
-            else:
-                from backports import zstd
-            zd = zstd.ZstdDecompressor()
+            zd = zstd_module().ZstdDecompressor()
             out = zd.decompress(data, max_length=size)
             if not partial and not zd.eof:
                 raise _Bad(f"its zstd data does not end within {size} bytes")
@@ -380,4 +385,4 @@ class _CrcMismatch(_Bad):
     """A chunk whose bytes do not match its CRC-32."""
 
 
-__all__ = ["MAX_RECORD_BYTES", "McapWalk"]
+__all__ = ["MAX_RECORD_BYTES", "McapWalk", "zstd_module"]
