@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -234,34 +235,59 @@ def test_a_bad_part_with_the_genuine_stamp_does_not_take_its_slot(sessions, bad,
 
 
 def test_a_junk_burst_never_takes_a_ring_slot(sessions):
-    """96 junk samples (no rmw_zenoh attachment, or oversized) before each genuine set, 4-deep rings, latest policy."""
+    """Junk (no rmw_zenoh attachment, or oversized) after genuine sets, 4-deep rings, latest policy.
+
+    The drain is held inside ``emit`` while three genuine sets, each followed by 96 junk samples on every
+    topic, arrive: the rings then hold exactly the 3 genuine messages per topic, whatever the scheduling. A
+    junk sample that took a ring slot would push a genuine one out of its 4-deep ring (``ring_dropped``).
+    """
     svc, bot = sessions
-    opts = {"depth_wait_ms": 2000.0, "ring_size": 4, "max_message_mb": 0.01}
+    opts = {"depth_wait_ms": 5000.0, "ring_size": 4, "max_message_mb": 0.01}
     src = build_source("ros2", opts, SourceContext(rig="r", session=svc))
     frames: list = []
+    held = threading.Event()
+
+    def emit(frame) -> bool:
+        frames.append(frame)
+        if len(frames) == 1:  # hold the drain: nothing leaves the rings until released
+            held.wait(30)
+        return True
+
     src.open()  # the pipeline's default input policy: latest
     robot = Robot(bot)
+    names = list(robot.topics)
     try:
         assert robot.wait_for_subscribers(["left/image_rect", "right/image_rect", "points"])
-        src.start(lambda f: frames.append(f) or True, lambda reason: None)
+        src.start(emit, lambda reason: None)
         rig = tiny_rig()
-        for k in range(10):
-            for j in range(96):
-                if j % 2:  # no attachment: not an rmw_zenoh publisher
-                    name = ("left/image_rect", "right/image_rect", "left/camera_info", "points")[j // 2 % 4]
-                    robot.pubs[name].put(b"\x00\x01\x00\x00junk")
-                else:  # 12 KB > max_message_mb
-                    name = ("left/image_rect", "right/image_rect")[j // 2 % 2]
-                    robot.put(name, image_msg(np.zeros((64, 64, 3), np.uint8), 9, "j"))
+        robot.publish(rig, 1_000)
+        assert wait_for(lambda: len(frames) == 1, timeout=20), src.stats()
+        for k in range(1, 4):
             robot.publish(rig, 1_000 + k)
-        assert wait_for(lambda: len(frames) == 10, timeout=20), src.stats()
+            for j in range(96):  # after the genuine set on the same publishers: a slot taken would evict it
+                if j % 2:  # no attachment: not an rmw_zenoh publisher
+                    robot.pubs[names[j // 2 % len(names)]].put(b"\x00\x01\x00\x00junk")
+                else:  # 12 KB > max_message_mb
+                    robot.put(
+                        ("left/image_rect", "right/image_rect")[j // 2 % 2],
+                        image_msg(np.zeros((64, 64, 3), np.uint8), 9, "j"),
+                    )
+
+        def all_in() -> bool:
+            st = src.stats()
+            return st["received"] == 5 * 4 + 3 * 96 and st["messages"]["unmatched"] == 5 * 3  # type: ignore[index]
+
+        assert wait_for(all_in, timeout=20), src.stats()
+        held.set()
+        assert wait_for(lambda: len(frames) == 4, timeout=20), src.stats()
         st = src.stats()
     finally:
+        held.set()
         robot.close()
         src.stop(2.0)
-    assert st["ring_dropped"] == 0 and st["rejected"] == 960, st
-    assert st["rejected_by"]["attachment"] == 480 and st["rejected_by"]["too_large"] == 480
-    assert [f.stamp_ns for f in frames] == [1_000 + k for k in range(10)]
+    assert st["ring_dropped"] == 0 and st["rejected"] == 3 * 96, st
+    assert st["rejected_by"]["attachment"] == 3 * 48 and st["rejected_by"]["too_large"] == 3 * 48
+    assert [f.stamp_ns for f in frames] == [1_000 + k for k in range(4)]
 
 
 def test_every_received_message_ends_in_exactly_one_count(sessions):
