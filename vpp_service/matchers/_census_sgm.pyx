@@ -5,12 +5,13 @@ the Python wrappers there validate every argument (shape, dtype, contiguity)
 and allocate the outputs. Call those, not these.
 
 The C, by stage (``setup.py`` rebuilds this module when a header named here
-changes): ``_census_sgm.h`` (common definitions and the driver: row
-finishing, the passes, the parallel region) includes ``_census_sgm_census.h``
+changes): ``_census_sgm.h`` (the driver: row finishing, the passes, the
+parallel region) includes the stage headers ``_census_sgm_census.h``
 (census, Hamming costs), ``_census_sgm_paths.h`` (path aggregation),
-``_census_sgm_wta.h`` (winner-takes-all, left-right check),
-``_census_sgm_median.h`` (3x3 median), ``_gaps.h`` (short gaps) and
-``_omp_team.h``.
+``_census_sgm_wta.h`` (winner-takes-all, left-right check) and
+``_census_sgm_median.h`` (3x3 median); each of them and the driver include
+``_census_sgm_common.h`` (the parameter block and macros), which includes
+``_gaps.h`` (short gaps) and ``_omp_team.h``.
 
 This source is compiled twice (``_census_sgm`` portable, ``_census_sgm_avx2``
 for x86-64-v3); :mod:`vpp_service.matchers.census_sgm` picks the build that

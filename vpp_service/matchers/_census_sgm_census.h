@@ -1,8 +1,10 @@
 /* Census-SGM, census and Hamming costs: the 5x5 census, a row of the Hamming volume, the cost stage (census of
  * both images, then the volume).
- * Part of _census_sgm.h, which includes it after its common definitions (not a header of its own). */
+ * Built on _census_sgm_common.h; the driver, _census_sgm.h, includes it. */
 #ifndef VPP_CENSUS_SGM_CENSUS_H
 #define VPP_CENSUS_SGM_CENSUS_H
+
+#include "_census_sgm_common.h"
 
 /* ------------------------------------------------------------------ census */
 

@@ -1,7 +1,9 @@
 /* Census-SGM, the 3x3 median over the valid neighbours.
- * Part of _census_sgm.h, which includes it after its common definitions (not a header of its own). */
+ * Built on _census_sgm_common.h; the driver, _census_sgm.h, includes it. */
 #ifndef VPP_CENSUS_SGM_MEDIAN_H
 #define VPP_CENSUS_SGM_MEDIAN_H
+
+#include "_census_sgm_common.h"
 
 /* ---------------------------------------------------------------- median -- */
 

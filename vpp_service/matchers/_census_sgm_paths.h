@@ -1,9 +1,11 @@
 /* Census-SGM, path aggregation: the step of one pixel over the paths of a pass in its four forms (csgm_step4,
  * csgm_step2, csgm_step4_avx2, csgm_step4_u8), when the narrow forms apply, the per-thread scratch and one row
  * of a pass (csgm_pass_row, csgm_pass_row8).
- * Part of _census_sgm.h, which includes it after its common definitions (not a header of its own). */
+ * Built on _census_sgm_common.h; the driver, _census_sgm.h, includes it. */
 #ifndef VPP_CENSUS_SGM_PATHS_H
 #define VPP_CENSUS_SGM_PATHS_H
+
+#include "_census_sgm_common.h"
 
 /* --------------------------------------------------------------------- SGM */
 

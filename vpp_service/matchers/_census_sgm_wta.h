@@ -1,8 +1,10 @@
 /* Census-SGM, winner-takes-all: the left and right WTA and the left-right check, on costs and (AVX2 build) on
  * 16-bit keys.
- * Part of _census_sgm.h, which includes it after its common definitions (not a header of its own). */
+ * Built on _census_sgm_common.h; the driver, _census_sgm.h, includes it. */
 #ifndef VPP_CENSUS_SGM_WTA_H
 #define VPP_CENSUS_SGM_WTA_H
+
+#include "_census_sgm_common.h"
 
 /* ----------------------------------------------------------------- WTA ---- */
 
