@@ -7,8 +7,11 @@ multicast scouting off) and saving ``vpp-run/vpp.rrd``. With ``--source zenoh`` 
 takes frames from ``vpp-service publish`` or a camera instead, losslessly by default
 (``--input-policy block``; a live camera wants ``latest``). It prints one line when
 it has started (endpoint, topics, sinks) and one when it stops (where the files went).
-Stops on SIGINT/SIGTERM (clean, bounded shutdown, exit 0) or after ``--max-frames``;
-exits 1 when the source died on an error (a runtime failure).
+Stops on SIGINT/SIGTERM (clean, bounded shutdown, exit 0) or after ``--max-frames``
+(frames processed or rejected); exits 1 when the source died on an error (a runtime
+failure), 2 when a frame arrives that the disparity range cannot fit (``--max-disparity``
+not below its width: a configuration error; ``--check`` finds it when the source
+knows its frame size, as the sim source does).
 """
 
 from __future__ import annotations
@@ -105,7 +108,9 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--ros-namespace", metavar="NS", help="ROS 2 namespace of the ros2 source and sinks (e.g. /stereo)")
     p.add_argument("--ros-domain", type=int, metavar="ID", help="ROS 2 domain id of the ros2 source and sinks")
     p.add_argument(
-        "--max-frames", type=int, help="stop after N processed frames (default: the config's, 0 = run until stopped)"
+        "--max-frames",
+        type=int,
+        help="stop after N frames processed or rejected (default: the config's, 0 = run until stopped)",
     )
     p.add_argument("--out", help="output folder for summary.json and the default .rrd (default: the config's, vpp-run)")
     p.add_argument("--no-summary", action="store_true", help="no live summary line on stderr")
@@ -236,6 +241,7 @@ def _ros_overrides(d: dict[str, Any], args: argparse.Namespace) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Validate the whole configuration, then run until done or signalled."""
+    from vpp_service.cli import EXIT_STARTUP
     from vpp_service.errors import StartupError
     from vpp_service.service.app import run_service
     from vpp_service.service.config import DEFAULT_CONFIG, check_paths, previous_outputs, read_toml, validate_config
@@ -273,6 +279,9 @@ def main(args: argparse.Namespace) -> int:
             {"counters": status["counters"], "out": cfg.service.out, "shutdown_s": round(status["shutdown_s"], 3)}
         )
     )
+    if status["config_error"] is not None:  # the configuration cannot process the frames: restarting won't help
+        print(f"vpp-service run: stopped: {status['config_error']}", file=sys.stderr)
+        return EXIT_STARTUP
     if status["source_error"] is not None:  # a dead source is a runtime failure: exit 1 so systemd restarts it
         print(f"vpp-service run: the source failed: {status['source_error']}", file=sys.stderr)
         return 1

@@ -177,12 +177,21 @@ def check_pair(left: object, right: object) -> tuple[np.ndarray, np.ndarray]:
     return left, right
 
 
+class DisparityRangeError(ValueError):
+    """The matcher's disparity range cannot fit an image this wide (``max_disparity`` not below the width).
+
+    Not a flaw of one frame: every frame of that width fails the same way, so the
+    service stops on it (a configuration that cannot process the source's frames)
+    instead of rejecting frame after frame.
+    """
+
+
 def check_max_disparity(max_disparity: int, width: int, name: str = "max_disparity") -> None:
-    """Raise ValueError unless ``0 < max_disparity < width``."""
+    """Raise :class:`DisparityRangeError` (a ValueError) unless ``0 < max_disparity < width``."""
     if isinstance(max_disparity, bool) or not isinstance(max_disparity, (int, np.integer)):
         raise TypeError(f"{name} must be an integer, got {max_disparity!r}")
     if not 0 < max_disparity < width:
-        raise ValueError(f"{name} must be > 0 and < the image width {width}, got {max_disparity}")
+        raise DisparityRangeError(f"{name} must be > 0 and < the image width {width}, got {max_disparity}")
 
 
 def check_hints(hints: object, shape: tuple[int, int]) -> np.ndarray:
@@ -238,6 +247,16 @@ class Matcher(ABC):
         """
         return None
 
+    def check_width(self, width: int) -> None:
+        """Raise :class:`DisparityRangeError` when the range cannot be searched on images ``width`` pixels wide.
+
+        :meth:`compute` runs it on every pair; ``run --check`` runs it on the
+        source's frame width when the source knows it in advance. The base
+        rule is ``0 < max_disparity < width``; matchers with a stricter one
+        (OpenCV's rounding to 16) override it.
+        """
+        check_max_disparity(self.options.max_disparity, width)
+
     @classmethod  # noqa: B027 - optional hook, a no-op by default
     def check_files(cls, options: MatcherOptions, section: str) -> None:
         """Check what the options name on disk and load (``run --check``, before the service starts); nothing here.
@@ -280,10 +299,11 @@ class Matcher(ABC):
         ------
         TypeError, ValueError
             Bad images (dtype, shape, contiguity), ``max_disparity`` not below
-            the width, or ``hints`` given to a matcher without guidance.
+            the width (:class:`DisparityRangeError`, :meth:`check_width`), or
+            ``hints`` given to a matcher without guidance.
         """
         check_pair(left, right)
-        check_max_disparity(self.options.max_disparity, left.shape[1])
+        self.check_width(left.shape[1])
         if hints is not None:
             if not self.supports_guidance:
                 raise ValueError(f"matcher {self.name!r} does not support guidance (hints)")

@@ -45,7 +45,7 @@ from typing import Any, ClassVar, Literal
 import cv2
 import numpy as np
 
-from vpp_service.matchers.base import MATCHERS, Matcher, MatcherOptions, check_pair, to_gray
+from vpp_service.matchers.base import MATCHERS, DisparityRangeError, Matcher, MatcherOptions, check_pair, to_gray
 from vpp_service.matchers.inference import Engine, open_engine
 from vpp_service.matchers.model_card import PSMNET_CARD, ModelCard, card_from_mapping, find_card, read_card
 from vpp_service.matchers.model_store import MODELS_ENV, models_dir
@@ -417,12 +417,17 @@ class OnnxMatcher(Matcher):
         self.last_timing = {"pre": (t1 - t0) * 1e3, "network": (t2 - t1) * 1e3, "post": (t3 - t2) * 1e3}
         return disp
 
+    def check_width(self, width: int) -> None:
+        """The base rule, and for a fixed-size network a ``max_disparity`` within its range at this width."""
+        super().check_width(width)
+        d = self.options.max_disparity
+        if self.card.fixed and not self.network_range and d > self.card.range_at(width):
+            raise DisparityRangeError(self._range_error(d, self.card.range_at(width)))
+
     def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
         d = self.options.max_disparity
         if self.card.fixed and self.network_range:
             d = max(1, math.floor(self.card.range_at(left.shape[1])))
-        elif self.card.fixed and d > self.card.range_at(left.shape[1]):
-            raise ValueError(self._range_error(d, self.card.range_at(left.shape[1])))
         disp = self.forward(left, right)
         t0 = time.perf_counter()
         disp[~((disp >= 0) & (disp < d))] = np.nan

@@ -383,6 +383,7 @@ def _not_started(cfg: ServiceConfig) -> ServiceSummary:
         "counters": empty,
         "dropped": {},
         "source_error": None,
+        "config_error": None,
         "zenoh": {"routers": 0, "peers": 0},
         "fps": 0.0,
         "queues": {},
