@@ -92,6 +92,32 @@ def test_both_engines_agree_and_run_on_the_chosen_engine(sad16, engine):
     np.testing.assert_array_equal(d[:, 16:], 3.0)
 
 
+@pytest.mark.parametrize("engine", ENGINES)
+def test_runtime_names_the_engine_device_precision_and_threads_that_run(sad16, engine):
+    m = build_matcher("onnx", {"model": str(sad16), "engine": engine, "threads": 2, "card": card()})
+    assert m.runtime() == {"engine": engine, "device": "cpu", "precision": "f32", "threads": 2}
+
+
+def _cpu_has_bf16() -> bool:
+    try:
+        flags = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return False
+    return "avx512_bf16" in flags or "amx_bf16" in flags
+
+
+@pytest.mark.skipif(importlib.util.find_spec("openvino") is None, reason="openvino is not installed")
+def test_bf16_asked_reports_what_openvino_runs(sad16, caplog):
+    """bf16 on a CPU without bf16 units runs f32: the runtime says f32 and a warning says so, never silently."""
+    clear_cache()
+    with caplog.at_level("WARNING"):
+        m = build_matcher("onnx", {"model": str(sad16), "engine": "openvino", "precision": "bf16", "card": card()})
+        ran = m.runtime()
+    assert ran["engine"] == "openvino" and ran["precision"] == ("bf16" if _cpu_has_bf16() else "f32")
+    warned = [r for r in caplog.records if "precision bf16 asked, OpenVINO runs" in r.getMessage()]
+    assert bool(warned) == (ran["precision"] != "bf16")
+
+
 def test_gray_images_and_a_gray_network(tmp_path):
     net = sad_stereo(tmp_path / "gray.onnx", 8, channels=1, window=3)
     left, right = shifted_pair(30, 50, 4, channels=1)
@@ -425,6 +451,8 @@ def test_eval_caps_the_per_scene_range_at_the_networks_and_rejects_guided(sad16)
     frames.append(_frame(32, 120, 9, seed=2).with_(gt_disparity=np.full((32, 120), 40.0, np.float32)))
     rows = run_evaluation(frames, "onnx", ["baseline", "vpp"], 0.05, "uniform", matcher_options=opts)
     assert {r["max_disparity"] for r in rows} == {16}
+    eng = build_matcher("onnx", opts).engine()  # the engine the rows ran on (open_engine keeps it)
+    assert {(r["engine"], r["device"], r["precision"]) for r in rows} == {(eng.kind, eng.device, eng.precision)}
     base = {r["scene"]: r for r in rows if r["method"] == "baseline"}
     assert base["shift5"]["bad1"] < 15 and base["shift12"]["bad1"] < 15  # only the left band x < 16 can miss
     with pytest.raises(ValueError, match=r"max_disparity: 32 exceeds the disparity range of 'onnx' \(16\)"):

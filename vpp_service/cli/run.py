@@ -6,7 +6,7 @@ a local Zenoh peer (``tcp/127.0.0.1:7447``, the endpoint publish and status use 
 multicast scouting off) and saving ``vpp-run/vpp.rrd``. With ``--source zenoh`` it
 takes frames from ``vpp-service publish`` or a camera instead, losslessly by default
 (``--input-policy block``; a live camera wants ``latest``). It prints one line when
-it has started (endpoint, topics, sinks) and one when it stops (where the files went).
+it has started (endpoint, topics, the matcher and the engine, device and precision that run it, sinks)
 Stops on SIGINT/SIGTERM (clean, bounded shutdown, exit 0) or after ``--max-frames``
 (frames processed or rejected); exits 1 when the source died on an error (a runtime
 failure), 2 when a frame arrives that the disparity range cannot fit (``--max-disparity``
@@ -267,7 +267,7 @@ def main(args: argparse.Namespace) -> int:
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        status = run_service(cfg, stop, sys.stderr, banner=startup_line(cfg))
+        status = run_service(cfg, stop, sys.stderr, banner=lambda matcher: startup_line(cfg, matcher))
     finally:
         for s, h in old.items():
             signal.signal(s, h)
@@ -339,8 +339,20 @@ def _sink_text(spec_name: str, raw: dict[str, Any]) -> str:
     return f"{spec_name} ({where})" if where else spec_name
 
 
-def startup_line(cfg: ServiceConfig) -> str:
-    """The line ``run`` prints once started: rig, Zenoh endpoints, input and output topics, sinks."""
+def matcher_text(name: str, runtime: Mapping[str, object] | None) -> str:
+    """``"sgbm (opencv cpu int16, 2 threads)"``: the matcher and what runs it (name alone when unknown)."""
+    if not runtime:
+        return name
+    threads = runtime.get("threads")
+    what = " ".join(str(runtime[k]) for k in ("engine", "device", "precision") if k in runtime)
+    return f"{runtime.get('name', name)} ({what}" + (f", {threads} threads)" if threads is not None else ")")
+
+
+def startup_line(cfg: ServiceConfig, matcher: Mapping[str, object] | None = None) -> str:
+    """The line ``run`` prints once started: rig, Zenoh endpoints, input, matcher and what runs it, outputs, sinks.
+
+    ``matcher`` is :attr:`~vpp_service.service.pipeline.Pipeline.matcher_runtime` (engine, device, precision).
+    """
     from vpp_service.transport.wire import topic
 
     s, z = cfg.service, cfg.zenoh
@@ -355,8 +367,8 @@ def startup_line(cfg: ServiceConfig) -> str:
     pool = f" | pool {topic(s.prefix, s.rig, '@pool/*')}" if s.pool else ""
     status = topic(s.prefix, s.rig, "@status/<worker>" if s.pool else "@status")
     return (
-        f"vpp-service run: rig {s.rig}{pool} | {zenoh_s} | {src}{outputs} | sinks {sinks} | "
-        f"status {status} | stop with Ctrl-C"
+        f"vpp-service run: rig {s.rig}{pool} | {zenoh_s} | {src} | matcher {matcher_text(cfg.matcher.name, matcher)}"
+        f"{outputs} | sinks {sinks} | status {status} | stop with Ctrl-C"
     )
 
 

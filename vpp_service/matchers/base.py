@@ -24,7 +24,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, TypedDict
 
 import cv2
 import numpy as np
@@ -211,6 +211,30 @@ def to_gray(img: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
 
 
+class MatcherRuntime(TypedDict):
+    """What actually runs a matcher (``run``'s start line, ``@status``, ``eval``'s results).
+
+    Attributes
+    ----------
+    engine : str
+        The implementation: ``"opencv"``, ``"cython"`` / ``"cython-avx2"`` (the build
+        of the kernels that runs), ``"openvino"``, ``"onnxruntime"``.
+    device : str
+        ``"cpu"`` or ``"cuda"``.
+    precision : str
+        The arithmetic that runs, as the engine reports it: ``"f32"``, ``"bf16"``,
+        ``"f16"`` for a network (what it runs, not what was asked), ``"int16"``
+        for the classical matchers' integer costs.
+    threads : int
+        CPU threads it uses.
+    """
+
+    engine: str
+    device: str
+    precision: str
+    threads: int
+
+
 class Matcher(ABC):
     """Base class of stereo matchers.
 
@@ -256,6 +280,23 @@ class Matcher(ABC):
         (OpenCV's rounding to 16) override it.
         """
         check_max_disparity(self.options.max_disparity, width)
+
+    def runtime(self) -> MatcherRuntime:
+        """The engine, device and precision that run this matcher (:class:`MatcherRuntime`).
+
+        The base class's answer is numpy on the CPU in f32, one thread; every
+        registered matcher overrides it. A network's opens its engine first.
+        """
+        return {"engine": "numpy", "device": "cpu", "precision": "f32", "threads": 1}
+
+    def warm_up(self, left: np.ndarray, right: np.ndarray) -> None:
+        """One untimed :meth:`compute` on a pair of this size, so that the timings that follow are steady.
+
+        A network's engine opens and compiles for the size on its first pair
+        (seconds); kernels allocate their buffers. ``eval`` and ``demo`` run it
+        before they time any method.
+        """
+        self.compute(left, right)
 
     @classmethod  # noqa: B027 - optional hook, a no-op by default
     def check_files(cls, options: MatcherOptions, section: str) -> None:

@@ -46,7 +46,15 @@ from typing import Any, ClassVar, Literal
 import cv2
 import numpy as np
 
-from vpp_service.matchers.base import MATCHERS, DisparityRangeError, Matcher, MatcherOptions, check_pair, to_gray
+from vpp_service.matchers.base import (
+    MATCHERS,
+    DisparityRangeError,
+    Matcher,
+    MatcherOptions,
+    MatcherRuntime,
+    check_pair,
+    to_gray,
+)
 from vpp_service.matchers.inference import Engine, open_engine
 from vpp_service.matchers.model_card import PSMNET_CARD, ModelCard, card_from_mapping, find_card, read_card
 from vpp_service.matchers.model_store import MODELS_ENV, find_model, models_dir
@@ -356,6 +364,15 @@ class OnnxMatcher(Matcher):
             self._check_graph(eng)
             self._engine = eng
         return self._engine
+
+    def runtime(self) -> MatcherRuntime:
+        """The engine, device, precision and threads that run the network (opens it on first use).
+
+        The precision is what the engine runs, which may differ from ``precision``
+        (OpenVINO runs f32 where the CPU has no bf16 unit; it logs a warning then).
+        """
+        eng = self.engine()
+        return {"engine": eng.kind, "device": eng.device, "precision": eng.precision, "threads": eng.threads}
 
     def _check_graph(self, eng: Engine) -> None:
         """Raise ValueError naming the first mismatch between the card and the graph's inputs and outputs."""

@@ -33,7 +33,14 @@ from typing import Literal
 import cv2
 import numpy as np
 
-from vpp_service.matchers.base import MATCHERS, DisparityRangeError, Matcher, MatcherOptions, to_gray
+from vpp_service.matchers.base import (
+    MATCHERS,
+    DisparityRangeError,
+    Matcher,
+    MatcherOptions,
+    MatcherRuntime,
+    to_gray,
+)
 
 _SGBM_MODES = {
     "sgbm": cv2.STEREO_SGBM_MODE_SGBM,
@@ -84,6 +91,11 @@ def _pad_left(img: np.ndarray, pad: int, band: str) -> np.ndarray:
     if band == "off" or pad <= 0:
         return img
     return cv2.copyMakeBorder(img, 0, 0, pad, 0, _BORDERS[band], value=0)
+
+
+def opencv_runtime() -> MatcherRuntime:
+    """What runs ``sgbm`` and ``bm``: OpenCV on the CPU, int16 costs (and 1/16 px disparities), its threads."""
+    return {"engine": "opencv", "device": "cpu", "precision": "int16", "threads": int(cv2.getNumThreads())}
 
 
 def _check_width(max_disparity: int, min_disparity: int, width: int) -> int:
@@ -167,6 +179,10 @@ class SGBM(Matcher):
         """``max_disparity`` rounded up to 16, plus ``min_disparity``, must stay below ``width`` (and the base rule)."""
         super().check_width(width)
         _check_width(self.options.max_disparity, self.options.min_disparity, width)
+
+    def runtime(self) -> MatcherRuntime:
+        """OpenCV on the CPU: 16-bit integer costs and fixed-point disparities, OpenCV's thread pool."""
+        return opencv_runtime()
 
     def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
         o = self.options
@@ -254,6 +270,10 @@ class BM(Matcher):
         """``max_disparity`` rounded up to 16, plus ``min_disparity``, must stay below ``width`` (and the base rule)."""
         super().check_width(width)
         _check_width(self.options.max_disparity, self.options.min_disparity, width)
+
+    def runtime(self) -> MatcherRuntime:
+        """OpenCV on the CPU: 16-bit integer costs and fixed-point disparities, OpenCV's thread pool."""
+        return opencv_runtime()
 
     def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
         o = self.options

@@ -19,7 +19,8 @@ finishes the sink threads; the last one to exit sets :attr:`Pipeline.done`. A
 result is ``published`` once every sink has handled it (none dropped it).
 Counters (``received``, ``rejected``, ``dropped``, ``processed``, ``published``, ``no_depth``,
 ``errors``, and ``sparse.see_through``: sparse points the fusion step's see-through filter
-removed before VPP, :mod:`vpp_service.vpp.see_through`) and per-stage timings (mean, p50, p99 over a sliding window) are
+removed before VPP, :mod:`vpp_service.vpp.see_through`), per-stage timings (mean, p50, p99 over a sliding window)
+and what runs the matcher (``matcher``: engine, device, precision, threads, the range in use) are
 reported by :meth:`Pipeline.status`, which the service also serves as JSON on
 the ``<prefix>/<rig>/@status`` queryable; a liveliness token
 ``<prefix>/<rig>/@alive`` is held while the pipeline runs.
@@ -134,6 +135,8 @@ class PipelineStatus(TypedDict):
     source: Mapping[str, object]
     sinks: dict[str, Mapping[str, object]]
     metrics: MetricsStatus
+    #: What runs the matcher (:attr:`Pipeline.matcher_runtime`), when the process step says.
+    matcher: NotRequired[dict[str, object]]
     pool: NotRequired[PoolStatus]
 
 
@@ -240,6 +243,9 @@ class Pipeline:
         self._snapshot_lock = threading.Lock()
         self._snapshot: tuple[float, str] | None = None  # (monotonic time, JSON) of the last @status reply built
         self._status_queries = {"queries": 0, "snapshots": 0, "cached": 0}
+        #: What runs the matcher (the process step's ``runtime()``: name, engine, device, precision, threads,
+        #: max_disparity), taken at :meth:`start`; None when the process step has no ``runtime``.
+        self.matcher_runtime: dict[str, object] | None = None
 
     # ----------------------------------------------------------- counters
     def _inc(self, key: str, n: int = 1) -> None:
@@ -466,6 +472,8 @@ class Pipeline:
             Whatever a sink's or the source's ``open`` raises (already opened
             parts are closed again).
         """
+        runtime = getattr(self.process, "runtime", None)  # a network's engine opens here, before any frame
+        self.matcher_runtime = dict(runtime()) if callable(runtime) else None
         try:
             for sink in self.sinks:
                 sink.open()
@@ -619,9 +627,20 @@ class Pipeline:
                 "bad2_filled_mean": _mean(self._bad2_filled),
             },
         }
+        if self.matcher_runtime is not None:
+            status["matcher"] = self._matcher_status()
         if self.pool is not None:
             status["pool"] = self.pool.status()
         return status
+
+    def _matcher_status(self) -> dict[str, object]:
+        """:attr:`matcher_runtime` as it is now (the ``auto`` range changes); the start's when it cannot be read."""
+        runtime = getattr(self.process, "runtime", None)
+        try:
+            return dict(runtime()) if callable(runtime) else dict(self.matcher_runtime or {})
+        except Exception:  # a matcher's broken report must not break @status
+            log.debug("runtime() failed", exc_info=True)
+            return dict(self.matcher_runtime or {})
 
     def _status_queries_copy(self) -> dict[str, int]:
         """``@status`` queries: ``queries`` answered, ``snapshots`` built, ``cached`` (answered from a snapshot)."""
