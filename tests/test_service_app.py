@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import io
 import json
 import threading
 import time
@@ -13,6 +14,7 @@ import zenoh
 from helpers.toml import toml_dumps
 from helpers.zenoh_loopback import collect, zenoh_test_config
 from vpp_service.cli import build_parser
+from vpp_service.cli.run import startup_line
 from vpp_service.service.app import build_pipeline, run_service
 from vpp_service.service.config import DEFAULT_CONFIG, validate_config
 from vpp_service.sources.base import SOURCES, Source
@@ -93,6 +95,27 @@ def test_dead_source_is_a_failure_not_a_clean_exit(tmp_path, dying_source):
     # (a second run into the same out: the restarted service replaces its own outputs)
     args = build_parser().parse_args(["run", "--config", str(cfg), "--no-summary", "--overwrite"])
     assert args.func(args) == 1
+
+
+def test_start_line_and_summary_name_the_engine_device_and_precision(tmp_path):
+    from vpp_service.matchers import census_sgm
+
+    data = small_config(tmp_path)
+    data["matcher"] = {"name": "census-sgm", "max_disparity": 32, "threads": 2}
+    cfg = validate_config(data)
+    stream = io.StringIO()
+    summary = run_service(cfg, stream=stream, banner=lambda matcher: startup_line(cfg, matcher))
+    engine = "cython" if census_sgm._k is census_sgm.portable else "cython-avx2"
+    assert summary["matcher"] == {
+        "name": "census-sgm",
+        "engine": engine,
+        "device": "cpu",
+        "precision": "int16",
+        "threads": 2,
+        "max_disparity": 32,
+    }
+    assert f"| matcher census-sgm ({engine} cpu int16, 2 threads) |" in stream.getvalue().splitlines()[0]
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["matcher"] == summary["matcher"]
 
 
 def test_healthy_run_exits_0(tmp_path):

@@ -155,6 +155,51 @@ def test_bad_frames_are_rejected_and_service_keeps_running():
     assert c["processed"] == len(sink.results) == 8
 
 
+def test_max_frames_counts_rejected_frames_too():
+    """A source whose every frame is rejected still ends at max_frames (rejected + processed)."""
+
+    def process(frame):
+        if frame.seq % 2 == 0:
+            raise ValueError("bad frame")
+        return FusionResult(frame, np.zeros(frame.shape, np.float32))
+
+    sink = CollectSink()
+    pipe = Pipeline(sim_source(0, rate_hz=200), process, [sink], input_policy="block", max_frames=6)
+    run(pipe)
+    c = pipe.counters
+    assert (c["rejected"], c["processed"], len(sink.results)) == (3, 3, 3)
+
+    def reject_all(frame):
+        raise ValueError("bad frame")
+
+    pipe = Pipeline(sim_source(0, rate_hz=200), reject_all, [], input_policy="block", max_frames=4)
+    run(pipe)
+    assert (pipe.counters["rejected"], pipe.counters["processed"]) == (4, 0)
+    assert pipe.status()["config_error"] is None
+
+
+def test_a_range_that_cannot_fit_the_frames_stops_the_pipeline_on_the_first_one(caplog):
+    """A fixed range not below the frame width fails every frame alike: stop and say why, never loop on rejects."""
+    from vpp_service.matchers import build_matcher
+
+    # 96 px wide frames; sgbm rounds 90 up to 96 (OpenCV's multiple of 16), which is not below 96
+    fusion = Fusion(build_matcher("sgbm", {"max_disparity": 90}), None, depth=False)
+    pipe = Pipeline(sim_source(0, rate_hz=200), fusion, [CollectSink()], input_policy="block")
+    with caplog.at_level("WARNING"):
+        run(pipe)  # ends by itself on an endless source
+    st = pipe.status()
+    assert st["counters"]["processed"] == 0 and st["counters"]["rejected"] == 1
+    err = st["config_error"]
+    assert err is not None and err.startswith("frame seq=0 is 96 x 48: max_disparity 90 (rounded up to 96")
+    assert "image width 96" in err and "matcher.max_disparity" in err
+    assert not [r for r in caplog.records if "rejected input" in r.getMessage()]  # no reject-log loop either
+    # the same range on frames it fits: processed as usual
+    fits = Fusion(build_matcher("sgbm", {"max_disparity": 64}), None, depth=False)
+    pipe = Pipeline(sim_source(3), fits, [CollectSink()], input_policy="block")
+    run(pipe)
+    assert pipe.counters["processed"] == 3 and pipe.status()["config_error"] is None
+
+
 def test_real_fusion_counts_no_depth_and_scores_against_gt():
     from vpp_service.matchers import build_matcher
     from vpp_service.vpp import VPPConfig

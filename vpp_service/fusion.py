@@ -265,6 +265,10 @@ class Fusion:
         """The disparity range in use (the fixed one, or the last auto range; None before the first auto frame)."""
         return self.matcher.options.max_disparity if self.range is None else self.range.current
 
+    def runtime(self) -> dict[str, object]:
+        """The matcher's name, :meth:`~vpp_service.matchers.Matcher.runtime` and the range in use (``@status``)."""
+        return {"name": self.matcher.name, **self.matcher.runtime(), "max_disparity": self.max_disparity}
+
     def prepare_next(self, frame: StereoFrame) -> None:
         """Build the random-pattern table the next frame (``seq + 1``) will use.
 

@@ -6,9 +6,12 @@ a local Zenoh peer (``tcp/127.0.0.1:7447``, the endpoint publish and status use 
 multicast scouting off) and saving ``vpp-run/vpp.rrd``. With ``--source zenoh`` it
 takes frames from ``vpp-service publish`` or a camera instead, losslessly by default
 (``--input-policy block``; a live camera wants ``latest``). It prints one line when
-it has started (endpoint, topics, sinks) and one when it stops (where the files went).
-Stops on SIGINT/SIGTERM (clean, bounded shutdown, exit 0) or after ``--max-frames``;
-exits 1 when the source died on an error (a runtime failure).
+it has started (endpoint, topics, the matcher and the engine, device and precision that run it, sinks)
+Stops on SIGINT/SIGTERM (clean, bounded shutdown, exit 0) or after ``--max-frames``
+(frames processed or rejected); exits 1 when the source died on an error (a runtime
+failure), 2 when a frame arrives that the disparity range cannot fit (``--max-disparity``
+not below its width: a configuration error; ``--check`` finds it when the source
+knows its frame size, as the sim source does).
 """
 
 from __future__ import annotations
@@ -105,7 +108,9 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--ros-namespace", metavar="NS", help="ROS 2 namespace of the ros2 source and sinks (e.g. /stereo)")
     p.add_argument("--ros-domain", type=int, metavar="ID", help="ROS 2 domain id of the ros2 source and sinks")
     p.add_argument(
-        "--max-frames", type=int, help="stop after N processed frames (default: the config's, 0 = run until stopped)"
+        "--max-frames",
+        type=int,
+        help="stop after N frames processed or rejected (default: the config's, 0 = run until stopped)",
     )
     p.add_argument("--out", help="output folder for summary.json and the default .rrd (default: the config's, vpp-run)")
     p.add_argument("--no-summary", action="store_true", help="no live summary line on stderr")
@@ -236,6 +241,7 @@ def _ros_overrides(d: dict[str, Any], args: argparse.Namespace) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Validate the whole configuration, then run until done or signalled."""
+    from vpp_service.cli import EXIT_STARTUP
     from vpp_service.errors import StartupError
     from vpp_service.service.app import run_service
     from vpp_service.service.config import DEFAULT_CONFIG, check_paths, previous_outputs, read_toml, validate_config
@@ -261,7 +267,7 @@ def main(args: argparse.Namespace) -> int:
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        status = run_service(cfg, stop, sys.stderr, banner=startup_line(cfg))
+        status = run_service(cfg, stop, sys.stderr, banner=lambda matcher: startup_line(cfg, matcher))
     finally:
         for s, h in old.items():
             signal.signal(s, h)
@@ -273,6 +279,9 @@ def main(args: argparse.Namespace) -> int:
             {"counters": status["counters"], "out": cfg.service.out, "shutdown_s": round(status["shutdown_s"], 3)}
         )
     )
+    if status["config_error"] is not None:  # the configuration cannot process the frames: restarting won't help
+        print(f"vpp-service run: stopped: {status['config_error']}", file=sys.stderr)
+        return EXIT_STARTUP
     if status["source_error"] is not None:  # a dead source is a runtime failure: exit 1 so systemd restarts it
         print(f"vpp-service run: the source failed: {status['source_error']}", file=sys.stderr)
         return 1
@@ -330,8 +339,20 @@ def _sink_text(spec_name: str, raw: dict[str, Any]) -> str:
     return f"{spec_name} ({where})" if where else spec_name
 
 
-def startup_line(cfg: ServiceConfig) -> str:
-    """The line ``run`` prints once started: rig, Zenoh endpoints, input and output topics, sinks."""
+def matcher_text(name: str, runtime: Mapping[str, object] | None) -> str:
+    """``"sgbm (opencv cpu int16, 2 threads)"``: the matcher and what runs it (name alone when unknown)."""
+    if not runtime:
+        return name
+    threads = runtime.get("threads")
+    what = " ".join(str(runtime[k]) for k in ("engine", "device", "precision") if k in runtime)
+    return f"{runtime.get('name', name)} ({what}" + (f", {threads} threads)" if threads is not None else ")")
+
+
+def startup_line(cfg: ServiceConfig, matcher: Mapping[str, object] | None = None) -> str:
+    """The line ``run`` prints once started: rig, Zenoh endpoints, input, matcher and what runs it, outputs, sinks.
+
+    ``matcher`` is :attr:`~vpp_service.service.pipeline.Pipeline.matcher_runtime` (engine, device, precision).
+    """
     from vpp_service.transport.wire import topic
 
     s, z = cfg.service, cfg.zenoh
@@ -346,8 +367,8 @@ def startup_line(cfg: ServiceConfig) -> str:
     pool = f" | pool {topic(s.prefix, s.rig, '@pool/*')}" if s.pool else ""
     status = topic(s.prefix, s.rig, "@status/<worker>" if s.pool else "@status")
     return (
-        f"vpp-service run: rig {s.rig}{pool} | {zenoh_s} | {src}{outputs} | sinks {sinks} | "
-        f"status {status} | stop with Ctrl-C"
+        f"vpp-service run: rig {s.rig}{pool} | {zenoh_s} | {src} | matcher {matcher_text(cfg.matcher.name, matcher)}"
+        f"{outputs} | sinks {sinks} | status {status} | stop with Ctrl-C"
     )
 
 

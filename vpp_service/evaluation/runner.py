@@ -14,6 +14,10 @@ For every frame (and every density of a sweep) the runner
    * ``vpp`` - VPP on the points (pattern seed ``seed``), then the matcher on
      the painted pair;
 
+   Before the first method is timed, the matcher runs once untimed on the
+   first frame (:meth:`~vpp_service.matchers.Matcher.warm_up`): a network's
+   engine opens and compiles on its first pair, which is no method's cost;
+
 3. fills the matcher's holes with background interpolation
    (:func:`vpp_service.matchers.fill_holes`), as the protocol says, and scores
    with :func:`~vpp_service.evaluation.metrics.compute_metrics` over all
@@ -244,6 +248,22 @@ def _draw_points(
     return np.where(np.isfinite(sparse) & (sparse > 0), sparse, np.nan).astype(np.float32), drawn.meta
 
 
+def _scene_matcher(
+    name: str, options: Mapping[str, object], gt: np.ndarray, *, max_disparity: int | None, limit: int | None
+) -> Matcher:
+    """Matcher ``name`` built for one scene: ``max_disparity``, else the scene's :func:`default_max_disparity`."""
+    from vpp_service.matchers import build_matcher
+
+    md = max_disparity if max_disparity is not None else default_max_disparity(gt, gt.shape[1], limit)
+    return build_matcher(name, {**options, "max_disparity": int(md), "fill": False})
+
+
+def _runtime_fields(matcher: Matcher) -> ResultRow:
+    """``engine``, ``device``, ``precision``: what runs ``matcher`` (:meth:`~vpp_service.matchers.Matcher.runtime`)."""
+    runtime = matcher.runtime()
+    return {"engine": runtime["engine"], "device": runtime["device"], "precision": runtime["precision"]}
+
+
 class EvaluationInterrupted(KeyboardInterrupt):
     """Ctrl-C during :func:`run_evaluation`: the rows of the scenes that finished, to save as a partial result.
 
@@ -337,8 +357,10 @@ def run_evaluation(
         One row per (scene, density, method): ``dataset``, ``scene``, ``method``,
         ``matcher``, ``sensor``, ``density``, ``bad1``..``bad4``, ``avg``, ``rms``,
         ``invalid``, ``n``, ``*_nocc`` variants (when masked), ``n_points``,
-        ``max_disparity``, ``ms`` (VPP + matching wall time), ``see_through``
-        (points the filter dropped, when it ran).
+        ``max_disparity``, ``ms`` (VPP + matching wall time, after one untimed
+        warm-up pass of the matcher on the first frame), ``see_through``
+        (points the filter dropped, when it ran), and ``engine``, ``device``,
+        ``precision``: what ran the matcher (:meth:`~vpp_service.matchers.Matcher.runtime`).
 
     Raises
     ------
@@ -347,7 +369,6 @@ def run_evaluation(
         guidance (names the matcher), frames without ground truth, ...
     """
     from vpp_service.fusion import fuse
-    from vpp_service.matchers import build_matcher
 
     methods = _check_methods(methods)
     _check_run_args(seed, max_disparity, progress)
@@ -374,17 +395,16 @@ def run_evaluation(
         for i in range(n_frames):
             frame, gt = _frame_with_gt(get, i)
             scene = frame.name or f"frame{i}"
-            if ready is None:
-                md = max_disparity if max_disparity is not None else default_max_disparity(gt, frame.shape[1], limit)
-                m = build_matcher(matcher_name, {**base_opts, "max_disparity": int(md), "fill": False})
-            else:
-                m = ready
+            m = ready or _scene_matcher(matcher_name, base_opts, gt, max_disparity=max_disparity, limit=limit)
+            if i == 0:  # untimed: a network's engine opens and compiles on its first pair, kernels allocate
+                m.warm_up(frame.left, frame.right)
             common: ResultRow = {
                 "dataset": dataset_name or frame.meta.get("dataset", ""),
                 "scene": scene,
                 "matcher": matcher_name,
                 "sensor": sensor_name,
                 "max_disparity": int(m.options.max_disparity),
+                **_runtime_fields(m),
             }
 
             baseline_row: ResultRow = {}

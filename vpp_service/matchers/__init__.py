@@ -16,9 +16,26 @@ See :mod:`vpp_service.matchers.base` for the conventions all matchers share.
 """
 
 from vpp_service.matchers import census_sgm, onnx, opencv  # noqa: F401  (register census-sgm, onnx, psmnet, sgbm, bm)
-from vpp_service.matchers.base import MATCHERS, Matcher, MatcherOptions, build_matcher
+from vpp_service.matchers.base import (
+    MATCHERS,
+    DisparityRangeError,
+    Matcher,
+    MatcherOptions,
+    MatcherRuntime,
+    build_matcher,
+)
 from vpp_service.matchers.guided import modulate_cost
 from vpp_service.matchers.holes import fill_holes
 from vpp_service.matchers.speckle import remove_speckles
 
-__all__ = ["MATCHERS", "Matcher", "MatcherOptions", "build_matcher", "fill_holes", "modulate_cost", "remove_speckles"]
+__all__ = [
+    "MATCHERS",
+    "DisparityRangeError",
+    "Matcher",
+    "MatcherOptions",
+    "MatcherRuntime",
+    "build_matcher",
+    "fill_holes",
+    "modulate_cost",
+    "remove_speckles",
+]

@@ -24,7 +24,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, TypedDict
 
 import cv2
 import numpy as np
@@ -177,12 +177,21 @@ def check_pair(left: object, right: object) -> tuple[np.ndarray, np.ndarray]:
     return left, right
 
 
+class DisparityRangeError(ValueError):
+    """The matcher's disparity range cannot fit an image this wide (``max_disparity`` not below the width).
+
+    Not a flaw of one frame: every frame of that width fails the same way, so the
+    service stops on it (a configuration that cannot process the source's frames)
+    instead of rejecting frame after frame.
+    """
+
+
 def check_max_disparity(max_disparity: int, width: int, name: str = "max_disparity") -> None:
-    """Raise ValueError unless ``0 < max_disparity < width``."""
+    """Raise :class:`DisparityRangeError` (a ValueError) unless ``0 < max_disparity < width``."""
     if isinstance(max_disparity, bool) or not isinstance(max_disparity, (int, np.integer)):
         raise TypeError(f"{name} must be an integer, got {max_disparity!r}")
     if not 0 < max_disparity < width:
-        raise ValueError(f"{name} must be > 0 and < the image width {width}, got {max_disparity}")
+        raise DisparityRangeError(f"{name} must be > 0 and < the image width {width}, got {max_disparity}")
 
 
 def check_hints(hints: object, shape: tuple[int, int]) -> np.ndarray:
@@ -200,6 +209,30 @@ def to_gray(img: np.ndarray) -> np.ndarray:
     if img.shape[2] == 1:
         return np.ascontiguousarray(img[:, :, 0])
     return cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+
+
+class MatcherRuntime(TypedDict):
+    """What actually runs a matcher (``run``'s start line, ``@status``, ``eval``'s results).
+
+    Attributes
+    ----------
+    engine : str
+        The implementation: ``"opencv"``, ``"cython"`` / ``"cython-avx2"`` (the build
+        of the kernels that runs), ``"openvino"``, ``"onnxruntime"``.
+    device : str
+        ``"cpu"`` or ``"cuda"``.
+    precision : str
+        The arithmetic that runs, as the engine reports it: ``"f32"``, ``"bf16"``,
+        ``"f16"`` for a network (what it runs, not what was asked), ``"int16"``
+        for the classical matchers' integer costs.
+    threads : int
+        CPU threads it uses.
+    """
+
+    engine: str
+    device: str
+    precision: str
+    threads: int
 
 
 class Matcher(ABC):
@@ -237,6 +270,33 @@ class Matcher(ABC):
         and ``eval``'s per-scene default are capped at it.
         """
         return None
+
+    def check_width(self, width: int) -> None:
+        """Raise :class:`DisparityRangeError` when the range cannot be searched on images ``width`` pixels wide.
+
+        :meth:`compute` runs it on every pair; ``run --check`` runs it on the
+        source's frame width when the source knows it in advance. The base
+        rule is ``0 < max_disparity < width``; matchers with a stricter one
+        (OpenCV's rounding to 16) override it.
+        """
+        check_max_disparity(self.options.max_disparity, width)
+
+    def runtime(self) -> MatcherRuntime:
+        """The engine, device and precision that run this matcher (:class:`MatcherRuntime`).
+
+        The base class's answer is numpy on the CPU in f32, one thread; every
+        registered matcher overrides it. A network's opens its engine first.
+        """
+        return {"engine": "numpy", "device": "cpu", "precision": "f32", "threads": 1}
+
+    def warm_up(self, left: np.ndarray, right: np.ndarray) -> None:
+        """One untimed :meth:`compute` on a pair of this size, so that the timings that follow are steady.
+
+        A network's engine opens and compiles for the size on its first pair
+        (seconds); kernels allocate their buffers. ``eval`` and ``demo`` run it
+        before they time any method.
+        """
+        self.compute(left, right)
 
     @classmethod  # noqa: B027 - optional hook, a no-op by default
     def check_files(cls, options: MatcherOptions, section: str) -> None:
@@ -280,10 +340,11 @@ class Matcher(ABC):
         ------
         TypeError, ValueError
             Bad images (dtype, shape, contiguity), ``max_disparity`` not below
-            the width, or ``hints`` given to a matcher without guidance.
+            the width (:class:`DisparityRangeError`, :meth:`check_width`), or
+            ``hints`` given to a matcher without guidance.
         """
         check_pair(left, right)
-        check_max_disparity(self.options.max_disparity, left.shape[1])
+        self.check_width(left.shape[1])
         if hints is not None:
             if not self.supports_guidance:
                 raise ValueError(f"matcher {self.name!r} does not support guidance (hints)")

@@ -95,6 +95,7 @@ from vpp_service.matchers.base import (
     MATCHERS,
     Matcher,
     MatcherOptions,
+    MatcherRuntime,
     check_array,
     check_disparity,
     check_hints,
@@ -564,6 +565,11 @@ class CensusSGM(Matcher):
 
     def _threads(self) -> int:
         return resolve_threads(self.options.threads or None)  # 0: the default policy
+
+    def runtime(self) -> MatcherRuntime:
+        """The Cython kernels on the CPU (``cython-avx2`` where the AVX2 build runs), int16 path costs."""
+        engine = "cython" if _k is portable else "cython-avx2"
+        return {"engine": engine, "device": "cpu", "precision": "int16", "threads": self._threads()}
 
     def cost_volume(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         """H x W x D uint16 Hamming cost of the 5 x 5 census of the gray pair (a new array)."""

@@ -14,6 +14,9 @@ Precision: f32 unless asked otherwise. OpenVINO would silently run in bf16 on
 a CPU with bf16 units when not told, so f32 is always set explicitly
 (``INFERENCE_PRECISION_HINT``); ``"bf16"`` / ``"f16"`` are opt-in and only
 OpenVINO honours them (ONNX Runtime runs the graph as exported, f32).
+:attr:`Engine.precision` is what the engine reports it runs, read back after
+compiling (a CPU without bf16 units runs f32 when bf16 is asked: logged as a
+warning).
 Threads: the project's policy (:func:`vpp_service.threads.resolve_threads`).
 
 The engine packages are imported on first use; a missing one raises
@@ -22,6 +25,7 @@ The engine packages are imported on first use; a missing one raises
 
 from __future__ import annotations
 
+import logging
 import threading
 from abc import ABC, abstractmethod
 from collections import OrderedDict
@@ -32,6 +36,8 @@ from typing import Any, Literal
 import numpy as np
 
 from vpp_service.errors import StartupError
+
+log = logging.getLogger(__name__)
 
 Device = Literal["auto", "cpu", "cuda"]
 EngineName = Literal["auto", "openvino", "onnxruntime"]
@@ -135,6 +141,10 @@ class OpenVINOEngine(Engine):
             raise ValueError(f"model {path.name}: OpenVINO cannot load it: {_first_line(exc)}") from None
         hint = self._compiled.get_property("INFERENCE_PRECISION_HINT")  # what the plugin really runs
         self.precision = hint.get_type_name() if hasattr(hint, "get_type_name") else str(hint)
+        if self.precision != precision:  # e.g. bf16 asked on a CPU without bf16 units: OpenVINO runs f32
+            log.warning(
+                "model %s: precision %s asked, OpenVINO runs %s on this CPU", path.name, precision, self.precision
+            )
         self.inputs = {n: _ov_shape(p) for p in model.inputs for n in p.get_names()}
         self.outputs = {n: _ov_shape(p) for p in model.outputs for n in p.get_names()}
         self._request = self._compiled.create_infer_request()

@@ -3,7 +3,8 @@
 ``$VPP_SERVICE_MODELS`` when set, else the user cache folder
 (``$XDG_CACHE_HOME/vpp-service/models``, by default ``~/.cache/vpp-service/models``).
 The project never downloads or bundles weights: the user puts (or converts) a
-model there, with its card beside it (``name.onnx`` + ``name.toml``).
+model there, with its card beside it (``name.onnx`` + ``name.toml``), and names
+it by file name (:func:`find_model`: ``model=psmnet_kitti2015.onnx``).
 """
 
 from __future__ import annotations
@@ -25,6 +26,31 @@ def models_dir() -> Path:
         return Path(env).expanduser()
     cache = os.environ.get("XDG_CACHE_HOME", "").strip()
     return (Path(cache).expanduser() if cache else Path.home() / ".cache") / "vpp-service" / "models"
+
+
+def find_model(model: str, key: str = "model") -> Path:
+    """The file ``model`` names: a path as given, or a relative one in the working directory, then the models folder.
+
+    So ``model=psmnet_kitti2015.onnx`` finds the file :func:`models_dir`
+    holds (``models export`` writes it there) unless the working directory has one of that name.
+
+    Raises
+    ------
+    FileNotFoundError
+        Nowhere; names ``key`` and every place looked in.
+    """
+    p = Path(model).expanduser()
+    if p.is_file():
+        return p
+    if p.is_absolute():
+        raise FileNotFoundError(f"{key}: no such file: {p}")
+    stored = models_dir() / p
+    if stored.is_file():
+        return stored
+    raise FileNotFoundError(
+        f"{key}: no such file: {model} (looked in the working directory {Path.cwd()} and the models folder "
+        f"{models_dir()}, ${MODELS_ENV} or the user cache)"
+    )
 
 
 @dataclass(frozen=True)
@@ -73,4 +99,4 @@ def list_models(folder: Path | None = None, builtin: dict[str, ModelCard] | None
     return out
 
 
-__all__ = ["MODELS_ENV", "StoredModel", "list_models", "models_dir"]
+__all__ = ["MODELS_ENV", "StoredModel", "find_model", "list_models", "models_dir"]

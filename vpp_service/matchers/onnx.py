@@ -26,8 +26,9 @@ Guided stereo needs the matcher's cost volume, which a network does not expose:
 ``supports_guidance`` is False (``eval --methods guided`` says so).
 
 Options (``[matcher]``, ``--matcher-opt KEY=VALUE``): ``model`` (the
-``.onnx``; ``psmnet`` looks in the models folder,
-:func:`~vpp_service.matchers.model_store.models_dir`, when it is not given),
+``.onnx``: a path, or a name in the models folder,
+:func:`~vpp_service.matchers.model_store.models_dir`, when the working
+directory has no such file; ``psmnet`` looks there when it is not given),
 ``card_file`` / ``card`` (the card: a TOML file, or a table of keys that
 override it; default the ``.toml`` beside the model, or the preset's),
 ``device``, ``engine``, ``precision``, ``threads`` (0 = the project's policy).
@@ -45,10 +46,18 @@ from typing import Any, ClassVar, Literal
 import cv2
 import numpy as np
 
-from vpp_service.matchers.base import MATCHERS, Matcher, MatcherOptions, check_pair, to_gray
+from vpp_service.matchers.base import (
+    MATCHERS,
+    DisparityRangeError,
+    Matcher,
+    MatcherOptions,
+    MatcherRuntime,
+    check_pair,
+    to_gray,
+)
 from vpp_service.matchers.inference import Engine, open_engine
 from vpp_service.matchers.model_card import PSMNET_CARD, ModelCard, card_from_mapping, find_card, read_card
-from vpp_service.matchers.model_store import MODELS_ENV, models_dir
+from vpp_service.matchers.model_store import MODELS_ENV, find_model, models_dir
 from vpp_service.threads import resolve_threads
 
 #: The file ``psmnet`` looks for in the models folder.
@@ -197,7 +206,9 @@ class OnnxOptions(MatcherOptions):
     ----------
     model : str
         Path of the ``.onnx`` file (required for ``onnx``; ``psmnet`` looks in
-        the models folder when empty).
+        the models folder when empty). A relative path not in the working
+        directory is looked up in the models folder
+        (:func:`~vpp_service.matchers.model_store.find_model`).
     card_file : str
         Path of the card (TOML); "" = the ``.toml`` beside the model, else the preset's card.
     card : dict
@@ -306,10 +317,7 @@ class OnnxMatcher(Matcher):
     def _model_path(self) -> Path:
         o = self.options
         if o.model:
-            p = Path(o.model).expanduser()
-            if not p.is_file():
-                raise FileNotFoundError(f"{self.section}.model: no such file: {p}")
-            return p
+            return find_model(o.model, f"{self.section}.model")
         if not self.default_file:
             raise ValueError(f"{self.section}.model: required (the path of the .onnx file)")
         p = models_dir() / self.default_file
@@ -356,6 +364,15 @@ class OnnxMatcher(Matcher):
             self._check_graph(eng)
             self._engine = eng
         return self._engine
+
+    def runtime(self) -> MatcherRuntime:
+        """The engine, device, precision and threads that run the network (opens it on first use).
+
+        The precision is what the engine runs, which may differ from ``precision``
+        (OpenVINO runs f32 where the CPU has no bf16 unit; it logs a warning then).
+        """
+        eng = self.engine()
+        return {"engine": eng.kind, "device": eng.device, "precision": eng.precision, "threads": eng.threads}
 
     def _check_graph(self, eng: Engine) -> None:
         """Raise ValueError naming the first mismatch between the card and the graph's inputs and outputs."""
@@ -417,12 +434,17 @@ class OnnxMatcher(Matcher):
         self.last_timing = {"pre": (t1 - t0) * 1e3, "network": (t2 - t1) * 1e3, "post": (t3 - t2) * 1e3}
         return disp
 
+    def check_width(self, width: int) -> None:
+        """The base rule, and for a fixed-size network a ``max_disparity`` within its range at this width."""
+        super().check_width(width)
+        d = self.options.max_disparity
+        if self.card.fixed and not self.network_range and d > self.card.range_at(width):
+            raise DisparityRangeError(self._range_error(d, self.card.range_at(width)))
+
     def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
         d = self.options.max_disparity
         if self.card.fixed and self.network_range:
             d = max(1, math.floor(self.card.range_at(left.shape[1])))
-        elif self.card.fixed and d > self.card.range_at(left.shape[1]):
-            raise ValueError(self._range_error(d, self.card.range_at(left.shape[1])))
         disp = self.forward(left, right)
         t0 = time.perf_counter()
         disp[~((disp >= 0) & (disp < d))] = np.nan

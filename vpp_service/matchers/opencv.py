@@ -33,7 +33,14 @@ from typing import Literal
 import cv2
 import numpy as np
 
-from vpp_service.matchers.base import MATCHERS, Matcher, MatcherOptions, to_gray
+from vpp_service.matchers.base import (
+    MATCHERS,
+    DisparityRangeError,
+    Matcher,
+    MatcherOptions,
+    MatcherRuntime,
+    to_gray,
+)
 
 _SGBM_MODES = {
     "sgbm": cv2.STEREO_SGBM_MODE_SGBM,
@@ -86,10 +93,16 @@ def _pad_left(img: np.ndarray, pad: int, band: str) -> np.ndarray:
     return cv2.copyMakeBorder(img, 0, 0, pad, 0, _BORDERS[band], value=0)
 
 
+def opencv_runtime() -> MatcherRuntime:
+    """What runs ``sgbm`` and ``bm``: OpenCV on the CPU, int16 costs (and 1/16 px disparities), its threads."""
+    return {"engine": "opencv", "device": "cpu", "precision": "int16", "threads": int(cv2.getNumThreads())}
+
+
 def _check_width(max_disparity: int, min_disparity: int, width: int) -> int:
+    """OpenCV's ``numDisparities``; :class:`DisparityRangeError` when it plus ``min_disparity`` reaches ``width``."""
     nd = opencv_num_disparities(max_disparity)
     if min_disparity + nd >= width:
-        raise ValueError(
+        raise DisparityRangeError(
             f"max_disparity {max_disparity} (rounded up to {nd} for OpenCV) + min_disparity "
             f"{min_disparity} must be < the image width {width}"
         )
@@ -161,6 +174,15 @@ class SGBM(Matcher):
     name = "sgbm"
     Options = SGBMOptions
     options: SGBMOptions
+
+    def check_width(self, width: int) -> None:
+        """``max_disparity`` rounded up to 16, plus ``min_disparity``, must stay below ``width`` (and the base rule)."""
+        super().check_width(width)
+        _check_width(self.options.max_disparity, self.options.min_disparity, width)
+
+    def runtime(self) -> MatcherRuntime:
+        """OpenCV on the CPU: 16-bit integer costs and fixed-point disparities, OpenCV's thread pool."""
+        return opencv_runtime()
 
     def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
         o = self.options
@@ -243,6 +265,15 @@ class BM(Matcher):
     name = "bm"
     Options = BMOptions
     options: BMOptions
+
+    def check_width(self, width: int) -> None:
+        """``max_disparity`` rounded up to 16, plus ``min_disparity``, must stay below ``width`` (and the base rule)."""
+        super().check_width(width)
+        _check_width(self.options.max_disparity, self.options.min_disparity, width)
+
+    def runtime(self) -> MatcherRuntime:
+        """OpenCV on the CPU: 16-bit integer costs and fixed-point disparities, OpenCV's thread pool."""
+        return opencv_runtime()
 
     def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
         o = self.options

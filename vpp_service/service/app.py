@@ -24,7 +24,7 @@ import re
 import sys
 import threading
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
@@ -49,6 +49,9 @@ class ServiceSummary(PipelineStatus):
     unfinished_sinks: list[str]
     config: dict[str, Any]
 
+
+#: The line :func:`run_service` prints once started: the text, or a function of what runs the matcher.
+Banner = str | Callable[[Mapping[str, object] | None], str]
 
 #: Reconnection to the configured endpoints (Zenoh's ``connect/retry``): first retry after 0.5 s, then at most
 #: every 2 s, so outputs flow again within a few seconds after a router returns.
@@ -219,7 +222,7 @@ def run_service(
     cfg: ServiceConfig,
     stop: threading.Event | None = None,
     stream: TextIO | None = sys.stderr,
-    banner: str | None = None,
+    banner: Banner | None = None,
 ) -> ServiceSummary:
     """Run until done or ``stop`` is set; return the final status (also in ``<out>/summary.json``).
 
@@ -232,8 +235,9 @@ def run_service(
     stream : text stream or None
         Where the live summary goes (None = nowhere): on a terminal one line rewritten every
         ``summary_period_s``; otherwise a new line only when the counters changed.
-    banner : str or None
-        Printed on ``stream`` once everything has started.
+    banner : str, callable or None
+        Printed on ``stream`` once everything has started; a callable gets what
+        runs the matcher (:attr:`Pipeline.matcher_runtime`) and returns the text.
     """
     stop = stop or threading.Event()
     s = cfg.service
@@ -250,7 +254,7 @@ def run_service(
 
 
 def _run(
-    cfg: ServiceConfig, stop: threading.Event, stream: TextIO | None, banner: str | None, out: Path
+    cfg: ServiceConfig, stop: threading.Event, stream: TextIO | None, banner: Banner | None, out: Path
 ) -> ServiceSummary:
     """:func:`run_service` once ``out`` exists."""
     s = cfg.service
@@ -268,7 +272,7 @@ def _run(
         if session is not None:
             log.info("zenoh session %s listening on %s", session.info.zid(), list(cfg.zenoh.listen))
         if banner and stream is not None:
-            print(banner, file=stream, flush=True)
+            print(banner(pipe.matcher_runtime) if callable(banner) else banner, file=stream, flush=True)
         tty = bool(getattr(stream, "isatty", lambda: False)())
         last_counters: dict[str, int] | None = None
         try:
@@ -383,6 +387,7 @@ def _not_started(cfg: ServiceConfig) -> ServiceSummary:
         "counters": empty,
         "dropped": {},
         "source_error": None,
+        "config_error": None,
         "zenoh": {"routers": 0, "peers": 0},
         "fps": 0.0,
         "queues": {},
@@ -399,6 +404,7 @@ def _not_started(cfg: ServiceConfig) -> ServiceSummary:
 
 
 __all__ = [
+    "Banner",
     "ServiceSummary",
     "build_pipeline",
     "open_session",

@@ -81,7 +81,7 @@ class ServiceSection:
     prefix : str
         Zenoh key prefix.
     max_frames : int
-        Stop after this many processed frames; 0 = run until stopped.
+        Stop after this many frames processed or rejected; 0 = run until stopped.
     out : str
         Folder for the run's files (summary JSON, default ``.rrd``).
     summary : bool
@@ -484,7 +484,8 @@ def check_paths(cfg: ServiceConfig) -> None:
     OSError
         A dataset root, output folder or recording folder is missing or not a folder; names the key.
     ValueError
-        The matcher's model is unusable (card and graph disagree, the dry run fails).
+        The matcher's model is unusable (card and graph disagree, the dry run fails), or its
+        disparity range cannot fit the source's frames (:func:`check_frame_size`).
     """
     from vpp_service.sinks import SINKS
     from vpp_service.sources import SOURCES
@@ -500,6 +501,47 @@ def check_paths(cfg: ServiceConfig) -> None:
 
     if isinstance(cfg.matcher.options, MatcherOptions):  # a network: its model, its card, one dry run
         MATCHERS.get(cfg.matcher.name).check_files(cfg.matcher.options, "matcher")
+    check_frame_size(cfg)
+
+
+def check_frame_size(cfg: ServiceConfig) -> None:
+    """Check the matcher's disparity range against the source's frame size, when the source knows it in advance.
+
+    A fixed ``max_disparity`` must fit the frames by the matcher's own rule
+    (:meth:`~vpp_service.matchers.Matcher.check_width`: below the width, after
+    OpenCV's rounding to 16 for ``sgbm`` / ``bm``); ``"auto"`` needs a frame
+    wider than 16 pixels. Sources whose size is known only once frames arrive
+    are checked on the first frame instead (the service stops on a range that
+    cannot fit it).
+
+    Raises
+    ------
+    SettingsError
+        ``matcher.max_disparity``: the range cannot fit; names the frame size and the range.
+    """
+    from vpp_service.matchers import MATCHERS, DisparityRangeError, MatcherOptions
+    from vpp_service.matchers.disparity_range import round_range
+    from vpp_service.sources import SOURCES
+
+    size = SOURCES.get(cfg.source.name).frame_size(cfg.source.options)
+    if size is None or not isinstance(cfg.matcher.options, MatcherOptions):
+        return
+    h, w = size
+    where = f"the {cfg.source.name} source's {w} x {h} frames"
+    if cfg.disparity_range is not None:
+        try:
+            round_range(cfg.disparity_range.limit, w, cfg.disparity_range.limit)
+        except ValueError as exc:
+            raise SettingsError(f'matcher.max_disparity: "auto" cannot fit {where}: {exc}') from None
+        return
+    matcher = MATCHERS.get(cfg.matcher.name)(cfg.matcher.options)
+    try:
+        matcher.check_width(w)
+    except DisparityRangeError as exc:
+        raise SettingsError(
+            f"matcher.max_disparity: {matcher.options.max_disparity} cannot fit {where} ({exc}); "
+            f'use a smaller max_disparity, or "auto"'
+        ) from None
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
@@ -554,6 +596,7 @@ __all__ = [
     "ServiceConfig",
     "ServiceSection",
     "ZenohSection",
+    "check_frame_size",
     "check_paths",
     "default_endpoint",
     "load_config",

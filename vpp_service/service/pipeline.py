@@ -19,7 +19,8 @@ finishes the sink threads; the last one to exit sets :attr:`Pipeline.done`. A
 result is ``published`` once every sink has handled it (none dropped it).
 Counters (``received``, ``rejected``, ``dropped``, ``processed``, ``published``, ``no_depth``,
 ``errors``, and ``sparse.see_through``: sparse points the fusion step's see-through filter
-removed before VPP, :mod:`vpp_service.vpp.see_through`) and per-stage timings (mean, p50, p99 over a sliding window) are
+removed before VPP, :mod:`vpp_service.vpp.see_through`), per-stage timings (mean, p50, p99 over a sliding window)
+and what runs the matcher (``matcher``: engine, device, precision, threads, the range in use) are
 reported by :meth:`Pipeline.status`, which the service also serves as JSON on
 the ``<prefix>/<rig>/@status`` queryable; a liveliness token
 ``<prefix>/<rig>/@alive`` is held while the pipeline runs.
@@ -36,7 +37,12 @@ one, but ``status()["source_error"]`` names the exception (the service exits 1).
 
 Bad input never stops the pipeline: a rejected message is counted and logged
 (at most once per ``reject_log_period_s``); a frame the process step raises
-on is counted as rejected and dropped. The ``latency`` statistic runs from
+on is counted as rejected and dropped. One exception: a frame the configured
+disparity range cannot fit (:class:`~vpp_service.matchers.DisparityRangeError`,
+the range not below its width) stops the pipeline like an exhausted source,
+with ``status()["config_error"]`` saying why (the service exits 2), instead of
+rejecting every frame of that size. ``max_frames`` counts rejected frames
+with the processed ones. The ``latency`` statistic runs from
 when the frame was received (``meta["recv_ns"]``, :func:`time.monotonic_ns`: a
 wall-clock step cannot corrupt the percentiles), never from the sender's
 ``stamp_ns``, which any peer can set. A frame whose ``rig`` (it comes from
@@ -59,6 +65,7 @@ import numpy as np
 
 from vpp_service.evaluation.metrics import answered_metrics
 from vpp_service.frame import FusionResult, StereoFrame
+from vpp_service.matchers.base import DisparityRangeError
 from vpp_service.queueing import Policy, QueueWorker
 from vpp_service.service.pool import PoolStatus
 from vpp_service.timing import StageTimer
@@ -119,6 +126,7 @@ class PipelineStatus(TypedDict):
     counters: dict[str, int]
     dropped: dict[str, int]
     source_error: str | None
+    config_error: str | None
     zenoh: dict[str, int] | None
     fps: float
     queues: dict[str, QueueStatus]
@@ -127,6 +135,8 @@ class PipelineStatus(TypedDict):
     source: Mapping[str, object]
     sinks: dict[str, Mapping[str, object]]
     metrics: MetricsStatus
+    #: What runs the matcher (:attr:`Pipeline.matcher_runtime`), when the process step says.
+    matcher: NotRequired[dict[str, object]]
     pool: NotRequired[PoolStatus]
 
 
@@ -146,7 +156,8 @@ class Pipeline:
     input_policy, output_policy : {"latest", "block"}
         Queue policies.
     max_frames : int
-        Stop after this many processed frames (0 = no limit).
+        Stop after this many frames processed or rejected (0 = no limit): a
+        source whose every frame is rejected still ends.
     session : zenoh.Session or None
         When given, ``@status`` and ``@alive`` are declared on it.
     prefix, rig : str
@@ -206,6 +217,9 @@ class Pipeline:
         self.timer = StageTimer(timing_window)
         self.reject_log_period_s = reject_log_period_s
         self.pool = pool
+        #: Why the pipeline stopped on its own: a frame the configuration cannot process (the disparity
+        #: range does not fit its width); None otherwise. The service then exits 2.
+        self.config_error: str | None = None
         self._counts = dict.fromkeys(COUNTER_NAMES, 0)
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -229,6 +243,9 @@ class Pipeline:
         self._snapshot_lock = threading.Lock()
         self._snapshot: tuple[float, str] | None = None  # (monotonic time, JSON) of the last @status reply built
         self._status_queries = {"queries": 0, "snapshots": 0, "cached": 0}
+        #: What runs the matcher (the process step's ``runtime()``: name, engine, device, precision, threads,
+        #: max_disparity), taken at :meth:`start`; None when the process step has no ``runtime``.
+        self.matcher_runtime: dict[str, object] | None = None
 
     # ----------------------------------------------------------- counters
     def _inc(self, key: str, n: int = 1) -> None:
@@ -250,6 +267,7 @@ class Pipeline:
         self._inc("received")
         if frame.rig != self.rig:  # the rig comes from the message: only the served rig's frames go on
             self._reject(f"frame seq={frame.seq}: rig {frame.rig[:64]!r} is not the served rig {self.rig!r}")
+            self._count_towards_limit()
             return False
         frame.meta.setdefault("recv_ns", time.monotonic_ns())  # sources that receive stamp it earlier
         if self.pool is not None and not self.pool.admit(frame):
@@ -274,6 +292,7 @@ class Pipeline:
     def _source_reject(self, reason: str) -> None:
         self._inc("received")
         self._reject(reason)
+        self._count_towards_limit()
 
     def _reject(self, reason: str) -> None:
         self._inc("rejected")
@@ -315,15 +334,42 @@ class Pipeline:
                 prepare(result.frame)  # optional idle-time work for the next frame
             except Exception as exc:  # noqa: BLE001 - optional idle-time work: a failure only costs the head start
                 log.debug("prepare_next(seq=%s): %r", result.frame.seq, exc)
-        if self.max_frames and self._counts["processed"] >= self.max_frames:
-            self._enough.set()
-            self.source.request_stop()  # no more input wanted
-            self.input.abort()  # frames still queued are not processed
+        self._count_towards_limit()
+
+    def _count_towards_limit(self) -> None:
+        """After a frame was processed or rejected: stop taking input once ``max_frames`` of them were."""
+        if not self.max_frames:
+            return
+        with self._lock:
+            handled = self._counts["processed"] + self._counts["rejected"]
+        if handled >= self.max_frames:
+            self._halt()
+
+    def _halt(self) -> None:
+        """Take no more input: the source stops, frames still queued are not processed (not counted as lost)."""
+        self._enough.set()
+        self.source.request_stop()  # no more input wanted
+        self.input.abort()
 
     def _process_failed(self, frame: StereoFrame, exc: Exception) -> None:
-        """A frame ``process`` raised on: a ValueError rejects it, anything else is counted as an error."""
+        """A frame ``process`` raised on: a ValueError rejects it, anything else is counted as an error.
+
+        A :class:`~vpp_service.matchers.DisparityRangeError` (the configured disparity range
+        cannot fit a frame this wide) stops the pipeline: every such frame would fail alike.
+        """
+        if isinstance(exc, DisparityRangeError):
+            h, w = frame.shape
+            self._inc("rejected")
+            if self.config_error is None:
+                self.config_error = (
+                    f'frame seq={frame.seq} is {w} x {h}: {exc}; set a smaller matcher.max_disparity, or "auto"'
+                )
+                log.info("stopping: %s", self.config_error)
+            self._halt()
+            return
         if isinstance(exc, ValueError):  # a frame the matcher/VPP cannot take (size, range)
             self._reject(f"frame seq={frame.seq}: {exc}")
+            self._count_towards_limit()
             return
         self._inc("errors")  # never let one frame kill the service
         now = time.monotonic()
@@ -426,6 +472,8 @@ class Pipeline:
             Whatever a sink's or the source's ``open`` raises (already opened
             parts are closed again).
         """
+        runtime = getattr(self.process, "runtime", None)  # a network's engine opens here, before any frame
+        self.matcher_runtime = dict(runtime()) if callable(runtime) else None
         try:
             for sink in self.sinks:
                 sink.open()
@@ -546,6 +594,7 @@ class Pipeline:
             "counters": counters,
             "dropped": dropped,
             "source_error": None if self.source.error is None else repr(self.source.error),
+            "config_error": self.config_error,
             "zenoh": self.connectivity(),
             "fps": self._recent_fps(elapsed),
             "queues": {
@@ -578,9 +627,20 @@ class Pipeline:
                 "bad2_filled_mean": _mean(self._bad2_filled),
             },
         }
+        if self.matcher_runtime is not None:
+            status["matcher"] = self._matcher_status()
         if self.pool is not None:
             status["pool"] = self.pool.status()
         return status
+
+    def _matcher_status(self) -> dict[str, object]:
+        """:attr:`matcher_runtime` as it is now (the ``auto`` range changes); the start's when it cannot be read."""
+        runtime = getattr(self.process, "runtime", None)
+        try:
+            return dict(runtime()) if callable(runtime) else dict(self.matcher_runtime or {})
+        except Exception:  # a matcher's broken report must not break @status
+            log.debug("runtime() failed", exc_info=True)
+            return dict(self.matcher_runtime or {})
 
     def _status_queries_copy(self) -> dict[str, int]:
         """``@status`` queries: ``queries`` answered, ``snapshots`` built, ``cached`` (answered from a snapshot)."""

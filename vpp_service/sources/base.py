@@ -68,6 +68,16 @@ class Source(Plugin):
     #: loses no frame unless the config asks for ``latest``. False (the default) for a live source.
     finite: ClassVar[bool] = False
 
+    @classmethod
+    def frame_size(cls, options: Any) -> tuple[int, int] | None:
+        """``(height, width)`` of every frame this source will emit, when the options alone tell it.
+
+        ``run --check`` checks the matcher's disparity range against it. None
+        (the default) when it is known only once frames arrive (a camera, a
+        recording, a dataset of several sizes).
+        """
+        return None
+
     def __init__(self, options: object, context: SourceContext) -> None:
         super().__init__(options, context)
         #: The exception that ended :meth:`run` (a dead source), None while healthy or after a clean end.

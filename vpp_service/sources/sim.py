@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import cv2
 import numpy as np
 
-from vpp_service.datasets.skimage_scene import MOTORCYCLE_CALIB, motorcycle
+from vpp_service.datasets.skimage_scene import MOTORCYCLE_CALIB, motorcycle, motorcycle_arrays
 from vpp_service.frame import Calibration, StereoFrame
 from vpp_service.settings import SettingsError
 from vpp_service.sources.base import SOURCES, Emit, Pacer, Reject, Source, SourceContext
@@ -39,6 +39,15 @@ if TYPE_CHECKING:
 
     from vpp_service.datasets.base import Dataset
     from vpp_service.sources.sensors import NominalGeometry, Sensor
+
+
+#: Size of the ``synthetic`` scene unless ``scene_options`` set ``height`` / ``width``.
+SYNTHETIC_SIZE: dict[str, object] = {"height": 240, "width": 320}
+
+
+def scaled_size(height: int, width: int, scale: float) -> tuple[int, int]:
+    """``(height, width)`` of a frame of this size after :func:`scale_frame` by ``scale`` (at least 8 x 8)."""
+    return (height, width) if scale == 1 else (max(8, round(height * scale)), max(8, round(width * scale)))
 
 
 def scale_frame(frame: StereoFrame, scale: float) -> StereoFrame:
@@ -57,7 +66,8 @@ def scale_frame(frame: StereoFrame, scale: float) -> StereoFrame:
     if scale == 1:
         return frame
     h, w = frame.shape
-    size = (max(8, round(w * scale)), max(8, round(h * scale)))
+    sh, sw = scaled_size(h, w, scale)
+    size = (sw, sh)
     sx = size[0] / w
     left = cv2.resize(frame.left, size, interpolation=cv2.INTER_AREA)
     right = cv2.resize(frame.right, size, interpolation=cv2.INTER_AREA)
@@ -177,6 +187,19 @@ class SimSource(Source):
         if options.scene == "dataset" and not Path(options.root).expanduser().is_dir():
             raise FileNotFoundError(f"{section}.root: no such folder: {options.root}")
 
+    @classmethod
+    def frame_size(cls, options: SimSourceOptions) -> tuple[int, int] | None:
+        """The scene's size after ``scale``: Motorcycle's, or the synthetic scene's; None for a dataset."""
+        if options.scene == "motorcycle":
+            left = motorcycle_arrays()[0]
+            return scaled_size(left.shape[0], left.shape[1], options.scale)
+        if options.scene == "synthetic":
+            opts = {**SYNTHETIC_SIZE, **dict(options.scene_options)}
+            h, w = opts["height"], opts["width"]
+            if isinstance(h, int) and isinstance(w, int) and not isinstance(h, bool) and not isinstance(w, bool):
+                return scaled_size(h, w, options.scale)
+        return None
+
     def __init__(self, options: SimSourceOptions, context: SourceContext) -> None:
         super().__init__(options, context)
         self._scenes: list[StereoFrame] | None = None
@@ -192,7 +215,7 @@ class SimSource(Source):
         elif o.scene == "synthetic":
             from vpp_service.sources.synthetic import make_scene
 
-            opts = {"height": 240, "width": 320, **dict(o.scene_options)}
+            opts = {**SYNTHETIC_SIZE, **dict(o.scene_options)}
             self._scenes = [scale_frame(make_scene(seed=o.seed, **opts), o.scale)]
         else:
             from vpp_service.datasets import open_dataset
@@ -228,4 +251,4 @@ class SimSource(Source):
             seq += 1
 
 
-__all__ = ["MOTORCYCLE_CALIB", "SimSource", "SimSourceOptions", "motorcycle_frame", "scale_frame"]
+__all__ = ["MOTORCYCLE_CALIB", "SimSource", "SimSourceOptions", "motorcycle_frame", "scale_frame", "scaled_size"]
