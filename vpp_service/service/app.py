@@ -33,6 +33,7 @@ from vpp_service.fusion import DEFAULT_DEPTH_FILTER, Fusion
 from vpp_service.service.allocator import reuse_freed_memory, trim_freed_memory
 from vpp_service.service.config import ServiceConfig, ZenohSection
 from vpp_service.service.pipeline import COUNTER_NAMES, Pipeline, PipelineStatus
+from vpp_service.sinks.folder import write_atomic
 
 if TYPE_CHECKING:  # zenoh is imported where it is used
     import zenoh
@@ -350,10 +351,8 @@ def _quiet_opencv() -> None:
 
 def _write_json(path: Path, data: Mapping[str, object], errors: list[int]) -> bool:
     """Write ``data`` atomically; a failure (full disk, read-only folder) is counted in ``errors[0]`` and logged."""
-    tmp = path.with_suffix(".json.tmp")
     try:
-        tmp.write_text(json.dumps(data, indent=2, default=str))
-        tmp.replace(path)
+        write_atomic(path, json.dumps(data, indent=2, default=str).encode(), overwrite=True)
     except OSError as exc:
         errors[0] += 1
         if errors[0] == 1 or errors[0] % 100 == 0:
