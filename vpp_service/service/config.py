@@ -112,8 +112,14 @@ class ServiceSection:
         This worker's id in the pool (default ``<host>-<pid>``); 1-64 of ``A-Z a-z 0-9 _ . -``.
     overwrite : bool
         Start even when ``out`` holds a previous run's outputs (summary.json, a .rrd, recorded
-        frames), replacing them. False (default): ``vpp-service run`` refuses and names them.
-        A long-running service restarted in place (systemd) sets it.
+        frames), replacing them (wins over ``resume``). False (default): see ``resume``.
+    resume : bool or "auto"
+        Start in an ``out`` that holds a previous run's outputs by keeping them: the previous
+        ``summary.json`` becomes ``summary.1.json`` (at most :data:`~vpp_service.service.resume.KEEP_SUMMARIES`
+        kept), a Rerun ``save`` recording is rotated as its size cap does, the files and record
+        sinks go on writing into their folders (:mod:`vpp_service.service.resume`). False:
+        ``vpp-service run`` refuses and names them (exit 2). ``"auto"`` (default): true for a
+        network source (``zenoh``, ``ros2``: a long-running service), false otherwise (a one-shot run).
     """
 
     rig: str = "rig0"
@@ -131,6 +137,7 @@ class ServiceSection:
     pool_deadline_ms: float = 1000.0
     worker_id: str = ""
     overwrite: bool = False
+    resume: bool | Literal["auto"] = "auto"
 
     def __post_init__(self) -> None:
         from vpp_service.transport.wire import topic
@@ -454,7 +461,7 @@ def previous_outputs(cfg: ServiceConfig) -> list[str]:
 
     ``<out>/summary.json``, the Rerun ``save`` path, and the folders and bags of the
     files, record and rosbag2 sinks. ``vpp-service run`` refuses to start over them
-    without ``--overwrite`` (``service.overwrite``).
+    without ``--overwrite`` (``service.overwrite``) or ``--resume`` (``service.resume``).
     """
     found: list[Path] = []
     summary = Path(cfg.service.out) / "summary.json"
