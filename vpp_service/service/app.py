@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from vpp_service.errors import StartupError
 from vpp_service.fusion import DEFAULT_DEPTH_FILTER, Fusion
+from vpp_service.matchers.depth_clip import DepthClip
 from vpp_service.service.allocator import reuse_freed_memory, trim_freed_memory
 from vpp_service.service.config import ServiceConfig, ZenohSection
 from vpp_service.service.pipeline import COUNTER_NAMES, Pipeline, PipelineStatus
@@ -196,6 +197,7 @@ def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> 
         depth=needs_depth,
         disparity_range=cfg.disparity_range,
         depth_filter=cfg.depth_filter if cfg.depth_filter is not None else DEFAULT_DEPTH_FILTER,
+        depth_clip=cfg.depth_clip or DepthClip(),  # one valid depth range for every output
     )
     q = cfg.queues
     return Pipeline(

@@ -11,6 +11,7 @@ Sections (every key is documented in ``deploy/config.example.toml``)::
     [queues]    input_size, input_policy, output_size, output_policy
     [depth_filter] mode = "auto" | "see-through" | "none", window_w, window_h, margin, min_gap
                 -> DepthFilter (the see-through filter before VPP)
+    [depth_clip] min_depth_m, max_depth_m -> DepthClip (the valid depth range of every output)
     [[sinks]]   type = "zenoh" | "rerun" | "files", plus that sink's options
 
 :func:`load_config` reads a file (or starts from :data:`DEFAULT_CONFIG`, the
@@ -38,6 +39,7 @@ from vpp_service.registry import Registry
 from vpp_service.settings import SettingsError, from_mapping
 
 if TYPE_CHECKING:
+    from vpp_service.matchers.depth_clip import DepthClip
     from vpp_service.matchers.disparity_range import AutoRangeOptions
     from vpp_service.vpp import VPPConfig
     from vpp_service.vpp.see_through import DepthFilter
@@ -66,7 +68,7 @@ def default_endpoint() -> str:
 
 
 #: Top-level tables a config may contain.
-SECTIONS = ("service", "zenoh", "source", "vpp", "matcher", "queues", "depth_filter", "sinks")
+SECTIONS = ("service", "zenoh", "source", "vpp", "matcher", "queues", "depth_filter", "depth_clip", "sinks")
 
 
 @dataclass(frozen=True)
@@ -275,6 +277,8 @@ class ServiceConfig:
     disparity_range: AutoRangeOptions | None = None
     #: ``[depth_filter]``: the see-through filter before VPP (None: the defaults, ``mode = "auto"``).
     depth_filter: DepthFilter | None = None
+    #: ``[depth_clip]``: the valid depth range of every output (None: :class:`DepthClip`'s defaults).
+    depth_clip: DepthClip | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain mapping (the form :func:`validate_config` accepts)."""
@@ -291,6 +295,8 @@ class ServiceConfig:
         }
         if self.depth_filter is not None:
             out["depth_filter"] = to_mapping(self.depth_filter)
+        if self.depth_clip is not None:
+            out["depth_clip"] = to_mapping(self.depth_clip)
         return out
 
 
@@ -426,6 +432,9 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
     from vpp_service.vpp.see_through import DepthFilter
 
     depth_filter = from_mapping(DepthFilter, _table(data, "depth_filter"), "depth_filter")
+    from vpp_service.matchers.depth_clip import DepthClip
+
+    depth_clip = from_mapping(DepthClip, _table(data, "depth_clip"), "depth_clip")
     sinks_raw = data.get("sinks", [])
     if not isinstance(sinks_raw, list):
         raise SettingsError(f"sinks: must be an array of tables ([[sinks]]), got {type(sinks_raw).__name__}")
@@ -453,6 +462,7 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
         sinks=tuple(sinks),
         disparity_range=ranges[0] if ranges else None,
         depth_filter=depth_filter,
+        depth_clip=depth_clip,
     )
 
 
