@@ -1,7 +1,8 @@
-"""Shared fixtures: a free TCP port on 127.0.0.1 and Zenoh configs with multicast scouting off."""
+"""Shared fixtures: a free TCP port on 127.0.0.1, Zenoh configs with multicast scouting off, a umask."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING
 
@@ -29,6 +30,16 @@ def zenoh_endpoint(tcp_port: int) -> str:
 def zenoh_config() -> Callable[..., zenoh.Config]:
     """Builder ``zenoh_config(listen=[...], connect=[...], mode="peer")`` -> ``zenoh.Config``."""
     return zenoh_test_config
+
+
+@pytest.fixture(params=[0o022, 0o027], ids=["umask022", "umask027"])
+def umask(request: pytest.FixtureRequest) -> Iterator[int]:
+    """Run the test under this process umask (restored afterwards)."""
+    old = os.umask(request.param)
+    try:
+        yield request.param
+    finally:
+        os.umask(old)
 
 
 def _use_build(name: str, builds: dict, module: object, attr: str, monkeypatch: pytest.MonkeyPatch):

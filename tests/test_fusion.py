@@ -178,3 +178,23 @@ def test_service_fusion_passes_its_filter(frame, matcher):
     assert wide > Fusion(matcher, VPPConfig())(lidar).see_through
     with pytest.raises(TypeError, match="depth_filter"):
         Fusion(matcher, depth_filter="auto")
+
+
+def test_fuse_with_a_depth_clip_clips_before_depth_and_metrics(frame, matcher):
+    from vpp_service.matchers.depth_clip import DepthClip
+
+    c = frame.calib
+    clip = DepthClip(max_depth_m=c.f * c.baseline / 12.0)  # nothing beyond 12 px
+    raw = fuse(frame, matcher, VPPConfig(), seed=5)
+    res = fuse(frame, matcher, VPPConfig(), seed=5, depth_clip=clip)
+    expect = clip.apply(raw.disparity.copy(), matcher, c)
+    assert np.isfinite(raw.disparity).sum() > np.isfinite(expect).sum() > 0
+    np.testing.assert_array_equal(res.disparity, expect)
+    np.testing.assert_array_equal(np.isnan(res.depth), np.isnan(expect))
+    assert res.metrics == score(expect, frame)
+    np.testing.assert_array_equal(
+        Fusion(matcher, VPPConfig(), depth_clip=clip)(frame).disparity,
+        fuse(frame, matcher, VPPConfig(), seed=frame.seq, depth_clip=clip).disparity,
+    )
+    with pytest.raises(TypeError, match="depth_clip"):
+        Fusion(matcher, depth_clip={"max_depth_m": 3.0})

@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import io
 import json
+import stat
 import threading
 import time
 
@@ -126,13 +127,19 @@ def test_healthy_run_exits_0(tmp_path):
 
 
 def test_summary_write_failure_is_counted_not_fatal(tmp_path):
-    """summary.json cannot be written (its temporary file's name is taken by a folder): counted, logged, run ends."""
+    """summary.json cannot be written (its name is taken by a non-empty folder): counted, logged, run ends."""
     out = tmp_path / "out"
-    (out / "summary.json.tmp").mkdir(parents=True)
+    (out / "summary.json" / "x").mkdir(parents=True)
     summary = run_service(validate_config(small_config(tmp_path, summary_period_s=0.05)), stream=None)
     assert summary["counters"]["processed"] == 3
     assert summary["summary_write_errors"] >= 1
-    assert not (out / "summary.json").exists()
+    assert (out / "summary.json").is_dir()
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary file left
+
+
+def test_summary_json_gets_the_umask_mode(tmp_path, umask):
+    run_service(validate_config(small_config(tmp_path)), stream=None)
+    assert stat.S_IMODE((tmp_path / "out" / "summary.json").stat().st_mode) == 0o666 & ~umask
 
 
 @pytest.mark.parametrize("mode", ["peer", "client"])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import stat
 from pathlib import Path
 
 import cv2
@@ -137,6 +138,15 @@ def test_all_formats_no_temp_leftovers(tmp_path, result):
     assert len(names) == 3 * 6
     assert not [n for n in names if n.startswith(".")]
     assert sink.stats()["written"] == 3 and sink.stats()["files"] == 18
+
+
+def test_every_file_gets_the_umask_mode(tmp_path, result, umask):
+    """Every kind of file the sink writes is as readable as the umask allows (0o644 under 022, 0o640 under 027)."""
+    sink = make_sink(tmp_path, formats=["png16", "pfm", "npy"], painted=True, depth=True, preview=True)
+    sink.write(result)
+    modes = {p.name: stat.S_IMODE(p.stat().st_mode) for p in tmp_path.iterdir()}
+    assert len(modes) == 7
+    assert set(modes.values()) == {0o666 & ~umask}, modes
 
 
 def test_pattern_and_context_rig(tmp_path, result):

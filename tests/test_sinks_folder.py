@@ -1,10 +1,13 @@
-"""File names of the folder sinks: only validated parts, and every path stays inside the sink's folder."""
+"""The folder sinks' files: names from validated parts only, paths inside the folder, the umask's mode."""
 
 from __future__ import annotations
 
+import stat
+from pathlib import Path
+
 import pytest
 
-from vpp_service.sinks.folder import check_name, path_inside
+from vpp_service.sinks.folder import check_name, path_inside, write_atomic
 
 HOSTILE_NAMES = [
     "../../x/relative",
@@ -58,3 +61,24 @@ def test_path_inside_follows_a_symlinked_folder(tmp_path):
     real.mkdir()
     (tmp_path / "alias").symlink_to(real)
     assert path_inside(tmp_path / "alias", "rig0_000001.png") == tmp_path / "alias" / "rig0_000001.png"
+
+
+@pytest.mark.parametrize("how", ["bytes", "callable"])
+@pytest.mark.parametrize("overwrite", [False, True])
+def test_write_atomic_honours_the_umask(tmp_path, umask, how, overwrite):
+    """The renamed file has the mode a plain open() gives, 0o666 less the umask (not mkstemp's 0o600)."""
+    path = tmp_path / "rig0_000001_disparity.png"
+    data = b"\x89PNG"
+    write_atomic(path, data if how == "bytes" else (lambda p: Path(p).write_bytes(data)), overwrite=overwrite)
+    assert path.read_bytes() == data
+    assert stat.S_IMODE(path.stat().st_mode) == 0o666 & ~umask
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]  # no temporary file left
+
+
+def test_write_atomic_replacing_a_private_file_gives_the_umask_mode(tmp_path, umask):
+    """An existing 0o600 file replaced with overwrite: the new file's mode comes from the umask, not the old file."""
+    path = tmp_path / "summary.json"
+    path.write_text("{}")
+    path.chmod(0o600)
+    write_atomic(path, b"{}\n", overwrite=True)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o666 & ~umask

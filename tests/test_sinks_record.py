@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import re
 import signal
+import stat
 import threading
 
 import numpy as np
@@ -276,6 +277,13 @@ def test_no_temporary_files_left(tmp_path):
         for s in range(3):
             sink.write(as_result(metric_frame(s)))
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_recorded_frames_get_the_umask_mode(tmp_path, umask):
+    with make_sink(tmp_path) as sink:
+        sink.write(as_result(metric_frame(0)))
+    (p,) = tmp_path.iterdir()
+    assert stat.S_IMODE(p.stat().st_mode) == 0o666 & ~umask
 
 
 def test_write_atomic(tmp_path):

@@ -23,6 +23,12 @@
   <vpp_service.vpp.VPPStats.to_dict>`).
 * **Guided stereo** (``guide=True``). The sparse points are passed to the
   matcher as ``hints`` (only matchers with ``supports_guidance``).
+* **Depth clip.** With a ``depth_clip``
+  (:class:`~vpp_service.matchers.depth_clip.DepthClip`, the service's
+  ``[depth_clip]``), disparities outside the valid depth range (by default
+  from the matcher's range and the rig: nothing below ``max(min_disparity, 1)``
+  px, nothing above the top of the range) become NaN, before depth, metrics and
+  every output, so they all agree on what is invalid.
 * **Depth.** With ``depth=True`` and a calibration, metric depth of the result.
 * **Metrics.** When the frame carries ground truth,
   :func:`~vpp_service.evaluation.metrics.compute_metrics` of the disparity over
@@ -46,6 +52,7 @@ import numpy as np
 from vpp_service.evaluation.metrics import answered_metrics, compute_metrics
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.matchers.base import Matcher
+from vpp_service.matchers.depth_clip import DepthClip
 from vpp_service.matchers.disparity_range import STEP, AutoRangeOptions, DisparityRange, MatcherCache
 from vpp_service.vpp import VPPConfig, depth_to_disparity, disparity_to_depth, project
 from vpp_service.vpp.see_through import DepthFilter
@@ -111,6 +118,7 @@ def fuse(
     protocol: bool = False,
     sparse: np.ndarray | None = None,
     depth_filter: DepthFilter | None = DEFAULT_DEPTH_FILTER,
+    depth_clip: DepthClip | None = None,
 ) -> FusionResult:
     """Process one frame: VPP (or guidance) on its sparse points, the matcher, depth and metrics.
 
@@ -136,6 +144,10 @@ def fuse(
     depth_filter : DepthFilter or None
         The see-through filter and when it runs (default ``auto``: frames with
         ``meta["lidar_like"]``); None never filters.
+    depth_clip : DepthClip or None
+        The valid depth range: disparities outside it become NaN before depth
+        and metrics; None (default) keeps the matcher's output as it is
+        (what ``eval`` scores).
 
     Returns
     -------
@@ -178,6 +190,8 @@ def fuse(
     t0 = time.perf_counter()
     disp = np.asarray(matcher.compute(m_left, m_right, hints=hints), dtype=np.float32)
     timing["match"] = (time.perf_counter() - t0) * 1e3
+    if depth_clip is not None:
+        disp = depth_clip.apply(disp, matcher, frame.calib)
     depth_map = None
     if depth and frame.calib is not None:
         c = frame.calib
@@ -221,6 +235,9 @@ class Fusion:
     depth_filter : DepthFilter or None
         The see-through filter (:func:`fuse`); the pipeline counts what it
         drops (``sparse.see_through``).
+    depth_clip : DepthClip or None
+        The valid depth range of every output (:func:`fuse`); the service
+        always passes one (``[depth_clip]``, defaults from the matcher and the rig).
 
     Attributes
     ----------
@@ -239,6 +256,7 @@ class Fusion:
         disparity_range: AutoRangeOptions | None = None,
         *,
         depth_filter: DepthFilter | None = DEFAULT_DEPTH_FILTER,
+        depth_clip: DepthClip | None = None,
     ) -> None:
         if not isinstance(matcher, Matcher):
             raise TypeError(
@@ -248,7 +266,10 @@ class Fusion:
             raise TypeError(f"vpp_config must be a VPPConfig or None, got {type(vpp_config).__name__}")
         if depth_filter is not None and not isinstance(depth_filter, DepthFilter):
             raise TypeError(f"depth_filter must be a DepthFilter or None, got {type(depth_filter).__name__}")
+        if depth_clip is not None and not isinstance(depth_clip, DepthClip):
+            raise TypeError(f"depth_clip must be a DepthClip or None, got {type(depth_clip).__name__}")
         self.depth_filter = depth_filter
+        self.depth_clip = depth_clip
         self.matcher = matcher
         self.vpp_config = vpp_config
         self.seed = int(seed)
@@ -301,7 +322,14 @@ class Fusion:
             matcher = self._matchers.get(self.range.update(sparse, frame.calib, frame.left.shape[1]))
         seed = self.seed + int(frame.seq)
         result = fuse(
-            frame, matcher, self.vpp_config, seed=seed, depth=self.depth, sparse=sparse, depth_filter=self.depth_filter
+            frame,
+            matcher,
+            self.vpp_config,
+            seed=seed,
+            depth=self.depth,
+            sparse=sparse,
+            depth_filter=self.depth_filter,
+            depth_clip=self.depth_clip,
         )
         if result.left_vpp is not None:
             self.counters["vpp"] += 1

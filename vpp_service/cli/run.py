@@ -117,8 +117,15 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace a previous run's outputs in --out (summary.json, .rrd, recorded frames); without it "
-        "run refuses to start over them (service.overwrite)",
+        help="replace a previous run's outputs in --out (summary.json, .rrd, recorded frames); without it or "
+        "--resume, run refuses to start over them (service.overwrite)",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="start over a previous run's outputs in --out by keeping them: summary.json -> summary.1.json, the "
+        ".rrd rotated, frame folders continued (service.resume; the default for --source zenoh/ros2; the systemd "
+        "unit passes it)",
     )
     p.add_argument(
         "--check",
@@ -192,7 +199,11 @@ def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[
 
 
 def _service_overrides(svc: dict[str, Any], args: argparse.Namespace) -> None:
-    """Apply the ``[service]`` flags (--rig, --pool, --worker-id, --max-frames, --out, --no-summary)."""
+    """Apply the ``[service]`` flags.
+
+    ``--rig``, ``--pool``, ``--worker-id``, ``--max-frames``, ``--out``, ``--no-summary``, ``--overwrite``,
+    ``--resume``.
+    """
     if args.rig:
         svc["rig"] = args.rig
     if getattr(args, "pool", False):
@@ -207,6 +218,8 @@ def _service_overrides(svc: dict[str, Any], args: argparse.Namespace) -> None:
         svc["summary"] = False
     if getattr(args, "overwrite", False):
         svc["overwrite"] = True
+    if getattr(args, "resume", False):
+        svc["resume"] = True
 
 
 def _rerun_flag(args: argparse.Namespace) -> dict[str, object] | None:
@@ -245,6 +258,7 @@ def main(args: argparse.Namespace) -> int:
     from vpp_service.errors import StartupError
     from vpp_service.service.app import run_service
     from vpp_service.service.config import DEFAULT_CONFIG, check_paths, previous_outputs, read_toml, validate_config
+    from vpp_service.service.resume import resume_outputs, resumes
 
     data = overrides_from_args(read_toml(args.config) if args.config else copy.deepcopy(DEFAULT_CONFIG), args)
     if data.get("service", {}).get("pool") and "listen" not in data.get("zenoh", {}):
@@ -255,10 +269,19 @@ def main(args: argparse.Namespace) -> int:
         print(json.dumps(cfg.to_dict(), indent=2))
         return 0
     previous = [] if cfg.service.overwrite else previous_outputs(cfg)
-    if previous:
+    if previous and resumes(cfg):
+        try:
+            moved = resume_outputs(cfg)
+        except OSError as exc:
+            raise StartupError(f"service.out: cannot keep the previous run's outputs: {exc}") from None
+        print(
+            f"vpp-service run: resuming in {cfg.service.out} ({'; '.join(moved) or 'frames continue'})", file=sys.stderr
+        )
+    elif previous:
         raise StartupError(
             f"service.out: {cfg.service.out!r} holds a previous run's outputs ({', '.join(previous)}); "
-            "pass --overwrite to replace them, or --out DIR for a new run folder"
+            "pass --overwrite to replace them, --resume to keep them (summary.json rotated), "
+            "or --out DIR for a new run folder"
         )
     stop = threading.Event()
 

@@ -30,9 +30,11 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from vpp_service.errors import StartupError
 from vpp_service.fusion import DEFAULT_DEPTH_FILTER, Fusion
+from vpp_service.matchers.depth_clip import DepthClip
 from vpp_service.service.allocator import reuse_freed_memory, trim_freed_memory
 from vpp_service.service.config import ServiceConfig, ZenohSection
 from vpp_service.service.pipeline import COUNTER_NAMES, Pipeline, PipelineStatus
+from vpp_service.sinks.folder import write_atomic
 
 if TYPE_CHECKING:  # zenoh is imported where it is used
     import zenoh
@@ -198,6 +200,7 @@ def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> 
         depth=needs_depth,
         disparity_range=cfg.disparity_range,
         depth_filter=cfg.depth_filter if cfg.depth_filter is not None else DEFAULT_DEPTH_FILTER,
+        depth_clip=cfg.depth_clip or DepthClip(),  # one valid depth range for every output
     )
     q = cfg.queues
     return Pipeline(
@@ -354,10 +357,8 @@ def _quiet_opencv() -> None:
 
 def _write_json(path: Path, data: Mapping[str, object], errors: list[int]) -> bool:
     """Write ``data`` atomically; a failure (full disk, read-only folder) is counted in ``errors[0]`` and logged."""
-    tmp = path.with_suffix(".json.tmp")
     try:
-        tmp.write_text(json.dumps(data, indent=2, default=str))
-        tmp.replace(path)
+        write_atomic(path, json.dumps(data, indent=2, default=str).encode(), overwrite=True)
     except OSError as exc:
         errors[0] += 1
         if errors[0] == 1 or errors[0] % 100 == 0:

@@ -11,6 +11,7 @@ Sections (every key is documented in ``deploy/config.example.toml``)::
     [queues]    input_size, input_policy, output_size, output_policy
     [depth_filter] mode = "auto" | "see-through" | "none", window_w, window_h, margin, min_gap
                 -> DepthFilter (the see-through filter before VPP)
+    [depth_clip] min_depth_m, max_depth_m -> DepthClip (the valid depth range of every output)
     [[sinks]]   type = "zenoh" | "rerun" | "files", plus that sink's options
 
 :func:`load_config` reads a file (or starts from :data:`DEFAULT_CONFIG`, the
@@ -38,6 +39,7 @@ from vpp_service.registry import Registry
 from vpp_service.settings import SettingsError, from_mapping
 
 if TYPE_CHECKING:
+    from vpp_service.matchers.depth_clip import DepthClip
     from vpp_service.matchers.disparity_range import AutoRangeOptions
     from vpp_service.vpp import VPPConfig
     from vpp_service.vpp.see_through import DepthFilter
@@ -66,7 +68,7 @@ def default_endpoint() -> str:
 
 
 #: Top-level tables a config may contain.
-SECTIONS = ("service", "zenoh", "source", "vpp", "matcher", "queues", "depth_filter", "sinks")
+SECTIONS = ("service", "zenoh", "source", "vpp", "matcher", "queues", "depth_filter", "depth_clip", "sinks")
 
 
 @dataclass(frozen=True)
@@ -112,8 +114,14 @@ class ServiceSection:
         This worker's id in the pool (default ``<host>-<pid>``); 1-64 of ``A-Z a-z 0-9 _ . -``.
     overwrite : bool
         Start even when ``out`` holds a previous run's outputs (summary.json, a .rrd, recorded
-        frames), replacing them. False (default): ``vpp-service run`` refuses and names them.
-        A long-running service restarted in place (systemd) sets it.
+        frames), replacing them (wins over ``resume``). False (default): see ``resume``.
+    resume : bool or "auto"
+        Start in an ``out`` that holds a previous run's outputs by keeping them: the previous
+        ``summary.json`` becomes ``summary.1.json`` (at most :data:`~vpp_service.service.resume.KEEP_SUMMARIES`
+        kept), a Rerun ``save`` recording is rotated as its size cap does, the files and record
+        sinks go on writing into their folders (:mod:`vpp_service.service.resume`). False:
+        ``vpp-service run`` refuses and names them (exit 2). ``"auto"`` (default): true for a
+        network source (``zenoh``, ``ros2``: a long-running service), false otherwise (a one-shot run).
     """
 
     rig: str = "rig0"
@@ -131,6 +139,7 @@ class ServiceSection:
     pool_deadline_ms: float = 1000.0
     worker_id: str = ""
     overwrite: bool = False
+    resume: bool | Literal["auto"] = "auto"
 
     def __post_init__(self) -> None:
         from vpp_service.transport.wire import topic
@@ -268,6 +277,8 @@ class ServiceConfig:
     disparity_range: AutoRangeOptions | None = None
     #: ``[depth_filter]``: the see-through filter before VPP (None: the defaults, ``mode = "auto"``).
     depth_filter: DepthFilter | None = None
+    #: ``[depth_clip]``: the valid depth range of every output (None: :class:`DepthClip`'s defaults).
+    depth_clip: DepthClip | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain mapping (the form :func:`validate_config` accepts)."""
@@ -284,6 +295,8 @@ class ServiceConfig:
         }
         if self.depth_filter is not None:
             out["depth_filter"] = to_mapping(self.depth_filter)
+        if self.depth_clip is not None:
+            out["depth_clip"] = to_mapping(self.depth_clip)
         return out
 
 
@@ -419,6 +432,9 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
     from vpp_service.vpp.see_through import DepthFilter
 
     depth_filter = from_mapping(DepthFilter, _table(data, "depth_filter"), "depth_filter")
+    from vpp_service.matchers.depth_clip import DepthClip
+
+    depth_clip = from_mapping(DepthClip, _table(data, "depth_clip"), "depth_clip")
     sinks_raw = data.get("sinks", [])
     if not isinstance(sinks_raw, list):
         raise SettingsError(f"sinks: must be an array of tables ([[sinks]]), got {type(sinks_raw).__name__}")
@@ -446,6 +462,7 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
         sinks=tuple(sinks),
         disparity_range=ranges[0] if ranges else None,
         depth_filter=depth_filter,
+        depth_clip=depth_clip,
     )
 
 
@@ -454,7 +471,7 @@ def previous_outputs(cfg: ServiceConfig) -> list[str]:
 
     ``<out>/summary.json``, the Rerun ``save`` path, and the folders and bags of the
     files, record and rosbag2 sinks. ``vpp-service run`` refuses to start over them
-    without ``--overwrite`` (``service.overwrite``).
+    without ``--overwrite`` (``service.overwrite``) or ``--resume`` (``service.resume``).
     """
     found: list[Path] = []
     summary = Path(cfg.service.out) / "summary.json"

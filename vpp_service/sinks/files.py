@@ -3,7 +3,10 @@
 Disparity formats (``formats`` option, any subset):
 
 ``png16``
-    16-bit PNG, value = round(disparity * 256) (KITTI convention), 0 = invalid.
+    16-bit PNG, value = round(disparity * 256) (KITTI convention), 0 = invalid:
+    exactly the pixels that are NaN in ``npy`` (and ``+inf`` in ``pfm``) once the
+    service's depth clip (:mod:`vpp_service.matchers.depth_clip`) has made every
+    disparity outside the valid range NaN, since a valid disparity is then > 0.
     Valid disparities are clamped to ``[1, 65535]`` so a tiny valid value never
     reads back as invalid and values above 255.996 px saturate.
 ``pfm``

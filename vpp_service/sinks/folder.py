@@ -5,13 +5,15 @@ come from a ``str.format`` pattern (:func:`check_pattern`, :meth:`FolderSink.fra
 over validated parts only (:func:`check_name`: a frame's ``rig`` comes from the
 network), and every path is checked to stay inside the folder after resolution
 (:func:`path_inside`); :func:`write_atomic` writes a file to a temporary name in its destination
-folder and renames it into place, so readers never see a partial file.
+folder and renames it into place, so readers never see a partial file. Files get the mode an ordinary
+``open()`` gives (``0o666`` less the process umask), not ``tempfile.mkstemp``'s private ``0o600``.
 """
 
 from __future__ import annotations
 
 import os
 import re
+import secrets
 import tempfile
 from abc import abstractmethod
 from collections.abc import Callable
@@ -84,8 +86,27 @@ def check_pattern(pattern: str) -> None:
         raise ValueError(f"pattern: {pattern!r} must give a plain, non-hidden file name, got {stem!r}")
 
 
+def _create_temp(path: Path) -> tuple[int, Path]:
+    """Create a new, empty temporary file beside ``path``; its descriptor (open for writing) and path.
+
+    Created with mode ``0o666`` so the kernel applies the umask (and a default ACL) as for any new file:
+    the renamed result is as readable as a file written in place. ``O_EXCL`` with a random name makes
+    it ours alone, as ``tempfile.mkstemp`` does.
+    """
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
+    for _ in range(100):
+        tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp"
+        try:
+            return os.open(tmp, flags, 0o666), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"{path}: no free temporary name in {str(path.parent)!r}")  # pragma: no cover
+
+
 def write_atomic(path: Path, data: bytes | Callable[[str], object], overwrite: bool) -> None:
     """Write ``path`` via a temporary file in the same folder, then rename.
+
+    The file gets the mode a plain ``open(path, "w")`` would give it: ``0o666`` less the umask.
 
     Parameters
     ----------
@@ -105,8 +126,8 @@ def write_atomic(path: Path, data: bytes | Callable[[str], object], overwrite: b
         The folder is not writable, the disk is full, ...
     """
     path = Path(path)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    tmp = Path(tmp_name)
+    fd, tmp = _create_temp(path)
+    tmp_name = str(tmp)
     try:
         if callable(data):
             os.close(fd)

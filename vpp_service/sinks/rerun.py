@@ -63,7 +63,6 @@ dead URL) the logging thread is abandoned (daemon) rather than hanging.
 
 from __future__ import annotations
 
-import contextlib
 import importlib.util
 import logging
 import math
@@ -84,6 +83,7 @@ from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import SINKS, QueueSpec, Sink, SinkContext
 from vpp_service.sinks.ordered import OrderedWrites, check_reorder_options
 from vpp_service.sinks.rerun_log import ENTITY_RE, RerunLayout, RerunParts, depth_stride, parts_from_result
+from vpp_service.sinks.rotation import rotate, rotated_paths
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -286,11 +286,6 @@ def reachable(url: str, timeout: float = 0.5) -> bool:
     except OSError:
         return False
     return True
-
-
-def rotated_paths(path: Path, max_files: int) -> list[Path]:
-    """The files of a rotated recording, newest first: ``vpp.rrd``, ``vpp.1.rrd``, ... ``vpp.<max_files-1>.rrd``."""
-    return [path] + [path.with_name(f"{path.stem}.{i}{path.suffix}") for i in range(1, max_files)]
 
 
 @SINKS.register("rerun")
@@ -674,13 +669,7 @@ class RerunSink(Sink):
         if size < o.max_mb * 1e6:
             return
         rec = self._recording()
-        files = rotated_paths(path, o.max_files)
-        # the file sink keeps writing to the renamed inode until save() below replaces it
-        with contextlib.suppress(FileNotFoundError):
-            files[-1].unlink()
-        for older, newer in zip(reversed(files[1:]), reversed(files[:-1]), strict=True):
-            if newer.exists():
-                newer.replace(older)
+        rotate(path, o.max_files)  # the file sink keeps writing to the renamed inode until save() below replaces it
         rec.save(str(path), default_blueprint=self._first_blueprint())
         self.layout.log_static(rec, self.context.rig)
         self._counters["rotations"] += 1

@@ -67,6 +67,10 @@ class Source(Plugin):
     #: lost by making it wait, so the service back-pressures it by default (``block`` queues end to end) and
     #: loses no frame unless the config asks for ``latest``. False (the default) for a live source.
     finite: ClassVar[bool] = False
+    #: True for a source that takes frames from the network (a camera publishing on Zenoh or ROS 2): a
+    #: long-running service, so by default (``service.resume = "auto"``) a restart resumes in its output
+    #: folder (the previous ``summary.json`` rotated) instead of refusing to start over a previous run.
+    network: ClassVar[bool] = False
 
     @classmethod
     def frame_size(cls, options: Any) -> tuple[int, int] | None:

@@ -87,6 +87,7 @@ class Ros2Source(Source):
 
     Options = Ros2SourceOptions
     needs_session = True
+    network = True  # a live camera on the network: a service that resumes after a restart
 
     def __init__(self, options: Ros2SourceOptions, context: SourceContext) -> None:
         super().__init__(options, context)

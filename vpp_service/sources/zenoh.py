@@ -143,6 +143,7 @@ class ZenohSource(Source):
     Options = ZenohSourceOptions
     options: ZenohSourceOptions
     needs_session = True
+    network = True  # a live camera on the network: a service that resumes after a restart
 
     def __init__(self, options: ZenohSourceOptions, context: SourceContext) -> None:
         super().__init__(options, context)
