@@ -23,6 +23,7 @@ from vpp_service.evaluation import (
     write_json,
 )
 from vpp_service.evaluation.report import json_safe
+from vpp_service.evaluation.runner import METHODS
 from vpp_service.matchers import build_matcher, fill_holes
 from vpp_service.sources.sensors import build_sensor
 from vpp_service.sources.synthetic import make_scene
@@ -250,6 +251,18 @@ def test_cli_synthetic_and_errors(tmp_path, capsys):
     assert "guidance" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["eval", "--dataset", "synthetic", "--density", "2"])
+
+
+@pytest.mark.parametrize(("matcher", "methods"), [("sgbm", ["baseline", "vpp"]), ("census-sgm", list(METHODS))])
+def test_eval_default_methods_are_the_ones_the_matcher_supports(tmp_path, capsys, matcher, methods):
+    """Without --methods: guided only with a matcher that has guided stereo; the skip is said, not an error."""
+    out = tmp_path / "r.json"
+    argv = ["eval", "--dataset", "synthetic", "--limit", "1", "--matcher", matcher, "--quiet", "--json", str(out)]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert [r["method"] for r in json.loads(out.read_text())["results"]] == methods
+    skipped = "methods baseline,vpp (guided skipped: 'sgbm' has no guided stereo"
+    assert (skipped in err) == (matcher == "sgbm")
 
 
 class InterruptAt:
