@@ -197,6 +197,7 @@ def _default_methods(matcher: str) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Run the evaluation described by ``args``; returns the exit code."""
+    from vpp_service.cli import EXIT_INTERRUPTED
     from vpp_service.evaluation import ProgressBar, markdown_report, plot_sweep, run_evaluation, write_json
     from vpp_service.evaluation.runner import EvaluationInterrupted, _check_methods
 
@@ -234,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
     except EvaluationInterrupted as exc:  # Ctrl-C: keep what finished, marked partial
         if not exc.rows:
             print("vpp-service eval: interrupted before the first scene finished: nothing written", file=sys.stderr)
-            return 130
+            return EXIT_INTERRUPTED
         partial, rows = exc, exc.rows
     config = {
         "dataset": dataset_name,
@@ -271,5 +272,5 @@ def run(args: argparse.Namespace) -> int:
             f"their results are written, marked partial ({written})",
             file=sys.stderr,
         )
-        return 130
+        return EXIT_INTERRUPTED
     return 0
