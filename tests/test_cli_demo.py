@@ -57,6 +57,38 @@ def test_demo_warms_the_matcher_up_before_timing(tmp_path, monkeypatch, capsys):
     assert ms["baseline"] < 300 and ms["vpp_match"] < 300, ms
 
 
+def test_demo_refuses_to_overwrite_a_previous_demo(tmp_path, capsys):
+    (tmp_path / "summary.json").write_text("{}")  # a previous demo's
+    assert main(["demo", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{str(tmp_path)!r} holds a previous demo's files (summary.json); pass --overwrite" in err
+    assert (tmp_path / "summary.json").read_text() == "{}" and not (tmp_path / "demo.png").exists()
+    assert main(["demo", "--out", str(tmp_path), "--overwrite"]) == 0
+    assert json.loads((tmp_path / "summary.json").read_text())["matcher"] == "sgbm"
+
+
+def test_failed_demo_leaves_no_folder_it_created(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "new" / "demo"
+    assert main(["demo", "--out", str(out), "--matcher", "nope"]) == 2
+    assert "unknown matcher 'nope'" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+    from vpp_service.evaluation import report
+
+    def disk_full(path, *args, **kwargs):
+        raise OSError(28, "No space left on device", str(path))
+
+    monkeypatch.setattr(report, "plot_comparison", disk_full)  # the disk fills while the demo writes
+    assert main(["demo", "--out", str(out)]) == 2
+    assert "No space left on device" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []  # new/ and new/demo/ with the painted pair already in it: gone
+    keep = tmp_path / "mine"
+    keep.mkdir()
+    (keep / "notes.txt").write_text("mine")
+    assert main(["demo", "--out", str(keep)]) == 2
+    assert [p.name for p in keep.iterdir()] == ["notes.txt"]  # the user's folder: only the partial files went
+
+
 def plain_error_map(disp: np.ndarray, gt: np.ndarray, tau: float) -> np.ndarray:
     out = np.zeros((*gt.shape, 3), np.uint8)
     for y in range(gt.shape[0]):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -104,3 +105,34 @@ def test_a_multi_line_error_is_shown_whole(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "no known dataset layout" in err and "looked for:" in err
     assert "middlebury2006: <scene>/view1.png" in err and "kitti2012:" in err  # the list after the first line
+
+
+def test_help_and_code_agree_on_ctrl_c(tmp_path):
+    """The help says run stops cleanly with 0 on Ctrl-C once running, 130 for work cut short; run does so."""
+    from vpp_service.cli import EXIT_INTERRUPTED
+
+    text = " ".join(build_parser().format_help().split())
+    assert "0 done, also when Ctrl-C or SIGTERM stops run, view or publish once running" in text
+    assert f"{EXIT_INTERRUPTED} interrupted before the work was done" in text
+    assert "130 interrupted." not in text
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[service]\nout = "{tmp_path / "run"}"\n[zenoh]\nenabled = false\n[source]\ntype = "sim"\n')
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "vpp_service", "run", "--config", str(cfg), "--no-summary"],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stderr is not None
+        banner = proc.stderr.readline()  # printed once started
+        assert "stop with Ctrl-C" in banner, banner
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert "vpp-service run: stopped after" in err

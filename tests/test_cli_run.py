@@ -7,17 +7,23 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 import subprocess
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
 from helpers.cli import vpp_service_module_command
 from helpers.damaged_bags import cut, garble, write_test_bag
+from helpers.own_folder import own_scene, write_own_folder
 from helpers.ros2_robot import StereoRig, write_bag
 from vpp_service.cli import EXIT_STARTUP, build_parser, main
 from vpp_service.cli.run import closing_line, overrides_from_args, startup_line
+from vpp_service.evaluation.metrics import compute_metrics
+from vpp_service.fusion import fuse
+from vpp_service.matchers import build_matcher
 from vpp_service.service.config import DEFAULT_CONFIG, validate_config
 from vpp_service.settings import SettingsError
 
@@ -192,6 +198,86 @@ def test_check_reports_a_missing_sim_dataset_root(tmp_path, capsys):
     cfg.write_text(f'[source]\ntype = "sim"\nscene = "dataset"\nroot = "{tmp_path / "nope"}"\n')
     rc, _, err = _check(capsys, "--config", str(cfg))
     assert rc == EXIT_STARTUP and "source.root: no such folder" in err and str(tmp_path / "nope") in err
+
+
+def _own_folder_without_gt(root: Path) -> Path:
+    """A user's folder: the image pairs and a calibration, no ground truth, no sparse/ (yet)."""
+    write_own_folder(root, own_scene(0.0625), forms=("png", "png"))
+    shutil.rmtree(root / "sparse")
+    return root
+
+
+@pytest.mark.parametrize("source", ["files", "sim"])
+def test_check_fails_for_a_folder_without_ground_truth_for_the_simulated_sensor(tmp_path, capsys, source):
+    """The default sensor is simulated from ground truth: --check names the folder and what is missing."""
+    root = _own_folder_without_gt(tmp_path / "mine")
+    scene = 'scene = "dataset"\n' if source == "sim" else ""
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[source]\ntype = "{source}"\n{scene}root = "{root}"\n')
+    rc, out, err = _check(capsys, "--config", str(cfg), "--out", str(tmp_path / "run"))
+    assert rc == EXIT_STARTUP and out == "" and len(err.strip().splitlines()) == 1
+    assert f"source.root: {root} has no ground truth (disp/) for the simulated sensor 'uniform'" in err
+    assert 'source.sensor = "none"' in err and ("sparse/" in err)
+    cfg.write_text(f'[source]\ntype = "{source}"\n{scene}root = "{root}"\nsensor = "none"\n')
+    assert _check(capsys, "--config", str(cfg), "--out", str(tmp_path / "run"))[0] == 0
+
+
+def test_check_passes_a_folder_with_its_own_sparse_depth(tmp_path, capsys):
+    root = _own_folder_without_gt(tmp_path / "mine")
+    (root / "sparse").mkdir()
+    np.save(root / "sparse" / "000.npy", np.zeros((31, 46), np.float32))
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f'[source]\ntype = "files"\nroot = "{root}"\n')
+    assert _check(capsys, "--config", str(cfg), "--out", str(tmp_path / "run"))[0] == 0
+    (root / "left" / "001.png").unlink()  # a reader error is a --check error too
+    rc, _, err = _check(capsys, "--config", str(cfg), "--out", str(tmp_path / "run"))
+    assert rc == EXIT_STARTUP and "1 left images but 2 right images" in err
+
+
+OWN_TOML = """[service]
+out = "{out}"
+[zenoh]
+enabled = false
+[source]
+type = "files"
+root = "{root}"
+[matcher]
+name = "sgbm"
+[[sinks]]
+type = "files"
+dir = "{{out}}/frames"
+create_dir = true
+"""
+
+
+def test_run_over_a_folder_with_its_own_sparse_depth_and_no_ground_truth(tmp_path):
+    """Real data needs no ground truth: the user's points drive VPP; the summary has no accuracy figures."""
+    frame = own_scene(0.25)
+    write_own_folder(tmp_path / "mine", frame)
+    (tmp_path / "mine" / "sparse" / "002.csv").write_text("u,v,d\n1,2,nan\n")  # one bad file: that frame only
+    out = tmp_path / "run"
+    cfg = tmp_path / "own.toml"
+    cfg.write_text(OWN_TOML.format(out=out, root=tmp_path / "mine"))
+    cmd = [*vpp_service_module_command(), "run", "--config", str(cfg), "--no-summary"]
+    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=120, check=False)
+    assert proc.returncode == 0, proc.stderr
+    counters = json.loads(proc.stdout)["counters"]
+    assert counters["processed"] == 2 and counters["rejected"] == 1
+    assert "rejected 1" in proc.stderr and "002.csv line 2: a non-finite number" in proc.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["metrics"]["bad2_answered_mean"] is None and summary["metrics"]["bad2_filled_mean"] is None
+    assert sorted(p.name for p in (out / "frames").iterdir()) == [
+        "rig0_000000_disparity.png",
+        "rig0_000001_disparity.png",
+    ]
+    # scored here, against the ground truth the folder did not hold: the points were used (VPP beats SGBM alone)
+    gt = frame.gt_disparity
+    matcher = build_matcher("sgbm", {"max_disparity": int(np.ceil(np.nanmax(gt) / 16) * 16)})
+    alone = compute_metrics(fuse(frame, matcher, None, depth=False).disparity, gt)["bad2"]
+    for name in ("rig0_000000_disparity.png", "rig0_000001_disparity.png"):
+        raw = cv2.imread(str(out / "frames" / name), cv2.IMREAD_UNCHANGED)
+        disp = np.where(raw > 0, raw.astype(np.float32) / 256, np.nan)
+        assert compute_metrics(disp, gt)["bad2"] < alone
 
 
 RUN_BAG_TOML = """sinks = []

@@ -90,8 +90,12 @@ def test_view_records_a_running_service(tmp_path, zenoh_endpoint):
     assert any(e.startswith("/rigT/timing/") for e in data)
 
 
-def test_view_wildcard_keeps_one_recording_per_rig(tmp_path, zenoh_endpoint):
-    """A publisher of outputs for two rigs (this process), ``view --rig '*'`` in another process."""
+@pytest.mark.parametrize("rigs", [("rig0", "rig1"), ("rig0",)])
+def test_view_wildcard_keeps_one_recording_per_rig(tmp_path, zenoh_endpoint, rigs):
+    """A publisher of outputs for each rig (this process), ``view --rig '*'`` in another process.
+
+    Several rigs: one file per rig, ``all-<rig>.rrd``; one rig: the file asked for, ``all.rrd``.
+    """
     rrd = tmp_path / "all.rrd"
     with zenoh.open(zenoh_test_config(listen=[zenoh_endpoint])) as session:
         sinks = {
@@ -100,12 +104,12 @@ def test_view_wildcard_keeps_one_recording_per_rig(tmp_path, zenoh_endpoint):
                 {"outputs": ["disparity", "depth", "left_vpp", "right_vpp", "sparse"], "image_enc": "png"},
                 SinkContext(rig=rig, session=session),
             )
-            for rig in ("rig0", "rig1")
+            for rig in rigs
         }
         for s in sinks.values():
             s.open()
         view = vpp("view", "--rig", "*", "--connect", zenoh_endpoint, "--save", str(rrd), "--max-frames", "8")
-        sent: dict[str, dict[int, np.ndarray]] = {"rig0": {}, "rig1": {}}
+        sent: dict[str, dict[int, np.ndarray]] = {rig: {} for rig in rigs}
         seq, deadline = 0, time.monotonic() + 60
         while view.poll() is None and time.monotonic() < deadline:
             for k, (rig, sink) in enumerate(sinks.items()):
@@ -130,10 +134,13 @@ def test_view_wildcard_keeps_one_recording_per_rig(tmp_path, zenoh_endpoint):
             s.close(2.0)
     assert rc == 0, err[-2000:]
     summary = json.loads(out.strip().splitlines()[-1])
-    assert sorted(summary["rigs"]) == ["rig0", "rig1"]
-    assert sorted(summary["saved"]) == [str(tmp_path / "all-rig0.rrd"), str(tmp_path / "all-rig1.rrd")]
-    for rig in ("rig0", "rig1"):
-        path = tmp_path / f"all-{rig}.rrd"
+    assert sorted(summary["rigs"]) == list(rigs)
+    files = {rig: tmp_path / (f"all-{rig}.rrd" if len(rigs) > 1 else "all.rrd") for rig in rigs}
+    assert sorted(summary["saved"]) == [str(f) for f in files.values()]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(f.name for f in files.values())
+    assert f"view: wrote {', '.join(summary['saved'])}" in err
+    for rig in rigs:
+        path = files[rig]
         assert [r.application_id for r in RrdReader(path).recordings()] == [f"vpp-service-{rig}"]
         data = read_rrd(path)
         assert {e.split("/")[1] for e in data} == {rig}  # only this rig's entities

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
+from helpers.own_folder import own_scene, write_own_folder
 from helpers.shared_data import need_shared
 from vpp_service.datasets import AUTO_ORDER, DATASETS, Dataset, open_dataset, read_pfm, write_pfm
 from vpp_service.datasets.base import reader_class
@@ -256,11 +257,44 @@ def folder_root(tmp_path):
 def test_folder_reader(folder_root):
     ds = open_dataset("auto", folder_root)
     assert ds.name == "folder" and ds.scenes == ["000", "001", "002"] and len(ds) == 3
+    assert ds.has_ground_truth and not ds.has_sparse_input and ds[0].sparse_disparity is None
     f = ds[-1]
     assert f.name == "002" and f.left.shape == (12, 16) and f.calib.f == 100.0
     assert np.isnan(f.gt_disparity[0, 0]) and np.nanmax(f.gt_disparity) == 3.0
     assert [fr.name for fr in ds] == ds.scenes
     assert open_dataset("folder", folder_root, disp_scale=1.0)[0].gt_disparity[1, 1] == 768.0
+
+
+def test_folder_reader_own_sparse_input(tmp_path):
+    """``sparse/`` gives every frame its own points (no ground truth needed); a missing file fails that frame only."""
+    frame = own_scene(0.25)
+    maps = write_own_folder(tmp_path, frame)
+    ds = open_dataset("auto", tmp_path)
+    assert ds.name == "folder" and ds.has_sparse_input and not ds.has_ground_truth
+    for i, fr in enumerate(ds):
+        assert fr.gt_disparity is None and fr.meta["lidar_like"] is False
+        np.testing.assert_allclose(fr.sparse_disparity, maps[i], atol=1e-6)  # NaN where no point, on both
+    (tmp_path / "sparse" / "001.npy").unlink()
+    ds = open_dataset("folder", tmp_path)
+    with pytest.raises(FileNotFoundError, match=r"no sparse input for frame '001'"):
+        ds[1]
+    assert ds[2].sparse_disparity is not None
+    assert open_dataset("folder", tmp_path).select(["002"])[0].name == "002"
+
+
+def test_folder_reader_sparse_folder_errors(tmp_path):
+    write_own_folder(tmp_path, own_scene(0.125), forms=("png", "png"))
+    (tmp_path / "sparse" / "007.png").write_bytes(b"")
+    with pytest.raises(ValueError, match="007 matches no left image"):
+        open_dataset("folder", tmp_path)
+    (tmp_path / "sparse" / "007.png").unlink()
+    np.save(tmp_path / "sparse" / "000.npy", np.zeros((2, 2)))
+    with pytest.raises(ValueError, match="two sparse inputs for frame '000'"):
+        open_dataset("folder", tmp_path)
+    for p in (tmp_path / "sparse").iterdir():
+        p.unlink()
+    with pytest.raises(ValueError, match="holds no"):
+        open_dataset("folder", tmp_path)
 
 
 def test_folder_reader_mismatch(folder_root):

@@ -24,3 +24,18 @@ def test_readme_says_a_c_compiler_with_openmp_is_needed():
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     head = text[: text.index("```bash")]
     assert "C compiler with OpenMP" in head
+
+
+def test_readme_says_what_the_shared_data_folder_is_without_pointing_into_it():
+    """A fresh clone has no ../shared: the README says what is in it and where it comes from, itself."""
+    text = " ".join((ROOT / "README.md").read_text(encoding="utf-8").split())
+    para = text[text.index("**Test data.**") :]
+    para = para[: para.index("## ")]
+    assert not re.search(r"its `?README", para)  # no pointer to a README the reader does not have
+    assert "a fresh clone does not have" in para
+    for site in ("vision.middlebury.edu/stereo", "cvlibs.net/datasets/kitti", "eth3d.net"):
+        assert site in para
+    shared = ROOT.parent / "shared" / "data"
+    if shared.is_dir():  # where the folder is here: every sub-folder the README names exists
+        for name in re.findall(r"`([a-z0-9_]+)/`", para):
+            assert (shared / name).is_dir(), name

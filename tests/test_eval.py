@@ -24,6 +24,7 @@ from vpp_service.evaluation import (
     write_json,
 )
 from vpp_service.evaluation.report import json_safe
+from vpp_service.evaluation.runner import METHODS
 from vpp_service.matchers import build_matcher, fill_holes
 from vpp_service.matchers.opencv import SGBM
 from vpp_service.sources.sensors import build_sensor
@@ -287,6 +288,18 @@ def test_rows_name_the_engine_device_and_precision_that_ran(scenes):
 
     engine = "cython" if census_sgm._k is census_sgm.portable else "cython-avx2"
     assert {(r["engine"], r["device"], r["precision"]) for r in rows} == {(engine, "cpu", "int16")}
+
+
+@pytest.mark.parametrize(("matcher", "methods"), [("sgbm", ["baseline", "vpp"]), ("census-sgm", list(METHODS))])
+def test_eval_default_methods_are_the_ones_the_matcher_supports(tmp_path, capsys, matcher, methods):
+    """Without --methods: guided only with a matcher that has guided stereo; the skip is said, not an error."""
+    out = tmp_path / "r.json"
+    argv = ["eval", "--dataset", "synthetic", "--limit", "1", "--matcher", matcher, "--quiet", "--json", str(out)]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert [r["method"] for r in json.loads(out.read_text())["results"]] == methods
+    skipped = "methods baseline,vpp (guided skipped: 'sgbm' has no guided stereo"
+    assert (skipped in err) == (matcher == "sgbm")
 
 
 class InterruptAt:

@@ -5,21 +5,28 @@ from __future__ import annotations
 import copy
 import io
 import json
+import logging
+import os
 import stat
+import subprocess
 import threading
 import time
+from pathlib import Path
 
 import pytest
 import zenoh
 
+from helpers.cli import vpp_service_module_command
 from helpers.toml import toml_dumps
-from helpers.zenoh_loopback import collect, zenoh_test_config
+from helpers.zenoh_loopback import collect, free_port, zenoh_test_config
 from vpp_service.cli import build_parser
 from vpp_service.cli.run import startup_line
-from vpp_service.service.app import build_pipeline, run_service
+from vpp_service.service.app import build_pipeline, run_service, zenoh_log_level
 from vpp_service.service.config import DEFAULT_CONFIG, validate_config
 from vpp_service.sources.base import SOURCES, Source
 from vpp_service.sources.sim import SimSource, SimSourceOptions
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def config(sinks: list[dict]) -> dict:
@@ -338,3 +345,37 @@ def test_a_failed_start_leaves_no_run_folder(tmp_path, zenoh_endpoint):
     with z.open(zenoh_test_config(listen=[zenoh_endpoint])):  # the port is taken: the service cannot open
         assert main(["run", "--config", str(cfg), "--no-summary"]) == EXIT_STARTUP
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    ("level", "rust_log", "want"),
+    [(logging.WARNING, None, None), (logging.INFO, None, "info"), (logging.DEBUG, "", "debug"), (30, "warn", "env")],
+)
+def test_zenoh_log_follows_our_verbosity(level, rust_log, want):
+    assert zenoh_log_level(level, rust_log) == want
+
+
+@pytest.mark.parametrize("verbose", [False, True])
+def test_a_clean_run_prints_no_raw_zenoh_line_unless_asked(tmp_path, verbose):
+    """Zenoh writes its own log raw on stdout: off on a clean run (stdout is the JSON line), on with -v."""
+    port = free_port()
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(
+        f'[service]\nout = "{tmp_path / "run"}"\nsummary = false\n'
+        f'[zenoh]\nlisten = ["tcp/127.0.0.1:{port}"]\n'
+        '[source]\ntype = "sim"\nscale = 0.25\nrate_hz = 0.0\n'
+        '[[sinks]]\ntype = "zenoh"\n'
+    )
+    env = {k: v for k, v in os.environ.items() if k != "RUST_LOG"}
+    cmd = [*vpp_service_module_command(), *(["-v"] if verbose else []), "run", "--config", str(cfg)]
+    proc = subprocess.run(
+        [*cmd, "--max-frames", "2"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120, check=False
+    )
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert json.loads(lines[-1])["counters"]["processed"] == 2
+    zenoh_lines = [line for line in lines[:-1] if "zenoh" in line]
+    if verbose:  # Zenoh's INFO, as our -v asks
+        assert any(f"Zenoh can be reached at: tcp/127.0.0.1:{port}" in line for line in zenoh_lines), proc.stdout
+    else:
+        assert lines == lines[-1:], proc.stdout

@@ -284,3 +284,24 @@ def with_rig(result: FusionResult, rig: str) -> FusionResult:
         left_vpp=result.left_vpp,
         right_vpp=result.right_vpp,
     )
+
+
+def test_example_config_documents_the_files_sink():
+    """deploy/config.example.toml shows every files-sink option (depth, painted ...), and its block validates."""
+    import dataclasses
+    import re
+    import tomllib
+
+    from vpp_service.service.config import validate_config
+    from vpp_service.sinks.files import FilesSinkOptions
+
+    text = (Path(__file__).resolve().parents[1] / "deploy" / "config.example.toml").read_text()
+    start = text.index('# type = "files"')
+    block = text[text.rindex("# [[sinks]]", 0, start) :]
+    block = block[: block.index("\n\n")]
+    for f in dataclasses.fields(FilesSinkOptions):
+        assert re.search(rf"^# {f.name} = ", block, re.MULTILINE), f"files option {f.name} undocumented"
+    data = tomllib.loads("\n".join(line[2:] for line in block.splitlines()))
+    cfg = validate_config({"zenoh": {"enabled": False}, "sinks": data["sinks"]})
+    # every value shown is the default, but for the folder the example names and creates
+    assert cfg.sinks[0].options == FilesSinkOptions(dir="vpp-run/frames", create_dir=True)

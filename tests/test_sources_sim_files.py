@@ -7,6 +7,7 @@ import time
 import numpy as np
 import pytest
 
+from helpers.own_folder import own_scene, write_own_folder
 from helpers.shared_data import need_shared
 from vpp_service.settings import SettingsError
 from vpp_service.sources.base import Pacer, SourceContext, build_source
@@ -178,3 +179,61 @@ def test_files_dataset_reader():
     for f in frames:
         pts = np.isfinite(f.sparse_disparity) & (f.sparse_disparity > 0)
         assert pts.any() and np.allclose(f.sparse_disparity[pts], f.gt_disparity[pts], atol=1e-3)
+
+
+def test_files_replays_own_sparse_depth_without_ground_truth(tmp_path):
+    """A folder with sparse/ and no disp/: each frame keeps its own points (no simulated sensor is drawn)."""
+    maps = write_own_folder(tmp_path, own_scene(0.25))
+    src = build_source("files", {"root": str(tmp_path)})  # the default sensor: uniform 5 %
+    frames, rejects = drain(src)
+    assert rejects == [] and len(frames) == 3
+    for f, want in zip(frames, maps, strict=True):
+        assert f.gt_disparity is None and "sensor" not in f.meta
+        np.testing.assert_allclose(f.sparse_disparity, want, atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("damage", "cause"),
+    [
+        ("missing", "no sparse input for frame '001'"),
+        ("wrong size", "001.npy is 31x45 (rows x columns), the images are 31x46"),
+        ("nan", "001.csv line 3: a non-finite number"),
+    ],
+)
+def test_files_bad_sparse_file_rejects_that_frame_only(tmp_path, damage, cause):
+    forms = ("png", "csv", "png") if damage == "nan" else ("png", "npy", "png")
+    frame = own_scene(0.0625)
+    write_own_folder(tmp_path, frame, forms=forms)
+    bad = tmp_path / "sparse" / f"001.{forms[1]}"
+    if damage == "missing":
+        bad.unlink()
+    elif damage == "wrong size":
+        np.save(bad, np.ones((frame.shape[0], frame.shape[1] - 1), np.float32))
+    else:
+        lines = bad.read_text().splitlines()
+        lines[2] = "3,4,nan"  # the first point, after the comment and the header
+        bad.write_text("\n".join(lines) + "\n")
+    src = build_source("files", {"root": str(tmp_path)})
+    frames, rejects = drain(src)
+    assert [f.name for f in frames] == ["000", "002"] and [f.seq for f in frames] == [0, 1]
+    assert len(rejects) == 1 and "[1] (001)" in rejects[0] and cause in rejects[0], rejects
+    assert src.stats()["rejected"] == 1 and src.error is None
+
+
+def test_scale_frame_moves_sparse_points():
+    """Resizing keeps every sparse point that has a pixel of its own, at its position; disparity scales with width."""
+    fr = own_scene(0.5)
+    sparse = np.full(fr.shape, np.nan, np.float32)
+    sparse[10, 20], sparse[100, 300] = 30.0, 12.0
+    sparse[101, 301] = 40.0  # lands on the same half-size pixel as (100, 300): the nearer one wins
+    depth = np.zeros(fr.shape, np.float32)
+    depth[10, 20], depth[100, 300], depth[101, 301] = 2.0, 5.0, 1.5
+    half = scale_frame(fr.with_(sparse_disparity=sparse, sensor_depth=depth), 0.5)
+    sx = half.shape[1] / fr.shape[1]
+    got = np.argwhere(np.isfinite(half.sparse_disparity))
+    assert got.tolist() == [[5, 10], [50, 150]]
+    assert half.sparse_disparity[5, 10] == pytest.approx(30.0 * sx) and half.sparse_disparity[50, 150] == pytest.approx(
+        40.0 * sx
+    )
+    assert half.sensor_depth[5, 10] == 2.0 and half.sensor_depth[50, 150] == 1.5
+    assert np.count_nonzero(np.isfinite(half.sensor_depth)) == 2

@@ -29,9 +29,15 @@ COMMANDS = ("run", "publish", "status", "view", "eval", "demo", "models")
 EXIT_STARTUP = 2
 #: Exit status of a failure after start-up (nobody answered or subscribed, an unexpected error while running).
 EXIT_FAILURE = 1
+#: Exit status of a command interrupted (Ctrl-C) before its work was done: during start-up, ``publish``'s
+#: wait for a subscriber, ``eval`` and ``demo``. ``run``, ``view`` and ``publish`` once running stop cleanly: 0.
+EXIT_INTERRUPTED = 130
 
-EPILOG = f"""exit status: 0 done; {EXIT_STARTUP} configuration or start-up error (a message on stderr);
-{EXIT_FAILURE} failure while running (e.g. no service answered, no subscriber); 130 interrupted.
+EPILOG = f"""exit status: 0 done, also when Ctrl-C or SIGTERM stops run, view or publish once running (a clean stop);
+{EXIT_STARTUP} configuration or start-up error (a message on stderr);
+{EXIT_FAILURE} failure while running (e.g. the source died, no service answered, no subscriber);
+{EXIT_INTERRUPTED} interrupted before the work was done: Ctrl-C during start-up, during publish's wait for a
+subscriber, or during eval (the scenes that finished are written, marked partial) or demo.
 Every command meets the others on tcp/127.0.0.1:7447 unless told otherwise ($VPP_SERVICE_ENDPOINT)."""
 
 
@@ -84,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
-        return 130
+        return EXIT_INTERRUPTED
     except (ValueError, OSError, StartupError) as exc:  # config, paths, endpoints: before anything ran
         print(f"vpp-service {args.command}: error: {_message(exc)}", file=sys.stderr)
         return EXIT_STARTUP

@@ -7,13 +7,16 @@ report of the service shows: bad-2 of the pixels that got a disparity, density
 (the share of ground-truth pixels that got one) and bad-2 with the holes filled
 first (as ``eval`` scores). Saves ``demo.png`` (both disparity maps beside the
 ground truth with a colour bar in pixels, and their bad-2 error maps), the
-painted pair and ``summary.json``.
+painted pair and ``summary.json`` in ``--out``. Like ``run``, it refuses to
+write over a previous demo's files unless ``--overwrite``; a demo that fails
+leaves no folder it created behind.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -42,7 +45,47 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     )
     p.add_argument("--seed", type=int, default=0, help="seed for sampling and the pattern (default: %(default)s)")
     p.add_argument("--matcher", default="sgbm", help="matcher name (default: %(default)s)")
+    p.add_argument(
+        "--overwrite", action="store_true", help="replace a previous demo's files in --out (without it: refuse)"
+    )
     p.set_defaults(func=run)
+
+
+#: The files a demo writes into ``--out``.
+OUTPUTS = ("demo.png", "left_vpp.png", "right_vpp.png", "summary.json")
+
+
+def _check_out(out: Path, overwrite: bool) -> None:
+    """``out`` must be a folder (or not exist yet) without a previous demo's files unless ``overwrite``.
+
+    Raises
+    ------
+    NotADirectoryError
+        ``out`` is a file.
+    StartupError
+        ``out`` holds a previous demo's files and ``overwrite`` is false.
+    """
+    from vpp_service.errors import StartupError
+
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"--out: {str(out)!r} is not a folder")
+    previous = [name for name in OUTPUTS if (out / name).exists()]
+    if previous and not overwrite:
+        raise StartupError(
+            f"--out: {str(out)!r} holds a previous demo's files ({', '.join(previous)}); "
+            "pass --overwrite to replace them, or --out DIR for a new folder"
+        )
+
+
+def _make_dir(out: Path) -> Path | None:
+    """Create ``out`` (with parents); the topmost folder this created, None when ``out`` existed."""
+    top = None
+    for folder in [out, *out.parents]:
+        if folder.exists():
+            break
+        top = folder
+    out.mkdir(parents=True, exist_ok=True)
+    return top
 
 
 def _scores(disparity: np.ndarray, frame: StereoFrame) -> dict[str, Any]:
@@ -67,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
     if not 0.0 < args.density <= 1.0:
         raise ValueError(f"--density must be in (0, 1], got {args.density}")
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    _check_out(out, args.overwrite)
 
     frame = motorcycle().with_(name="Motorcycle (skimage)")
     frame = build_sensor("uniform", {"density": args.density}).simulate(frame, seed=args.seed)
@@ -101,23 +144,11 @@ def run(args: argparse.Namespace) -> int:
     # without a usable point VPP paints nothing: the matcher saw the raw pair
     left_vpp = fused.left_vpp if fused.left_vpp is not None else left
     right_vpp = fused.right_vpp if fused.right_vpp is not None else right
-    cv2.imwrite(str(out / "left_vpp.png"), cv2.cvtColor(left_vpp, cv2.COLOR_RGB2BGR))
-    cv2.imwrite(str(out / "right_vpp.png"), cv2.cvtColor(right_vpp, cv2.COLOR_RGB2BGR))
 
     def caption(name: str) -> str:
         s = scores[name]
         return f"bad-2 {s['bad2_answered']:.2f} % | density {s['density']:.1f} % | filled {s['bad2_filled']:.2f} %"
 
-    plot_comparison(
-        out / "demo.png",
-        left_vpp,
-        gt,
-        {
-            f"{args.matcher} alone": (base.disparity, caption("baseline")),
-            f"VPP + {args.matcher}": (fused.disparity, caption("vpp")),
-        },
-        f"{frame.name}: {args.matcher} with and without VPP ({n_points} sparse points, {args.density:.1%})",
-    )
     summary = {
         "scene": frame.name,
         "density": args.density,
@@ -129,6 +160,28 @@ def run(args: argparse.Namespace) -> int:
         "vpp": scores["vpp"],
         "ms": {"baseline": t_base, "vpp": t_vpp, "vpp_match": t_fused},
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
+    created = _make_dir(out)
+    try:
+        for name, img in (("left_vpp.png", left_vpp), ("right_vpp.png", right_vpp)):
+            if not cv2.imwrite(str(out / name), cv2.cvtColor(img, cv2.COLOR_RGB2BGR)):
+                raise OSError(f"--out: could not write {out / name}")
+        plot_comparison(
+            out / "demo.png",
+            left_vpp,
+            gt,
+            {
+                f"{args.matcher} alone": (base.disparity, caption("baseline")),
+                f"VPP + {args.matcher}": (fused.disparity, caption("vpp")),
+            },
+            f"{frame.name}: {args.matcher} with and without VPP ({n_points} sparse points, {args.density:.1%})",
+        )
+        (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
+    except BaseException:
+        if created is not None:  # a folder this demo made: leave nothing behind
+            shutil.rmtree(created, ignore_errors=True)
+        else:  # the user's folder: take out this demo's partial files, nothing else
+            for name in OUTPUTS:
+                (out / name).unlink(missing_ok=True)
+        raise
     print(f"wrote {out}/demo.png, left_vpp.png, right_vpp.png, summary.json", file=sys.stderr)
     return 0

@@ -78,7 +78,11 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         metavar="KEY=VALUE",
         help="matcher option (repeatable)",
     )
-    g.add_argument("--methods", default="baseline,guided,vpp", help="comma list of baseline, guided, vpp")
+    g.add_argument(
+        "--methods",
+        help="comma list of baseline, guided, vpp (default: all three; baseline,vpp for a matcher without "
+        "guided stereo, e.g. sgbm, bm or a network, saying so)",
+    )
     g.add_argument("--max-disparity", type=int, help="matcher disparity range (default: per scene from GT)")
     g = p.add_argument_group("sparse points")
     g.add_argument("--sensor", default="uniform", help="uniform | lidar | tof | frame (the dataset's own scan)")
@@ -177,12 +181,27 @@ def _frames(args: argparse.Namespace) -> tuple[Frames, str]:
     return ds, ds.name
 
 
+def _default_methods(matcher: str) -> str:
+    """Every method the matcher supports: ``guided`` only where it has guidance (one stderr line when skipped)."""
+    from vpp_service.matchers import MATCHERS
+
+    if MATCHERS.get(matcher).supports_guidance:
+        return "baseline,guided,vpp"
+    print(
+        f"vpp-service eval: methods baseline,vpp (guided skipped: {matcher!r} has no guided stereo, "
+        "it needs a cost volume to modulate, as census-sgm has)",
+        file=sys.stderr,
+    )
+    return "baseline,vpp"
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the evaluation described by ``args``; returns the exit code."""
+    from vpp_service.cli import EXIT_INTERRUPTED
     from vpp_service.evaluation import ProgressBar, markdown_report, plot_sweep, run_evaluation, write_json
     from vpp_service.evaluation.runner import EvaluationInterrupted, _check_methods
 
-    methods = _check_methods(args.methods)
+    methods = _check_methods(args.methods or _default_methods(args.matcher))
     if args.limit is not None and args.limit < 1:
         raise ValueError(f"--limit: must be >= 1, got {args.limit}")
     vpp_config = _vpp_config(args) if "vpp" in methods else None
@@ -216,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
     except EvaluationInterrupted as exc:  # Ctrl-C: keep what finished, marked partial
         if not exc.rows:
             print("vpp-service eval: interrupted before the first scene finished: nothing written", file=sys.stderr)
-            return 130
+            return EXIT_INTERRUPTED
         partial, rows = exc, exc.rows
     config = {
         "dataset": dataset_name,
@@ -253,5 +272,5 @@ def run(args: argparse.Namespace) -> int:
             f"their results are written, marked partial ({written})",
             file=sys.stderr,
         )
-        return 130
+        return EXIT_INTERRUPTED
     return 0

@@ -301,6 +301,7 @@ def _publish(
 
     import zenoh
 
+    from vpp_service.cli import EXIT_INTERRUPTED
     from vpp_service.service.app import has_link, zenoh_session
     from vpp_service.sources.base import Pacer
     from vpp_service.transport import wire
@@ -329,7 +330,7 @@ def _publish(
         }
         if args.wait_subscriber > 0 and not _wait_for_subscribers(pubs.values(), args.wait_subscriber, stop):
             if stop.is_set():  # interrupted while waiting
-                return 130
+                return EXIT_INTERRUPTED
             if zsec.connect and not args.send_anyway and not has_link(session):
                 print(
                     f"vpp-service publish: could not connect to {', '.join(zsec.connect)} (nothing answers there); "

@@ -5,8 +5,9 @@ the sparse points; the service's zenoh sink publishes the last three only while
 someone subscribes, see its ``on_request`` option) of one rig or of every rig
 (``--rig '*'``) and logs them with the Rerun sink's own layout, one recording
 per rig: into a spawned viewer (default), a viewer at ``--rerun-connect URL``,
-or ``.rrd`` files (``--save PATH``; with ``--rig '*'`` one file per rig,
-``PATH`` with ``-<rig>`` before the suffix). Stops on Ctrl-C / SIGTERM, after
+or ``.rrd`` files (``--save PATH``: ``PATH`` itself when one rig was seen; with
+``--rig '*'`` and several rigs one file per rig, ``PATH`` with ``-<rig>`` before
+the suffix; the files written are named on stderr). Stops on Ctrl-C / SIGTERM, after
 ``--max-frames`` disparity maps or after ``--duration`` seconds, and prints a
 JSON summary (messages received per rig and output, rejected messages, the
 Rerun sinks' counters, the files written, and per output how it was put in order).
@@ -219,6 +220,10 @@ class Viewer:
         for rig, sink in self.sinks.items():
             self.workers[rig].close(timeout)
             sink.close(timeout)
+        saved = [str(s.options.path) for s in self.sinks.values() if s.options.mode == "save"]
+        if self.wildcard and len(saved) == 1:  # '*' and one rig seen: the file asked for, not PATH-<rig>
+            (only,) = self.sinks.values()
+            saved = [_rename(Path(saved[0]), Path(str(self.options["path"])), only.options.max_files)]
         order: dict[str, dict[str, object]] = defaultdict(dict)
         for (rig, name), buf in self.order.items():
             order[rig][name] = buf.stats()
@@ -233,8 +238,24 @@ class Viewer:
                 for rig, sink in self.sinks.items()
             },
             "rejected": self.rejected,
-            "saved": [str(s.options.path) for s in self.sinks.values() if s.options.mode == "save"],
+            "saved": saved,
         }
+
+
+def _rename(written: Path, asked: Path, max_files: int) -> str:
+    """Move the recording ``written`` (and its rotated parts) to ``asked``; the path that now holds it."""
+    from vpp_service.sinks.rerun import rotated_paths
+
+    try:
+        for src, dst in zip(rotated_paths(written, max_files), rotated_paths(asked, max_files), strict=True):
+            if src.exists():
+                src.replace(dst)
+            elif dst.exists():
+                dst.unlink()  # an older recording's part would read as a part of this one
+    except OSError as exc:
+        log.warning("view: could not rename %s to %s: %s", written, asked, exc)
+        return str(written)
+    return str(asked)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -299,6 +320,9 @@ def main(args: argparse.Namespace) -> int:
         summary = viewer.close()
     summary["lost"] = lost[0]
     print(json.dumps(summary))
+    saved = summary["saved"]
+    if isinstance(saved, list) and saved:
+        print(f"view: wrote {', '.join(map(str, saved))}", file=sys.stderr)
     failed = [rig for rig, sink in viewer.sinks.items() if sink.stats()["errors"] and not sink.stats()["written"]]
     if failed:
         print(

@@ -61,10 +61,19 @@ class Dataset:
         Scene names, in loading order.
     max_disparity : float or None
         An upper bound of the disparities in the set when known.
+    has_ground_truth : bool
+        Every frame carries ground-truth disparity (what a simulated sensor is
+        drawn from). True for the benchmark readers; the ``folder`` reader says
+        whether its ``disp/`` is there.
+    has_sparse_input : bool
+        Every frame carries its own sparse depth (``sparse_disparity``), e.g. the
+        ``folder`` reader's ``sparse/``; a replay then needs no simulated sensor.
     """
 
     name: str = ""
     layout: str = ""
+    has_ground_truth: bool = True
+    has_sparse_input: bool = False
 
     def __init__(self, root: str | Path) -> None:
         if not isinstance(root, (str, Path)):

@@ -7,11 +7,21 @@
       right/   000.png 001.png ...      (same count, paired by sorted position)
       disp/    000.pfm | 000.png | 000.npy   (optional left ground truth)
       nocc/    000.png                  (optional mask, 255 = non-occluded)
+      sparse/  000.png | 000.npy | 000.csv | 000.txt   (optional: your own sparse depth, per frame)
       calib.json                        (optional {"f": ..., "baseline": ..., "doffs", "cx", "cy"})
 
 Ground truth decoding: ``.pfm`` and ``.npy`` as stored (non-finite or <= 0 ->
 NaN); ``.png``/``.pgm`` integer-coded, divided by ``disp_scale`` (default 256,
 KITTI style), 0 invalid. Scene names are the left file stems.
+
+``sparse/`` holds the sparse depth of your own recordings (a disparity image,
+a disparity map, or a points file of ``u v d`` or ``x y z``; formats in
+:mod:`vpp_service.datasets.sparse_input`), one file per frame named after its
+left image (``sparse/000.png`` for ``left/000.png``). Frames with it need no
+ground truth: the ``files`` source replays them with their own points instead
+of simulating a sensor. With ``sparse/`` present every frame needs its file: a
+frame whose file is missing or bad fails to load (a replay rejects and counts
+that frame only).
 """
 
 from __future__ import annotations
@@ -24,6 +34,7 @@ import numpy as np
 from vpp_service.datasets.base import DATASETS, Dataset
 from vpp_service.datasets.imageio import read_image, read_mask, read_scaled_disparity
 from vpp_service.datasets.middlebury import read_pfm_disparity
+from vpp_service.datasets.sparse_input import SPARSE_EXT, read_sparse
 from vpp_service.frame import Calibration, StereoFrame
 
 _IMAGE_EXT = {".png", ".ppm", ".pgm", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"}
@@ -36,7 +47,7 @@ def _files(d: Path, exts: set[str]) -> list[Path]:
 
 @DATASETS.register("folder")
 class FolderDataset(Dataset):
-    """Generic ``left/``, ``right/``, ``[disp/]``, ``[nocc/]``, ``[calib.json]`` layout.
+    """Generic ``left/``, ``right/``, ``[disp/]``, ``[nocc/]``, ``[sparse/]``, ``[calib.json]`` layout.
 
     Parameters
     ----------
@@ -47,7 +58,9 @@ class FolderDataset(Dataset):
     """
 
     name = "folder"
-    layout = "left/*.png, right/*.png (same count) [disp/*.pfm|png|npy] [nocc/*.png] [calib.json]"
+    layout = (
+        "left/*.png, right/*.png (same count) [disp/*.pfm|png|npy] [nocc/*.png] [sparse/*.png|npy|csv|txt] [calib.json]"
+    )
 
     @classmethod
     def detect(cls, root: Path) -> bool:
@@ -78,6 +91,9 @@ class FolderDataset(Dataset):
         if nocc and len(nocc) != len(self._left):
             raise ValueError(f"root: {len(nocc)} nocc masks for {len(self._left)} left images in {self.root}")
         self._nocc: list[Path | None] = list(nocc) if nocc else [None] * len(self._left)
+        self.has_ground_truth = bool(disp)
+        self._sparse = self._sparse_files()
+        self.has_sparse_input = self._sparse is not None
         self.calib = None
         if (self.root / "calib.json").is_file():
             self.calib = Calibration.from_dict(json.loads((self.root / "calib.json").read_text()))
@@ -88,6 +104,27 @@ class FolderDataset(Dataset):
         for attr in ("_left", "_right", "_disp", "_nocc"):
             seq = getattr(self, attr)
             setattr(self, attr, [seq[i] for i in keep])
+        if self._sparse is not None:
+            self._sparse = [self._sparse[i] for i in keep]
+
+    def _sparse_files(self) -> list[Path] | None:
+        """``sparse/<left stem>.<ext>`` of every frame (None without ``sparse/``); the file may be missing."""
+        folder = self.root / "sparse"
+        if not folder.is_dir():
+            return None
+        found: dict[str, Path] = {}
+        for p in _files(folder, set(SPARSE_EXT)):
+            if p.stem in found:
+                raise ValueError(f"root: two sparse inputs for frame {p.stem!r}: {found[p.stem].name} and {p.name}")
+            found[p.stem] = p
+        if not found:
+            raise ValueError(f"root: {folder} holds no {', '.join(SPARSE_EXT)} files (remove it, or add them)")
+        stems = {p.stem for p in self._left}
+        strays = sorted(set(found) - stems)
+        if strays:
+            raise ValueError(f"root: {folder}: {strays[0]} matches no left image (sparse files are named after them)")
+        # a frame without its file is kept: it fails alone when loaded (a replay counts it)
+        return [found.get(p.stem, folder / f"{p.stem}{SPARSE_EXT[0]}") for p in self._left]
 
     def _read_disp(self, path: Path) -> np.ndarray:
         if path.suffix.lower() == ".pfm":
@@ -109,14 +146,25 @@ class FolderDataset(Dataset):
         nocc = read_mask(nocc_path, threshold=255) if nocc_path is not None else None
         if disp_path is not None and gt is not None and gt.shape != left.shape[:2]:
             raise ValueError(f"root: ground truth {disp_path.name} shape {gt.shape} != image {left.shape[:2]}")
+        meta: dict[str, object] = {"dataset": self.name, "path": str(self._left[index])}
+        sparse = None
+        if self._sparse is not None:
+            path = self._sparse[index]
+            if not path.is_file():
+                raise FileNotFoundError(
+                    f"sparse: no sparse input for frame {self.scenes[index]!r} "
+                    f"(sparse/{self.scenes[index]}{{{','.join(SPARSE_EXT)}}})"
+                )
+            sparse, meta["lidar_like"] = read_sparse(path, left.shape[:2], self.calib, self.disp_scale)
         return StereoFrame(
             left=left,
             right=right,
             calib=self.calib,
+            sparse_disparity=sparse,
             gt_disparity=gt,
             nocc_mask=nocc,
             name=self.scenes[index],
-            meta={"dataset": self.name, "path": str(self._left[index])},
+            meta=meta,
         )
 
 

@@ -93,6 +93,38 @@ def zenoh_config(section: ZenohSection) -> zenoh.Config:
     return conf
 
 
+def zenoh_log_level(python_level: int, rust_log: str | None) -> str | None:
+    """The level of Zenoh's own log for ours: ``"env"`` (``RUST_LOG`` decides), a level, or None (off).
+
+    Zenoh's log (its Rust ``tracing`` output) cannot be handed to Python's
+    ``logging``: it prints raw lines on stdout, where ``run``, ``publish`` and
+    ``status`` print their JSON. So it follows our verbosity: off by default
+    (what Zenoh fails at reaches us as an error that we report in our own
+    words), ``info`` with ``-v``, ``debug`` with ``-vv``; ``RUST_LOG``, when
+    set, is Zenoh's own switch and wins.
+    """
+    if rust_log:
+        return "env"
+    if python_level <= logging.DEBUG:
+        return "debug"
+    if python_level <= logging.INFO:
+        return "info"
+    return None
+
+
+def init_zenoh_log() -> None:
+    """Start Zenoh's own log at :func:`zenoh_log_level` of the root logger (Zenoh keeps the first call's)."""
+    import os
+
+    import zenoh
+
+    level = zenoh_log_level(logging.getLogger().getEffectiveLevel(), os.environ.get("RUST_LOG"))
+    if level == "env":
+        zenoh.try_init_log_from_env()
+    elif level is not None:
+        zenoh.init_log_from_env_or(level)
+
+
 def zenoh_message(exc: BaseException) -> str:
     """Zenoh's error text without its Rust source locations (`` at /path/file.rs:61.``)."""
     return re.sub(r"\s+at \S+\.rs:\d+\.?", "", str(exc)).strip() or type(exc).__name__
@@ -111,7 +143,7 @@ def zenoh_session(section: ZenohSection) -> Iterator[zenoh.Session]:
     """
     import zenoh
 
-    zenoh.init_log_from_env_or("error")
+    init_zenoh_log()
     try:
         session = zenoh.open(zenoh_config(section))
     except zenoh.ZError as exc:
@@ -146,7 +178,7 @@ def open_session(
         yield None
         return
     stop = stop or threading.Event()
-    zenoh.init_log_from_env_or("error")
+    init_zenoh_log()
     session: zenoh.Session | None = None
     while session is None:
         try:
@@ -408,9 +440,11 @@ __all__ = [
     "Banner",
     "ServiceSummary",
     "build_pipeline",
+    "init_zenoh_log",
     "open_session",
     "run_service",
     "zenoh_config",
+    "zenoh_log_level",
     "zenoh_message",
     "zenoh_session",
 ]

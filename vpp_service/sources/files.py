@@ -3,9 +3,13 @@
 Two layouts:
 
 - ``format = "dataset"``: any dataset :func:`vpp_service.datasets.open_dataset`
-  reads (``dataset`` = a name or ``"auto"``, ``root`` = its folder). Datasets
-  ship ground truth but no sparse sensor, so a simulated one is drawn per frame
-  (``sensor``, default ``uniform`` 5 %; ``"none"`` to send frames without depth).
+  reads (``dataset`` = a name or ``"auto"``, ``root`` = its folder). Frames that
+  carry their own sparse depth (your recordings: the ``folder`` layout's
+  ``sparse/``, :mod:`vpp_service.datasets.sparse_input`) keep it and need no
+  ground truth; the others get a simulated sensor drawn from their ground truth
+  per frame (``sensor``, default ``uniform`` 5 %; ``"none"`` to send frames
+  without depth). :meth:`FilesSource.check_paths` (``run --check``) fails when
+  the sensor would need ground truth the folder lacks.
 - ``format = "msgpack"``: a folder of wire-format v1 ``in/frame`` messages
   (``*.msgpack``, replayed in name order; e.g. written by the ``record`` sink,
   :mod:`vpp_service.sinks.record`). Every file is validated like a network
@@ -31,7 +35,7 @@ from typing import TYPE_CHECKING, Literal
 
 from vpp_service.frame import StereoFrame
 from vpp_service.sources.base import SOURCES, Emit, Pacer, Reject, Source, SourceContext
-from vpp_service.sources.sim import build_sensor_or_none, scale_frame
+from vpp_service.sources.sim import build_sensor_or_none, check_sensor_input, scale_frame
 from vpp_service.transport import wire
 
 if TYPE_CHECKING:
@@ -108,9 +112,20 @@ class FilesSource(Source):
     def check_paths(
         cls, options: FilesSourceOptions, section: str, created_dirs: frozenset[Path] = frozenset()
     ) -> None:
-        """``root`` must be an existing folder."""
+        """``root`` must be an existing folder; a dataset's frames need ground truth or their own sparse depth.
+
+        Raises
+        ------
+        FileNotFoundError
+            ``root`` is not a folder.
+        ValueError
+            The sensor is simulated but the dataset has neither ground truth nor
+            ``sparse/`` input; or no dataset layout matches ``root``.
+        """
         if not Path(options.root).expanduser().is_dir():
             raise FileNotFoundError(f"{section}.root: no such folder: {options.root}")
+        if options.format == "dataset":
+            check_sensor_input(options.dataset, options.root, options.sensor, section, own_sparse=True)
 
     def open(self) -> None:
         """Open the dataset / list the files; raises FileNotFoundError/ValueError early."""
@@ -150,8 +165,18 @@ class FilesSource(Source):
             raise wire.WireError(f"message: {size} bytes exceeds the limit")
         return wire.decode_frame(path.read_bytes())
 
+    def _frame(self, index: int, seq: int) -> StereoFrame:
+        """Item ``index`` as frame ``seq``: its own sparse depth, else the simulated sensor's draw."""
+        frame = self._load(index)
+        frame = frame.with_(rig=self.context.rig, seq=seq, stamp_ns=time.time_ns(), meta=dict(frame.meta))
+        if self.sensor is not None and frame.sparse_disparity is None and frame.sensor_depth is None:
+            frame = self.sensor.simulate(frame, self.options.seed + seq)
+        return frame
+
     def _item_name(self, index: int) -> str:
-        return str(self._files[index]) if self._dataset is None else f"{self.options.root}[{index}]"
+        if self._dataset is None:
+            return str(self._files[index])
+        return f"{self.options.root}[{index}] ({self._dataset.scenes[index]})"
 
     def run(self, emit: Emit, reject: Reject) -> None:
         """Replay until the end (or ``count``), looping if asked, or until stopped."""
@@ -168,7 +193,7 @@ class FilesSource(Source):
             if pacer.wait(self):
                 return
             try:
-                frame = self._load(index)
+                frame = self._frame(index, seq)
             except Exception as exc:  # noqa: BLE001 - one unreadable item (any error) is skipped, not fatal
                 self._counters["rejected"] += 1
                 reject(f"{self._item_name(index)}: {exc if isinstance(exc, wire.WireError) else repr(exc)}")
@@ -179,9 +204,6 @@ class FilesSource(Source):
                     return  # every file is bad: looping would spin
                 continue
             index += 1
-            frame = frame.with_(rig=self.context.rig, seq=seq, stamp_ns=time.time_ns(), meta=dict(frame.meta))
-            if self.sensor is not None and frame.sparse_disparity is None and frame.sensor_depth is None:
-                frame = self.sensor.simulate(frame, o.seed + seq)
             self._counters["emitted"] += 1
             emit(frame)
             seq += 1

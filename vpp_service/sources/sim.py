@@ -50,11 +50,30 @@ def scaled_size(height: int, width: int, scale: float) -> tuple[int, int]:
     return (height, width) if scale == 1 else (max(8, round(height * scale)), max(8, round(width * scale)))
 
 
+def _scale_points(sparse: np.ndarray, size: tuple[int, int], sx: float, sy: float, nearest: str) -> np.ndarray:
+    """Move the points of a sparse map (NaN or <= 0 = none) onto a resized grid, values unchanged.
+
+    Where several land on one pixel the nearest wins: the largest value
+    (``nearest = "max"``, disparity) or the smallest (``"min"``, depth).
+    """
+    ys, xs = np.nonzero(np.isfinite(sparse) & (sparse > 0))
+    w, h = size
+    u = np.clip(np.floor((xs + 0.5) * sx).astype(np.int64), 0, w - 1)
+    v = np.clip(np.floor((ys + 0.5) * sy).astype(np.int64), 0, h - 1)
+    fill = -np.inf if nearest == "max" else np.inf
+    out = np.full((h, w), fill, np.float32)
+    (np.maximum if nearest == "max" else np.minimum).at(out, (v, u), sparse[ys, xs].astype(np.float32))
+    out[~np.isfinite(out)] = np.nan
+    return out
+
+
 def scale_frame(frame: StereoFrame, scale: float) -> StereoFrame:
-    """Resize a frame (images, ground truth, calibration) by ``scale`` in (0, 1].
+    """Resize a frame (images, ground truth, sparse depth, calibration) by ``scale`` in (0, 1].
 
     Disparities scale with the image width; ground truth is resampled with
-    nearest neighbour (no mixing across depth edges).
+    nearest neighbour (no mixing across depth edges); each sparse point moves
+    to the pixel its position falls in (the nearest wins a pixel), metric
+    ``sensor_depth`` keeps its values.
 
     Raises
     ------
@@ -86,8 +105,19 @@ def scale_frame(frame: StereoFrame, scale: float) -> StereoFrame:
     nocc = None
     if frame.nocc_mask is not None:
         nocc = cv2.resize(frame.nocc_mask.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST).astype(bool)
+    sy = size[1] / h
+    sparse = None
+    if frame.sparse_disparity is not None:
+        sparse = _scale_points(frame.sparse_disparity, size, sx, sy, "max") * np.float32(sx)
+    depth = None if frame.sensor_depth is None else _scale_points(frame.sensor_depth, size, sx, sy, "min")
     return frame.with_(
-        left=left, right=right, gt_disparity=gt, calib=calib, nocc_mask=nocc, sparse_disparity=None, sensor_depth=None
+        left=left,
+        right=right,
+        gt_disparity=gt,
+        calib=calib,
+        nocc_mask=nocc,
+        sparse_disparity=sparse,
+        sensor_depth=depth,
     )
 
 
@@ -151,6 +181,43 @@ class SimSourceOptions:
             raise ValueError("root: required when scene = 'dataset'")
 
 
+def check_sensor_input(dataset: str, root: str, sensor: str, section: str, *, own_sparse: bool) -> None:
+    """Fail early when a dataset replay would need ground truth its folder lacks.
+
+    A simulated ``sensor`` (anything but ``"none"``) draws each frame's sparse
+    depth from its ground truth. With ``own_sparse`` (the ``files`` source),
+    frames that carry their own sparse depth (the ``folder`` layout's
+    ``sparse/``) need none. Opening the dataset here also reports a folder that
+    matches no layout. A folder of ``*.msgpack`` frames (``dataset = "auto"``)
+    is left to the source.
+
+    Raises
+    ------
+    ValueError
+        ``<section>.root: <folder> has no ground truth ...``, in one line; or the
+        dataset reader's own error (no layout matched, mismatched files).
+    """
+    from vpp_service.datasets import open_dataset
+
+    try:
+        ds = open_dataset(dataset, Path(root).expanduser())
+    except ValueError:
+        if dataset == "auto" and any(Path(root).expanduser().glob("*.msgpack")):
+            return  # a recording: replayed as wire frames
+        raise
+    if sensor == "none" or ds.has_ground_truth or (own_sparse and ds.has_sparse_input):
+        return
+    how = (
+        "add your sparse depth as sparse/<frame>.png|.npy|.csv|.txt (docs/deployment.md, 'Your own recordings')"
+        if own_sparse
+        else 'the sim source always simulates: use type = "files" with your sparse depth in sparse/'
+    )
+    raise ValueError(
+        f"{section}.root: {root} has no ground truth (disp/) for the simulated sensor {sensor!r} to draw "
+        f'sparse depth from; {how}, or set {section}.sensor = "none"'
+    )
+
+
 def build_sensor_or_none(name: str, options: Mapping[str, object]) -> Sensor[NominalGeometry] | None:
     """The named sensor simulator, or None for ``"none"``."""
     if name == "none":
@@ -183,9 +250,12 @@ class SimSource(Source):
 
     @classmethod
     def check_paths(cls, options: SimSourceOptions, section: str, created_dirs: frozenset[Path] = frozenset()) -> None:
-        """``scene = "dataset"``: ``root`` must be an existing folder (as for the files source)."""
-        if options.scene == "dataset" and not Path(options.root).expanduser().is_dir():
+        """``scene = "dataset"``: ``root`` must be an existing dataset folder with ground truth for the sensor."""
+        if options.scene != "dataset":
+            return
+        if not Path(options.root).expanduser().is_dir():
             raise FileNotFoundError(f"{section}.root: no such folder: {options.root}")
+        check_sensor_input(options.dataset, options.root, options.sensor, section, own_sparse=False)
 
     @classmethod
     def frame_size(cls, options: SimSourceOptions) -> tuple[int, int] | None:
@@ -251,4 +321,12 @@ class SimSource(Source):
             seq += 1
 
 
-__all__ = ["MOTORCYCLE_CALIB", "SimSource", "SimSourceOptions", "motorcycle_frame", "scale_frame", "scaled_size"]
+__all__ = [
+    "MOTORCYCLE_CALIB",
+    "SimSource",
+    "SimSourceOptions",
+    "check_sensor_input",
+    "motorcycle_frame",
+    "scale_frame",
+    "scaled_size",
+]
