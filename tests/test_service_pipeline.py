@@ -200,6 +200,23 @@ def test_a_range_that_cannot_fit_the_frames_stops_the_pipeline_on_the_first_one(
     assert pipe.counters["processed"] == 3 and pipe.status()["config_error"] is None
 
 
+def test_a_network_frame_the_range_cannot_fit_is_rejected_and_the_service_serves_on(caplog):
+    """From a network source any peer may send any size: one such frame is a counted reject, never a stop."""
+    from vpp_service.matchers import build_matcher
+
+    fusion = Fusion(build_matcher("sgbm", {"max_disparity": 90}), None, depth=False)
+    src = sim_source(5)
+    src.network = True  # frames as a Zenoh or ROS 2 peer sends them
+    pipe = Pipeline(src, fusion, [CollectSink()], input_policy="block")
+    with caplog.at_level("ERROR"):
+        run(pipe)  # the finite source ends: every frame was taken
+    st = pipe.status()
+    assert st["config_error"] is None
+    assert (st["counters"]["rejected"], st["counters"]["processed"]) == (5, 0)
+    said = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
+    assert len(said) == 1 and said[0].startswith("rejecting every 96 x 48 frame: frame seq=0 is 96 x 48"), said
+
+
 def test_real_fusion_counts_no_depth_and_scores_against_gt():
     from vpp_service.matchers import build_matcher
     from vpp_service.vpp import VPPConfig

@@ -41,7 +41,8 @@ on is counted as rejected and dropped. One exception: a frame the configured
 disparity range cannot fit (:class:`~vpp_service.matchers.DisparityRangeError`,
 the range not below its width) stops the pipeline like an exhausted source,
 with ``status()["config_error"]`` saying why (the service exits 2), instead of
-rejecting every frame of that size. ``max_frames`` counts rejected frames
+rejecting every frame of that size; from a network source, where any peer may
+send any size, it is rejected like other bad input, with one error line per size. ``max_frames`` counts rejected frames
 with the processed ones. The ``latency`` statistic runs from
 when the frame was received (``meta["recv_ns"]``, :func:`time.monotonic_ns`: a
 wall-clock step cannot corrupt the percentiles), never from the sender's
@@ -220,6 +221,7 @@ class Pipeline:
         #: Why the pipeline stopped on its own: a frame the configuration cannot process (the disparity
         #: range does not fit its width); None otherwise. The service then exits 2.
         self.config_error: str | None = None
+        self._range_misfits: set[tuple[int, int]] = set()  # frame sizes a network frame's range misfit was logged for
         self._counts = dict.fromkeys(COUNTER_NAMES, 0)
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -355,15 +357,23 @@ class Pipeline:
         """A frame ``process`` raised on: a ValueError rejects it, anything else is counted as an error.
 
         A :class:`~vpp_service.matchers.DisparityRangeError` (the configured disparity range
-        cannot fit a frame this wide) stops the pipeline: every such frame would fail alike.
+        cannot fit a frame this wide) stops the pipeline: every such frame would fail alike. From a
+        network source (any peer can send a frame of any size) it only rejects the frame, with one
+        error line per frame size, and the service keeps serving the frames that fit.
         """
         if isinstance(exc, DisparityRangeError):
             h, w = frame.shape
+            why = f'frame seq={frame.seq} is {w} x {h}: {exc}; set a smaller matcher.max_disparity, or "auto"'
+            if self.source.network:
+                if (h, w) not in self._range_misfits and len(self._range_misfits) < 16:  # bounded: hostile peers
+                    self._range_misfits.add((h, w))
+                    log.error("rejecting every %d x %d frame: %s", w, h, why)
+                self._reject(why)
+                self._count_towards_limit()
+                return
             self._inc("rejected")
             if self.config_error is None:
-                self.config_error = (
-                    f'frame seq={frame.seq} is {w} x {h}: {exc}; set a smaller matcher.max_disparity, or "auto"'
-                )
+                self.config_error = why
                 log.info("stopping: %s", self.config_error)
             self._halt()
             return
