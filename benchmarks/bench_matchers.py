@@ -170,7 +170,7 @@ def versus_rows(reps: int) -> list[Row]:
 def stage_rows(reps: int) -> list[Row]:
     """Time the census-SGM kernels at 1 thread on the KITTI scene, on buffers allocated once; print, return rows."""
     from vpp_service.matchers import census_sgm as cs
-    from vpp_service.matchers.base import to_gray
+    from vpp_service.matchers.inputs import to_gray
 
     k = cs._k  # the build in use
     H, W, D = SIZES["kitti"]

@@ -201,7 +201,7 @@ def test_census_sgm_thread_count_does_not_change_result(pair, threads):
 
 
 def test_check_disparity_strict_kernel_input_or_converted():
-    from vpp_service.matchers.base import check_disparity
+    from vpp_service.matchers.inputs import check_disparity
 
     a = np.array([[1.0, np.nan, 3.0], [4.0, 5.0, 6.0]])
     got = check_disparity(a[:, ::2], "d", (2, 2), convert=True)  # float64, strided: converted

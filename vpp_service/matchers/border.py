@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vpp_service.matchers.base import check_disparity
+from vpp_service.matchers.inputs import check_disparity
 
 
 def reject_border_matches(disparity: np.ndarray, margin: int = 2) -> np.ndarray:

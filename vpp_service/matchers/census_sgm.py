@@ -91,21 +91,10 @@ from typing import TypedDict
 import numpy as np
 
 from vpp_service.matchers import _census_sgm as portable
-from vpp_service.matchers.base import (
-    MATCHERS,
-    Matcher,
-    MatcherOptions,
-    MatcherRuntime,
-    check_array,
-    check_disparity,
-    check_hints,
-    check_image,
-    check_max_disparity,
-    check_pair,
-    to_gray,
-)
+from vpp_service.matchers.base import MATCHERS, Matcher, MatcherOptions, MatcherRuntime, check_max_disparity
 from vpp_service.matchers.guided import modulate_cost
 from vpp_service.matchers.holes import GAP_STEP
+from vpp_service.matchers.inputs import check_array, check_disparity, check_hints, check_image, check_pair, to_gray
 from vpp_service.matchers.speckle import remove_speckles
 from vpp_service.threads import resolve_threads
 from vpp_service.vpp import backend

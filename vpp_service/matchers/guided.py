@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from vpp_service.matchers._guided import modulate
-from vpp_service.matchers.base import check_array, check_hints
+from vpp_service.matchers.inputs import check_array, check_hints
 from vpp_service.threads import resolve_threads
 
 _DTYPES = (np.uint8, np.uint16, np.float32)

@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from vpp_service.matchers._holes import fill_gap_rows, fill_rows
-from vpp_service.matchers.base import check_disparity
+from vpp_service.matchers.inputs import check_disparity
 from vpp_service.threads import resolve_threads
 
 

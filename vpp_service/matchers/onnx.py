@@ -46,16 +46,9 @@ from typing import Any, ClassVar, Literal
 import cv2
 import numpy as np
 
-from vpp_service.matchers.base import (
-    MATCHERS,
-    DisparityRangeError,
-    Matcher,
-    MatcherOptions,
-    MatcherRuntime,
-    check_pair,
-    to_gray,
-)
+from vpp_service.matchers.base import MATCHERS, DisparityRangeError, Matcher, MatcherOptions, MatcherRuntime
 from vpp_service.matchers.inference import Engine, open_engine
+from vpp_service.matchers.inputs import check_pair, to_gray
 from vpp_service.matchers.model_card import PSMNET_CARD, ModelCard, card_from_mapping, find_card, read_card
 from vpp_service.matchers.model_store import MODELS_ENV, find_model, models_dir
 from vpp_service.threads import resolve_threads

@@ -33,14 +33,8 @@ from typing import Literal
 import cv2
 import numpy as np
 
-from vpp_service.matchers.base import (
-    MATCHERS,
-    DisparityRangeError,
-    Matcher,
-    MatcherOptions,
-    MatcherRuntime,
-    to_gray,
-)
+from vpp_service.matchers.base import MATCHERS, DisparityRangeError, Matcher, MatcherOptions, MatcherRuntime
+from vpp_service.matchers.inputs import to_gray
 
 _SGBM_MODES = {
     "sgbm": cv2.STEREO_SGBM_MODE_SGBM,

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from vpp_service.matchers._speckle import speckle_filter
-from vpp_service.matchers.base import check_array
+from vpp_service.matchers.inputs import check_array
 from vpp_service.threads import resolve_threads
 
 #: Fixed-point scale of the disparity comparison (OpenCV's ``filterSpeckles`` works on 1/16 px int16).

@@ -17,11 +17,11 @@ from __future__ import annotations
 import logging
 import sqlite3
 from collections.abc import Collection, Iterator
-from dataclasses import dataclass
 from pathlib import Path, PurePath
 from typing import TYPE_CHECKING, Any, Literal
 
 from vpp_service.transport.ros2.bag_damage import BagDamage, OnDamage
+from vpp_service.transport.ros2.bag_message import BagMessage
 from vpp_service.transport.ros2.keys import DEFAULT_PUBLISHER, Qos
 from vpp_service.transport.ros2.messages import typestore
 
@@ -42,28 +42,6 @@ DISTRO_VERSIONS: dict[str, Literal[8, 9]] = {"humble": 8, "jazzy": 9}
 #: ``RMW_DURATION_INFINITE`` (``{9223372036, 854775807}``): deadline, lifespan and liveliness lease
 #: of a publisher that leaves them unset, as an rmw_zenoh graph reports it (its default QoS).
 INFINITE_S, INFINITE_NS = 9_223_372_036, 854_775_807
-
-
-@dataclass(frozen=True)
-class BagMessage:
-    """One recorded message.
-
-    Attributes
-    ----------
-    topic : str
-        Fully-qualified topic name.
-    ros_type : str
-        ``pkg/msg/Msg``.
-    log_time_ns : int
-        Recording time of the message, ns.
-    data : bytes
-        The CDR payload.
-    """
-
-    topic: str
-    ros_type: str
-    log_time_ns: int
-    data: bytes
 
 
 def check_bag_path(path: str | Path) -> Path:

@@ -24,8 +24,8 @@ from urllib.parse import quote
 
 import apsw
 
-from vpp_service.transport.ros2.bag import BagMessage
 from vpp_service.transport.ros2.bag_damage import BagDamage, OnDamage, ignore_damage
+from vpp_service.transport.ros2.bag_message import BagMessage
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
 #: Probes past a break in the messages table (row ids break + 1, + 2, + 4, ...).

@@ -37,8 +37,8 @@ from pathlib import Path
 from types import ModuleType
 from typing import BinaryIO
 
-from vpp_service.transport.ros2.bag import BagMessage
 from vpp_service.transport.ros2.bag_damage import BagDamage, OnDamage, ignore_damage
+from vpp_service.transport.ros2.bag_message import BagMessage
 
 MAGIC = b"\x89MCAP0\r\n"
 #: The largest chunk (compressed or not) read; a record claiming more is damage. ros2 bag
