@@ -244,7 +244,7 @@ def main(args: argparse.Namespace) -> int:
     if data.get("service", {}).get("pool") and "listen" not in data.get("zenoh", {}):
         _join_local_pool(data.setdefault("zenoh", {}))
     cfg = validate_config(data)
-    check_paths(cfg)
+    check_paths(cfg, servers_required=args.check)  # run: a Triton server down at start is waited for
     if args.check:
         print(json.dumps(cfg.to_dict(), indent=2))
         return 0

@@ -211,6 +211,7 @@ def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> 
         rig=s.rig,
         timing_window=s.timing_window,
         reject_log_period_s=s.reject_log_period_s,
+        in_flight=int(getattr(options, "in_flight", 1)),  # a network on Triton servers: frames matched at once
         pool=pool,
     )
 

@@ -24,6 +24,7 @@ hook). Errors are :class:`~vpp_service.settings.SettingsError` naming the key
 from __future__ import annotations
 
 import copy
+import logging
 import os
 import re
 import tomllib
@@ -36,6 +37,8 @@ from vpp_service.plugin import Plugin
 from vpp_service.queueing import Policy
 from vpp_service.registry import Registry
 from vpp_service.settings import SettingsError, from_mapping
+
+log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
     from vpp_service.matchers.disparity_range import AutoRangeOptions
@@ -473,11 +476,14 @@ def previous_outputs(cfg: ServiceConfig) -> list[str]:
     return [str(p) for p in found]
 
 
-def check_paths(cfg: ServiceConfig) -> None:
+def check_paths(cfg: ServiceConfig, *, servers_required: bool = True) -> None:
     """Check the paths the configuration names (each plugin's ``check_paths``), before anything starts.
 
     The matcher's ``check_files`` too: a network matcher opens its model, checks
-    its card against the graph and runs it once on a small pair.
+    its card against the graph and runs it once on a small pair. A network on
+    Triton servers none of which can be reached is an error when
+    ``servers_required`` (``run --check``), else a warning: the service starts
+    and its requests wait for a server (``retry_s``).
 
     Raises
     ------
@@ -499,7 +505,14 @@ def check_paths(cfg: ServiceConfig) -> None:
     from vpp_service.matchers import MATCHERS, MatcherOptions
 
     if isinstance(cfg.matcher.options, MatcherOptions):  # a network: its model, its card, one dry run
-        MATCHERS.get(cfg.matcher.name).check_files(cfg.matcher.options, "matcher")
+        from vpp_service.matchers.triton import ServerUnavailable
+
+        try:
+            MATCHERS.get(cfg.matcher.name).check_files(cfg.matcher.options, "matcher")
+        except ServerUnavailable as exc:
+            if servers_required:
+                raise
+            log.warning("matcher: %s; starting anyway, requests wait for a server", exc)
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:

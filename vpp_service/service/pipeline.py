@@ -60,6 +60,7 @@ import numpy as np
 from vpp_service.evaluation.metrics import answered_metrics
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.queueing import Policy, QueueWorker
+from vpp_service.service.in_flight import InFlight
 from vpp_service.service.pool import PoolStatus
 from vpp_service.timing import StageTimer
 
@@ -127,6 +128,7 @@ class PipelineStatus(TypedDict):
     source: Mapping[str, object]
     sinks: dict[str, Mapping[str, object]]
     metrics: MetricsStatus
+    network: NotRequired[Mapping[str, object]]
     pool: NotRequired[PoolStatus]
 
 
@@ -155,6 +157,10 @@ class Pipeline:
         Window of the timing statistics.
     reject_log_period_s : float
         Rate limit of the rejected-input log line.
+    in_flight : int
+        Frames processed at once (:class:`~vpp_service.service.in_flight.InFlight`; a network on
+        remote servers): results still leave in the order the frames came, and the process stage
+        waits while the window is full. 1 (default): one frame at a time on the process thread.
     pool : WorkerPool or None
         Run as one worker of the rig's pool (:mod:`vpp_service.service.pool`):
         only the frames the pool admits are processed, answers are announced,
@@ -177,6 +183,7 @@ class Pipeline:
         rig: str = "rig0",
         timing_window: int = 200,
         reject_log_period_s: float = 5.0,
+        in_flight: int = 1,
         pool: WorkerPool | None = None,
     ) -> None:
         if not callable(process):
@@ -206,6 +213,10 @@ class Pipeline:
         self.timer = StageTimer(timing_window)
         self.reject_log_period_s = reject_log_period_s
         self.pool = pool
+        if isinstance(in_flight, bool) or not isinstance(in_flight, int) or in_flight < 1:
+            raise ValueError(f"in_flight must be an integer >= 1, got {in_flight!r}")
+        self.in_flight = in_flight
+        self._window: InFlight[StereoFrame, FusionResult] | None = None
         self._counts = dict.fromkeys(COUNTER_NAMES, 0)
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -287,10 +298,28 @@ class Pipeline:
 
     # -------------------------------------------------------------- stages
     def _process(self, frame: StereoFrame) -> None:
-        """Process stage (its worker thread): one frame through ``process``, the result to the sinks."""
+        """Process stage (its worker thread): one frame through ``process``, the result to the sinks.
+
+        With ``in_flight`` > 1 the frame joins the window (waiting for a free slot) and its result is
+        handed on by the window's delivering thread, in order.
+        """
         if self._enough.is_set():
             return
-        result = self.process(frame)
+        if self.in_flight > 1:
+            if self._window is None:
+                self._window = InFlight(
+                    self.in_flight, self.process, self._processed, self._process_failed, name="pipeline-match"
+                )
+            if not self._window.submit(frame, self._stop):
+                with self._lock:
+                    self._refused += 1  # stopping while the window was full: counted as shutdown
+            return
+        self._processed(self.process(frame))
+
+    def _processed(self, result: FusionResult) -> None:
+        """A frame's result: timings, metrics and counters, then to the sinks."""
+        if self._enough.is_set():
+            return  # max_frames reached while it was in flight: unwanted, not lost
         for stage, ms in result.timing_ms.items():
             self.timer.add(stage, ms)
         if result.metrics:
@@ -400,6 +429,8 @@ class Pipeline:
 
     def _process_done(self) -> None:
         """The process stage ended: the sink threads finish what is queued (or ``done`` now, without sinks)."""
+        if self._window is not None:
+            self._window.close()  # the frames in flight are answered and handed on first
         for worker in self.sink_workers:
             worker.finish()
         if not self.sink_workers:
@@ -566,6 +597,7 @@ class Pipeline:
                     }
                     for sink, w in zip(self.sinks, self.sink_workers, strict=True)
                 },
+                **self._window_status(),
             },
             "timing_ms": self.timer.summary(),
             "status_queries": self._status_queries_copy(),
@@ -578,9 +610,29 @@ class Pipeline:
                 "bad2_filled_mean": _mean(self._bad2_filled),
             },
         }
+        network = getattr(self.process, "network_status", None)
+        if callable(network):
+            net = network()
+            if net:  # a network on remote servers: requests, retries, bad replies, each server's state
+                status["network"] = net
         if self.pool is not None:
             status["pool"] = self.pool.status()
         return status
+
+    def _window_status(self) -> dict[str, QueueStatus]:
+        """The frames in flight as a queue (``in_flight`` > 1)."""
+        if self.in_flight == 1:
+            return {}
+        w = self._window
+        return {
+            "in_flight": {
+                "len": 0 if w is None else w.outstanding,
+                "size": self.in_flight,
+                "policy": "block",
+                "dropped": 0,
+                "high_water": 0 if w is None else w.high_water,
+            }
+        }
 
     def _status_queries_copy(self) -> dict[str, int]:
         """``@status`` queries: ``queries`` answered, ``snapshots`` built, ``cached`` (answered from a snapshot)."""
