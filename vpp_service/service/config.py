@@ -104,15 +104,6 @@ class ServiceSection:
         returning them to the kernel (glibc ``mallopt``; see
         :mod:`vpp_service.service.allocator`): fewer page faults per frame, a
         resident size at the stream's peak.
-    pool : bool
-        Run as one worker of the rig's pool (:mod:`vpp_service.service.pool`):
-        workers anywhere on the Zenoh network share the rig's frames by
-        rendezvous hashing of ``seq`` over the live members. Needs ``[zenoh]``.
-    pool_deadline_ms : float
-        A dead worker's unanswered frame younger than this is processed by its
-        successor; older ones are counted as lost.
-    worker_id : str
-        This worker's id in the pool (default ``<host>-<pid>``); 1-64 of ``A-Z a-z 0-9 _ . -``.
     overwrite : bool
         Start even when ``out`` holds a previous run's outputs (summary.json, a .rrd, recorded
         frames), replacing them. False (default): ``vpp-service run`` refuses and names them.
@@ -130,9 +121,6 @@ class ServiceSection:
     reject_log_period_s: float = 5.0
     seed: int = 0
     reuse_memory: bool = True
-    pool: bool = False
-    pool_deadline_ms: float = 1000.0
-    worker_id: str = ""
     overwrite: bool = False
 
     def __post_init__(self) -> None:
@@ -154,12 +142,6 @@ class ServiceSection:
                 raise ValueError(f"{name} must be in (0, 3600], got {getattr(self, name)}")
         if not 1 <= self.timing_window <= 100000:
             raise ValueError(f"timing_window must be in [1, 100000], got {self.timing_window}")
-        if not 0 < self.pool_deadline_ms <= 600_000:
-            raise ValueError(f"pool_deadline_ms must be in (0, 600000], got {self.pool_deadline_ms}")
-        if self.worker_id:
-            from vpp_service.service.pool import check_worker_id
-
-            check_worker_id(self.worker_id)
 
 
 @dataclass(frozen=True)
@@ -433,8 +415,6 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
             sink = {k: (v.replace("{out}", out_dir) if isinstance(v, str) else v) for k, v in raw_sink.items()}
         sinks.append(_plugin(sink, f"sinks[{i}]", "type", SINKS, parse_sink_options))
     if not zen.enabled:
-        if service.pool:
-            raise SettingsError("zenoh.enabled: service.pool needs a zenoh session (membership is on Zenoh)")
         _require_no_session("source", source, SOURCES)
         for i, spec in enumerate(sinks):
             _require_no_session(f"sinks[{i}]", spec, SINKS)

@@ -61,13 +61,11 @@ from vpp_service.evaluation.metrics import answered_metrics
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.queueing import Policy, QueueWorker
 from vpp_service.service.in_flight import InFlight
-from vpp_service.service.pool import PoolStatus
 from vpp_service.timing import StageTimer
 
 if TYPE_CHECKING:  # zenoh, sources and sinks are imported where they are used
     import zenoh
 
-    from vpp_service.service.pool import WorkerPool
     from vpp_service.sinks.base import Sink
     from vpp_service.sources.base import Source
 
@@ -129,7 +127,6 @@ class PipelineStatus(TypedDict):
     sinks: dict[str, Mapping[str, object]]
     metrics: MetricsStatus
     network: NotRequired[Mapping[str, object]]
-    pool: NotRequired[PoolStatus]
 
 
 class Pipeline:
@@ -161,10 +158,6 @@ class Pipeline:
         Frames processed at once (:class:`~vpp_service.service.in_flight.InFlight`; a network on
         remote servers): results still leave in the order the frames came, and the process stage
         waits while the window is full. 1 (default): one frame at a time on the process thread.
-    pool : WorkerPool or None
-        Run as one worker of the rig's pool (:mod:`vpp_service.service.pool`):
-        only the frames the pool admits are processed, answers are announced,
-        and ``@status`` is served on ``<prefix>/<rig>/@status/<worker-id>``.
     """
 
     def __init__(
@@ -184,7 +177,6 @@ class Pipeline:
         timing_window: int = 200,
         reject_log_period_s: float = 5.0,
         in_flight: int = 1,
-        pool: WorkerPool | None = None,
     ) -> None:
         if not callable(process):
             raise TypeError("process must be callable")
@@ -212,7 +204,6 @@ class Pipeline:
         self.prefix, self.rig = prefix, rig
         self.timer = StageTimer(timing_window)
         self.reject_log_period_s = reject_log_period_s
-        self.pool = pool
         if isinstance(in_flight, bool) or not isinstance(in_flight, int) or in_flight < 1:
             raise ValueError(f"in_flight must be an integer >= 1, got {in_flight!r}")
         self.in_flight = in_flight
@@ -263,8 +254,6 @@ class Pipeline:
             self._reject(f"frame seq={frame.seq}: rig {frame.rig[:64]!r} is not the served rig {self.rig!r}")
             return False
         frame.meta.setdefault("recv_ns", time.monotonic_ns())  # sources that receive stamp it earlier
-        if self.pool is not None and not self.pool.admit(frame):
-            return True  # another worker's share (the pool holds it for a takeover)
         return self._enqueue(frame)
 
     def _enqueue(self, frame: StereoFrame) -> bool:
@@ -418,14 +407,12 @@ class Pipeline:
             self._published(delivery.result)
 
     def _published(self, result: FusionResult) -> None:
-        """Every sink has the result: latency, ``published``, and the pool's answer (without a network sink)."""
+        """Every sink has the result: latency and ``published``."""
         # latency from when this service received the frame, never from the sender's stamp_ns (a peer sets it)
         recv_ns = result.frame.meta.get("recv_ns")
         if isinstance(recv_ns, int):
             self.timer.add("latency", (time.monotonic_ns() - recv_ns) / 1e6)
         self._inc("published")
-        if self.pool is not None and self.pool.answer_on_publish:
-            self.pool.answered(result.frame.seq)
 
     def _process_done(self) -> None:
         """The process stage ended: the sink threads finish what is queued (or ``done`` now, without sinks)."""
@@ -471,8 +458,6 @@ class Pipeline:
 
             self._queryable = self.session.declare_queryable(self.status_key, self._on_query)
             self._token = self.session.liveliness().declare_token(topic(self.prefix, self.rig, "@alive"))
-        if self.pool is not None:
-            self.pool.start(self._enqueue)
         self._started = time.monotonic()
         for worker in self.sink_workers:
             worker.start()
@@ -481,11 +466,10 @@ class Pipeline:
 
     @property
     def status_key(self) -> str:
-        """Where ``@status`` is served: ``<prefix>/<rig>/@status``, plus ``/<worker-id>`` in a pool."""
+        """Where ``@status`` is served: ``<prefix>/<rig>/@status``."""
         from vpp_service.transport.wire import topic
 
-        key = topic(self.prefix, self.rig, "@status")
-        return key if self.pool is None else f"{key}/{self.pool.worker_id}"
+        return topic(self.prefix, self.rig, "@status")
 
     def _on_query(self, query: zenoh.Query) -> None:
         # runs on a Zenoh thread: reply with the cached snapshot, never block
@@ -515,18 +499,9 @@ class Pipeline:
         return self.done.wait(timeout)
 
     def stop(self, timeout: float = 5.0) -> None:
-        """Stop the source, drain the queues, close sinks; every step bounded by ``timeout``.
-
-        A pool worker leaves the pool first: the other workers take the frames
-        queued here over (they are still fresh; not counted as losses here) and
-        every new one, while this worker finishes the frame in hand.
-        """
-        if self.pool is not None:
-            self.pool.leave()
+        """Stop the source, drain the queues, close sinks; every step bounded by ``timeout``."""
         self.source.stop(timeout)
         self.source.finished.set()
-        if self.pool is not None:
-            self.pool.state.handed_over(self.input.queue.discard())
         deadline = time.monotonic() + timeout
         self.input.finish()
         drained = self.input.join(max(0.05, deadline - time.monotonic()))
@@ -552,8 +527,6 @@ class Pipeline:
                     obj.undeclare()
         self._queryable = None
         self._token = None
-        if self.pool is not None:
-            self.pool.stop()  # after the sinks: every drained frame has been announced
         self.done.set()
 
     # -------------------------------------------------------------- status
@@ -615,8 +588,6 @@ class Pipeline:
             net = network()
             if net:  # a network on remote servers: requests, retries, bad replies, each server's state
                 status["network"] = net
-        if self.pool is not None:
-            status["pool"] = self.pool.status()
         return status
 
     def _window_status(self) -> dict[str, QueueStatus]:
@@ -654,7 +625,7 @@ class Pipeline:
         out = {
             "input_queue": self.input.dropped,
             # frames left queued when max_frames is reached were not wanted: only a stop's discards are losses
-            "shutdown": (0 if self._enough.is_set() else self.input.discarded - self._handed_over())
+            "shutdown": (0 if self._enough.is_set() else self.input.discarded)
             + sum(w.discarded for w in self.sink_workers)
             + self._refused,
         }
@@ -667,10 +638,6 @@ class Pipeline:
             n = sinks.get(name, {}).get("dropped", 0)  # the sink's own losses (a viewer gone, ...)
             out[f"sink.{name}"] = (n if isinstance(n, int) else 0) + worker.dropped  # + its full queue's
         return out
-
-    def _handed_over(self) -> int:
-        """Frames a leaving pool worker left to the others (not a loss)."""
-        return 0 if self.pool is None else self.pool.state.status()["handed_over"]
 
     def _recent_fps(self, elapsed: float) -> float:
         """Frames processed per second over the last :data:`FPS_WINDOW_S` (0 when input stopped that long ago)."""
