@@ -116,7 +116,14 @@ def main() -> int:
     try:
         for n in sorted(a.servers):
             for k in a.in_flight:
-                opts = {"engine": "triton", "url": [s.url for s in servers[:n]], "in_flight": k, "model": name}
+                # a request's deadline covers its wait in the server's queue too: in_flight frames of seconds each
+                opts = {
+                    "engine": "triton",
+                    "url": [s.url for s in servers[:n]],
+                    "in_flight": k,
+                    "model": name,
+                    "timeout_ms": 3_600_000.0,
+                }
                 m = build_matcher("onnx" if a.tiny else "psmnet", {**opts, **({"card": card} if card else {})})
                 assert isinstance(m, OnnxMatcher)
                 m.compute(*data[0])  # warm-up: metadata, channels, the servers' first run
