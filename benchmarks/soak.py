@@ -27,7 +27,7 @@ default ``out/soak.json``, a path git ignores):
   (after the service trims freed memory);
 * latency p99 (from receive time: hostile stamps must not move it).
 
-Two more modes attack the newer paths (``--mode``):
+One more mode attacks the ROS 2 path (``--mode``):
 
 ``ros2``
     The service with the ``ros2`` source and sink; a robot (``tests/helpers/ros2_robot.py``)
@@ -36,18 +36,12 @@ Two more modes attack the newer paths (``--mode``):
     a cloud without ``x y z``) and a burst of junk samples (no rmw_zenoh attachment, or over
     ``max_message_mb``) into 4-deep rings. Figures: genuine sets delivered, rejections by cause,
     and the source's ledger (every received sample in exactly one count).
-``pool``
-    Two pool workers (processes) behind a router; a hostile peer declares six ``@pool`` tokens
-    that never answer and forges ``@answered`` for every frame under each worker's id and an id
-    without a token, before the frames. Figures: frames answered, each loss by cause
-    (``lost``, ``silent_lost``), ``foreign_answers``, ``duplicates``.
 
 Usage::
 
     python benchmarks/soak.py                      # 10,000 hostile messages, 100 valid frames
     python benchmarks/soak.py --hostile 500 --valid 20 --no-full-size   # a quick run
     python benchmarks/soak.py --mode ros2 --valid 300 --junk 96       # ROS 2 input under attack
-    python benchmarks/soak.py --mode pool --valid 1200                # the worker pool under attack (60 s)
 """
 
 from __future__ import annotations
@@ -392,72 +386,6 @@ def run_ros2(n_sets: int = 300, junk: int = 96, timeout_s: float = 30.0) -> dict
     return figures
 
 
-def run_pool(n_frames: int = 600, rate: float = 20.0, fakes: int = 6) -> dict[str, Any]:
-    """The worker pool under attack (see the module docstring); returns the figures."""
-    import zenoh
-
-    from helpers.pool import attack, publish, start_worker, stop_all, wait_members, worker_config
-    from helpers.zenoh_loopback import zenoh_test_config
-    from helpers.zenoh_router import RouterProcess
-
-    endpoint, rig, ids = f"tcp/127.0.0.1:{_free_port()}", "soakpool", ["w0", "w1"]
-    base = Path(tempfile.mkdtemp(prefix="vpp-soak-pool-"))
-    procs = [start_worker(worker_config(base, endpoint, rig, w), base / f"{w}.log") for w in ids]
-    seqs: set[int] = set()
-    replies: dict[str, Any] = {}
-    with RouterProcess(endpoint) as router:
-        router.start()
-        try:
-            with (
-                zenoh.open(zenoh_test_config(connect=[endpoint], mode="client")) as session,
-                zenoh.open(zenoh_test_config(connect=[endpoint], mode="client")) as hostile,
-            ):
-                wait_members(session, rig, len(ids), procs)
-                sub = session.declare_subscriber(f"vpp/{rig}/out/disparity", zenoh.handlers.FifoChannel(4096))
-                tokens = attack(hostile, rig, ids, n_frames, fakes)
-                t0 = time.monotonic()
-                pub = publish(endpoint, rig, n_frames, rate=rate)
-                if pub.returncode != 0:
-                    raise RuntimeError(pub.stderr)
-                last = time.monotonic()
-                outs = 0
-                while time.monotonic() - last < 3.0:
-                    s = sub.try_recv()
-                    if s is None:
-                        time.sleep(0.01)
-                        continue
-                    last = time.monotonic()
-                    outs += 1
-                    seqs.add(wire.decode_output(s.payload.to_bytes()).seq)
-                seconds = time.monotonic() - t0
-                for reply in session.get(f"vpp/{rig}/@status/*", timeout=3.0):
-                    if reply.ok is not None:
-                        st = json.loads(reply.ok.payload.to_string())
-                        replies[st["pool"]["worker"]] = st["pool"]
-                del tokens
-        finally:
-            codes = stop_all(procs)
-    missing = n_frames - len(seqs)
-    lost = sum(st["lost"] + st["silent_lost"] for st in replies.values())
-    return {
-        "mode": "pool",
-        "workers": len(ids),
-        "fake_members": fakes,
-        "sent_frames": n_frames,
-        "seconds": seconds,
-        "delivered": len(seqs),
-        "delivered_pct": 100.0 * len(seqs) / max(1, n_frames),
-        "outputs": outs,
-        "missing": missing,
-        "lost_counted": lost,
-        "every_loss_counted": lost == missing,
-        "silent_found": sorted({m for st in replies.values() for m in st["silent"]}),
-        "foreign_answers": sum(st["foreign_answers"] for st in replies.values()),
-        "duplicates": sum(st["duplicates"] for st in replies.values()),
-        "exit_codes": codes,
-    }
-
-
 def main(argv: list[str] | None = None) -> int:
     """Command line: run the soak, print the figures, write them as JSON."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -466,12 +394,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--flood-mb", type=float, default=2.0, help="size the flood kinds are built to during the soak")
     ap.add_argument("--no-full-size", action="store_true", help="skip the phase of 64 MiB hostile messages")
     ap.add_argument("--json", default=str(ROOT / "out" / "soak.json"), help="where the figures go (git ignores out/)")
-    ap.add_argument("--mode", choices=("zenoh", "ros2", "pool"), default="zenoh", help="which path to attack")
+    ap.add_argument("--mode", choices=("zenoh", "ros2"), default="zenoh", help="which path to attack")
     ap.add_argument("--junk", type=int, default=96, help="ros2 mode: junk samples before every genuine set")
-    ap.add_argument("--rate", type=float, default=20.0, help="pool mode: frames per second")
     a = ap.parse_args(argv)
     if a.mode != "zenoh":
-        figures = run_ros2(a.valid, a.junk) if a.mode == "ros2" else run_pool(a.valid, a.rate)
+        figures = run_ros2(a.valid, a.junk)
         for key, value in figures.items():
             print(f"{key:28s} {value}")
         path = Path(a.json)

@@ -72,6 +72,21 @@ def test_rerun_flags_exclude_each_other(capsys):
     assert exc.value.code == 2 and "not allowed with" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("argv", [["--pool"], ["--worker-id", "w0"]])
+def test_the_retired_pool_options_are_unknown(capsys, argv):
+    """The worker pool is gone (networks scale on Triton): its options are usage errors, exit 2."""
+    with pytest.raises(SystemExit) as exc:
+        main(["run", *argv, "--check"])
+    assert exc.value.code == EXIT_STARTUP == 2
+    assert f"unrecognized arguments: {' '.join(argv)}" in capsys.readouterr().err
+
+
+def test_the_retired_pool_keys_are_unknown():
+    for key, value in (("pool", True), ("pool_deadline_ms", 1000.0), ("worker_id", "w0")):
+        with pytest.raises(SettingsError, match=f"service.{key}"):
+            validate_config({**DEFAULT_CONFIG, "service": {key: value}})
+
+
 def config(argv: list[str]):
     args = build_parser().parse_args(["run", *argv])
     return validate_config(overrides_from_args(DEFAULT_CONFIG, args))

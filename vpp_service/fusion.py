@@ -44,7 +44,9 @@
 
 from __future__ import annotations
 
+import threading
 import time
+from collections.abc import Mapping
 from dataclasses import replace
 
 import numpy as np
@@ -280,6 +282,7 @@ class Fusion:
             disparity_range = replace(disparity_range, limit=max(STEP, limit // STEP * STEP))
         self.range = DisparityRange(disparity_range) if disparity_range is not None else None
         self._matchers = MatcherCache(matcher)
+        self._lock = threading.Lock()
 
     @property
     def max_disparity(self) -> int | None:
@@ -307,8 +310,16 @@ class Fusion:
         if 0 <= seed < 2**64:
             kernel_table(seed, frame.left.shape[2] if frame.left.ndim == 3 else 1, (cfg.patch - 1) // 2)
 
+    def network_status(self) -> Mapping[str, object] | None:
+        """The matcher's remote servers' counters and states (a network on Triton), else None."""
+        status = getattr(self.matcher, "network_status", None)
+        return status() if callable(status) else None
+
     def __call__(self, frame: StereoFrame) -> FusionResult:
         """Process one frame (:func:`fuse` with seed ``seed + frame.seq``).
+
+        Safe to call from several threads at once (frames in flight): the auto range is
+        updated under a lock, in the order the calls take it.
 
         Raises
         ------
@@ -319,7 +330,8 @@ class Fusion:
         matcher, sparse = self.matcher, None
         if self.range is not None:
             sparse = sparse_disparity(frame)
-            matcher = self._matchers.get(self.range.update(sparse, frame.calib, frame.left.shape[1]))
+            with self._lock:
+                matcher = self._matchers.get(self.range.update(sparse, frame.calib, frame.left.shape[1]))
         seed = self.seed + int(frame.seq)
         result = fuse(
             frame,
@@ -332,9 +344,11 @@ class Fusion:
             depth_clip=self.depth_clip,
         )
         if result.left_vpp is not None:
-            self.counters["vpp"] += 1
+            with self._lock:
+                self.counters["vpp"] += 1
         elif self.vpp_config is not None or not _has_points(sparse if sparse is not None else sparse_disparity(frame)):
-            self.counters["no_depth"] += 1
+            with self._lock:
+                self.counters["no_depth"] += 1
         return result
 
 

@@ -45,12 +45,6 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--config", help="TOML config file (default: the embedded default)")
     p.add_argument("--rig", help="rig name (service.rig; default: the config's, rig0)")
     p.add_argument(
-        "--pool",
-        action="store_true",
-        help="run as one worker of the rig's pool (service.pool): workers on the same Zenoh network share its frames",
-    )
-    p.add_argument("--worker-id", help="this worker's id in the pool (service.worker_id; default <host>-<pid>)")
-    p.add_argument(
         "--source",
         help="source type: sim, files, zenoh, ros2, rosbag2 (options from the config; default: the config's, sim)",
     )
@@ -199,17 +193,9 @@ def overrides_from_args(data: dict[str, Any], args: argparse.Namespace) -> dict[
 
 
 def _service_overrides(svc: dict[str, Any], args: argparse.Namespace) -> None:
-    """Apply the ``[service]`` flags.
-
-    ``--rig``, ``--pool``, ``--worker-id``, ``--max-frames``, ``--out``, ``--no-summary``, ``--overwrite``,
-    ``--resume``.
-    """
+    """Apply the ``[service]`` flags (--rig, --max-frames, --out, --no-summary, --overwrite, --resume)."""
     if args.rig:
         svc["rig"] = args.rig
-    if getattr(args, "pool", False):
-        svc["pool"] = True
-    if getattr(args, "worker_id", None):
-        svc["worker_id"] = args.worker_id
     if args.max_frames is not None:
         svc["max_frames"] = args.max_frames
     if args.out:
@@ -261,10 +247,8 @@ def main(args: argparse.Namespace) -> int:
     from vpp_service.service.resume import resume_outputs, resumes
 
     data = overrides_from_args(read_toml(args.config) if args.config else copy.deepcopy(DEFAULT_CONFIG), args)
-    if data.get("service", {}).get("pool") and "listen" not in data.get("zenoh", {}):
-        _join_local_pool(data.setdefault("zenoh", {}))
     cfg = validate_config(data)
-    check_paths(cfg)
+    check_paths(cfg, servers_required=args.check)  # run: a Triton server down at start is waited for
     if args.check:
         print(json.dumps(cfg.to_dict(), indent=2))
         return 0
@@ -322,39 +306,6 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
-def _join_local_pool(zen: dict[str, Any]) -> None:
-    """A pool worker on the default endpoint, which another worker on this host already holds: join it.
-
-    The worker connects to that endpoint and listens on a free loopback port instead; Zenoh's
-    gossip then links every peer of the mesh (the camera included) to every worker directly.
-    """
-    import re
-    import socket
-
-    from vpp_service.service.config import default_endpoint
-
-    endpoint = default_endpoint()
-    match = re.fullmatch(r"tcp/(?:127\.0\.0\.1|localhost):(\d{1,5})", endpoint)
-    if match is None:  # not a loopback TCP endpoint: nothing to probe here
-        return
-    port = int(match.group(1))
-    with socket.socket() as probe:
-        try:
-            probe.bind(("127.0.0.1", port))
-            return  # free: this is the first worker, it listens there
-        except OSError:
-            pass
-    with socket.socket() as free:
-        free.bind(("127.0.0.1", 0))
-        own = f"tcp/127.0.0.1:{free.getsockname()[1]}"
-    zen["listen"] = [own]
-    zen["connect"] = [*zen.get("connect", []), endpoint]
-    print(
-        f"vpp-service run: {endpoint} is taken (another worker of this host): joining it, listening on {own}",
-        file=sys.stderr,
-    )
-
-
 def _sink_text(spec_name: str, raw: dict[str, Any]) -> str:
     """``name`` plus the file or folder it writes, when it names one."""
     where = raw.get("path") if raw.get("mode", "save") == "save" else raw.get("mode")
@@ -387,10 +338,9 @@ def startup_line(cfg: ServiceConfig, matcher: Mapping[str, object] | None = None
     src = f"in {topic(s.prefix, s.rig, 'in/*')}" if cfg.source.name == "zenoh" else f"source {cfg.source.name}"
     sinks = ", ".join(_sink_text(sp.name, sp.raw) for sp in cfg.sinks) or "none"
     outputs = f" | out {topic(s.prefix, s.rig, 'out/*')}" if any(sp.name == "zenoh" for sp in cfg.sinks) else ""
-    pool = f" | pool {topic(s.prefix, s.rig, '@pool/*')}" if s.pool else ""
-    status = topic(s.prefix, s.rig, "@status/<worker>" if s.pool else "@status")
+    status = topic(s.prefix, s.rig, "@status")
     return (
-        f"vpp-service run: rig {s.rig}{pool} | {zenoh_s} | {src} | matcher {matcher_text(cfg.matcher.name, matcher)}"
+        f"vpp-service run: rig {s.rig} | {zenoh_s} | {src} | matcher {matcher_text(cfg.matcher.name, matcher)}"
         f"{outputs} | sinks {sinks} | status {status} | stop with Ctrl-C"
     )
 

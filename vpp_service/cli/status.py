@@ -1,10 +1,7 @@
 """vpp-service status: query running services' @status and print the replies as JSON.
 
 The output maps each service's own key (<prefix>/<rig>/@status) to its status,
-so --rig '*' lists every rig that answered, one entry each. The workers of a
-rig's pool (run --pool) answer on <prefix>/<rig>/@status/<worker-id>, one entry
-each, and the output adds <prefix>/<rig>/@pool: the members with their share
-and counters, and the pool's total fps. When no service answers within
+so --rig '*' lists every rig that answered, one entry each. When no service answers within
 --timeout it says so on stderr and exits 1; when the endpoint cannot be reached
 it says it could not connect (exit 1).
 
@@ -76,8 +73,7 @@ def query_status(
     zsec = ZenohSection(mode="peer", listen=[], connect=list(connect), multicast_scouting=multicast_scouting)
     out: dict[str, Any] = {}
     with zenoh_session(zsec) as session:
-        # ``/**`` also matches the plain key: single services and pool workers alike
-        for reply in session.get(f"{prefix}/{rig}/@status/**", timeout=timeout):
+        for reply in session.get(f"{prefix}/{rig}/@status", timeout=timeout):
             if reply.ok is not None:
                 try:
                     out[str(reply.ok.key_expr)] = json.loads(reply.ok.payload.to_string())
@@ -85,53 +81,7 @@ def query_status(
                     raise ValueError(f"{reply.ok.key_expr}: reply is not JSON: {exc}") from None
         if unreachable_error and not out and connect and not has_link(session):
             raise ConnectionError(f"could not connect to {', '.join(connect)} (nothing answers there)")
-    return {**dict(sorted(out.items())), **pool_summaries(out)}
-
-
-#: The per-worker counters ``@pool`` lists for each member.
-_MEMBER_COUNTERS = ("received", "processed", "published", "dropped")
-_POOL_COUNTERS = ("seen", "own", "taken_over", "lost", "silent_lost", "duplicates", "held")
-
-
-def pool_summaries(replies: dict[str, Any]) -> dict[str, Any]:
-    """``{<prefix>/<rig>/@pool: summary}`` for each rig whose replies come from pool workers.
-
-    A summary lists the ``members`` that answered (worker id -> share, fps and
-    counters), the ``live`` members the workers see (``silent``: those some worker found silent,
-    see :mod:`vpp_service.service.pool`), and the pool's total ``fps``, ``processed``,
-    ``taken_over``, ``lost``, ``silent_lost`` and ``duplicates``.
-    """
-    pools: dict[str, dict[str, Any]] = {}
-    for key, st in replies.items():
-        pool = st.get("pool") if isinstance(st, dict) else None
-        if not isinstance(pool, dict) or "/@status/" not in key:
-            continue
-        summary = pools.setdefault(
-            key.split("/@status/", 1)[0] + "/@pool",
-            {
-                "members": {},
-                "live": [],
-                "silent": [],
-                "fps": 0.0,
-                "processed": 0,
-                "taken_over": 0,
-                "lost": 0,
-                "silent_lost": 0,
-                "duplicates": 0,
-            },
-        )
-        counters = st.get("counters", {})
-        member: dict[str, Any] = {"share": pool.get("share"), "fps": st.get("fps", 0.0)}
-        member.update({k: counters.get(k, 0) for k in _MEMBER_COUNTERS})
-        member.update({k: pool.get(k, 0) for k in _POOL_COUNTERS})
-        summary["members"][str(pool.get("worker", key.rsplit("/", 1)[-1]))] = member
-        summary["live"] = sorted(set(summary["live"]) | set(pool.get("members", [])))
-        summary["silent"] = sorted(set(summary["silent"]) | set(pool.get("silent", [])))
-        summary["fps"] += float(st.get("fps", 0.0))
-        summary["processed"] += int(counters.get("processed", 0))
-        for k in ("taken_over", "lost", "silent_lost", "duplicates"):
-            summary[k] += int(pool.get(k, 0))
-    return pools
+    return dict(sorted(out.items()))
 
 
 def main(args: argparse.Namespace) -> int:

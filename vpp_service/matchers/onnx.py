@@ -9,7 +9,9 @@ pair before it, as for any matcher):
    on the card's sides; a network with a fixed input size gets the pair
    resized to it instead.
 2. **Network**: :mod:`~vpp_service.matchers.inference` (OpenVINO on CPU, ONNX
-   Runtime on CUDA; f32 unless ``precision`` asks otherwise).
+   Runtime on CUDA; f32 unless ``precision`` asks otherwise), or a Triton
+   Inference Server (``engine = "triton"``, :mod:`~vpp_service.matchers.triton`):
+   the tensors cross the network, the pre- and post-processing stay here.
 3. **Out** (:func:`from_output`): the disparity cropped back (fixed size:
    resized back and multiplied by ``W_image / W_network``), times the card's
    ``output_scale``. An output with NaN or inf is an error. Values outside
@@ -32,6 +34,12 @@ directory has no such file; ``psmnet`` looks there when it is not given),
 ``card_file`` / ``card`` (the card: a TOML file, or a table of keys that
 override it; default the ``.toml`` beside the model, or the preset's),
 ``device``, ``engine``, ``precision``, ``threads`` (0 = the project's policy).
+
+With ``engine = "triton"`` no local file is needed: ``url`` (one ``host:port``
+or a list), ``model`` (the model's name on the server; default the card's
+``name``), ``model_version``, TLS (``ssl``, ``root_certificates``,
+``private_key``, ``certificate_chain``: PEM files), ``timeout_ms``, ``retry_s``
+and ``in_flight`` (frames the service keeps on the servers at once).
 """
 
 from __future__ import annotations
@@ -51,6 +59,7 @@ from vpp_service.matchers.inference import Engine, open_engine
 from vpp_service.matchers.inputs import check_pair, to_gray
 from vpp_service.matchers.model_card import PSMNET_CARD, ModelCard, card_from_mapping, find_card, read_card
 from vpp_service.matchers.model_store import MODELS_ENV, find_model, models_dir
+from vpp_service.matchers.triton import TritonEngine, TritonSettings, metadata_mismatches, open_triton
 from vpp_service.threads import resolve_threads
 
 #: The file ``psmnet`` looks for in the models folder.
@@ -201,15 +210,18 @@ class OnnxOptions(MatcherOptions):
         Path of the ``.onnx`` file (required for ``onnx``; ``psmnet`` looks in
         the models folder when empty). A relative path not in the working
         directory is looked up in the models folder
-        (:func:`~vpp_service.matchers.model_store.find_model`).
+        (:func:`~vpp_service.matchers.model_store.find_model`). With
+        ``engine = "triton"``: the model's name on the server ("" = the
+        card's ``name``).
     card_file : str
         Path of the card (TOML); "" = the ``.toml`` beside the model, else the preset's card.
     card : dict
         Card keys that override the card (or are the whole card, when there is no file).
     device : {"auto", "cpu", "cuda"}
         Where the network runs (default auto: CUDA when ONNX Runtime has it, else CPU).
-    engine : {"auto", "openvino", "onnxruntime"}
-        Inference engine (auto: OpenVINO on CPU when installed, ONNX Runtime on CUDA).
+    engine : {"auto", "openvino", "onnxruntime", "triton"}
+        Inference engine (auto: OpenVINO on CPU when installed, ONNX Runtime on CUDA;
+        triton: a Triton Inference Server, :mod:`~vpp_service.matchers.triton`).
     precision : {"f32", "bf16", "f16"}
         Inference precision (default f32; bf16 / f16 only with OpenVINO).
     threads : int
@@ -217,15 +229,37 @@ class OnnxOptions(MatcherOptions):
     max_disparity : int
         Disparities treated as valid ``0 .. max_disparity - 1``; at most the
         network's range. 0 (default): the network's range (the card's ``max_disparity``).
+    url : str or tuple of str
+        ``engine = "triton"``: the servers' gRPC endpoints (``host:port``, one or a list).
+    model_version : str
+        ``engine = "triton"``: the model version ("" = the server's policy).
+    ssl : bool
+        ``engine = "triton"``: TLS; ``root_certificates``, ``private_key``,
+        ``certificate_chain`` are PEM files ("" = none).
+    timeout_ms : float
+        ``engine = "triton"``: deadline of one request (a server past it is marked down).
+    retry_s : float
+        ``engine = "triton"``: how long a request waits for a server when none is up.
+    in_flight : int
+        ``engine = "triton"``: frames matched at once (requests outstanding), 1..64.
     """
 
     model: str = ""
     card_file: str = ""
     card: dict[str, Any] = field(default_factory=dict)
     device: Literal["auto", "cpu", "cuda"] = "auto"
-    engine: Literal["auto", "openvino", "onnxruntime"] = "auto"
+    engine: Literal["auto", "openvino", "onnxruntime", "triton"] = "auto"
     precision: Literal["f32", "bf16", "f16"] = "f32"
     threads: int = 0
+    url: str | tuple[str, ...] = ""
+    model_version: str = ""
+    ssl: bool = False
+    root_certificates: str = ""
+    private_key: str = ""
+    certificate_chain: str = ""
+    timeout_ms: float = 30_000.0
+    retry_s: float = 30.0
+    in_flight: int = 1
 
     max_disparity: int = 0
 
@@ -240,12 +274,42 @@ class OnnxOptions(MatcherOptions):
         if not isinstance(self.card, dict):
             raise ValueError(f"card must be a table of card keys, got {type(self.card).__name__}")
         _check_choice("device", self.device, ("auto", "cpu", "cuda"))
-        _check_choice("engine", self.engine, ("auto", "openvino", "onnxruntime"))
+        _check_choice("engine", self.engine, ("auto", "openvino", "onnxruntime", "triton"))
         _check_choice("precision", self.precision, ("f32", "bf16", "f16"))
         if self.engine == "onnxruntime" and self.precision != "f32":
             raise ValueError(f"precision {self.precision!r} needs engine 'openvino' (ONNX Runtime runs f32)")
         if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 0:
             raise ValueError(f"threads must be an integer >= 0 (0 = the default policy), got {self.threads!r}")
+        self._check_triton()
+
+    @property
+    def urls(self) -> tuple[str, ...]:
+        """``url`` as a tuple (one or several servers)."""
+        return (self.url,) if isinstance(self.url, str) and self.url else tuple(u for u in self.url if u)
+
+    def _check_triton(self) -> None:
+        for key in ("model_version", "root_certificates", "private_key", "certificate_chain"):
+            if not isinstance(getattr(self, key), str):
+                raise ValueError(f"{key} must be a string, got {getattr(self, key)!r}")
+        for u in (self.url,) if isinstance(self.url, str) else self.url:
+            if not isinstance(u, str) or (u and (":" not in u or " " in u)):
+                raise ValueError(f"url must be host:port (or a list of them), got {u!r}")
+        if self.engine == "triton" and not self.urls:
+            raise ValueError("url: engine 'triton' needs the server's gRPC endpoint, host:port (or a list)")
+        if self.engine != "triton" and self.urls:
+            raise ValueError(f"url is for engine 'triton' (engine is {self.engine!r})")
+        if self.engine == "triton" and (self.device == "cuda" or self.precision != "f32"):
+            raise ValueError("engine 'triton': the server decides device and precision (leave device, precision)")
+        for key, lo, hi in (("timeout_ms", 1.0, 3_600_000.0), ("retry_s", 0.0, 86_400.0)):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= v <= hi:
+                raise ValueError(f"{key} must be a number in [{lo:g}, {hi:g}], got {v!r}")
+        if isinstance(self.in_flight, bool) or not isinstance(self.in_flight, int) or not 1 <= self.in_flight <= 64:
+            raise ValueError(f"in_flight must be an integer in [1, 64], got {self.in_flight!r}")
+        if self.in_flight > 1 and self.engine != "triton":
+            raise ValueError("in_flight > 1 is for engine 'triton' (a local engine runs one frame at a time)")
+        if not isinstance(self.ssl, bool):
+            raise ValueError(f"ssl must be a bool, got {self.ssl!r}")
 
 
 @MATCHERS.register("onnx")
@@ -282,8 +346,13 @@ class OnnxMatcher(Matcher):
     def __init__(self, options: OnnxOptions | Mapping[str, object] | None = None) -> None:
         super().__init__(options)
         self.section = f"matcher.{self.name}"
-        self.model_path = self._model_path()
+        self.remote = self.options.engine == "triton"
+        self.model_path = Path(self.options.model) if self.remote else self._model_path()
         self.card = self._card()
+        if self.remote:
+            self.model_path = Path(self.options.model or self.card.name)
+            if not self.card.name and not self.options.model:
+                raise ValueError(f"{self.section}.model: the model's name on the Triton server (the card has no name)")
         #: True when ``max_disparity`` was left to the network (0): a fixed-size network then takes
         #: its range at each image's width.
         self.network_range = self.options.max_disparity == 0
@@ -326,10 +395,14 @@ class OnnxMatcher(Matcher):
         base = self.preset_card
         if o.card_file:
             base = read_card(Path(o.card_file).expanduser(), self.preset_card)
+        elif self.remote:
+            pass  # no local model: the preset's card, the card keys, or card_file
         else:
             beside = find_card(self.model_path)
             if beside is not None:
                 base = read_card(beside, self.preset_card)
+        if base is None and not o.card and self.remote:
+            raise ValueError(f"{self.section}.card: engine 'triton' needs the model's card: card_file or card keys")
         if base is None and not o.card:
             raise ValueError(
                 f"{self.section}.card: no model card for {self.model_path.name}: write "
@@ -353,6 +426,10 @@ class OnnxMatcher(Matcher):
         """
         if self._engine is None:
             o = self.options
+            if self.remote:
+                self._engine = self._remote_engine()
+                return self._engine
+            assert o.engine != "triton"
             eng = open_engine(self.model_path, o.device, o.engine, o.precision, resolve_threads(o.threads or None))
             self._check_graph(eng)
             self._engine = eng
@@ -366,6 +443,48 @@ class OnnxMatcher(Matcher):
         """
         eng = self.engine()
         return {"engine": eng.kind, "device": eng.device, "precision": eng.precision, "threads": eng.threads}
+
+    def triton_settings(self) -> TritonSettings:
+        """Where the network is served (``engine = "triton"``)."""
+        o = self.options
+        return TritonSettings(
+            urls=o.urls,
+            model=str(self.model_path),
+            model_version=o.model_version,
+            ssl=o.ssl,
+            root_certificates=o.root_certificates,
+            private_key=o.private_key,
+            certificate_chain=o.certificate_chain,
+            timeout_ms=float(o.timeout_ms),
+            retry_s=float(o.retry_s),
+        )
+
+    def _remote_engine(self, *, probe: bool = False) -> TritonEngine:
+        """The Triton engine, its metadata read (``probe``: every server checked now) and checked against the card.
+
+        Raises
+        ------
+        ServerUnavailable
+            ``probe`` and no server can be reached.
+        RuntimeError
+            No server answered within ``retry_s`` (not ``probe``), or a server lacks the model.
+        ValueError
+            The model's metadata disagrees with the card (one line per mismatch).
+        """
+        eng = open_triton(self.triton_settings())
+        if probe:
+            eng.probe()
+        else:
+            eng.ensure_metadata()
+        lines = metadata_mismatches(eng, self.card, self.card.output)
+        if lines:
+            head = f"{self.section}: the served model and the card disagree:"
+            raise ValueError("\n  ".join([head, *lines]))
+        return eng
+
+    def network_status(self) -> dict[str, Any] | None:
+        """``engine = "triton"``: the engine's counters and each server's state (None before it opened, or local)."""
+        return self._engine.status() if isinstance(self._engine, TritonEngine) else None
 
     def _check_graph(self, eng: Engine) -> None:
         """Raise ValueError naming the first mismatch between the card and the graph's inputs and outputs."""
@@ -422,7 +541,12 @@ class OnnxMatcher(Matcher):
         t1 = time.perf_counter()
         raw = eng.run({self.card.left_input: tl, self.card.right_input: tr}, self.output_name(eng))
         t2 = time.perf_counter()
-        disp = from_output(raw, self.card, lay, f"{self.section}: {self.model_path.name}")
+        try:
+            disp = from_output(raw, self.card, lay, f"{self.section}: {self.model_path.name}")
+        except ValueError:
+            if isinstance(eng, TritonEngine):
+                eng.bad_reply()  # a reply of the wrong shape: counted, never published
+            raise
         t3 = time.perf_counter()
         self.last_timing = {"pre": (t1 - t0) * 1e3, "network": (t2 - t1) * 1e3, "post": (t3 - t2) * 1e3}
         return disp
@@ -454,6 +578,8 @@ class OnnxMatcher(Matcher):
         EngineUnavailable
             The engine is missing.
         """
+        if self.remote:
+            self._engine = self._remote_engine(probe=True)
         eng = self.engine()
         c = self.card
         if c.fixed:
@@ -469,7 +595,8 @@ class OnnxMatcher(Matcher):
             self.forward(left, right)
         except RuntimeError as exc:
             raise ValueError(f"{self.section}: dry run on a {h} x {w} pair failed: {exc}") from None
-        return f"{self.model_path.name} ({c.name or 'no name'}): {eng.describe()}, range {c.max_disparity}"
+        who = self.model_path.name if not self.remote else f"{c.name or 'no name'} card"
+        return f"{who} ({c.name or 'no name'}): {eng.describe()}, range {c.max_disparity}"
 
     @classmethod
     def check_files(cls, options: MatcherOptions, section: str) -> None:

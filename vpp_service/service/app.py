@@ -204,20 +204,7 @@ def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> 
     source = SOURCES.get(cfg.source.name)(
         cfg.source.options, SourceContext(rig=s.rig, prefix=s.prefix, session=session)
     )
-    pool = None
-    if s.pool:
-        if session is None:
-            raise StartupError("service.pool: needs a zenoh session")
-        from vpp_service.service.pool import WorkerPool, default_worker_id
-
-        pool = WorkerPool(session, s.prefix, s.rig, s.worker_id or default_worker_id(), deadline_ms=s.pool_deadline_ms)
-    extra: dict[str, object] = {}
-    if pool is not None:
-        extra["seq_expected"] = pool.state.expects  # ordered sinks: another worker's frame is never a gap
-        if any(SINKS.get(sp.name).answers_pool for sp in cfg.sinks):
-            pool.answer_on_publish = False  # such a sink announces each frame once its outputs are out
-            extra["on_written"] = pool.answered
-    sink_ctx = SinkContext(rig=s.rig, prefix=s.prefix, session=session, extra=extra)
+    sink_ctx = SinkContext(rig=s.rig, prefix=s.prefix, session=session)
     sinks = [SINKS.get(sp.name)(sp.options, sink_ctx) for sp in cfg.sinks]
     options = cfg.matcher.options  # validated, with max_disparity "auto" taken off (cfg.disparity_range)
     if not isinstance(options, MatcherOptions):
@@ -249,7 +236,7 @@ def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> 
         rig=s.rig,
         timing_window=s.timing_window,
         reject_log_period_s=s.reject_log_period_s,
-        pool=pool,
+        in_flight=int(getattr(options, "in_flight", 1)),  # a network on Triton servers: frames matched at once
     )
 
 

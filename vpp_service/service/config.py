@@ -25,6 +25,7 @@ hook). Errors are :class:`~vpp_service.settings.SettingsError` naming the key
 from __future__ import annotations
 
 import copy
+import logging
 import os
 import re
 import tomllib
@@ -37,6 +38,8 @@ from vpp_service.plugin import Plugin
 from vpp_service.queueing import Policy
 from vpp_service.registry import Registry
 from vpp_service.settings import SettingsError, from_mapping
+
+log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
     from vpp_service.matchers.depth_clip import DepthClip
@@ -103,15 +106,6 @@ class ServiceSection:
         returning them to the kernel (glibc ``mallopt``; see
         :mod:`vpp_service.service.allocator`): fewer page faults per frame, a
         resident size at the stream's peak.
-    pool : bool
-        Run as one worker of the rig's pool (:mod:`vpp_service.service.pool`):
-        workers anywhere on the Zenoh network share the rig's frames by
-        rendezvous hashing of ``seq`` over the live members. Needs ``[zenoh]``.
-    pool_deadline_ms : float
-        A dead worker's unanswered frame younger than this is processed by its
-        successor; older ones are counted as lost.
-    worker_id : str
-        This worker's id in the pool (default ``<host>-<pid>``); 1-64 of ``A-Z a-z 0-9 _ . -``.
     overwrite : bool
         Start even when ``out`` holds a previous run's outputs (summary.json, a .rrd, recorded
         frames), replacing them (wins over ``resume``). False (default): see ``resume``.
@@ -135,9 +129,6 @@ class ServiceSection:
     reject_log_period_s: float = 5.0
     seed: int = 0
     reuse_memory: bool = True
-    pool: bool = False
-    pool_deadline_ms: float = 1000.0
-    worker_id: str = ""
     overwrite: bool = False
     resume: bool | Literal["auto"] = "auto"
 
@@ -160,12 +151,6 @@ class ServiceSection:
                 raise ValueError(f"{name} must be in (0, 3600], got {getattr(self, name)}")
         if not 1 <= self.timing_window <= 100000:
             raise ValueError(f"timing_window must be in [1, 100000], got {self.timing_window}")
-        if not 0 < self.pool_deadline_ms <= 600_000:
-            raise ValueError(f"pool_deadline_ms must be in (0, 600000], got {self.pool_deadline_ms}")
-        if self.worker_id:
-            from vpp_service.service.pool import check_worker_id
-
-            check_worker_id(self.worker_id)
 
 
 @dataclass(frozen=True)
@@ -446,8 +431,6 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
             sink = {k: (v.replace("{out}", out_dir) if isinstance(v, str) else v) for k, v in raw_sink.items()}
         sinks.append(_plugin(sink, f"sinks[{i}]", "type", SINKS, parse_sink_options))
     if not zen.enabled:
-        if service.pool:
-            raise SettingsError("zenoh.enabled: service.pool needs a zenoh session (membership is on Zenoh)")
         _require_no_session("source", source, SOURCES)
         for i, spec in enumerate(sinks):
             _require_no_session(f"sinks[{i}]", spec, SINKS)
@@ -490,11 +473,14 @@ def previous_outputs(cfg: ServiceConfig) -> list[str]:
     return [str(p) for p in found]
 
 
-def check_paths(cfg: ServiceConfig) -> None:
+def check_paths(cfg: ServiceConfig, *, servers_required: bool = True) -> None:
     """Check the paths the configuration names (each plugin's ``check_paths``), before anything starts.
 
     The matcher's ``check_files`` too: a network matcher opens its model, checks
-    its card against the graph and runs it once on a small pair.
+    its card against the graph and runs it once on a small pair. A network on
+    Triton servers none of which can be reached is an error when
+    ``servers_required`` (``run --check``), else a warning: the service starts
+    and its requests wait for a server (``retry_s``).
 
     Raises
     ------
@@ -517,7 +503,14 @@ def check_paths(cfg: ServiceConfig) -> None:
     from vpp_service.matchers import MATCHERS, MatcherOptions
 
     if isinstance(cfg.matcher.options, MatcherOptions):  # a network: its model, its card, one dry run
-        MATCHERS.get(cfg.matcher.name).check_files(cfg.matcher.options, "matcher")
+        from vpp_service.matchers.triton import ServerUnavailable
+
+        try:
+            MATCHERS.get(cfg.matcher.name).check_files(cfg.matcher.options, "matcher")
+        except ServerUnavailable as exc:
+            if servers_required:
+                raise
+            log.warning("matcher: %s; starting anyway, requests wait for a server", exc)
     check_frame_size(cfg)
 
 

@@ -68,13 +68,12 @@ from vpp_service.evaluation.metrics import answered_metrics
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.matchers.base import DisparityRangeError
 from vpp_service.queueing import Policy, QueueWorker
-from vpp_service.service.pool import PoolStatus
+from vpp_service.service.in_flight import InFlight
 from vpp_service.timing import StageTimer
 
 if TYPE_CHECKING:  # zenoh, sources and sinks are imported where they are used
     import zenoh
 
-    from vpp_service.service.pool import WorkerPool
     from vpp_service.sinks.base import Sink
     from vpp_service.sources.base import Source
 
@@ -138,7 +137,7 @@ class PipelineStatus(TypedDict):
     metrics: MetricsStatus
     #: What runs the matcher (:attr:`Pipeline.matcher_runtime`), when the process step says.
     matcher: NotRequired[dict[str, object]]
-    pool: NotRequired[PoolStatus]
+    network: NotRequired[Mapping[str, object]]
 
 
 class Pipeline:
@@ -167,10 +166,10 @@ class Pipeline:
         Window of the timing statistics.
     reject_log_period_s : float
         Rate limit of the rejected-input log line.
-    pool : WorkerPool or None
-        Run as one worker of the rig's pool (:mod:`vpp_service.service.pool`):
-        only the frames the pool admits are processed, answers are announced,
-        and ``@status`` is served on ``<prefix>/<rig>/@status/<worker-id>``.
+    in_flight : int
+        Frames processed at once (:class:`~vpp_service.service.in_flight.InFlight`; a network on
+        remote servers): results still leave in the order the frames came, and the process stage
+        waits while the window is full. 1 (default): one frame at a time on the process thread.
     """
 
     def __init__(
@@ -189,7 +188,7 @@ class Pipeline:
         rig: str = "rig0",
         timing_window: int = 200,
         reject_log_period_s: float = 5.0,
-        pool: WorkerPool | None = None,
+        in_flight: int = 1,
     ) -> None:
         if not callable(process):
             raise TypeError("process must be callable")
@@ -217,11 +216,14 @@ class Pipeline:
         self.prefix, self.rig = prefix, rig
         self.timer = StageTimer(timing_window)
         self.reject_log_period_s = reject_log_period_s
-        self.pool = pool
         #: Why the pipeline stopped on its own: a frame the configuration cannot process (the disparity
         #: range does not fit its width); None otherwise. The service then exits 2.
         self.config_error: str | None = None
         self._range_misfits: set[tuple[int, int]] = set()  # frame sizes a network frame's range misfit was logged for
+        if isinstance(in_flight, bool) or not isinstance(in_flight, int) or in_flight < 1:
+            raise ValueError(f"in_flight must be an integer >= 1, got {in_flight!r}")
+        self.in_flight = in_flight
+        self._window: InFlight[StereoFrame, FusionResult] | None = None
         self._counts = dict.fromkeys(COUNTER_NAMES, 0)
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -272,8 +274,6 @@ class Pipeline:
             self._count_towards_limit()
             return False
         frame.meta.setdefault("recv_ns", time.monotonic_ns())  # sources that receive stamp it earlier
-        if self.pool is not None and not self.pool.admit(frame):
-            return True  # another worker's share (the pool holds it for a takeover)
         return self._enqueue(frame)
 
     def _enqueue(self, frame: StereoFrame) -> bool:
@@ -308,10 +308,28 @@ class Pipeline:
 
     # -------------------------------------------------------------- stages
     def _process(self, frame: StereoFrame) -> None:
-        """Process stage (its worker thread): one frame through ``process``, the result to the sinks."""
+        """Process stage (its worker thread): one frame through ``process``, the result to the sinks.
+
+        With ``in_flight`` > 1 the frame joins the window (waiting for a free slot) and its result is
+        handed on by the window's delivering thread, in order.
+        """
         if self._enough.is_set():
             return
-        result = self.process(frame)
+        if self.in_flight > 1:
+            if self._window is None:
+                self._window = InFlight(
+                    self.in_flight, self.process, self._processed, self._process_failed, name="pipeline-match"
+                )
+            if not self._window.submit(frame, self._stop):
+                with self._lock:
+                    self._refused += 1  # stopping while the window was full: counted as shutdown
+            return
+        self._processed(self.process(frame))
+
+    def _processed(self, result: FusionResult) -> None:
+        """A frame's result: timings, metrics and counters, then to the sinks."""
+        if self._enough.is_set():
+            return  # max_frames reached while it was in flight: unwanted, not lost
         for stage, ms in result.timing_ms.items():
             self.timer.add(stage, ms)
         if result.metrics:
@@ -445,17 +463,17 @@ class Pipeline:
             self._published(delivery.result)
 
     def _published(self, result: FusionResult) -> None:
-        """Every sink has the result: latency, ``published``, and the pool's answer (without a network sink)."""
+        """Every sink has the result: latency and ``published``."""
         # latency from when this service received the frame, never from the sender's stamp_ns (a peer sets it)
         recv_ns = result.frame.meta.get("recv_ns")
         if isinstance(recv_ns, int):
             self.timer.add("latency", (time.monotonic_ns() - recv_ns) / 1e6)
         self._inc("published")
-        if self.pool is not None and self.pool.answer_on_publish:
-            self.pool.answered(result.frame.seq)
 
     def _process_done(self) -> None:
         """The process stage ended: the sink threads finish what is queued (or ``done`` now, without sinks)."""
+        if self._window is not None:
+            self._window.close()  # the frames in flight are answered and handed on first
         for worker in self.sink_workers:
             worker.finish()
         if not self.sink_workers:
@@ -498,8 +516,6 @@ class Pipeline:
 
             self._queryable = self.session.declare_queryable(self.status_key, self._on_query)
             self._token = self.session.liveliness().declare_token(topic(self.prefix, self.rig, "@alive"))
-        if self.pool is not None:
-            self.pool.start(self._enqueue)
         self._started = time.monotonic()
         for worker in self.sink_workers:
             worker.start()
@@ -508,11 +524,10 @@ class Pipeline:
 
     @property
     def status_key(self) -> str:
-        """Where ``@status`` is served: ``<prefix>/<rig>/@status``, plus ``/<worker-id>`` in a pool."""
+        """Where ``@status`` is served: ``<prefix>/<rig>/@status``."""
         from vpp_service.transport.wire import topic
 
-        key = topic(self.prefix, self.rig, "@status")
-        return key if self.pool is None else f"{key}/{self.pool.worker_id}"
+        return topic(self.prefix, self.rig, "@status")
 
     def _on_query(self, query: zenoh.Query) -> None:
         # runs on a Zenoh thread: reply with the cached snapshot, never block
@@ -542,18 +557,9 @@ class Pipeline:
         return self.done.wait(timeout)
 
     def stop(self, timeout: float = 5.0) -> None:
-        """Stop the source, drain the queues, close sinks; every step bounded by ``timeout``.
-
-        A pool worker leaves the pool first: the other workers take the frames
-        queued here over (they are still fresh; not counted as losses here) and
-        every new one, while this worker finishes the frame in hand.
-        """
-        if self.pool is not None:
-            self.pool.leave()
+        """Stop the source, drain the queues, close sinks; every step bounded by ``timeout``."""
         self.source.stop(timeout)
         self.source.finished.set()
-        if self.pool is not None:
-            self.pool.state.handed_over(self.input.queue.discard())
         deadline = time.monotonic() + timeout
         self.input.finish()
         drained = self.input.join(max(0.05, deadline - time.monotonic()))
@@ -579,8 +585,6 @@ class Pipeline:
                     obj.undeclare()
         self._queryable = None
         self._token = None
-        if self.pool is not None:
-            self.pool.stop()  # after the sinks: every drained frame has been announced
         self.done.set()
 
     # -------------------------------------------------------------- status
@@ -625,6 +629,7 @@ class Pipeline:
                     }
                     for sink, w in zip(self.sinks, self.sink_workers, strict=True)
                 },
+                **self._window_status(),
             },
             "timing_ms": self.timer.summary(),
             "status_queries": self._status_queries_copy(),
@@ -639,8 +644,11 @@ class Pipeline:
         }
         if self.matcher_runtime is not None:
             status["matcher"] = self._matcher_status()
-        if self.pool is not None:
-            status["pool"] = self.pool.status()
+        network = getattr(self.process, "network_status", None)
+        if callable(network):
+            net = network()
+            if net:  # a network on remote servers: requests, retries, bad replies, each server's state
+                status["network"] = net
         return status
 
     def _matcher_status(self) -> dict[str, object]:
@@ -651,6 +659,21 @@ class Pipeline:
         except Exception:  # a matcher's broken report must not break @status
             log.debug("runtime() failed", exc_info=True)
             return dict(self.matcher_runtime or {})
+
+    def _window_status(self) -> dict[str, QueueStatus]:
+        """The frames in flight as a queue (``in_flight`` > 1)."""
+        if self.in_flight == 1:
+            return {}
+        w = self._window
+        return {
+            "in_flight": {
+                "len": 0 if w is None else w.outstanding,
+                "size": self.in_flight,
+                "policy": "block",
+                "dropped": 0,
+                "high_water": 0 if w is None else w.high_water,
+            }
+        }
 
     def _status_queries_copy(self) -> dict[str, int]:
         """``@status`` queries: ``queries`` answered, ``snapshots`` built, ``cached`` (answered from a snapshot)."""
@@ -672,7 +695,7 @@ class Pipeline:
         out = {
             "input_queue": self.input.dropped,
             # frames left queued when max_frames is reached were not wanted: only a stop's discards are losses
-            "shutdown": (0 if self._enough.is_set() else self.input.discarded - self._handed_over())
+            "shutdown": (0 if self._enough.is_set() else self.input.discarded)
             + sum(w.discarded for w in self.sink_workers)
             + self._refused,
         }
@@ -685,10 +708,6 @@ class Pipeline:
             n = sinks.get(name, {}).get("dropped", 0)  # the sink's own losses (a viewer gone, ...)
             out[f"sink.{name}"] = (n if isinstance(n, int) else 0) + worker.dropped  # + its full queue's
         return out
-
-    def _handed_over(self) -> int:
-        """Frames a leaving pool worker left to the others (not a loss)."""
-        return 0 if self.pool is None else self.pool.state.status()["handed_over"]
 
     def _recent_fps(self, elapsed: float) -> float:
         """Frames processed per second over the last :data:`FPS_WINDOW_S` (0 when input stopped that long ago)."""

@@ -29,7 +29,7 @@ from __future__ import annotations
 from abc import abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, ClassVar, Literal
+from typing import Any, Literal
 
 from vpp_service.frame import FusionResult
 from vpp_service.plugin import Plugin, PluginContext, parse_plugin_options
@@ -79,10 +79,6 @@ class Sink(Plugin):
     """
 
     counter_names = ("written", "dropped", "errors")
-    #: True for a sink whose ``write`` puts the frame's outputs on the network: in a worker pool the
-    #: frame counts as answered once this sink has written it (it calls ``context.extra["on_written"]``
-    #: with the ``seq``); without such a sink the pipeline announces a frame when every sink is done.
-    answers_pool: ClassVar[bool] = False
 
     def queue_spec(self) -> QueueSpec:
         """How the pipeline buffers results for this sink (default: the ``[queues]`` output settings)."""

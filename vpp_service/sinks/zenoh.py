@@ -20,10 +20,6 @@ to keep up and must not lose a map. ``left_vpp`` / ``right_vpp`` and
 runs it on this sink's own thread behind a queue of ``queue_size`` results
 (:meth:`ZenohSink.queue_spec`; the oldest dropped and counted when full).
 ``close`` undeclares the publishers (the session belongs to the service).
-
-A callable ``context.extra["on_written"]`` is called with each result's ``seq``
-once its outputs have been put (a pool worker announces the frame as answered
-then, never before its outputs are on their way).
 """
 
 from __future__ import annotations
@@ -109,7 +105,6 @@ class ZenohSink(Sink):
     Options = ZenohSinkOptions
     options: ZenohSinkOptions
     needs_session = True
-    answers_pool = True  # its outputs on the network are what a pool's consumers wait for
 
     @classmethod
     def needs_depth(cls, options: ZenohSinkOptions) -> bool:
@@ -171,9 +166,6 @@ class ZenohSink(Sink):
         self._timer.add("encode", enc_s * 1e3)
         self._timer.add("put", put_s * 1e3)
         self.count("written")
-        on_written = self.context.extra.get("on_written")
-        if callable(on_written):
-            on_written(result.frame.seq)
 
     def close(self, timeout: float = 5.0) -> None:
         """Undeclare the publishers."""
