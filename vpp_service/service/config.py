@@ -11,6 +11,7 @@ Sections (every key is documented in ``deploy/config.example.toml``)::
     [queues]    input_size, input_policy, output_size, output_policy
     [depth_filter] mode = "auto" | "see-through" | "none", window_w, window_h, margin, min_gap
                 -> DepthFilter (the see-through filter before VPP)
+    [rectify]   left + right (camera_info YAMLs) | opencv + alpha -> RectifyOptions (raw frames rectified)
     [[sinks]]   type = "zenoh" | "rerun" | "files", plus that sink's options
 
 :func:`load_config` reads a file (or starts from :data:`DEFAULT_CONFIG`, the
@@ -39,6 +40,7 @@ from vpp_service.settings import SettingsError, from_mapping
 
 if TYPE_CHECKING:
     from vpp_service.matchers.disparity_range import AutoRangeOptions
+    from vpp_service.rectify import RectifyOptions
     from vpp_service.vpp import VPPConfig
     from vpp_service.vpp.see_through import DepthFilter
 
@@ -66,7 +68,7 @@ def default_endpoint() -> str:
 
 
 #: Top-level tables a config may contain.
-SECTIONS = ("service", "zenoh", "source", "vpp", "matcher", "queues", "depth_filter", "sinks")
+SECTIONS = ("service", "zenoh", "source", "vpp", "matcher", "queues", "depth_filter", "rectify", "sinks")
 
 
 @dataclass(frozen=True)
@@ -268,6 +270,9 @@ class ServiceConfig:
     disparity_range: AutoRangeOptions | None = None
     #: ``[depth_filter]``: the see-through filter before VPP (None: the defaults, ``mode = "auto"``).
     depth_filter: DepthFilter | None = None
+    #: ``[rectify]``: the rig's calibration; its raw frames are rectified before processing (None: frames
+    #: arrive rectified, with their own ``calib``).
+    rectify: RectifyOptions | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain mapping (the form :func:`validate_config` accepts)."""
@@ -284,6 +289,8 @@ class ServiceConfig:
         }
         if self.depth_filter is not None:
             out["depth_filter"] = to_mapping(self.depth_filter)
+        if self.rectify is not None:
+            out["rectify"] = to_mapping(self.rectify)
         return out
 
 
@@ -419,6 +426,11 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
     from vpp_service.vpp.see_through import DepthFilter
 
     depth_filter = from_mapping(DepthFilter, _table(data, "depth_filter"), "depth_filter")
+    rectify = None
+    if "rectify" in data:
+        from vpp_service.rectify import RectifyOptions
+
+        rectify = from_mapping(RectifyOptions, _table(data, "rectify"), "rectify")
     sinks_raw = data.get("sinks", [])
     if not isinstance(sinks_raw, list):
         raise SettingsError(f"sinks: must be an array of tables ([[sinks]]), got {type(sinks_raw).__name__}")
@@ -446,6 +458,7 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
         sinks=tuple(sinks),
         disparity_range=ranges[0] if ranges else None,
         depth_filter=depth_filter,
+        rectify=rectify,
     )
 
 
