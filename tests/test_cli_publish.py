@@ -215,3 +215,61 @@ def test_publish_rosbag_plays_a_cut_bag_up_to_the_cut_and_counts_it(
 
 def line_causes(err: str) -> list[str]:
     return [ln for ln in err.splitlines() if ln.startswith("vpp-service publish: damaged bag: bag.truncated")]
+
+
+def test_publish_calib_plays_a_raw_folder_into_a_rectifying_service(
+    tmp_path, shared_endpoint, keep_signal_handlers, capsys
+):
+    """--calib: raw frames go without calib or depth; the service's [rectify] answers as on the rectified scene."""
+    from helpers.raw_rig import write_raw_scene
+    from helpers.shared_data import need_shared
+    from vpp_service.datasets import open_dataset
+    from vpp_service.fusion import fuse
+    from vpp_service.matchers import build_matcher
+
+    root = need_shared("middlebury2005_2006_thirdsize")
+    raw_root, lp, rp = write_raw_scene(tmp_path, root, "Books")
+    reference = fuse(
+        open_dataset("middlebury2006", root).select(["Books"])[0], build_matcher("sgbm", {"max_disparity": 96})
+    )
+    data = {
+        "service": {"out": str(tmp_path / "run"), "max_frames": 1, "summary": False},
+        "source": {"type": "zenoh"},
+        "vpp": {"enabled": False},
+        "matcher": {"name": "sgbm", "max_disparity": 96},
+        "queues": {"input_policy": "block"},
+        "rectify": {"left": str(lp), "right": str(rp)},
+        "sinks": [],
+    }
+    with service_in_thread(data) as (thread, result):
+        argv = [
+            "publish",
+            "--root",
+            str(raw_root),
+            "--calib",
+            str(lp),
+            str(rp),
+            "--rate",
+            "0",
+            "--wait-subscriber",
+            "30",
+        ]
+        rc = main(argv)
+        captured = capsys.readouterr()
+        assert rc == 0, captured.err
+        thread.join(60)
+        assert not thread.is_alive()
+    status = result["status"]
+    assert status["counters"]["processed"] == 1 and status["counters"]["rejected"] == 0, status
+    bad2 = status["metrics"]["last"]["bad2_answered"]
+    assert bad2 <= reference.metrics["bad2_answered"] + 2.0
+
+
+def test_publish_rejects_a_bad_calib(tmp_path, capsys):
+    from helpers.raw_rig import write_rig_yamls
+
+    lp, rp = write_rig_yamls(tmp_path, 64, 48)
+    rp.write_text(rp.read_text().replace("projection_matrix:", "projection_matrix_:"))  # monocular: P = [K | 0]
+    assert main(["publish", "--count", "1", "--calib", str(lp), str(rp)]) == EXIT_STARTUP
+    err = capsys.readouterr().err
+    assert err.startswith("vpp-service publish: error: --calib: ") and "not a rectified pair: P fx' differs" in err

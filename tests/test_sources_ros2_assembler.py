@@ -242,3 +242,95 @@ def test_bad_tf_message_refused():
 def test_bad_options(opts):
     with pytest.raises(SettingsError):
         from_mapping(StereoTopics, opts, "source")
+
+
+def raw_info(stamp: int, frame_id: str, info, **changes: object) -> bytes:
+    """A raw camera's CameraInfo (``K``, ``D``, ``R``, ``P`` of ``info``), fields replaced by ``changes``."""
+    from helpers.ros2_robot import T, header
+
+    roi = T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
+    fields = {
+        "k": info.k.ravel().copy(),
+        "d": info.d.copy(),
+        "r": info.r.ravel().copy(),
+        "p": info.p.ravel().copy(),
+        **changes,
+    }
+    msg = T["sensor_msgs/msg/CameraInfo"](
+        header=header(stamp, frame_id),
+        height=info.height,
+        width=info.width,
+        distortion_model=info.distortion_model,
+        binning_x=0,
+        binning_y=0,
+        roi=roi,
+        **fields,
+    )
+    return cdr(msg, "sensor_msgs/msg/CameraInfo")
+
+
+def test_raw_images_are_rectified_with_the_camera_info_as_stereo_image_proc_does():
+    """image_raw + camera_info (D, K, R, P) of a real scene: answers as on the rectified pair."""
+    from helpers.raw_rig import raw_image, rig_calibration
+    from helpers.shared_data import need_shared
+    from vpp_service.datasets import open_dataset
+    from vpp_service.fusion import fuse
+    from vpp_service.matchers import build_matcher
+
+    scene = open_dataset("middlebury2006", need_shared("middlebury2005_2006_thirdsize")).select(["Moebius"])[0]
+    h, w = scene.shape
+    left, right = rig_calibration(w, h)
+    img_t = "sensor_msgs/msg/Image"
+    asm, rejects = make(rectify=True, depth_type="none")
+    parts = {
+        "left_image": cdr(image_msg(raw_image(scene.left, left), 5_000, "left"), img_t),
+        "right_image": cdr(image_msg(raw_image(scene.right, right), 5_000, "right"), img_t),
+        "left_info": raw_info(5_000, "left", left),
+        "right_info": raw_info(5_000, "right", right),
+    }
+    frames = feed(asm, parts)
+    assert len(frames) == 1 and not rejects
+    f = frames[0]
+    assert f.calib.f == left.p[0, 0] and f.calib.baseline == pytest.approx(-right.p[0, 3] / right.p[0, 0])
+    matcher = build_matcher("sgbm", {"max_disparity": 96})
+    got = fuse(f.with_(gt_disparity=scene.gt_disparity), matcher).metrics["bad2_answered"]
+    want = fuse(scene, matcher).metrics["bad2_answered"]
+    assert got <= want + 2.0, f"bad-2 {got:.2f} % image_raw vs {want:.2f} % rectified"
+    assert asm._rectifier is not None
+    maps = asm._rectifier[1]
+    parts2 = {
+        "left_image": cdr(image_msg(raw_image(scene.left, left), 6_000, "left"), img_t),
+        "right_image": cdr(image_msg(raw_image(scene.right, right), 6_000, "right"), img_t),
+        "left_info": raw_info(6_000, "left", left),
+        "right_info": raw_info(6_000, "right", right),
+    }
+    assert len(feed(asm, parts2)) == 1 and asm._rectifier[1] is maps  # the maps are built once per calibration
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"p": np.zeros(12)}, "P is all zeros"),
+        ({"k": np.array([np.nan, 0, 3.5, 0, 100.0, 2.5, 0, 0, 1])}, "K holds a NaN"),
+    ],
+)
+def test_a_raw_camera_info_that_cannot_rectify_refuses_only_its_set(changes, message):
+    from helpers.raw_rig import rig_calibration
+
+    left, right = rig_calibration(W, H)
+    asm, rejects = make(rectify=True, depth_type="none")
+    img = np.zeros((H, W), np.uint8)
+    img_t = "sensor_msgs/msg/Image"
+
+    def parts(stamp: int, **right_changes: object) -> dict[str, bytes]:
+        return {
+            "left_image": cdr(image_msg(img, stamp, "left"), img_t),
+            "right_image": cdr(image_msg(img, stamp, "right"), img_t),
+            "left_info": raw_info(stamp, "left", left),
+            "right_info": raw_info(stamp, "right", right, **right_changes),
+        }
+
+    bad, good = parts(1_000, **changes), parts(2_000)
+    assert feed(asm, bad) == []
+    assert len(rejects) == 1 and message in rejects[0] and "right/camera_info" in rejects[0]
+    assert len(feed(asm, good)) == 1  # nothing else lost

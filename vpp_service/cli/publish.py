@@ -74,6 +74,13 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         metavar="M",
         help="baseline sent with frames whose dataset has no calibration, metres",
     )
+    p.add_argument(
+        "--calib",
+        nargs=2,
+        metavar=("LEFT", "RIGHT"),
+        help="the rig's camera_info YAMLs: the frames are raw (a service with [rectify] rectifies them) and go "
+        "without calib and without simulated depth (drawn from rectified ground truth, it is not in the raw frame)",
+    )
     p.add_argument("--rate", type=float, default=10.0, help="frames per second (0 = as fast as possible)")
     p.add_argument("--count", type=int, default=0, help="frames to send (0 = until interrupted / end)")
     p.add_argument("--loop", action="store_true", help="loop over the dataset")
@@ -192,10 +199,17 @@ def _check_args(args: argparse.Namespace) -> None:
     for flag, value in (("--nominal-f", args.nominal_f), ("--nominal-baseline", args.nominal_baseline)):
         if not (math.isfinite(value) and value > 0):
             raise ValueError(f"{flag}: must be a finite number > 0, got {value}")
+    if getattr(args, "calib", None):
+        from vpp_service.rectify import check_pair, read_camera_info
+
+        try:
+            check_pair(*(read_camera_info(p) for p in args.calib))
+        except ValueError as exc:
+            raise ValueError(f"--calib: {exc}") from None
 
 
 def with_calibration(frame: StereoFrame, f: float, baseline: float) -> StereoFrame:
-    """``frame`` unchanged when it has a calibration, else with a nominal one (the wire requires one).
+    """``frame`` unchanged when it has a calibration, else with a nominal one (a rectified frame needs one).
 
     The principal point is the image centre and ``doffs`` 0; sparse depth sent as 3-D points is
     converted with the same values on both ends, so the disparities the service uses are the dataset's.
@@ -212,7 +226,10 @@ def _send(frame: StereoFrame, args: argparse.Namespace, pubs: dict[str, zenoh.Pu
     """Stamp ``frame``, strip what the flags say, publish it on ``pubs`` (one topic per part, or ``frame``)."""
     from vpp_service.transport import wire
 
-    frame = with_calibration(frame, args.nominal_f, args.nominal_baseline).with_(stamp_ns=time.time_ns())
+    if getattr(args, "calib", None):  # a raw frame: the service's [rectify] has the calibration
+        frame = frame.with_(calib=None, sparse_disparity=None, sensor_depth=None, stamp_ns=time.time_ns())
+    else:
+        frame = with_calibration(frame, args.nominal_f, args.nominal_baseline).with_(stamp_ns=time.time_ns())
     if args.no_depth:
         frame = frame.with_(sparse_disparity=None, sensor_depth=None)
     if args.no_gt:

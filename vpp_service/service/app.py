@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from vpp_service.errors import StartupError
+from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.fusion import DEFAULT_DEPTH_FILTER, Fusion
 from vpp_service.matchers.depth_clip import DepthClip
 from vpp_service.service.allocator import reuse_freed_memory, trim_freed_memory
@@ -38,6 +39,8 @@ from vpp_service.sinks.folder import write_atomic
 
 if TYPE_CHECKING:  # zenoh is imported where it is used
     import zenoh
+
+    from vpp_service.rectify import StereoRectifier
 
 log = logging.getLogger(__name__)
 
@@ -194,6 +197,26 @@ def open_session(
         yield session
 
 
+class Rectified:
+    """The process step of a rig that sends raw frames: rectify (``[rectify]``), then fuse.
+
+    A frame of the wrong size raises ``ValueError`` in the rectifier: the pipeline counts
+    it as rejected and goes on.
+    """
+
+    def __init__(self, rectifier: StereoRectifier, fusion: Fusion) -> None:
+        self.rectifier = rectifier
+        self.fusion = fusion
+
+    def __call__(self, frame: StereoFrame) -> FusionResult:
+        """Rectify ``frame``, then :class:`~vpp_service.fusion.Fusion` on the result."""
+        return self.fusion(self.rectifier(frame))
+
+    def prepare_next(self, frame: StereoFrame) -> None:
+        """The fusion step's idle-time work for the next frame."""
+        self.fusion.prepare_next(frame)
+
+
 def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> Pipeline:
     """Build (not start) the pipeline described by ``cfg`` on ``session``."""
     from vpp_service.matchers import MATCHERS, MatcherOptions
@@ -221,10 +244,13 @@ def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> 
         depth_filter=cfg.depth_filter if cfg.depth_filter is not None else DEFAULT_DEPTH_FILTER,
         depth_clip=cfg.depth_clip or DepthClip(),  # one valid depth range for every output
     )
+    process: Callable[[StereoFrame], FusionResult] = fusion
+    if cfg.rectify is not None:  # the rig sends raw frames: rectify them first (maps computed once, here)
+        process = Rectified(cfg.rectify.build(), fusion)
     q = cfg.queues
     return Pipeline(
         source,
-        fusion,
+        process,
         sinks,
         input_size=q.input_size,
         input_policy=q.input_policy,

@@ -12,6 +12,7 @@ Sections (every key is documented in ``deploy/config.example.toml``)::
     [depth_filter] mode = "auto" | "see-through" | "none", window_w, window_h, margin, min_gap
                 -> DepthFilter (the see-through filter before VPP)
     [depth_clip] min_depth_m, max_depth_m -> DepthClip (the valid depth range of every output)
+    [rectify]   left + right (camera_info YAMLs) | opencv + alpha -> RectifyOptions (raw frames rectified)
     [[sinks]]   type = "zenoh" | "rerun" | "files", plus that sink's options
 
 :func:`load_config` reads a file (or starts from :data:`DEFAULT_CONFIG`, the
@@ -44,6 +45,7 @@ log = logging.getLogger(__name__)
 if TYPE_CHECKING:
     from vpp_service.matchers.depth_clip import DepthClip
     from vpp_service.matchers.disparity_range import AutoRangeOptions
+    from vpp_service.rectify import RectifyOptions
     from vpp_service.vpp import VPPConfig
     from vpp_service.vpp.see_through import DepthFilter
 
@@ -71,7 +73,7 @@ def default_endpoint() -> str:
 
 
 #: Top-level tables a config may contain.
-SECTIONS = ("service", "zenoh", "source", "vpp", "matcher", "queues", "depth_filter", "depth_clip", "sinks")
+SECTIONS = ("service", "zenoh", "source", "vpp", "matcher", "queues", "depth_filter", "depth_clip", "rectify", "sinks")
 
 
 @dataclass(frozen=True)
@@ -264,6 +266,9 @@ class ServiceConfig:
     depth_filter: DepthFilter | None = None
     #: ``[depth_clip]``: the valid depth range of every output (None: :class:`DepthClip`'s defaults).
     depth_clip: DepthClip | None = None
+    #: ``[rectify]``: the rig's calibration; its raw frames are rectified before processing (None: frames
+    #: arrive rectified, with their own ``calib``).
+    rectify: RectifyOptions | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain mapping (the form :func:`validate_config` accepts)."""
@@ -282,6 +287,8 @@ class ServiceConfig:
             out["depth_filter"] = to_mapping(self.depth_filter)
         if self.depth_clip is not None:
             out["depth_clip"] = to_mapping(self.depth_clip)
+        if self.rectify is not None:
+            out["rectify"] = to_mapping(self.rectify)
         return out
 
 
@@ -420,6 +427,11 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
     from vpp_service.matchers.depth_clip import DepthClip
 
     depth_clip = from_mapping(DepthClip, _table(data, "depth_clip"), "depth_clip")
+    rectify = None
+    if "rectify" in data:
+        from vpp_service.rectify import RectifyOptions
+
+        rectify = from_mapping(RectifyOptions, _table(data, "rectify"), "rectify")
     sinks_raw = data.get("sinks", [])
     if not isinstance(sinks_raw, list):
         raise SettingsError(f"sinks: must be an array of tables ([[sinks]]), got {type(sinks_raw).__name__}")
@@ -446,6 +458,7 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
         disparity_range=ranges[0] if ranges else None,
         depth_filter=depth_filter,
         depth_clip=depth_clip,
+        rectify=rectify,
     )
 
 

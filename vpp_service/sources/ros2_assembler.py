@@ -30,6 +30,14 @@
    (``tf_topic``, role ``tf_static``; :class:`~vpp_service.transport.ros2.tf.StaticTransforms`)
    from the cloud's frame to the left camera's. Without such a chain the cloud is refused
    (cause ``tf``) and the frame goes on without depth.
+6. With ``rectify = true`` the images are raw (``image_raw``): each pair is rectified with
+   its camera_info's ``D``, ``K``, ``R``, ``P`` as ``stereo_image_proc`` does
+   (:class:`~vpp_service.rectify.StereoRectifier`, its maps built once per calibration
+   and rebuilt only when the camera_info changes); the calibration comes from ``P``, a
+   cloud is rotated by the left ``R`` into the rectified camera before projection with
+   ``P``, a depth image is taken as registered to the raw left image and moved point by
+   point. A camera_info that cannot rectify (NaN, all-zero ``P``, not a pair) refuses the
+   set (cause ``calibration``).
 
 Every refused message or pair is counted by cause in :attr:`StereoAssembler.rejected_by`
 and reported through ``reject``. :attr:`StereoAssembler.messages` follows every message
@@ -47,11 +55,13 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, cast
 
 import numpy as np
 
 from vpp_service.frame import StereoFrame
+from vpp_service.rectify import CalibrationError, CameraInfo, StereoRectifier
+from vpp_service.rectify.camera_info import DistortionModel
 from vpp_service.transport.ros2 import keys
 from vpp_service.transport.ros2 import messages as rm
 from vpp_service.transport.ros2.cloud import check_extrinsic, cloud_to_depth
@@ -86,7 +96,10 @@ class StereoTopics:
     namespace : str
         ROS namespace of the relative topic names.
     left_image, left_info, right_image, right_info : str
-        The rectified images and their camera_info.
+        The images (rectified, or raw with ``rectify``) and their camera_info.
+    rectify : bool
+        The images are raw (``left/image_raw``): rectify them with the camera_info's
+        ``D``, ``K``, ``R``, ``P`` (module docstring, 6.).
     depth_topic : str
         Sparse depth: a ``PointCloud2`` (``depth_type = "cloud"``) or a depth ``Image``
         registered to the left camera (``"image"``: ``32FC1`` metres or ``16UC1`` mm).
@@ -121,6 +134,7 @@ class StereoTopics:
     left_info: str = "left/camera_info"
     right_image: str = "right/image_rect"
     right_info: str = "right/camera_info"
+    rectify: bool = False
     depth_topic: str = "points"
     depth_type: DepthType = "cloud"
     lidar_to_left: list[list[float]] | None = None
@@ -252,6 +266,7 @@ class StereoAssembler:
         self._depth: deque[_Depth] = deque()
         self._depth_waiting = 0  # entries of _depth still "waiting" (kept as a count: stats() runs on other threads)
         self._seq = 0
+        self._rectifier: tuple[bytes, StereoRectifier] | None = None  # (its camera_info's bytes, the rectifier)
         self.counters: dict[str, int] = dict.fromkeys(
             (
                 "frames",
@@ -405,7 +420,8 @@ class StereoAssembler:
             left, right = p["left_image"].value, p["right_image"].value
             assert isinstance(lc, rm.CameraModel) and isinstance(rc, rm.CameraModel)
             assert isinstance(left, np.ndarray) and isinstance(right, np.ndarray)
-            calib = rm.stereo_calibration(lc, rc)
+            rectifier = self._rectifier_of(p["left_info"].msg, p["right_info"].msg) if self.topics.rectify else None
+            calib = rm.stereo_calibration(lc, rc) if rectifier is None else rectifier.calib
             h, w = left.shape[:2]
             if left.shape != right.shape:
                 raise Ros2Error("shape", f"left {left.shape} and right {right.shape} images differ")
@@ -418,6 +434,8 @@ class StereoAssembler:
         if depth_entry is not None and isinstance(depth_entry.item.msg, rm.PointCloud2):
             try:
                 extrinsic = self._cloud_to_left(depth_entry.item.msg.header.frame_id, lc.frame_id)
+                if rectifier is not None:  # into the rectified left camera, which P projects
+                    extrinsic = np.block([[rectifier.left.r, np.zeros((3, 1))], [np.zeros((1, 3)), 1.0]]) @ extrinsic
             except Ros2Error as exc:  # the cloud cannot be placed: refused, the frame goes on without depth
                 self._refused("depth", exc, self._take(depth_entry, "rejected"))
                 depth_entry = depth = None
@@ -433,7 +451,7 @@ class StereoAssembler:
         decode_s = sum(m.decode_s for m in p.values()) + (depth.decode_s if depth is not None else 0.0)
         self._seq += 1
         self.counters["frames"] += 1
-        return StereoFrame(
+        frame = StereoFrame(
             left=left,
             right=right,
             calib=calib,
@@ -449,6 +467,46 @@ class StereoAssembler:
                 LIDAR_LIKE: depth is not None and isinstance(depth.msg, rm.PointCloud2),
             },
         )
+        if rectifier is None:
+            return frame
+        cloud = depth is not None and isinstance(depth.msg, rm.PointCloud2)  # projected with P already
+        rectified = rectifier(frame.with_(sensor_depth=None) if cloud else frame)
+        return rectified.with_(sensor_depth=sensor_depth) if cloud else rectified
+
+    def _rectifier_of(self, left_info: object, right_info: object) -> StereoRectifier:
+        """The rectifier of a raw pair's camera_info (built once, again only when the calibration changes).
+
+        Raises
+        ------
+        Ros2Error
+            ``calibration``: the camera_info cannot rectify (:class:`~vpp_service.rectify.CalibrationError`).
+        """
+        assert isinstance(left_info, rm.CameraInfo) and isinstance(right_info, rm.CameraInfo)
+        fields = [np.asarray(getattr(m, a), np.float64).tobytes() for m in (left_info, right_info) for a in "kdrp"]
+        sig = b"".join(
+            [*fields, repr([(m.width, m.height, m.distortion_model) for m in (left_info, right_info)]).encode()]
+        )
+        if self._rectifier is not None and self._rectifier[0] == sig:
+            return self._rectifier[1]
+        try:
+            cams = [
+                CameraInfo(
+                    int(m.width),
+                    int(m.height),
+                    np.asarray(m.k),
+                    np.asarray(m.d),
+                    np.asarray(m.r),
+                    np.asarray(m.p),
+                    cast(DistortionModel, m.distortion_model),
+                    name=self.topics.topic(role),
+                )
+                for m, role in ((left_info, "left_info"), (right_info, "right_info"))
+            ]
+            rectifier = StereoRectifier(cams[0], cams[1])
+        except CalibrationError as exc:
+            raise Ros2Error("calibration", str(exc)) from None
+        self._rectifier = (sig, rectifier)
+        return rectifier
 
     def _take(self, entry: _Depth, state: Literal["used", "rejected"]) -> int:
         """Mark a depth message ``state``; 1 when it was still waiting (counted now), else 0 (counted before)."""

@@ -584,8 +584,16 @@ def _header(msg: Mapping[str, object]) -> tuple[str, int, int]:
 
 # ------------------------------------------------------------------- frames
 #: Top-level keys an ``in/frame`` / separate-topics decoder reads (others are skipped unbuilt).
-_FRAME_KEYS = frozenset({"v", "rig", "seq", "stamp_ns", "left", "right", "calib", "depth", "gt"})
-_PART_KEYS = frozenset({"v", "rig", "seq", "stamp_ns", "image", "calib", "gt", "depth", "h", "w"})
+_FRAME_KEYS = frozenset({"v", "rig", "seq", "stamp_ns", "left", "right", "calib", "rectified", "depth", "gt"})
+_PART_KEYS = frozenset({"v", "rig", "seq", "stamp_ns", "image", "calib", "rectified", "gt", "depth", "h", "w"})
+
+
+def _decode_rectified(msg: Mapping[str, object]) -> bool:
+    """The optional ``rectified`` flag (a rig with ``[rectify]`` skips the remap of such a frame)."""
+    v = msg.get("rectified", False)
+    if not isinstance(v, bool):
+        raise WireError(f"rectified: must be true or false, got {type(v).__name__}")
+    return v
 
 
 def encode_frame(frame: StereoFrame, enc: str = "raw", depth_kind: str = "auto", include_gt: bool = True) -> bytes:
@@ -594,7 +602,9 @@ def encode_frame(frame: StereoFrame, enc: str = "raw", depth_kind: str = "auto",
     Parameters
     ----------
     frame : StereoFrame
-        Needs ``calib``; sparse depth and ground truth are optional.
+        ``calib`` is optional (a raw frame of a rig the service rectifies needs none);
+        ``meta["rectified"] = True`` is sent as ``"rectified": true``. Sparse depth and
+        ground truth are optional.
     enc : {"raw", "png", "jpeg"}
         Image encoding.
     depth_kind : str
@@ -605,12 +615,10 @@ def encode_frame(frame: StereoFrame, enc: str = "raw", depth_kind: str = "auto",
     Raises
     ------
     TypeError, ValueError
-        Not a frame, missing calibration, mismatched shapes.
+        Not a frame, mismatched shapes.
     """
     if not isinstance(frame, StereoFrame):
         raise TypeError(f"frame must be a StereoFrame, got {type(frame).__name__}")
-    if frame.calib is None:
-        raise ValueError("frame.calib is required on the wire")
     if frame.left.shape != frame.right.shape:
         raise ValueError(f"frame.left {frame.left.shape} and frame.right {frame.right.shape} differ")
     msg: dict[str, object] = {
@@ -620,8 +628,11 @@ def encode_frame(frame: StereoFrame, enc: str = "raw", depth_kind: str = "auto",
         "stamp_ns": int(frame.stamp_ns),
         "left": encode_image(frame.left, enc),
         "right": encode_image(frame.right, enc),
-        "calib": frame.calib.to_dict(),
     }
+    if frame.calib is not None:
+        msg["calib"] = frame.calib.to_dict()
+    if frame.meta.get("rectified") is True:
+        msg["rectified"] = True
     depth = encode_depth(frame, depth_kind)
     if depth is not None:
         msg["depth"] = depth
@@ -638,6 +649,8 @@ def decode_frame(payload: bytes, limits: WireLimits = DEFAULT_LIMITS, *, metric_
     by the pipeline); disparity points/maps as ``sparse_disparity``. With
     ``metric_map=False`` metric points arrive as their ``sparse_disparity``
     only (``sensor_depth`` None), which is all the fusion reads of them.
+    ``calib`` is optional (None when absent); ``"rectified": true`` becomes
+    ``meta["rectified"] = True``.
 
     Raises
     ------
@@ -650,7 +663,8 @@ def decode_frame(payload: bytes, limits: WireLimits = DEFAULT_LIMITS, *, metric_
     right = decode_image(_req(msg, "right", ""), "right", limits)
     if left.shape != right.shape:
         raise WireError(f"right: shape {right.shape} differs from left {left.shape}")
-    calib = _decode_calib(_req(msg, "calib", ""))
+    calib = _decode_calib(msg["calib"]) if msg.get("calib") is not None else None
+    rectified = _decode_rectified(msg)
     h, w = left.shape[:2]
     sensor = disp = gt = None
     if msg.get("depth") is not None:
@@ -667,6 +681,7 @@ def decode_frame(payload: bytes, limits: WireLimits = DEFAULT_LIMITS, *, metric_
         rig=rig,
         seq=seq,
         stamp_ns=stamp,
+        meta={"rectified": True} if rectified else {},
     )
 
 
@@ -674,16 +689,17 @@ def decode_frame(payload: bytes, limits: WireLimits = DEFAULT_LIMITS, *, metric_
 def encode_part(frame: StereoFrame, part: str, enc: str = "raw", depth_kind: str = "auto") -> bytes | None:
     """One separate-topics message (``part`` = "left", "right" or "depth").
 
-    ``left`` carries the calibration (and ground truth, as an extension);
-    ``depth`` returns None when the frame has no sparse depth.
+    ``left`` carries the calibration when the frame has one, the ``rectified`` flag and
+    ground truth (as an extension); ``depth`` returns None when the frame has no sparse depth.
     """
     base: dict[str, object] = {"v": VERSION, "rig": frame.rig, "seq": int(frame.seq), "stamp_ns": int(frame.stamp_ns)}
     if part in ("left", "right"):
         base["image"] = encode_image(frame.left if part == "left" else frame.right, enc)
         if part == "left":
-            if frame.calib is None:
-                raise ValueError("frame.calib is required on the wire")
-            base["calib"] = frame.calib.to_dict()
+            if frame.calib is not None:
+                base["calib"] = frame.calib.to_dict()
+            if frame.meta.get("rectified") is True:
+                base["rectified"] = True
             if frame.gt_disparity is not None:
                 base["gt"] = _encode_gt(frame.gt_disparity)
     elif part == "depth":
@@ -710,6 +726,7 @@ class Part:
     gt: np.ndarray | None = None
     sensor_depth: np.ndarray | None = None
     sparse_disparity: np.ndarray | None = None
+    rectified: bool = False
 
 
 def decode_part(payload: bytes, part: str, limits: WireLimits = DEFAULT_LIMITS) -> Part:
@@ -728,7 +745,8 @@ def decode_part(payload: bytes, part: str, limits: WireLimits = DEFAULT_LIMITS) 
     if part in ("left", "right"):
         out.image = decode_image(_req(msg, "image", ""), "image", limits)
         if part == "left":
-            out.calib = _decode_calib(_req(msg, "calib", ""))
+            out.calib = _decode_calib(msg["calib"]) if msg.get("calib") is not None else None
+            out.rectified = _decode_rectified(msg)
             if msg.get("gt") is not None:
                 out.gt = _decode_gt(msg["gt"], *out.image.shape[:2])
     else:
@@ -770,6 +788,7 @@ def assemble(left: Part, right: Part, depth: Part | None) -> StereoFrame:
         rig=left.rig,
         seq=left.seq,
         stamp_ns=left.stamp_ns,
+        meta={"rectified": True} if left.rectified else {},
     )
 
 

@@ -318,6 +318,8 @@ def camera_model(msg: CameraInfo) -> CameraModel:
     if p.size != 12 or not np.all(np.isfinite(p)):
         raise Ros2Error("calibration", "camera_info P must hold 12 finite numbers")
     p = p.reshape(3, 4)
+    if not p.any():
+        raise Ros2Error("calibration", "camera_info P is all zeros (an uncalibrated camera)")
     if not (p[0, 0] > 0 and p[1, 1] > 0) or p[2, 2] != 1:
         raise Ros2Error("calibration", f"camera_info P has fx={p[0, 0]}, fy={p[1, 1]}, P[2,2]={p[2, 2]}")
     if int(msg.width) < 1 or int(msg.height) < 1:
