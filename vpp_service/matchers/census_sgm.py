@@ -1,7 +1,8 @@
 """Census-SGM, the rSGM recipe used as the paper's classical matcher, in Cython.
 
 Pipeline (each step is a public, validated function so it can be tested and
-reused; the :class:`CensusSGM` matcher chains them):
+reused; the :class:`CensusSGM` matcher runs the same steps fused, in one C
+driver per call, with the same results):
 
 1. :func:`census_transform` -- 5 x 5 census on the gray image: 24 bits, bit set
    where the neighbour is darker than the centre, window scanned row-major
