@@ -164,61 +164,61 @@ def ref_project(  # noqa: PLR0912, PLR0915 - a literal transcription of the rule
     def skipped(y: int, x: int) -> bool:
         return cfg.occlusion == "no" and bool(occ[y, x])
 
+    def patch(d: float, y: int, x: int):
+        """The (dx, dy) offsets of the point's patch that are painted, row by row."""
+        h = half(d)
+        for dy in range(-h, h + 1):
+            for dx in range(-h, h + 1):
+                if mask(x, y, dx, dy):
+                    yield dx, dy
+
     # right view first, in global order
     for d, y, x in pts:
         if skipped(y, x) or is_fgd(y, x):
             continue
-        h = half(d)
         xp = x - float(d)
-        for dy in range(-h, h + 1):
-            for dx in range(-h, h + 1):
-                if not mask(x, y, dx, dy):
-                    continue
-                A = value(x, y, d, dx, dy)
-                r = y + dy
-                if cfg.splat:
-                    fl = math.floor(xp)
-                    beta = xp - fl
-                    targets = [(fl + dx, w16(alpha * (1.0 - beta)))]
-                    if beta > 0:
-                        targets.append((fl + dx + 1, w16(alpha * beta)))
-                else:
-                    targets = [(math.floor(xp + 0.5) + dx, wa)]
-                for col, w in targets:
-                    if 0 <= col < W:
-                        for c in range(C):
-                            oR[r, col, c] = blend(oR[r, col, c], A[c], w)
+        for dx, dy in patch(d, y, x):
+            A = value(x, y, d, dx, dy)
+            r = y + dy
+            if cfg.splat:
+                fl = math.floor(xp)
+                beta = xp - fl
+                targets = [(fl + dx, w16(alpha * (1.0 - beta)))]
+                if beta > 0:
+                    targets.append((fl + dx + 1, w16(alpha * beta)))
+            else:
+                targets = [(math.floor(xp + 0.5) + dx, wa)]
+            for col, w in targets:
+                if 0 <= col < W:
+                    for c in range(C):
+                        oR[r, col, c] = blend(oR[r, col, c], A[c], w)
     # then the left view (FGD reads the final right view)
     for d, y, x in pts:
         if skipped(y, x):
             continue
-        h = half(d)
         xp = x - float(d)
-        for dy in range(-h, h + 1):
-            for dx in range(-h, h + 1):
-                if not mask(x, y, dx, dy):
-                    continue
-                r, xl = y + dy, x + dx
-                if is_fgd(y, x):
-                    if cfg.splat:
-                        fl = math.floor(xp)
-                        beta = xp - fl
-                    else:
-                        fl, beta = math.floor(xp + 0.5), 0.0
-                    col = fl + dx
-                    if col < 0 or col >= W or (beta > 0 and col + 1 >= W):
-                        continue
-                    wb = w16(beta)
-                    for c in range(C):
-                        if beta > 0:
-                            v16 = int(oR[r, col, c]) * (65536 - wb) + int(oR[r, col + 1, c]) * wb
-                        else:
-                            v16 = int(oR[r, col, c]) * 65536
-                        oL[r, xl, c] = (int(oL[r, xl, c]) * (65536 - wa) * 65536 + v16 * wa + 2**31) >> 32
+        for dx, dy in patch(d, y, x):
+            r, xl = y + dy, x + dx
+            if is_fgd(y, x):
+                if cfg.splat:
+                    fl = math.floor(xp)
+                    beta = xp - fl
                 else:
-                    A = value(x, y, d, dx, dy)
-                    for c in range(C):
-                        oL[r, xl, c] = blend(oL[r, xl, c], A[c], wa)
+                    fl, beta = math.floor(xp + 0.5), 0.0
+                col = fl + dx
+                if col < 0 or col >= W or (beta > 0 and col + 1 >= W):
+                    continue
+                wb = w16(beta)
+                for c in range(C):
+                    if beta > 0:
+                        v16 = int(oR[r, col, c]) * (65536 - wb) + int(oR[r, col + 1, c]) * wb
+                    else:
+                        v16 = int(oR[r, col, c]) * 65536
+                    oL[r, xl, c] = (int(oL[r, xl, c]) * (65536 - wa) * 65536 + v16 * wa + 2**31) >> 32
+            else:
+                A = value(x, y, d, dx, dy)
+                for c in range(C):
+                    oL[r, xl, c] = blend(oL[r, xl, c], A[c], wa)
     outL = oL.astype(np.uint8).reshape(left.shape)
     outR = oR.astype(np.uint8).reshape(right.shape)
     return outL, outR, occ
