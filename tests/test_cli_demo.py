@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from vpp_service.cli import main
-from vpp_service.evaluation.metrics import compute_metrics
 from vpp_service.evaluation.report import error_map
 from vpp_service.matchers import MATCHERS
 from vpp_service.matchers.opencv import SGBM
+from vpp_service.metrics import compute_metrics
 
 
 def test_demo_reports_the_three_numbers_and_draws_the_figure(tmp_path, capsys):

@@ -21,9 +21,9 @@ from helpers.own_folder import own_scene, write_own_folder
 from helpers.ros2_robot import StereoRig, write_bag
 from vpp_service.cli import EXIT_STARTUP, build_parser, main
 from vpp_service.cli.run import closing_line, overrides_from_args, startup_line
-from vpp_service.evaluation.metrics import compute_metrics
 from vpp_service.fusion import fuse
 from vpp_service.matchers import build_matcher
+from vpp_service.metrics import compute_metrics
 from vpp_service.service.config import DEFAULT_CONFIG, validate_config
 from vpp_service.settings import SettingsError
 

@@ -16,7 +16,6 @@ from vpp_service.cli import main
 from vpp_service.datasets import open_dataset
 from vpp_service.evaluation import (
     ProgressBar,
-    compute_metrics,
     default_max_disparity,
     markdown_report,
     run_evaluation,
@@ -27,6 +26,7 @@ from vpp_service.evaluation.report import json_safe
 from vpp_service.evaluation.runner import METHODS
 from vpp_service.matchers import build_matcher, fill_holes
 from vpp_service.matchers.opencv import SGBM
+from vpp_service.metrics import compute_metrics
 from vpp_service.sources.sensors import build_sensor
 from vpp_service.sources.synthetic import make_scene
 

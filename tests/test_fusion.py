@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vpp_service.evaluation.metrics import answered_metrics, compute_metrics
 from vpp_service.frame import StereoFrame
 from vpp_service.fusion import Fusion, fuse, score, sparse_disparity
 from vpp_service.matchers import build_matcher, fill_holes
+from vpp_service.metrics import answered_metrics, compute_metrics
 from vpp_service.sources.sensors import build_sensor
 from vpp_service.sources.synthetic import make_scene
 from vpp_service.vpp import VPPConfig, depth_to_disparity, disparity_to_depth, project

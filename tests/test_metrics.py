@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vpp_service.evaluation.metrics import compute_metrics, metric_key
+from vpp_service.metrics import compute_metrics, metric_key
 
 
 @pytest.fixture

@@ -90,8 +90,8 @@ def query_status(session, key: str) -> dict:
 @pytest.fixture(scope="module")
 def baseline_bad2() -> tuple[float, np.ndarray]:
     """bad-2 of the same matcher on the raw pair (no depth), and the GT."""
-    from vpp_service.evaluation.metrics import compute_metrics
     from vpp_service.matchers import build_matcher
+    from vpp_service.metrics import compute_metrics
     from vpp_service.sources.sim import motorcycle_frame
 
     fr = motorcycle_frame(SCALE)
@@ -115,7 +115,7 @@ def collect(sub, n: int, timeout: float) -> list:
 def test_publisher_to_service_to_subscriber(tmp_path, baseline_bad2, mode, sig):
     import zenoh
 
-    from vpp_service.evaluation.metrics import compute_metrics
+    from vpp_service.metrics import compute_metrics
     from vpp_service.transport import wire
 
     base, gt = baseline_bad2

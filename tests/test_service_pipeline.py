@@ -12,10 +12,10 @@ import zenoh
 
 from helpers.frames import make_frame
 from helpers.zenoh_loopback import zenoh_test_config
-from vpp_service.evaluation.metrics import answered_metrics, compute_metrics
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.fusion import Fusion, score
 from vpp_service.matchers import fill_holes
+from vpp_service.metrics import answered_metrics, compute_metrics
 from vpp_service.service.pipeline import Pipeline
 from vpp_service.sinks.base import QueueSpec, Sink, SinkContext
 from vpp_service.sources.base import Source, SourceContext, build_source

@@ -22,7 +22,7 @@ import zenoh
 from helpers.ros2_robot import TS, Robot, StereoRig, camera_info_from_p, cloud_msg, image_msg
 from helpers.ros2_scenes import SCENES, load_scene, msgpack_bad2, plain_bad2
 from helpers.zenoh_loopback import free_port, zenoh_test_config
-from vpp_service.evaluation.metrics import compute_metrics
+from vpp_service.metrics import compute_metrics
 from vpp_service.service.app import run_service
 from vpp_service.service.config import validate_config
 

@@ -16,7 +16,7 @@ from helpers.ros2_robot import TS, key, write_bag
 from helpers.ros2_scenes import SCENES, load_scene, msgpack_bad2, plain_bad2
 from helpers.zenoh_loopback import collect, free_port, zenoh_test_config
 from vpp_service.cli import main as cli_main
-from vpp_service.evaluation.metrics import compute_metrics
+from vpp_service.metrics import compute_metrics
 from vpp_service.service.app import run_service
 from vpp_service.service.config import validate_config
 

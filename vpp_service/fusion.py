@@ -31,7 +31,7 @@
   every output, so they all agree on what is invalid.
 * **Depth.** With ``depth=True`` and a calibration, metric depth of the result.
 * **Metrics.** When the frame carries ground truth,
-  :func:`~vpp_service.evaluation.metrics.compute_metrics` of the disparity over
+  :func:`~vpp_service.metrics.compute_metrics` of the disparity over
   all valid-GT pixels. ``protocol=True`` scores as the evaluation protocol
   does: the matcher's holes are filled first
   (:func:`~vpp_service.matchers.fill_holes`) and ``*_nocc`` metrics are added
@@ -51,11 +51,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from vpp_service.evaluation.metrics import answered_metrics, compute_metrics
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.matchers.base import Matcher
 from vpp_service.matchers.depth_clip import DepthClip
 from vpp_service.matchers.disparity_range import STEP, AutoRangeOptions, DisparityRange, MatcherCache
+from vpp_service.metrics import answered_metrics, compute_metrics
 from vpp_service.vpp import VPPConfig, depth_to_disparity, disparity_to_depth, project
 from vpp_service.vpp.see_through import DepthFilter
 
@@ -91,7 +91,7 @@ def score(disparity: np.ndarray, frame: StereoFrame, protocol: bool = False) -> 
         ``*_nocc`` metrics when the frame has a mask. False: the raw output
         over all valid-GT pixels plus the three numbers every report shows,
         ``bad2_answered``, ``density`` and ``bad2_filled`` (what the service
-        reports; see :mod:`vpp_service.evaluation.metrics`).
+        reports; see :mod:`vpp_service.metrics`).
     """
     if frame.gt_disparity is None:
         return {}

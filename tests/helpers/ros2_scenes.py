@@ -19,10 +19,10 @@ import numpy as np
 
 from helpers.ros2_robot import StereoRig
 from helpers.shared_data import SHARED_DATA, need_shared
-from vpp_service.evaluation.metrics import compute_metrics
 from vpp_service.frame import Calibration, StereoFrame
 from vpp_service.fusion import fuse
 from vpp_service.matchers import build_matcher
+from vpp_service.metrics import compute_metrics
 from vpp_service.transport import wire
 from vpp_service.vpp import VPPConfig
 

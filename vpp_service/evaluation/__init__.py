@@ -1,9 +1,8 @@
-"""Evaluation: metrics, the runner comparing matcher / guided / VPP, and reports.
+"""Evaluation: the runner comparing matcher / guided / VPP, and reports (the metrics: :mod:`vpp_service.metrics`).
 
->>> from vpp_service.evaluation import compute_metrics, run_evaluation, summarize
+>>> from vpp_service.evaluation import run_evaluation, summarize
 """
 
-from vpp_service.evaluation.metrics import compute_metrics, metric_key
 from vpp_service.evaluation.progress import ProgressBar
 from vpp_service.evaluation.report import markdown_report, plot_sweep, summarize, write_json, write_markdown
 from vpp_service.evaluation.runner import METHODS, default_max_disparity, run_evaluation
@@ -11,10 +10,8 @@ from vpp_service.evaluation.runner import METHODS, default_max_disparity, run_ev
 __all__ = [
     "METHODS",
     "ProgressBar",
-    "compute_metrics",
     "default_max_disparity",
     "markdown_report",
-    "metric_key",
     "plot_sweep",
     "run_evaluation",
     "summarize",

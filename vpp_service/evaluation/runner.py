@@ -20,7 +20,7 @@ For every frame (and every density of a sweep) the runner
 
 3. fills the matcher's holes with background interpolation
    (:func:`vpp_service.matchers.fill_holes`), as the protocol says, and scores
-   with :func:`~vpp_service.evaluation.metrics.compute_metrics` over all
+   with :func:`~vpp_service.metrics.compute_metrics` over all
    valid-GT pixels, plus ``*_nocc`` metrics when the frame has a mask
    (:func:`vpp_service.fusion.score`).
 

@@ -64,9 +64,9 @@ from typing import TYPE_CHECKING, NotRequired, TypedDict
 
 import numpy as np
 
-from vpp_service.evaluation.metrics import answered_metrics
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.matchers.base import DisparityRangeError
+from vpp_service.metrics import answered_metrics
 from vpp_service.queueing import Policy, QueueWorker
 from vpp_service.service.in_flight import InFlight
 from vpp_service.timing import StageTimer
@@ -93,12 +93,12 @@ class QueueStatus(TypedDict):
 class MetricsStatus(TypedDict):
     """Accuracy against ground truth (frames that carry it), means over the timing window.
 
-    The three numbers of every report (:mod:`vpp_service.evaluation.metrics`):
+    The three numbers of every report (:mod:`vpp_service.metrics`):
     ``bad2_answered_mean`` is bad-2 (percent) over the pixels with ground truth
     that got a value, ``density_mean`` the percentage of pixels with ground truth
     that got one, and ``bad2_filled_mean`` bad-2 with the holes filled first, as
     ``eval`` scores. ``last`` is the last frame's
-    :func:`~vpp_service.evaluation.metrics.compute_metrics` (raw: a pixel without
+    :func:`~vpp_service.metrics.compute_metrics` (raw: a pixel without
     a value counts as bad) plus the three. None until a frame with ground truth
     was processed.
     """

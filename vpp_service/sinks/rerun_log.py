@@ -25,7 +25,7 @@ Entities (root = the rig's name)
     Per-stage milliseconds as scalars.
 ``<rig>/accuracy/<name>``
     When the frame carries ground truth: ``bad2_answered``, ``density`` and
-    ``bad2_filled`` (percent; :mod:`vpp_service.evaluation.metrics`) as scalars.
+    ``bad2_filled`` (percent; :mod:`vpp_service.metrics`) as scalars.
 
 Colour ranges are fixed per recording: given, or taken once from the first frame
 (robust percentiles) and then kept, so colours never jump between frames.

@@ -1,5 +1,8 @@
 """Disparity accuracy metrics of the VPP evaluation protocol.
 
+Below both the frame path (:mod:`~vpp_service.fusion`, the service's pipeline) and the evaluator
+(:mod:`vpp_service.evaluation`), which both score with it.
+
 Scored pixels are those with valid (finite, > 0) ground truth, restricted to
 ``mask`` when given. Over them:
 
