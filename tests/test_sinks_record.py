@@ -245,7 +245,7 @@ def test_overwrite_false_counts_an_error_and_keeps_the_file(tmp_path):
 
 
 def test_unencodable_frame_is_counted_not_raised(tmp_path):
-    bad = metric_frame().with_(calib=None)
+    bad = metric_frame().with_(right=np.zeros((4, 4), np.uint8))  # left and right differ: no in/frame holds it
     with make_sink(tmp_path) as sink:
         sink.write(as_result(bad))
         sink.write(as_result(metric_frame(1)))
