@@ -26,6 +26,7 @@ matched at once by the pipeline's matcher stage, each request on its own thread.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import threading
 import time
@@ -299,6 +300,8 @@ class TritonEngine(Engine):
                     best = min(up, key=lambda s: s.outstanding)
                     best.outstanding += 1
                     return best
+                if not self._servers:  # closed
+                    return None
                 wake = min(s.down_until for s in self._servers)
             if now >= deadline:
                 return None
@@ -414,8 +417,9 @@ class TritonEngine(Engine):
         return f"triton {self.settings.model}{version} on {n} server{'s' if n > 1 else ''} ({urls})"
 
     def close(self) -> None:
-        """Close the gRPC channels."""
-        for server in self._servers:
+        """Close the gRPC channels and let the clients go (the engine takes no requests after this)."""
+        servers, self._servers = self._servers, []
+        for server in servers:
             with contextlib.suppress(Exception):  # closing a dead channel
                 server.client.close()
 
@@ -508,11 +512,24 @@ def open_triton(settings: TritonSettings) -> TritonEngine:
         return eng
 
 
+def close_all() -> None:
+    """Close every cached engine (at exit: a gRPC client left to the interpreter's teardown fails in ``__del__``)."""
+    with _cache_lock:
+        engines = list(_cache.values())
+        _cache.clear()
+    for eng in engines:
+        eng.close()
+
+
+atexit.register(close_all)
+
+
 __all__ = [
     "ModelUnavailable",
     "ServerUnavailable",
     "TritonEngine",
     "TritonSettings",
+    "close_all",
     "import_grpcclient",
     "metadata_mismatches",
     "open_triton",
