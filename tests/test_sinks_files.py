@@ -305,3 +305,57 @@ def test_example_config_documents_the_files_sink():
     cfg = validate_config({"zenoh": {"enabled": False}, "sinks": data["sinks"]})
     # every value shown is the default, but for the folder the example names and creates
     assert cfg.sinks[0].options == FilesSinkOptions(dir="vpp-run/frames", create_dir=True)
+
+
+# -- points: <stem>_points.ply ------------------------------------------------------------
+
+
+def read_ply(data: bytes) -> tuple[list[str], np.ndarray]:
+    """A binary little-endian PLY of x y z float / red green blue uchar vertices: (comments, records)."""
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    header = data[:end].decode("ascii").splitlines()
+    assert header[:2] == ["ply", "format binary_little_endian 1.0"]
+    props = [line.split()[1:] for line in header if line.startswith("property ")]
+    assert props == [
+        ["float", "x"],
+        ["float", "y"],
+        ["float", "z"],
+        ["uchar", "red"],
+        ["uchar", "green"],
+        ["uchar", "blue"],
+    ]
+    (n,) = (int(line.split()[2]) for line in header if line.startswith("element vertex "))
+    dtype = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("r", "u1"), ("g", "u1"), ("b", "u1")])
+    assert len(data) - end == n * dtype.itemsize  # 15 bytes a vertex, nothing after them
+    return [line[8:] for line in header if line.startswith("comment ")], np.frombuffer(data[end:], dtype)
+
+
+@pytest.mark.parametrize("stride", [1, 3])
+def test_points_written_as_ply_and_read_back(tmp_path, stride):
+    from helpers.points import assert_cloud_is_depth, clipped_result
+
+    res = clipped_result(seq=9)
+    sink = make_sink(tmp_path, points=True, points_stride=stride)
+    assert FilesSink.needs_depth(sink.options)
+    sink.write(res)
+    sink.close()
+    path = tmp_path / "r1_000009_points.ply"
+    comments, v = read_ply(path.read_bytes())
+    assert "vpp-service rig r1 seq 9 stamp_ns 1000009" in comments
+    xyz = np.stack([v["x"], v["y"], v["z"]], axis=1)
+    rgb = np.stack([v["r"], v["g"], v["b"]], axis=1)
+    assert_cloud_is_depth(xyz, rgb, res, stride)
+    assert sink.stats()["errors"] == 0 and not list(tmp_path.glob(".*"))  # written atomically, no temp left
+
+
+def test_points_skipped_without_metric_depth(tmp_path, result):
+    sink = make_sink(tmp_path, points=True)
+    sink.write(FusionResult(result.frame.with_(calib=None), result.disparity, depth=None))
+    sink.close()
+    assert not list(tmp_path.glob("*_points.ply")) and sink.stats()["errors"] == 0
+
+
+@pytest.mark.parametrize("bad", [0, 65, "2", 1.5])
+def test_bad_points_stride(tmp_path, bad):
+    with pytest.raises(SettingsError, match=r"sinks\.files.*points_stride"):
+        make_sink(tmp_path, points=True, points_stride=bad)
