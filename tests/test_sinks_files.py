@@ -310,29 +310,9 @@ def test_example_config_documents_the_files_sink():
 # -- points: <stem>_points.ply ------------------------------------------------------------
 
 
-def read_ply(data: bytes) -> tuple[list[str], np.ndarray]:
-    """A binary little-endian PLY of x y z float / red green blue uchar vertices: (comments, records)."""
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode("ascii").splitlines()
-    assert header[:2] == ["ply", "format binary_little_endian 1.0"]
-    props = [line.split()[1:] for line in header if line.startswith("property ")]
-    assert props == [
-        ["float", "x"],
-        ["float", "y"],
-        ["float", "z"],
-        ["uchar", "red"],
-        ["uchar", "green"],
-        ["uchar", "blue"],
-    ]
-    (n,) = (int(line.split()[2]) for line in header if line.startswith("element vertex "))
-    dtype = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("r", "u1"), ("g", "u1"), ("b", "u1")])
-    assert len(data) - end == n * dtype.itemsize  # 15 bytes a vertex, nothing after them
-    return [line[8:] for line in header if line.startswith("comment ")], np.frombuffer(data[end:], dtype)
-
-
 @pytest.mark.parametrize("stride", [1, 3])
 def test_points_written_as_ply_and_read_back(tmp_path, stride):
-    from helpers.points import assert_cloud_is_depth, clipped_result
+    from helpers.points import assert_cloud_is_depth, clipped_result, read_ply
 
     res = clipped_result(seq=9)
     sink = make_sink(tmp_path, points=True, points_stride=stride)

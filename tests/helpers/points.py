@@ -58,3 +58,23 @@ def assert_cloud_is_depth(
     valid = np.isfinite(grid) & (grid > 0)
     assert len(xyz) == int(valid.sum()) == len({(a, b) for a, b in zip(vi.tolist(), ui.tolist(), strict=True)})
     assert 0.2 < valid.mean() < 0.9, "the clip should have removed part of the scene, not all of it"
+
+
+def read_ply(data: bytes) -> tuple[list[str], np.ndarray]:
+    """A binary little-endian PLY of x y z float / red green blue uchar vertices: (comments, records)."""
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    header = data[:end].decode("ascii").splitlines()
+    assert header[:2] == ["ply", "format binary_little_endian 1.0"]
+    props = [line.split()[1:] for line in header if line.startswith("property ")]
+    assert props == [
+        ["float", "x"],
+        ["float", "y"],
+        ["float", "z"],
+        ["uchar", "red"],
+        ["uchar", "green"],
+        ["uchar", "blue"],
+    ]
+    (n,) = (int(line.split()[2]) for line in header if line.startswith("element vertex "))
+    dtype = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("r", "u1"), ("g", "u1"), ("b", "u1")])
+    assert len(data) - end == n * dtype.itemsize  # 15 bytes a vertex, nothing after them
+    return [line[8:] for line in header if line.startswith("comment ")], np.frombuffer(data[end:], dtype)
