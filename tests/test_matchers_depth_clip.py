@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from helpers.points import read_ply
 from helpers.toml import toml_dumps
 from vpp_service.frame import Calibration
 from vpp_service.matchers import build_matcher
@@ -115,7 +116,7 @@ def test_config_round_trips():
 
 
 def test_every_file_output_of_the_service_agrees_on_the_clip(tmp_path):
-    """A service run: .npy disparity, 16-bit PNG and depth .npy mark the same pixels invalid, all inside the range."""
+    """A service run: .npy disparity, 16-bit PNG, depth .npy and .ply agree on the valid pixels, inside the range."""
     f, b = 500.0, 0.1  # the synthetic scene's calibration
     near, far = f * b / 40.0, f * b / 20.0  # disparities 20 .. 40 px
     data = {
@@ -132,7 +133,15 @@ def test_every_file_output_of_the_service_agrees_on_the_clip(tmp_path):
         "matcher": {"name": "sgbm", "max_disparity": 64},
         "depth_clip": {"min_depth_m": near, "max_depth_m": far},
         "sinks": [
-            {"type": "files", "dir": "{out}/frames", "create_dir": True, "formats": ["png16", "npy"], "depth": True}
+            {
+                "type": "files",
+                "dir": "{out}/frames",
+                "create_dir": True,
+                "formats": ["png16", "npy"],
+                "depth": True,
+                "points": True,
+                "points_stride": 1,
+            }
         ],
     }
     (tmp_path / "run.toml").write_text(toml_dumps(data))
@@ -149,3 +158,6 @@ def test_every_file_output_of_the_service_agrees_on_the_clip(tmp_path):
         np.testing.assert_array_equal(np.isnan(depth), ~ok)
         assert disp[ok].min() >= 20.0 and disp[ok].max() <= 40.0
         assert depth[ok].min() >= near * (1 - 1e-6) and depth[ok].max() <= far * (1 + 1e-6)
+        _, cloud = read_ply((frames / f"rig0_{seq:06d}_points.ply").read_bytes())  # one point per valid pixel
+        assert len(cloud) == ok.sum() and np.array_equal(np.sort(cloud["z"]), np.sort(depth[ok]))
+        assert cloud["z"].max() <= far * (1 + 1e-6) and cloud["z"].min() >= near * (1 - 1e-6)

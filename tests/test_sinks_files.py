@@ -305,3 +305,37 @@ def test_example_config_documents_the_files_sink():
     cfg = validate_config({"zenoh": {"enabled": False}, "sinks": data["sinks"]})
     # every value shown is the default, but for the folder the example names and creates
     assert cfg.sinks[0].options == FilesSinkOptions(dir="vpp-run/frames", create_dir=True)
+
+
+# -- points: <stem>_points.ply ------------------------------------------------------------
+
+
+@pytest.mark.parametrize("stride", [1, 3])
+def test_points_written_as_ply_and_read_back(tmp_path, stride):
+    from helpers.points import assert_cloud_is_depth, clipped_result, read_ply
+
+    res = clipped_result(seq=9)
+    sink = make_sink(tmp_path, points=True, points_stride=stride)
+    assert FilesSink.needs_depth(sink.options)
+    sink.write(res)
+    sink.close()
+    path = tmp_path / "r1_000009_points.ply"
+    comments, v = read_ply(path.read_bytes())
+    assert "vpp-service rig r1 seq 9 stamp_ns 1000009" in comments
+    xyz = np.stack([v["x"], v["y"], v["z"]], axis=1)
+    rgb = np.stack([v["r"], v["g"], v["b"]], axis=1)
+    assert_cloud_is_depth(xyz, rgb, res, stride)
+    assert sink.stats()["errors"] == 0 and not list(tmp_path.glob(".*"))  # written atomically, no temp left
+
+
+def test_points_skipped_without_metric_depth(tmp_path, result):
+    sink = make_sink(tmp_path, points=True)
+    sink.write(FusionResult(result.frame.with_(calib=None), result.disparity, depth=None))
+    sink.close()
+    assert not list(tmp_path.glob("*_points.ply")) and sink.stats()["errors"] == 0
+
+
+@pytest.mark.parametrize("bad", [0, 65, "2", 1.5])
+def test_bad_points_stride(tmp_path, bad):
+    with pytest.raises(SettingsError, match=r"sinks\.files.*points_stride"):
+        make_sink(tmp_path, points=True, points_stride=bad)

@@ -590,3 +590,55 @@ def test_frames_after_the_viewer_dies_are_not_counted_written(tmp_path):
             stop(viewer)
     st = sink.stats()
     assert st["written"] == 5 and st["undelivered"] == n - 5, st
+
+
+# -- points: rr.Points3D beside the pinhole ------------------------------------------------
+
+
+def _rgba_to_rgb(colors) -> np.ndarray:
+    c = np.asarray(colors, dtype=np.uint64)
+    return np.stack([(c >> 24) & 255, (c >> 16) & 255, (c >> 8) & 255], axis=1).astype(np.uint8)
+
+
+@pytest.mark.parametrize("stride", [1, 3])
+def test_points3d_are_the_depth_map_and_line_up_with_the_pinhole(tmp_path, stride):
+    """``<rig>/points`` is the clipped depth map's coloured cloud, and it lines up with the camera.
+
+    Projected by the logged pinhole, each point lands on the logged depth image's pixel of the same depth.
+    """
+    from helpers.points import assert_cloud_is_depth, clipped_result
+
+    sink = save_sink(tmp_path, jpeg_quality=0, points=True, points_stride=stride, depth_range=[0.1, 100.0])
+    res = clipped_result(seq=4, rig=RIG)
+    res.depth = None  # the sink back-projects the clipped disparity itself, as it does for the depth image
+    sink.write(res)
+    sink.close(timeout=10)
+    data = read_rrd(tmp_path / "out.rrd")
+    pts = data[f"/{RIG}/points"]
+    xyz = np.asarray(pts["Points3D:positions"][0], np.float32)
+    rgb = _rgba_to_rgb(pts["Points3D:colors"][0])
+    ref = clipped_result(seq=4, rig=RIG)  # the same (deterministic) frame, with the fusion step's depth
+    assert_cloud_is_depth(xyz, rgb, ref, stride)
+    k = np.asarray(data[f"/{RIG}/camera"]["Pinhole:image_from_camera"][0]).reshape(3, 3).T
+    depth = np.frombuffer(bytes(image_bytes(data[f"/{RIG}/camera/depth"]["DepthImage:buffer"][0])), np.float32)
+    depth = depth.reshape(ref.depth.shape)  # 64 x 128 is within max_points: not decimated
+    uvw = (k @ xyz.T.astype(np.float64)).T
+    u = np.rint(uvw[:, 0] / uvw[:, 2] - 0.5).astype(int)  # Rerun's pixel centres are at +0.5
+    v = np.rint(uvw[:, 1] / uvw[:, 2] - 0.5).astype(int)
+    np.testing.assert_allclose(depth[v, u], xyz[:, 2], rtol=1e-6)
+
+
+def test_points_without_the_depth_image_keep_the_pinhole(tmp_path):
+    from helpers.points import clipped_result
+
+    sink = save_sink(tmp_path, points=True, point_cloud=False)
+    sink.write(clipped_result(rig=RIG))
+    sink.close(timeout=10)
+    data = read_rrd(tmp_path / "out.rrd")
+    assert f"/{RIG}/points" in data and f"/{RIG}/camera" in data and f"/{RIG}/camera/depth" not in data
+
+
+@pytest.mark.parametrize("bad", [0, 100, "4"])
+def test_bad_points_stride_is_refused(bad):
+    with pytest.raises(SettingsError, match=r"sinks\.rerun.*points_stride"):
+        build_sink("rerun", {"points": True, "points_stride": bad}, SinkContext(rig=RIG))

@@ -143,6 +143,8 @@ def test_close_is_bounded_without_peers(sessions):
         {"shm_pool_mb": -1},
         {"shm_pool_mb": 5000},
         {"shm_pool_mb": "64"},
+        {"points_stride": 0},
+        {"points_stride": "4"},
     ],
 )
 def test_bad_options(opts):
@@ -153,3 +155,26 @@ def test_bad_options(opts):
 def test_needs_session():
     with pytest.raises(ValueError, match="session"):
         build_sink("zenoh", {}).open()
+
+
+def test_points_output_over_zenoh(sessions):
+    """``out/points`` from a depth-clipped fused result: a subscriber decodes the depth map's cloud."""
+    from helpers.points import assert_cloud_is_depth, clipped_result
+
+    svc, client = sessions
+    sub = client.declare_subscriber("vpp/r1/out/points", zenoh.handlers.FifoChannel(8))
+    opts = {"outputs": ["points"], "on_request": [], "points_stride": 2, "congestion_control": "block"}
+    sink = build_sink("zenoh", opts, SinkContext(rig="r1", session=svc))
+    assert type(sink).needs_depth(sink.options)
+    sink.open()
+    time.sleep(0.3)
+    results = [clipped_result(seq) for seq in (1, 2)]
+    for res in results:
+        sink.write(res)
+    sink.close(3.0)
+    got = collect(sub, 2)
+    assert len(got) == 2
+    for sample, res in zip(got, results, strict=True):
+        cloud = wire.decode_output_cloud(sample.payload.to_bytes())
+        assert cloud.seq == res.frame.seq and cloud.stride == 2
+        assert_cloud_is_depth(cloud.xyz, cloud.rgb, res, 2)

@@ -530,3 +530,70 @@ def test_corrupt_images_are_rejected_without_decoder_noise_on_stderr():
         [sys.executable, "-c", _QUIET_PROBE], capture_output=True, text=True, timeout=60, check=True, cwd=root
     )
     assert out.stderr == ""
+
+
+# -- out/points ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("stride", [1, 4])
+def test_points_output_round_trips(stride):
+    """``out/points``: a msgpack header and the xyz / rgb blobs; decoded, it is the depth map's cloud."""
+    from helpers.points import CALIB, assert_cloud_is_depth, clipped_result
+
+    res = clipped_result(seq=5, rig="cam")
+    payload = wire.encode_output(res, "points", points_stride=stride)
+    assert payload is not None
+    assert payload == b"".join(wire.encode_output_parts(res, "points", points_stride=stride) or [])
+    raw = msgpack.unpackb(payload, raw=False)  # any msgpack library reads it: the documented layout
+    assert sorted(raw) == sorted(["v", "rig", "seq", "stamp_ns", "h", "w", "stride", "calib", "n", "xyz", "rgb"])
+    assert (raw["h"], raw["w"], raw["stride"]) == (64, 128, stride)
+    xyz = np.frombuffer(raw["xyz"], "<f4").reshape(raw["n"], 3)
+    rgb = np.frombuffer(raw["rgb"], np.uint8).reshape(raw["n"], 3)
+    assert_cloud_is_depth(xyz, rgb, res, stride)
+    cloud = wire.decode_output_cloud(payload)
+    assert (cloud.rig, cloud.seq, cloud.stamp_ns, cloud.stride) == ("cam", 5, 1_000_005, stride)
+    assert cloud.calib == CALIB
+    np.testing.assert_array_equal(cloud.xyz, xyz)
+    np.testing.assert_array_equal(cloud.rgb, rgb)
+
+
+def test_points_output_needs_metric_depth():
+    res = FusionResult(frame=make_frame(), disparity=np.ones((6, 8), np.float32), depth=None)
+    assert wire.encode_output(res, "points") is None
+
+
+def _points_message(**changes) -> bytes:
+    n = 2
+    msg = {
+        "v": 1,
+        "rig": "r",
+        "seq": 0,
+        "stamp_ns": 0,
+        "h": 4,
+        "w": 4,
+        "stride": 2,
+        "calib": {"f": 10.0, "baseline": 0.1},
+        "n": n,
+        "xyz": np.array([[0, 0, 1], [0.1, 0.2, 2]], "<f4").tobytes(),
+        "rgb": bytes(3 * n),
+    }
+    msg.update(changes)
+    return msgpack.packb(msg, use_bin_type=True)
+
+
+@pytest.mark.parametrize(
+    ("changes", "match"),
+    [
+        ({"rgb": bytes(5)}, r"rgb: 5 bytes, need 6"),
+        ({"xyz": bytes(20)}, r"xyz: expected 24 bytes"),
+        ({"n": 5}, r"\bn\b"),  # more points than the 2 x 2 grid holds
+        ({"stride": 0}, "stride"),
+        ({"xyz": np.array([[0, 0, 1], [0, 0, 0]], "<f4").tobytes()}, "z must be > 0"),
+        ({"xyz": np.array([[0, 0, 1], [np.nan, 0, 1]], "<f4").tobytes()}, "finite"),
+        ({"calib": None}, "calib"),
+    ],
+)
+def test_bad_points_messages_are_rejected(changes, match):
+    assert wire.decode_output_cloud(_points_message()).xyz.shape == (2, 3)
+    with pytest.raises(WireError, match=match):
+        wire.decode_output_cloud(_points_message(**changes))

@@ -20,11 +20,15 @@ metric depth (metres, NaN invalid) as float32 ``.npy``, and ``preview`` saves a
 colour-mapped 8-bit RGB PNG of the disparity (turbo, near = red, invalid = black)
 for looking at: the 16-bit PNGs look black in an ordinary image viewer. Its range
 is ``[0, preview_max_disparity]`` (fixed, comparable between frames) or, when that
-is 0, each frame's own range of valid values.
+is 0, each frame's own range of valid values. ``points`` saves the point cloud as a
+binary little-endian PLY (:mod:`vpp_service.sinks.ply`: ``x y z`` float32 metres in the
+rectified left camera, x right, y down, z forward; ``red green blue`` uchar from the left
+image): the valid (depth-clipped) pixels on every ``points_stride``-th row and column,
+back-projected by :mod:`vpp_service.transport.backproject` (calibrated frames only).
 
 File names are ``<pattern>_<what>.<ext>`` where ``pattern`` (default
 ``{rig}_{seq:06d}``) may use ``rig``, ``seq``, ``stamp_ns`` and ``name``, and
-``<what>`` is ``disparity``, ``disparity_preview``, ``depth``, ``left_vpp`` or ``right_vpp``.
+``<what>`` is ``disparity``, ``disparity_preview``, ``depth``, ``points``, ``left_vpp`` or ``right_vpp``.
 
 Every file is written to a temporary name in the same folder and then renamed
 into place, so readers never see a partial file. After :meth:`FilesSink.open`
@@ -49,6 +53,8 @@ from vpp_service.sinks.base import SINKS, SinkContext
 from vpp_service.sinks.colorize import colorize_disparity
 from vpp_service.sinks.folder import FolderSink, check_pattern, path_inside, write_atomic
 from vpp_service.sinks.ordered import check_reorder_options
+from vpp_service.sinks.ply import encode_ply
+from vpp_service.transport.backproject import DEFAULT_STRIDE, check_stride, depth_to_points
 
 log = logging.getLogger(__name__)
 
@@ -84,6 +90,11 @@ class FilesSinkOptions:
         Also save a colour-mapped RGB PNG of the disparity (``<stem>_disparity_preview.png``).
     preview_max_disparity : float
         Top of the preview's colour range (pixels, >= 0); 0 = each frame's own range.
+    points : bool
+        Also save the point cloud as binary PLY (``<stem>_points.ply``) when the frame is calibrated.
+    points_stride : int
+        Every ``points_stride``-th row and column of the depth map becomes a point (1 = every
+        pixel; the default 4 keeps a 720p cloud under 57 600 points).
     reorder_window : int
         In a worker pool, results held to write them in ``seq`` order
         (:mod:`vpp_service.sinks.ordered`); 0 = off. Outside a pool results come in order.
@@ -100,11 +111,14 @@ class FilesSinkOptions:
     create_dir: bool = False
     preview: bool = False
     preview_max_disparity: float = 0.0
+    points: bool = False
+    points_stride: int = DEFAULT_STRIDE
     reorder_window: int = 16
     reorder_wait_ms: float = 500.0
 
     def __post_init__(self) -> None:
         check_reorder_options(self.reorder_window, self.reorder_wait_ms)
+        check_stride(self.points_stride)
         if not (self.preview_max_disparity >= 0 and np.isfinite(self.preview_max_disparity)):
             raise ValueError(f"preview_max_disparity: must be a finite number >= 0, got {self.preview_max_disparity}")
         if not self.dir.strip():
@@ -215,8 +229,8 @@ class FilesSink(FolderSink):
 
     @classmethod
     def needs_depth(cls, options: FilesSinkOptions) -> bool:
-        """True when the ``depth`` files are written."""
-        return options.depth
+        """True when the ``depth`` or ``points`` files are written."""
+        return options.depth or options.points
 
     DIR_KEY = "sinks.files.dir"
     DIR_WHAT = "output folder"
@@ -231,7 +245,7 @@ class FilesSink(FolderSink):
         """The files :meth:`write` would produce for ``result``, by kind.
 
         Keys are ``png16``/``pfm``/``npy`` (the enabled formats), and
-        ``preview``, ``depth``, ``left_vpp``, ``right_vpp`` when enabled (whether or not the
+        ``preview``, ``depth``, ``points``, ``left_vpp``, ``right_vpp`` when enabled (whether or not the
         result carries that data).
 
         Raises
@@ -247,6 +261,8 @@ class FilesSink(FolderSink):
             names["preview"] = f"{stem}_disparity_preview.png"
         if self.options.depth:
             names["depth"] = f"{stem}_depth.npy"
+        if self.options.points:
+            names["points"] = f"{stem}_points.ply"
         if self.options.painted:
             names["left_vpp"] = f"{stem}_left_vpp.png"
             names["right_vpp"] = f"{stem}_right_vpp.png"
@@ -263,7 +279,7 @@ class FilesSink(FolderSink):
         failures = 0
         for kind, path in paths.items():
             try:
-                writer = self._writer(kind, result)
+                writer = self._points_writer(result) if kind == "points" else self._writer(kind, result)
                 if writer is None:
                     continue
                 write_atomic(path, writer, self.options.overwrite)
@@ -301,6 +317,23 @@ class FilesSink(FolderSink):
             data = buf.getvalue()
             return lambda p: Path(p).write_bytes(data)
         return _painted_writer(result.left_vpp if kind == "left_vpp" else result.right_vpp, kind)
+
+    def _points_writer(self, result: FusionResult) -> Callable[[str], object] | None:
+        """A ``f(tmp_path)`` writing the result's point cloud as PLY, or None without metric depth."""
+        fr = result.frame
+        if result.depth is None or fr.calib is None:
+            return None
+        stride = self.options.points_stride
+        xyz, rgb = depth_to_points(np.asarray(result.depth), fr.left, fr.calib, stride=stride)
+        c = fr.calib
+        comments = [
+            f"vpp-service rig {fr.rig} seq {int(fr.seq)} stamp_ns {int(fr.stamp_ns)}",
+            f"rectified left camera: x right, y down, z forward, metres; stride {stride}",
+            f"f {c.f:.9g} cx {'none' if c.cx is None else f'{c.cx:.9g}'} cy {'none' if c.cy is None else f'{c.cy:.9g}'}"
+            f" baseline {c.baseline:.9g}",
+        ]
+        data = encode_ply(xyz, rgb, comments)
+        return lambda p: Path(p).write_bytes(data)
 
 
 def _painted_writer(img: np.ndarray | None, kind: str) -> Callable[[str], object] | None:

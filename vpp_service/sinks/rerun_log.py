@@ -21,6 +21,14 @@ Entities (root = the rig's name)
     ``rr.DepthImage`` (``meter = 1``), decimated to ``max_points`` pixels: the viewer
     back-projects it into the dense point cloud. Depths beyond ``depth_range``
     are left out so that the view's bounds are the scene's.
+``<rig>/points``
+    With ``points``: the point cloud as ``rr.Points3D`` in the left camera's frame
+    (x right, y down, z forward, metres; the pinhole at ``<rig>/camera`` has no
+    transform of its own, so ``<rig>`` is that frame and the points line up with the
+    camera and its depth image), coloured from the (unpainted) left image: the valid,
+    depth-clipped pixels on every ``points_stride``-th row and column, back-projected
+    by :mod:`vpp_service.transport.backproject`. Not under ``<rig>/camera``: entities
+    below a pinhole live in its 2-D image plane.
 ``<rig>/timing/<stage>``
     Per-stage milliseconds as scalars.
 ``<rig>/accuracy/<name>``
@@ -43,6 +51,7 @@ import numpy as np
 
 from vpp_service.frame import Calibration, FusionResult
 from vpp_service.sinks.colorize import colorize_disparity
+from vpp_service.transport.backproject import DEFAULT_STRIDE, depth_to_points
 from vpp_service.transport.wire import sparse_to_points
 
 if TYPE_CHECKING:
@@ -71,6 +80,8 @@ class RerunParts:
         Needed for the 3-D view.
     sparse : ndarray or None
         N x 3 float32 rows ``(x, y, disparity)`` (pixel indices).
+    colors : ndarray or None
+        The image the 3-D points are coloured from (the unpainted left image); None = grey.
     timing_ms : dict
         Stage name -> milliseconds.
     accuracy : dict
@@ -86,6 +97,7 @@ class RerunParts:
     depth: np.ndarray | None = None
     calib: Calibration | None = None
     sparse: np.ndarray | None = None
+    colors: np.ndarray | None = None
     timing_ms: dict[str, float] = field(default_factory=dict)
     accuracy: dict[str, float] = field(default_factory=dict)
 
@@ -108,6 +120,7 @@ def parts_from_result(result: FusionResult, log_painted: bool = True) -> RerunPa
         depth=result.depth,
         calib=fr.calib,
         sparse=sparse_to_points(fr.sparse_disparity),
+        colors=fr.left,
         timing_ms=dict(result.timing_ms),
         accuracy={k: float(result.metrics[k]) for k in ACCURACY_KEYS if k in result.metrics},
     )
@@ -174,6 +187,10 @@ class RerunLayout:
         Most sparse points logged per frame (evenly subsampled); 0 = none.
     point_cloud : bool
         Log the pinhole and the depth image.
+    points : bool
+        Log the pinhole and the point cloud as ``rr.Points3D`` (``<rig>/points``).
+    points_stride : int
+        Every ``points_stride``-th row and column of the depth map becomes a point.
     """
 
     jpeg_quality: int = 85
@@ -182,6 +199,8 @@ class RerunLayout:
     max_points: int = 200_000
     max_sparse_points: int = 5000
     point_cloud: bool = True
+    points: bool = False
+    points_stride: int = DEFAULT_STRIDE
 
     def blueprint(self, rig: str) -> rrb.Blueprint:
         """The default layout: the pair on top; disparity, 3-D and timing below."""
@@ -206,7 +225,9 @@ class RerunLayout:
                 ),
                 rrb.Horizontal(
                     rrb.Spatial2DView(origin=f"{r}/disparity", name="disparity [px]"),
-                    rrb.Spatial3DView(origin=r, contents=[f"{r}/camera/**"], name="3-D", eye_controls=eye),
+                    rrb.Spatial3DView(
+                        origin=r, contents=[f"{r}/camera/**", f"{r}/points"], name="3-D", eye_controls=eye
+                    ),
                     rrb.Vertical(
                         rrb.TimeSeriesView(origin=f"{r}/timing", name="timing [ms]"),
                         rrb.TimeSeriesView(origin=f"{r}/accuracy", name="accuracy vs GT [%]"),
@@ -288,10 +309,12 @@ class RerunLayout:
                     radii=rr.Radius.ui_points(1.0),
                 ),
             )
-        if self.point_cloud and parts.calib is not None:
+        if (self.point_cloud or self.points) and parts.calib is not None:
             depth = self._depth(parts)
             if depth is not None:
                 self._log_depth(rec, root, depth, parts.calib)
+                if self.points:
+                    self._log_points(rec, root, depth, parts.calib, parts.colors)
         for group, values in (("timing", parts.timing_ms), ("accuracy", parts.accuracy)):
             for name, v in values.items():
                 if isinstance(v, (int, float)) and math.isfinite(v) and ENTITY_RE.match(str(name)):
@@ -301,7 +324,7 @@ class RerunLayout:
         import rerun as rr
 
         h, w = depth.shape
-        s = depth_stride(h, w, self.max_points)
+        s = depth_stride(h, w, self.max_points) if self.point_cloud else 1
         dd = _valid_map(depth[::s, ::s])
         if self.depth_range is not None:
             dd[dd > self.depth_range[1]] = 0.0  # far outliers would push the 3-D view's bounds away
@@ -319,7 +342,19 @@ class RerunLayout:
                 camera_xyz=rr.ViewCoordinates.RDF,
             ),
         )
-        rec.log(f"{root}/camera/depth", rr.DepthImage(dd, meter=1.0, colormap="turbo", depth_range=self.depth_range))
+        if self.point_cloud:
+            rec.log(
+                f"{root}/camera/depth", rr.DepthImage(dd, meter=1.0, colormap="turbo", depth_range=self.depth_range)
+            )
+
+    def _log_points(
+        self, rec: rr.RecordingStream, root: str, depth: np.ndarray, c: Calibration, colors: np.ndarray | None
+    ) -> None:
+        import rerun as rr
+
+        image = colors if colors is not None and colors.shape[:2] == depth.shape else None
+        xyz, rgb = depth_to_points(depth, image, c, stride=self.points_stride)
+        rec.log(f"{root}/points", rr.Points3D(xyz, colors=rgb, radii=rr.Radius.ui_points(1.0)))
 
 
 __all__ = [

@@ -43,9 +43,10 @@ from typing import Literal
 
 import numpy as np
 
-from vpp_service.frame import Calibration, FusionResult
+from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import SINKS, QueueSpec, Sink, SinkContext
 from vpp_service.timing import StageTimer
+from vpp_service.transport.backproject import depth_to_points
 from vpp_service.transport.ros2 import keys
 from vpp_service.transport.ros2 import messages as rm
 from vpp_service.transport.ros2.attachment import Layout
@@ -159,31 +160,6 @@ class Ros2SinkOptions(Ros2OutputOptions):
         keys.check_distro(self.ros_distro)
 
 
-def points_xyz_rgb(
-    depth: np.ndarray, image: np.ndarray, calib: Calibration, organized: bool = False
-) -> tuple[np.ndarray, np.ndarray]:
-    """A depth map as N x 3 points in the left optical frame and N x 3 uint8 colours.
-
-    ``organized``: every pixel, row by row (N = H x W), NaN where the depth is not valid (the
-    colour kept, as stereo_image_proc does); else the valid pixels only.
-    """
-    h, w = depth.shape
-    cx = calib.cx if calib.cx is not None else (w - 1) / 2
-    cy = calib.cy if calib.cy is not None else (h - 1) / 2
-    valid = np.isfinite(depth) & (depth > 0)
-    rgb_all = image if image.ndim == 3 else np.repeat(image[:, :, None], 3, axis=2)
-    if organized:
-        v, u = np.mgrid[0:h, 0:w].reshape(2, -1)
-        z = np.where(valid, depth, np.nan).reshape(-1).astype(np.float32)
-        rgb = rgb_all.reshape(-1, 3)
-    else:
-        v, u = np.nonzero(valid)
-        z = depth[valid].astype(np.float32)
-        rgb = rgb_all[valid]
-    xyz = np.stack([(u - cx) * z / calib.f, (v - cy) * z / calib.f, z], axis=1).astype(np.float32)
-    return xyz, np.ascontiguousarray(rgb, dtype=np.uint8)
-
-
 class Ros2Encoder:
     """CDR payloads of the outputs of one result (see the module docstring for what each holds).
 
@@ -221,7 +197,7 @@ class Ros2Encoder:
             if result.depth is None or calib is None:
                 return None
             organized = self.options.points2_layout == "organized"
-            xyz, rgb = points_xyz_rgb(result.depth, result.frame.left, calib, organized)
+            xyz, rgb = depth_to_points(result.depth, result.frame.left, calib, organized=organized)
             msg = rm.xyz_cloud_message(xyz, header, rgb, result.depth.shape if organized else None)
         else:
             img = result.left_vpp if name == "left_vpp" else result.right_vpp
@@ -332,4 +308,4 @@ class Ros2Sink(Sink):
         return out
 
 
-__all__ = ["OUTPUTS", "Ros2Encoder", "Ros2OutputOptions", "Ros2Sink", "Ros2SinkOptions", "points_xyz_rgb"]
+__all__ = ["OUTPUTS", "Ros2Encoder", "Ros2OutputOptions", "Ros2Sink", "Ros2SinkOptions"]

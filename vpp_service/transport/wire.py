@@ -19,6 +19,7 @@ Topics (``prefix`` defaults to ``"vpp"``)::
     <prefix>/<rig>/out/depth         dense depth, float32 metres, NaN = invalid
     <prefix>/<rig>/out/left_vpp|right_vpp   painted pair, as Images
     <prefix>/<rig>/out/sparse        the sparse input points, n x 3 float32 (x, y, disparity)
+    <prefix>/<rig>/out/points        the point cloud, n x 3 float32 x y z (metres) + n x 3 uint8 RGB
     <prefix>/<rig>/@status           queryable, JSON
     <prefix>/<rig>/@alive            liveliness token
 """
@@ -37,13 +38,14 @@ import numpy as np
 
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
 from vpp_service.transport import _points, msgview
+from vpp_service.transport.backproject import DEFAULT_STRIDE, depth_to_points
 
 #: Wire format version written and accepted.
 VERSION = 1
 #: Default key prefix.
 DEFAULT_PREFIX = "vpp"
 #: Output names a sink may publish.
-OUTPUTS = ("disparity", "depth", "left_vpp", "right_vpp", "sparse")
+OUTPUTS = ("disparity", "depth", "left_vpp", "right_vpp", "sparse", "points")
 
 
 class WireError(ValueError):
@@ -835,7 +837,9 @@ def _map_message(result: FusionResult, arr: np.ndarray, extra: Mapping[str, obje
     return _map_parts(msg, "data", np.ascontiguousarray(arr, dtype="<f4").tobytes())
 
 
-def encode_output_parts(result: FusionResult, name: str, enc: str = "raw") -> list[bytes] | None:
+def encode_output_parts(
+    result: FusionResult, name: str, enc: str = "raw", points_stride: int = DEFAULT_STRIDE
+) -> list[bytes] | None:
     """:func:`encode_output` as a list of byte strings whose concatenation is the message.
 
     The float maps' data is its own part: no copy to join it.
@@ -843,6 +847,8 @@ def encode_output_parts(result: FusionResult, name: str, enc: str = "raw") -> li
     if name not in OUTPUTS:
         raise ValueError(f"name must be one of {OUTPUTS}, got {name!r}")
     fr = result.frame
+    if name in ("sparse", "points"):  # point sets: the sparse input, the output cloud
+        return _sparse_parts(fr) if name == "sparse" else encode_points_parts(result, points_stride)
     if name == "disparity":
         extra = {}
         if result.metrics:
@@ -856,13 +862,6 @@ def encode_output_parts(result: FusionResult, name: str, enc: str = "raw") -> li
         return _map_message(result, result.disparity, extra)
     if name == "depth":
         return None if result.depth is None else _map_message(result, result.depth, {})
-    if name == "sparse":
-        pts = sparse_to_points(fr.sparse_disparity)
-        if pts is None:
-            return None
-        h, w = fr.left.shape[:2]
-        fields = {"v": VERSION, "rig": fr.rig, "seq": int(fr.seq), "stamp_ns": int(fr.stamp_ns), "h": h, "w": w}
-        return _map_parts({**fields, "n": len(pts), "dtype": "f32"}, "data", pts.astype("<f4").tobytes())
     img = result.left_vpp if name == "left_vpp" else result.right_vpp
     if img is None:
         return None
@@ -876,15 +875,28 @@ def encode_output_parts(result: FusionResult, name: str, enc: str = "raw") -> li
     return [msgpack.packb(msg, use_bin_type=True)]
 
 
-def encode_output(result: FusionResult, name: str, enc: str = "raw") -> bytes | None:
-    """Serialize one output (``disparity``, ``depth``, ``left_vpp``, ``right_vpp``).
+def _sparse_parts(fr: StereoFrame) -> list[bytes] | None:
+    """The ``out/sparse`` message of a frame's sparse input points (None without any)."""
+    pts = sparse_to_points(fr.sparse_disparity)
+    if pts is None:
+        return None
+    h, w = fr.left.shape[:2]
+    fields = {"v": VERSION, "rig": fr.rig, "seq": int(fr.seq), "stamp_ns": int(fr.stamp_ns), "h": h, "w": w}
+    return _map_parts({**fields, "n": len(pts), "dtype": "f32"}, "data", pts.astype("<f4").tobytes())
+
+
+def encode_output(
+    result: FusionResult, name: str, enc: str = "raw", points_stride: int = DEFAULT_STRIDE
+) -> bytes | None:
+    """Serialize one output (``disparity``, ``depth``, ``left_vpp``, ``right_vpp``, ``sparse``, ``points``).
 
     Returns None when the result does not have that output (e.g. no depth
     without calibration, no painted pair when VPP was skipped). The
     ``disparity`` message also carries ``metrics`` (vs ground truth) and
-    ``vpp`` (VPP counters) as extensions when known.
+    ``vpp`` (VPP counters) as extensions when known. ``points_stride``: the
+    ``points`` output's decimation (:mod:`vpp_service.transport.backproject`).
     """
-    parts = encode_output_parts(result, name, enc)
+    parts = encode_output_parts(result, name, enc, points_stride)
     return None if parts is None else b"".join(parts)
 
 
@@ -990,6 +1002,110 @@ def decode_output_points(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) ->
     return OutputPoints(rig=rig, seq=seq, stamp_ns=stamp, h=h, w=w, points=pts)
 
 
+# ------------------------------------------------------------ points output
+def _blobs_parts(fields: Mapping[str, object], blobs: Mapping[str, bytes]) -> list[bytes]:
+    """``packb({**fields, **blobs})`` as parts: each blob its own part, the bytes around it between."""
+    pk = msgpack.Packer(use_bin_type=True, autoreset=False)
+    pk.pack_map_header(len(fields) + len(blobs))
+    for k, v in fields.items():
+        pk.pack(k)
+        pk.pack(v)
+    parts: list[bytes] = []
+    for key, blob in blobs.items():
+        pk.pack(key)
+        parts += [pk.bytes() + _bin_header(len(blob)), blob]
+        pk.reset()
+    return parts
+
+
+def encode_points_parts(result: FusionResult, stride: int = DEFAULT_STRIDE) -> list[bytes] | None:
+    """The ``out/points`` message of ``result`` as parts (None without metric depth).
+
+    The valid pixels of the (depth-clipped) depth map on every ``stride``-th row and
+    column, back-projected by :func:`~vpp_service.transport.backproject.depth_to_points`
+    and coloured from the left image, in raster order: an ``xyz`` blob (float32 n x 3)
+    and an ``rgb`` blob (uint8 n x 3) after the header fields.
+    """
+    fr = result.frame
+    if result.depth is None or fr.calib is None:
+        return None
+    xyz, rgb = depth_to_points(np.asarray(result.depth), fr.left, fr.calib, stride=stride)
+    h, w = result.depth.shape
+    fields = {
+        "v": VERSION,
+        "rig": fr.rig,
+        "seq": int(fr.seq),
+        "stamp_ns": int(fr.stamp_ns),
+        "h": int(h),
+        "w": int(w),
+        "stride": int(stride),
+        "calib": fr.calib.to_dict(),
+        "n": len(xyz),
+    }
+    blobs = {"xyz": np.ascontiguousarray(xyz, dtype="<f4").tobytes(), "rgb": rgb.tobytes()}
+    return _blobs_parts(fields, blobs)
+
+
+@dataclass
+class OutputCloud:
+    """A decoded ``out/points`` message.
+
+    Attributes
+    ----------
+    rig, seq, stamp_ns
+        The frame's header.
+    h, w : int
+        Size of the depth map the points come from.
+    stride : int
+        Every ``stride``-th row and column of it.
+    calib : Calibration
+        The rectified left camera the points are in.
+    xyz : ndarray
+        N x 3 float32 ``(x, y, z)`` metres: x right, y down, z forward (> 0).
+    rgb : ndarray
+        N x 3 uint8 colours.
+    """
+
+    rig: str
+    seq: int
+    stamp_ns: int
+    h: int
+    w: int
+    stride: int
+    calib: Calibration
+    xyz: np.ndarray
+    rgb: np.ndarray
+
+
+def decode_output_cloud(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> OutputCloud:
+    """Parse and validate an ``out/points`` message.
+
+    Raises
+    ------
+    WireError
+        Anything wrong, naming the field (blob lengths exactly ``12 n`` / ``3 n``, points
+        finite with ``z > 0``, ``n`` at most the strided grid's size).
+    """
+    msg = unpack(payload, limits)
+    rig, seq, stamp = _header(msg)
+    h = _int(msg, "h", "", 1, limits.max_side)
+    w = _int(msg, "w", "", 1, limits.max_side)
+    stride = _int(msg, "stride", "", 1, limits.max_side)
+    grid = -(-h // stride) * -(-w // stride)
+    n = _int(msg, "n", "", 0, min(grid, limits.max_points))
+    calib = _decode_calib(_req(msg, "calib", ""))
+    xyz = _f32(_bytes(msg, "xyz", ""), 3 * n, "xyz").reshape(n, 3)
+    rgb_b = _bytes(msg, "rgb", "")
+    if len(rgb_b) != 3 * n:
+        raise WireError(f"rgb: {len(rgb_b)} bytes, need {3 * n} (n x 3 uint8)")
+    if not np.isfinite(xyz).all():
+        raise WireError("xyz: coordinates must be finite")
+    if n and xyz[:, 2].min() <= 0:
+        raise WireError("xyz: z must be > 0 (points in front of the camera)")
+    rgb = np.frombuffer(rgb_b, np.uint8).reshape(n, 3)
+    return OutputCloud(rig=rig, seq=seq, stamp_ns=stamp, h=h, w=w, stride=stride, calib=calib, xyz=xyz, rgb=rgb)
+
+
 def decode_output_image(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> tuple[int, np.ndarray]:
     """Parse an ``out/left_vpp`` / ``out/right_vpp`` message; returns ``(seq, image)``."""
     msg = unpack(payload, limits)
@@ -1002,6 +1118,7 @@ __all__ = [
     "DEFAULT_PREFIX",
     "OUTPUTS",
     "VERSION",
+    "OutputCloud",
     "OutputMap",
     "OutputPoints",
     "Part",
@@ -1012,6 +1129,7 @@ __all__ = [
     "decode_frame",
     "decode_image",
     "decode_output",
+    "decode_output_cloud",
     "decode_output_image",
     "decode_output_points",
     "decode_part",
@@ -1021,6 +1139,7 @@ __all__ = [
     "encode_output",
     "encode_output_parts",
     "encode_part",
+    "encode_points_parts",
     "points_to_maps",
     "sparse_to_points",
     "topic",
