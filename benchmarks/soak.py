@@ -32,7 +32,7 @@ One more mode attacks the ROS 2 path (``--mode``):
 ``ros2``
     The service with the ``ros2`` source and sink; a robot (``tests/helpers/ros2_robot.py``)
     sends, before every genuine stereo set, hostile parts carrying the set's own stamp
-    (a ``bgra8`` image, a step that does not match the data, a camera_info with a zero ``P``,
+    (a ``8UC4`` image, a step that does not match the data, a camera_info with a zero ``P``,
     a cloud without ``x y z``) and a burst of junk samples (no rmw_zenoh attachment, or over
     ``max_message_mb``) into 4-deep rings. Figures: genuine sets delivered, rejections by cause,
     and the source's ledger (every received sample in exactly one count).
@@ -293,7 +293,7 @@ def _hostile_parts(rig: Any, stamp: int) -> list[tuple[str, object]]:
     cloud = cloud_msg(rig.cloud, stamp, "l")
     cloud.fields = cloud.fields[:1]  # x only: no y, z
     return [
-        ("left/image_rect", image_msg(np.zeros((h, w, 4), np.uint8), stamp, "l", encoding="bgra8")),
+        ("left/image_rect", image_msg(np.zeros((h, w, 4), np.uint8), stamp, "l", encoding="8UC4")),
         ("right/image_rect", step),
         ("left/camera_info", camera_info_from_p(stamp, "l", (w, h), np.zeros((3, 4)))),
         ("points", cloud),

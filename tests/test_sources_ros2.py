@@ -165,8 +165,8 @@ def test_overload_loses_nothing_under_block_and_counts_every_drop_under_latest(s
     try:
         assert robot.wait_for_subscribers(["left/image_rect", "right/image_rect", "points"])
         rig = tiny_rig()
-        h, w = rig.left.shape[:2]  # one whole set whose left image is bgra8: joined, then refused
-        robot.put("left/image_rect", image_msg(np.zeros((h, w, 4), np.uint8), 400, "l", encoding="bgra8"))
+        h, w = rig.left.shape[:2]  # one whole set whose left image is 8UC4: joined, then refused
+        robot.put("left/image_rect", image_msg(np.zeros((h, w, 4), np.uint8), 400, "l", encoding="8UC4"))
         robot.put("right/image_rect", image_msg(rig.right, 400, "r"))
         robot.put("left/camera_info", camera_info_from_p(400, "l", (w, h), rig.projection(right=False)))
         robot.put("right/camera_info", camera_info_from_p(400, "r", (w, h), rig.projection(right=True)))
@@ -217,7 +217,7 @@ def test_a_bad_part_with_the_genuine_stamp_does_not_take_its_slot(sessions, bad,
         rig = tiny_rig()
         h, w = rig.left.shape[:2]
         if bad == "encoding":
-            robot.put("left/image_rect", image_msg(rig.left, 1_000, "l", encoding="bgra8"))
+            robot.put("left/image_rect", image_msg(rig.left, 1_000, "l", encoding="8UC4"))
         elif bad == "step":
             msg = image_msg(rig.left, 1_000, "l")
             msg.step = w * 3 + 7  # step x height no longer matches the data
@@ -293,8 +293,8 @@ def test_a_junk_burst_never_takes_a_ring_slot(sessions):
 def test_every_received_message_ends_in_exactly_one_count(sessions):
     """A rejected set, a junk burst, a set refused whole, three good sets and a half set left at shutdown.
 
-    Expected ends (J = 24 junk samples): used 3 x 5; rejected J + 1 (the bgra8 image) + 4 (the set
-    whose camera_info has another size); sync_dropped 3 (the bgra8 set's partners, passed over by the
+    Expected ends (J = 24 junk samples): used 3 x 5; rejected J + 1 (the 8UC4 image) + 4 (the set
+    whose camera_info has another size); sync_dropped 3 (the 8UC4 set's partners, passed over by the
     next match); unmatched 4 (the two clouds no set took, the half set's 2 parts).
     """
     svc, bot = sessions
@@ -308,8 +308,8 @@ def test_every_received_message_ends_in_exactly_one_count(sessions):
         assert robot.wait_for_subscribers(["left/image_rect", "right/image_rect", "points"])
         rig = tiny_rig()
         h, w = rig.left.shape[:2]
-        # a set whose left image is bgra8: the image is refused, its 3 partners and its cloud stay behind
-        robot.put("left/image_rect", image_msg(np.zeros((h, w, 4), np.uint8), 400, "l", encoding="bgra8"))
+        # a set whose left image is 8UC4: the image is refused, its 3 partners and its cloud stay behind
+        robot.put("left/image_rect", image_msg(np.zeros((h, w, 4), np.uint8), 400, "l", encoding="8UC4"))
         robot.put("right/image_rect", image_msg(rig.right, 400, "r"))
         robot.put("left/camera_info", camera_info_from_p(400, "l", (w, h), rig.projection(right=False)))
         robot.put("right/camera_info", camera_info_from_p(400, "r", (w, h), rig.projection(right=True)))

@@ -180,6 +180,44 @@ def test_mono_frames():
     assert frames[0].left.shape == (H, W)
 
 
+def test_compressed_transport_topics_types_and_refusals():
+    from helpers.ros2_robot import compressed_bytes_msg, compressed_image_msg
+
+    asm, rejects = make(depth_type="image", transport="compressed", left_image="left/image_raw")
+    t = asm.topics
+    assert t.topic("left_image") == "/stereo/left/image_raw/compressed"
+    assert t.topic("right_image") == "/stereo/right/image_rect/compressed"
+    assert t.ros_type("left_image") == t.ros_type("right_image") == "sensor_msgs/msg/CompressedImage"
+    assert (
+        t.topic("left_info") == "/stereo/left/camera_info" and t.ros_type("left_info") == "sensor_msgs/msg/CameraInfo"
+    )
+    assert t.topic("depth") == "/stereo/points" and t.ros_type("depth") == "sensor_msgs/msg/Image"  # depth stays raw
+    rng = np.random.default_rng(3)
+    img = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    comp_t = "sensor_msgs/msg/CompressedImage"
+
+    def views(stamp: int, left: object | None = None) -> dict[str, bytes]:
+        parts = pair(stamp)
+        parts["left_image"] = cdr(left or compressed_image_msg(img, stamp, "left", "png"), comp_t)
+        parts["right_image"] = cdr(compressed_image_msg(img, stamp, "right", "png"), comp_t)
+        return parts
+
+    depth = cdr(image_msg(np.full((H, W), 1.5, np.float32), 1, "left", "32FC1"), "sensor_msgs/msg/Image")
+    asm.add("depth", depth)
+    (f,) = feed(asm, views(1))
+    np.testing.assert_array_equal(f.left, img)
+    np.testing.assert_array_equal(f.right, img)
+    jpeg = compressed_image_msg(img, 2, "left", "jpeg")
+    cut = compressed_bytes_msg(jpeg.data.tobytes()[:-30], 2, "left", jpeg.format)
+    assert feed(asm, views(2, cut)) == []
+    assert asm.rejected_by == {"corrupt": 1}
+    assert rejects == [
+        "/stereo/left/image_raw/compressed: corrupt: compressed image: truncated JPEG stream (no end-of-image marker)"
+    ]
+    asm.add("depth", cdr(image_msg(np.full((H, W), 1.5, np.float32), 3, "left", "32FC1"), "sensor_msgs/msg/Image"))
+    assert len(feed(asm, views(3))) == 1  # nothing else lost
+
+
 def tf_static(*entries) -> bytes:
     return cdr(tf_message(list(entries)), "tf2_msgs/msg/TFMessage")
 
@@ -237,6 +275,7 @@ def test_bad_tf_message_refused():
         {"depth_tolerance_ms": -1.0},
         {"max_message_mb": 0.0},
         {"depth_type": "laser"},
+        {"transport": "theora"},
     ],
 )
 def test_bad_options(opts):

@@ -4,14 +4,24 @@ from __future__ import annotations
 
 import struct
 
+import cv2
 import numpy as np
 import pytest
 
+from helpers.hostile import png_bomb
 from helpers.ros2_robot import TS, tf_message
 from vpp_service.frame import Calibration
 from vpp_service.transport.ros2 import messages as m
 from vpp_service.transport.ros2.errors import Ros2Error
-from vpp_service.transport.ros2.keys import CAMERA_INFO, DISPARITY_IMAGE, IMAGE, POINT_CLOUD2, TF_MESSAGE, type_hash
+from vpp_service.transport.ros2.keys import (
+    CAMERA_INFO,
+    COMPRESSED_IMAGE,
+    DISPARITY_IMAGE,
+    IMAGE,
+    POINT_CLOUD2,
+    TF_MESSAGE,
+    type_hash,
+)
 
 LIMITS = m.Limits()
 
@@ -85,8 +95,156 @@ def test_mono16_scaled(big):
 
 def test_unsupported_encoding_named():
     with pytest.raises(Ros2Error) as err:
-        m.image_to_array(image(np.zeros((2, 2), np.uint8), "bayer_rggb8"), LIMITS)
-    assert err.value.reason == "encoding" and "bayer_rggb8" in str(err.value)
+        m.image_to_array(image(np.zeros((2, 2), np.uint8), "nv21"), LIMITS)
+    assert err.value.reason == "encoding" and "nv21" in str(err.value) and "bayer_rggb8" in str(err.value)
+
+
+def smooth_rgb(h: int = 40, w: int = 64, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return cv2.GaussianBlur(rng.integers(0, 256, (h, w, 3), dtype=np.uint8), (9, 9), 0)
+
+
+def mosaic(rgb: np.ndarray, pattern: str) -> np.ndarray:
+    """What a Bayer sensor of ``pattern`` (``"rggb"``: R at (0, 0), G at (0, 1), G at (1, 0), B at (1, 1)) records."""
+    out = np.empty(rgb.shape[:2], np.uint8)
+    for k, colour in enumerate(pattern):
+        out[k // 2 :: 2, k % 2 :: 2] = rgb[k // 2 :: 2, k % 2 :: 2, "rgb".index(colour)]
+    return out
+
+
+@pytest.mark.parametrize("pattern", ["rggb", "bggr", "gbrg", "grbg"])
+def test_bayer_demosaiced_with_the_ros_pattern(pattern):
+    rgb = smooth_rgb()
+    raw = mosaic(rgb, pattern)
+    got = m.image_to_array(roundtrip(image(raw, f"bayer_{pattern}8"), IMAGE, m.Image), LIMITS)
+    assert got.shape == rgb.shape
+    inner = (slice(4, -4), slice(4, -4))
+    err = np.abs(got[inner].astype(int) - rgb[inner].astype(int)).mean()
+    assert err < 3.0, err
+    swapped = {"rggb": "bggr", "bggr": "rggb", "gbrg": "grbg", "grbg": "gbrg"}[pattern]  # red and blue exchanged
+    wrong = m.image_to_array(image(raw, f"bayer_{swapped}8"), LIMITS)
+    assert np.abs(wrong[inner].astype(int) - rgb[inner].astype(int)).mean() > 3 * err
+
+
+def yuv422(rgb: np.ndarray, order: str) -> np.ndarray:
+    """Packed 4:2:2 (BT.601, video range) in byte ``order`` ``"uyvy"`` or ``"yuyv"``: H x 2W uint8."""
+    f = rgb.astype(np.float64)
+    r, g, b = f[..., 0], f[..., 1], f[..., 2]
+    y = 16 + 0.257 * r + 0.504 * g + 0.098 * b
+    u = 128 - 0.148 * r - 0.291 * g + 0.439 * b
+    v = 128 + 0.439 * r - 0.368 * g - 0.071 * b
+    u2, v2 = (u[:, 0::2] + u[:, 1::2]) / 2, (v[:, 0::2] + v[:, 1::2]) / 2  # one U and V per two pixels
+    planes = {"y0": y[:, 0::2], "y1": y[:, 1::2], "u": u2, "v": v2}
+    names = ["u", "y0", "v", "y1"] if order == "uyvy" else ["y0", "u", "y1", "v"]
+    out = np.stack([planes[n] for n in names], axis=-1).reshape(rgb.shape[0], -1)
+    return np.clip(np.rint(out), 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize(
+    ("encoding", "order"), [("yuv422", "uyvy"), ("uyvy", "uyvy"), ("yuv422_yuy2", "yuyv"), ("yuyv", "yuyv")]
+)
+def test_yuv422_converted(encoding, order):
+    rgb = smooth_rgb()
+    packed = yuv422(rgb, order)
+    msg = m.Image(
+        header=m.make_header(5, "f"),
+        height=rgb.shape[0],
+        width=rgb.shape[1],
+        encoding=encoding,
+        is_bigendian=0,
+        step=packed.shape[1],
+        data=packed.reshape(-1),
+    )
+    got = m.image_to_array(roundtrip(msg, IMAGE, m.Image), LIMITS)
+    assert got.shape == rgb.shape
+    assert np.abs(got.astype(int) - rgb.astype(int)).mean() < 3.0
+    msg.width, msg.step = rgb.shape[1] - 1, packed.shape[1] - 2
+    msg.data = packed[:, :-2].reshape(-1).copy()
+    with pytest.raises(Ros2Error, match="width 63 is odd") as err:
+        m.image_to_array(msg, LIMITS)
+    assert err.value.reason == "layout"
+
+
+def test_rgba_and_bgra_lose_their_alpha():
+    rgb = smooth_rgb(4, 6)
+    alpha = np.full((4, 6, 1), 7, np.uint8)
+    np.testing.assert_array_equal(m.image_to_array(image(np.concatenate([rgb, alpha], 2), "rgba8"), LIMITS), rgb)
+    bgra = np.concatenate([rgb[:, :, ::-1], alpha], 2)
+    np.testing.assert_array_equal(m.image_to_array(image(bgra, "bgra8", step=30), LIMITS), rgb)
+
+
+def compressed(data: bytes, fmt: str) -> m.CompressedImage:
+    msg = m.CompressedImage(header=m.make_header(5, "f"), format=fmt, data=np.frombuffer(data, np.uint8))
+    return roundtrip(msg, COMPRESSED_IMAGE, m.CompressedImage)
+
+
+def encoded(img: np.ndarray, ext: str, quality: int = 95) -> bytes:
+    bgr = img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_RGB2BGR)  # as compressed_image_transport: bgr8
+    ok, buf = cv2.imencode(ext, bgr, [cv2.IMWRITE_JPEG_QUALITY, quality] if ext == ".jpg" else [])
+    assert ok
+    return buf.tobytes()
+
+
+@pytest.mark.parametrize(
+    ("fmt", "ext", "grey"),
+    [
+        ("rgb8; jpeg compressed bgr8", ".jpg", False),
+        ("bgr8; png compressed bgr8", ".png", False),
+        ("mono8; jpeg compressed ", ".jpg", True),
+        ("mono8; png compressed ", ".png", True),
+        ("jpeg", ".jpg", False),  # older publishers: the codec alone
+        ("png", ".png", True),
+        ("", ".jpg", False),  # nothing named: the stream's magic bytes decide
+    ],
+)
+def test_compressed_views_decoded(fmt, ext, grey):
+    rgb = smooth_rgb()
+    img = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY) if grey else rgb
+    got = m.compressed_to_array(compressed(encoded(img, ext), fmt), LIMITS)
+    assert got.shape == img.shape and got.dtype == np.uint8
+    err = np.abs(got.astype(int) - img.astype(int))
+    assert (err.max() == 0) if ext == ".png" else (err.mean() < 4.0)  # JPEG q95 (4:2:0 chroma) of a fine texture
+    if not grey:  # RGB, not the stream's BGR
+        assert np.abs(got.astype(int) - img[:, :, ::-1].astype(int)).mean() > 4 * max(err.mean(), 1.0)
+
+
+def test_compressed_mono16_png_scaled_and_bayer_png_demosaiced():
+    v = np.array([[0, 257, 65535, 32768]], np.uint16)
+    _, buf = cv2.imencode(".png", v)
+    got = m.compressed_to_array(compressed(buf.tobytes(), "mono16; png compressed "), LIMITS)
+    np.testing.assert_array_equal(got, [[0, 1, 255, 128]])
+    rgb = smooth_rgb()
+    raw = mosaic(rgb, "grbg")
+    got = m.compressed_to_array(compressed(encoded(raw, ".png"), "bayer_grbg8; png compressed "), LIMITS)
+    want = m.image_to_array(image(raw, "bayer_grbg8"), LIMITS)
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize(
+    ("fmt", "data", "reason", "message"),
+    [
+        ("rgb8; jpeg compressed bgr8", "truncated", "corrupt", "truncated JPEG stream (no end-of-image marker)"),
+        ("rgb8; png compressed bgr8", "bomb", "too_large", "PNG stream declares 20000x20000 = 400000000 pixels"),
+        ("rgb8; png compressed bgr8", "png_cut", "corrupt", "truncated PNG stream"),
+        ("rgb8; jpeg compressed bgr8", "garbage", "corrupt", "not a PNG or JPEG stream"),
+        ("rgb8; png compressed bgr8", "jpeg", "encoding", "says png, the data is a jpeg stream"),
+        ("rgb8; tiff compressed bgr8", "jpeg", "encoding", "codec 'tiff' not supported; accepted: jpeg, png"),
+        ("16UC1; compressedDepth png", "png", "encoding", "compressedDepth stream"),
+    ],
+)
+def test_bad_compressed_views_refused_with_their_cause(fmt, data, reason, message):
+    good_jpeg, good_png = encoded(smooth_rgb(), ".jpg"), encoded(smooth_rgb(), ".png")
+    payload = {
+        "truncated": good_jpeg[: len(good_jpeg) * 2 // 3],
+        "bomb": png_bomb(20000, 20000),
+        "png_cut": good_png[:-20],
+        "garbage": b"\x00" * 64,
+        "jpeg": good_jpeg,
+        "png": good_png,
+    }[data]
+    with pytest.raises(Ros2Error) as err:
+        m.compressed_to_array(compressed(payload, fmt), LIMITS)
+    assert err.value.reason == reason and message in str(err.value), str(err.value)
 
 
 def test_bounds_checked_before_work():

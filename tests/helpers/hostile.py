@@ -55,6 +55,23 @@ def _png_header(h: int, w: int) -> bytes:
     return out + struct.pack(">I", len(idat) - 4) + idat + struct.pack(">I", zlib.crc32(idat))
 
 
+def _chunk(kind: bytes, body: bytes) -> bytes:
+    return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+
+def png_bomb(width: int, height: int) -> bytes:
+    """A complete, valid PNG of ``width`` x ``height`` black 1-bit pixels: 20000 x 20000 is ~40 KiB on the wire.
+
+    Every chunk and CRC is right, so only a bound on the declared size stops a decoder from
+    allocating the whole image (400 M pixels, 1.2 GB as an 8-bit colour image).
+    """
+    row = b"\0" * (1 + (width + 7) // 8)  # filter byte "none", then the packed bits
+    z = zlib.compressobj(9)
+    idat = b"".join(z.compress(row) for _ in range(height)) + z.flush()
+    ihdr = struct.pack(">IIBBBBB", width, height, 1, 0, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", ihdr) + _chunk(b"IDAT", idat) + _chunk(b"IEND", b"")
+
+
 def _with_image(seq: int, **image: object) -> bytes:
     msg = _fields(seq)
     left = dict(msg["left"])  # type: ignore[call-overload]
@@ -202,4 +219,4 @@ def stage(kind: str) -> Stage:
     return KINDS[kind][0]
 
 
-__all__ = ["KINDS", "hostile_message", "stage", "valid_message"]
+__all__ = ["KINDS", "hostile_message", "png_bomb", "stage", "valid_message"]

@@ -1,9 +1,11 @@
 """A ROS 2 "robot" written from the rmw_zenoh contract alone (rosbags + zenoh, none of vpp_service's ROS code).
 
-It publishes a rectified stereo pair, both camera_info and a PointCloud2 the way an
-rmw_zenoh node does (keys ``<domain>/<topic>/<type>/<hash>``, CDR payloads, the
-33-byte attachment, liveliness tokens) and subscribes to ``DisparityImage`` with a
-subscriber token, so the tests check the service against the contract, not against itself.
+It publishes a rectified stereo pair, both camera_info and a PointCloud2 (or, with its own
+``topics``, raw images, ``CompressedImage`` views as image_transport's ``compressed``
+plugin writes them, a raw camera's camera_info) the way an rmw_zenoh node does (keys
+``<domain>/<topic>/<type>/<hash>``, CDR payloads, the 33-byte attachment, liveliness tokens) and
+subscribes to ``DisparityImage`` with a subscriber token, so the tests check the service against
+the contract, not against itself.
 """
 
 from __future__ import annotations
@@ -17,11 +19,14 @@ import zenoh
 import zenoh.ext
 from rosbags.typesys import Stores, get_typestore
 
+from vpp_service.rectify import CameraInfo as RawCamera  # a calibration file's content, not the ROS transport
+
 TS = get_typestore(Stores.ROS2_JAZZY)
 T = TS.types
 
 HASH = {
     "sensor_msgs/msg/Image": "RIHS01_d31d41a9a4c4bc8eae9be757b0beed306564f7526c88ea6a4588fb9582527d47",
+    "sensor_msgs/msg/CompressedImage": TS.hash_rihs01("sensor_msgs/msg/CompressedImage"),
     "sensor_msgs/msg/CameraInfo": "RIHS01_b3dfd68ff46c9d56c80fd3bd4ed22c7a4ddce8c8348f2f59c299e73118e7e275",
     "sensor_msgs/msg/PointCloud2": "RIHS01_9198cabf7da3796ae6fe19c4cb3bdd3525492988c70522628af5daa124bae2b5",
     "stereo_msgs/msg/DisparityImage": "RIHS01_1ec1ff6b5bace919e4544a37f2d96ead9f81783701b7b7a4d97a09325ecf2711",
@@ -58,6 +63,53 @@ def image_msg(img: np.ndarray, stamp_ns: int, frame_id: str, encoding: str | Non
         is_bigendian=0,
         step=data.size // h,
         data=data,
+    )
+
+
+def compressed_image_msg(
+    img: np.ndarray, stamp_ns: int, frame_id: str, codec: str = "jpeg", quality: int = 95
+) -> object:
+    """A ``CompressedImage`` of an RGB (H x W x 3) or mono8 image as compressed_image_transport writes it.
+
+    The stream holds BGR for a colour image and ``format`` says so: ``"rgb8; jpeg compressed bgr8"``,
+    ``"mono8; png compressed "``.
+    """
+    import cv2
+
+    colour = img.ndim == 3
+    params = [cv2.IMWRITE_JPEG_QUALITY, quality] if codec == "jpeg" else [cv2.IMWRITE_PNG_COMPRESSION, 1]
+    ok, buf = cv2.imencode(".jpg" if codec == "jpeg" else ".png", img[:, :, ::-1] if colour else img, params)
+    assert ok
+    fmt = f"rgb8; {codec} compressed bgr8" if colour else f"mono8; {codec} compressed "
+    return compressed_bytes_msg(buf.tobytes(), stamp_ns, frame_id, fmt)
+
+
+def compressed_bytes_msg(data: bytes, stamp_ns: int, frame_id: str, fmt: str) -> object:
+    """A ``CompressedImage`` carrying ``data`` as given (e.g. a damaged stream) with ``format`` = ``fmt``."""
+    return T["sensor_msgs/msg/CompressedImage"](
+        header=header(stamp_ns, frame_id), format=fmt, data=np.frombuffer(data, np.uint8)
+    )
+
+
+def raw_camera_info_msg(stamp_ns: int, frame_id: str, info: RawCamera, **changes: object) -> object:
+    """A raw camera's ``CameraInfo``: ``K``, ``D``, ``R``, ``P`` of ``info``, fields replaced by ``changes``."""
+    fields = {
+        "k": np.asarray(info.k, np.float64).ravel().copy(),
+        "d": np.asarray(info.d, np.float64).copy(),
+        "r": np.asarray(info.r, np.float64).ravel().copy(),
+        "p": np.asarray(info.p, np.float64).ravel().copy(),
+        **changes,
+    }
+    roi = T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
+    return T["sensor_msgs/msg/CameraInfo"](
+        header=header(stamp_ns, frame_id),
+        height=info.height,
+        width=info.width,
+        distortion_model=info.distortion_model,
+        binning_x=0,
+        binning_y=0,
+        roi=roi,
+        **fields,
     )
 
 
@@ -159,22 +211,31 @@ class StereoRig:
         return np.array([[self.f, 0, cx, tx], [0, self.f, self.cy, 0], [0, 0, 1.0, 0]])
 
 
-class Robot:
-    """An rmw_zenoh node ``/stereo/robot`` that publishes a stereo rig and receives disparity."""
+#: What a rectified rig publishes (topic under the namespace -> type).
+RECTIFIED_TOPICS = {
+    "left/image_rect": "sensor_msgs/msg/Image",
+    "left/camera_info": "sensor_msgs/msg/CameraInfo",
+    "right/image_rect": "sensor_msgs/msg/Image",
+    "right/camera_info": "sensor_msgs/msg/CameraInfo",
+    "points": "sensor_msgs/msg/PointCloud2",
+}
 
-    def __init__(self, session: zenoh.Session, domain: int = 0, namespace: str = "/stereo") -> None:
+
+class Robot:
+    """An rmw_zenoh node ``/stereo/robot`` that publishes a stereo rig and receives disparity.
+
+    ``topics`` (name under the namespace -> type) are its publishers; default :data:`RECTIFIED_TOPICS`.
+    """
+
+    def __init__(
+        self, session: zenoh.Session, domain: int = 0, namespace: str = "/stereo", topics: dict[str, str] | None = None
+    ) -> None:
         self.session, self.domain, self.ns = session, domain, namespace
         self.zid = str(session.zid())
         self.seq: dict[str, int] = {}
         self.tokens = [session.liveliness().declare_token(f"@ros2_lv/{domain}/{self.zid}/0/0/NN/%/%stereo/robot")]
         self.pubs: dict[str, zenoh.Publisher] = {}
-        self.topics = {
-            "left/image_rect": "sensor_msgs/msg/Image",
-            "left/camera_info": "sensor_msgs/msg/CameraInfo",
-            "right/image_rect": "sensor_msgs/msg/Image",
-            "right/camera_info": "sensor_msgs/msg/CameraInfo",
-            "points": "sensor_msgs/msg/PointCloud2",
-        }
+        self.topics = dict(RECTIFIED_TOPICS if topics is None else topics)
         for eid, (name, ros_type) in enumerate(self.topics.items(), start=1):
             topic = f"{namespace}/{name}"
             self.pubs[name] = session.declare_publisher(
@@ -277,23 +338,38 @@ class Robot:
 
 
 def write_bag(
-    path: str, storage: str, rig: StereoRig, stamps: list[int], namespace: str = "/stereo", *, zstd: bool = False
+    path: str,
+    storage: str,
+    rig: StereoRig,
+    stamps: list[int],
+    namespace: str = "/stereo",
+    *,
+    zstd: bool = False,
+    compressed: str | None = None,
 ) -> None:
     """A rosbag2 bag (``storage`` = "mcap" or "sqlite3") with the rig's five topics at each stamp, via rosbags.
 
     ``zstd``: MCAP chunks compressed with zstd (rosbags' storage compression), as ros2 bag record writes them.
+    ``compressed`` ("jpeg" or "png"): the views as ``CompressedImage`` on ``image_rect/compressed`` instead.
     """
     from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     h, w = rig.left.shape[:2]
+    suffix, image_type = (
+        ("/compressed", "sensor_msgs/msg/CompressedImage") if compressed else ("", "sensor_msgs/msg/Image")
+    )
     types = {
-        "left/image_rect": "sensor_msgs/msg/Image",
-        "right/image_rect": "sensor_msgs/msg/Image",
+        f"left/image_rect{suffix}": image_type,
+        f"right/image_rect{suffix}": image_type,
         "left/camera_info": "sensor_msgs/msg/CameraInfo",
         "right/camera_info": "sensor_msgs/msg/CameraInfo",
         "points": "sensor_msgs/msg/PointCloud2",
     }
+
+    def view(img: np.ndarray, stamp: int, frame_id: str) -> object:
+        return compressed_image_msg(img, stamp, frame_id, compressed) if compressed else image_msg(img, stamp, frame_id)
+
     bag = Writer(path, version=9, storage_plugin=plugin)
     if zstd:
         bag.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
@@ -301,8 +377,8 @@ def write_bag(
         conns = {n: writer.add_connection(f"{namespace}/{n}", t, typestore=TS) for n, t in types.items()}
         for stamp in stamps:
             msgs = {
-                "left/image_rect": image_msg(rig.left, stamp, "left_optical"),
-                "right/image_rect": image_msg(rig.right, stamp, "right_optical"),
+                f"left/image_rect{suffix}": view(rig.left, stamp, "left_optical"),
+                f"right/image_rect{suffix}": view(rig.right, stamp, "right_optical"),
                 "left/camera_info": camera_info_from_p(stamp, "left_optical", (w, h), rig.projection(right=False)),
                 "right/camera_info": camera_info_from_p(stamp, "right_optical", (w, h), rig.projection(right=True)),
                 "points": cloud_msg(rig.cloud, stamp, "left_optical"),

@@ -5,7 +5,9 @@ to ``left/image_rect``, ``left/camera_info``, ``right/image_rect``, ``right/came
 and the sparse depth on ``points`` (a ``PointCloud2``, or with ``depth_type = "image"``
 a depth ``Image`` registered to the left camera), and, for a cloud without a configured
 ``lidar_to_left``, the static transforms on ``/tf_static``; every name is an option, and an
-absolute name (``/velodyne_points``) ignores the namespace. It declares a node token
+absolute name (``/velodyne_points``) ignores the namespace. With ``transport = "compressed"``
+the views are ``sensor_msgs/CompressedImage`` on ``<image topic>/compressed``; with
+``rectify = true`` they are raw images, rectified with their camera_info. It declares a node token
 and one subscriber token per topic, so lazy publishers start sending. The tokens carry
 ``ros_distro``'s type-hash segment (``humble``: ``TypeHashNotSupported``) and the QoS the
 source keeps: best effort, volatile, depth ``ring_size``, keep last under the ``latest``

@@ -38,6 +38,11 @@
    ``P``, a depth image is taken as registered to the raw left image and moved point by
    point. A camera_info that cannot rectify (NaN, all-zero ``P``, not a pair) refuses the
    set (cause ``calibration``).
+7. With ``transport = "compressed"`` the two views come as ``sensor_msgs/CompressedImage``
+   (JPEG or PNG) on ``<image topic>/compressed``, image_transport's name, and are decoded
+   on arrival (:func:`~vpp_service.transport.ros2.messages.compressed_to_array`: the
+   declared size bounded before decoding, a truncated or corrupt stream refused, cause
+   ``corrupt``); everything else (camera_info, rectification, depth) is as with raw images.
 
 Every refused message or pair is counted by cause in :attr:`StereoAssembler.rejected_by`
 and reported through ``reject``. :attr:`StereoAssembler.messages` follows every message
@@ -78,6 +83,10 @@ ROLES = (*STEREO_ROLES, "depth")
 TF_ROLE = "tf_static"
 #: What the depth topic carries.
 DepthType = Literal["cloud", "image", "none"]
+#: How the two views travel (image_transport's names): ``sensor_msgs/Image``, or ``CompressedImage`` on ``/compressed``.
+Transport = Literal["raw", "compressed"]
+#: The roles of the two views (their topic and type follow :attr:`StereoTopics.transport`).
+IMAGE_ROLES = ("left_image", "right_image")
 
 _ROLE_TYPES = {
     "left_image": keys.IMAGE,
@@ -96,7 +105,13 @@ class StereoTopics:
     namespace : str
         ROS namespace of the relative topic names.
     left_image, left_info, right_image, right_info : str
-        The images (rectified, or raw with ``rectify``) and their camera_info.
+        The images (rectified, or raw with ``rectify``) and their camera_info. The image topics
+        are image_transport's base topics: with ``transport = "compressed"`` the source reads
+        ``<left_image>/compressed``.
+    transport : {"raw", "compressed"}
+        How the two views travel, as image_transport names it: ``raw`` = ``sensor_msgs/Image``
+        on the image topics; ``compressed`` = ``sensor_msgs/CompressedImage`` (JPEG or PNG) on
+        ``<image topic>/compressed``. The depth image (``depth_type = "image"``) is always raw.
     rectify : bool
         The images are raw (``left/image_raw``): rectify them with the camera_info's
         ``D``, ``K``, ``R``, ``P`` (module docstring, 6.).
@@ -135,6 +150,7 @@ class StereoTopics:
     right_image: str = "right/image_rect"
     right_info: str = "right/camera_info"
     rectify: bool = False
+    transport: Transport = "raw"
     depth_topic: str = "points"
     depth_type: DepthType = "cloud"
     lidar_to_left: list[list[float]] | None = None
@@ -167,6 +183,8 @@ class StereoTopics:
     def topic(self, role: str) -> str:
         """The fully-qualified topic of ``role``."""
         name = {"depth": self.depth_topic, TF_ROLE: self.tf_topic}.get(role) or getattr(self, role)
+        if role in IMAGE_ROLES and self.transport == "compressed":
+            name = name.rstrip("/") + "/compressed"
         return keys.fully_qualified(self.namespace, name)
 
     def uses_tf(self) -> bool:
@@ -185,6 +203,8 @@ class StereoTopics:
             return keys.TF_MESSAGE
         if role == "depth":
             return keys.POINT_CLOUD2 if self.depth_type == "cloud" else keys.IMAGE
+        if role in IMAGE_ROLES and self.transport == "compressed":
+            return keys.COMPRESSED_IMAGE
         return _ROLE_TYPES[role]
 
     def limits(self) -> rm.Limits:
@@ -354,7 +374,7 @@ class StereoAssembler:
         Ros2Error
             The part's content is unusable (encoding, ``step`` x ``height`` against the data, size
             limits, a camera_info without a valid ``P``, a cloud without float ``x``/``y``/``z``, a
-            transform that is not rigid).
+            transform that is not rigid, a compressed view that is truncated or declares too many pixels).
         """
         if isinstance(msg, rm.CameraInfo):
             return rm.camera_model(msg)
@@ -362,6 +382,8 @@ class StereoAssembler:
             return rm.tf_transforms(msg)
         if isinstance(msg, rm.PointCloud2):
             return rm.cloud_to_xyz(msg, self._limits)
+        if isinstance(msg, rm.CompressedImage):
+            return rm.compressed_to_array(msg, self._limits)
         assert isinstance(msg, rm.Image)
         if role == "depth":
             return rm.depth_image_to_array(msg, self._limits)
@@ -562,4 +584,13 @@ class StereoAssembler:
         return {**self.counters, "rejected_by": dict(self.rejected_by), "messages": messages, "sync": self.sync.stats()}
 
 
-__all__ = ["ROLES", "STEREO_ROLES", "TF_ROLE", "DepthType", "StereoAssembler", "StereoTopics"]
+__all__ = [
+    "IMAGE_ROLES",
+    "ROLES",
+    "STEREO_ROLES",
+    "TF_ROLE",
+    "DepthType",
+    "StereoAssembler",
+    "StereoTopics",
+    "Transport",
+]

@@ -27,8 +27,6 @@ Topics (``prefix`` defaults to ``"vpp"``)::
 from __future__ import annotations
 
 import math
-import struct
-import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -37,7 +35,7 @@ import msgpack
 import numpy as np
 
 from vpp_service.frame import Calibration, FusionResult, StereoFrame
-from vpp_service.transport import _points, msgview
+from vpp_service.transport import _points, encoded_image, msgview
 from vpp_service.transport.backproject import DEFAULT_STRIDE, depth_to_points
 
 #: Wire format version written and accepted.
@@ -213,76 +211,6 @@ def _check_version(msg: Mapping[str, object]) -> None:
 
 
 # ------------------------------------------------------------------- images
-#: Chunks a PNG stream may have (bounds the structure walk of a hostile stream; OpenCV writes 8 KiB IDAT chunks).
-_PNG_MAX_CHUNKS = 1 << 16
-
-
-def _png_size(data: Binary) -> tuple[int, int]:
-    if len(data) < 24 or data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR":
-        raise WireError("data: not a PNG stream")
-    w, h = struct.unpack(">II", data[16:24])
-    return h, w
-
-
-def _png_check(data: Binary) -> None:
-    """Walk the PNG chunks: every CRC right, IDAT present, IEND last (before libpng sees the stream).
-
-    A truncated or corrupted stream is rejected here, quietly, instead of by
-    libpng, which reports it on stderr past any log rate limit.
-    """
-    mv = memoryview(data)
-    i, n, idat = 8, len(mv), False
-    for _ in range(_PNG_MAX_CHUNKS):
-        if i + 12 > n:
-            raise WireError("data: truncated PNG stream")
-        length = int.from_bytes(mv[i : i + 4], "big")
-        end = i + 12 + length
-        if end > n:
-            raise WireError("data: truncated PNG stream")
-        kind = bytes(mv[i + 4 : i + 8])
-        if zlib.crc32(mv[i + 4 : i + 8 + length]) != int.from_bytes(mv[i + 8 + length : end], "big"):
-            raise WireError(f"data: corrupt PNG stream (bad CRC of chunk {kind!r})")
-        idat = idat or kind == b"IDAT"
-        if kind == b"IEND":
-            if end != n or not idat:
-                raise WireError("data: PNG stream without image data or with bytes after IEND")
-            return
-        i = end
-    raise WireError(f"data: PNG stream of more than {_PNG_MAX_CHUNKS} chunks")
-
-
-#: Markers scanned for a JPEG frame header before giving up (bounds the header scan of a hostile stream).
-_JPEG_MAX_MARKERS = 1024
-
-
-def _jpeg_size(data: Binary) -> tuple[int, int]:
-    if len(data) < 4 or data[:2] != b"\xff\xd8":
-        raise WireError("data: not a JPEG stream")
-    i = 2
-    steps = 0
-    while i + 4 <= len(data):
-        steps += 1
-        if steps > _JPEG_MAX_MARKERS:  # real streams reach their frame header within a few dozen
-            raise WireError(f"data: no JPEG frame header within {_JPEG_MAX_MARKERS} markers")
-        if data[i] != 0xFF:
-            raise WireError("data: corrupt JPEG marker")
-        marker = data[i + 1]
-        if marker == 0xFF:  # fill byte
-            i += 1
-            continue
-        if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:
-            i += 2
-            continue
-        seg = struct.unpack(">H", data[i + 2 : i + 4])[0]
-        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
-            if i + 9 > len(data):
-                break
-            h, w = struct.unpack(">HH", data[i + 5 : i + 9])
-            return h, w
-        i += 2 + seg
-    raise WireError("data: JPEG without a frame header")
-
-
 def encode_image(img: np.ndarray, enc: str = "raw", quality: int = 90) -> dict[str, object]:
     """Wire ``Image`` map of an H x W or H x W x C (C = 1 or 3, RGB) uint8 array.
 
@@ -350,16 +278,12 @@ def decode_image(m: object, path: str = "image", limits: WireLimits = DEFAULT_LI
             raise WireError(f"{p}data: expected h*w*c = {h * w * c} bytes, got {len(data)}")
         return np.frombuffer(data, dtype=np.uint8).reshape((h, w) if c == 1 else (h, w, 3))
     try:
-        hh, ww = _png_size(data) if enc == "png" else _jpeg_size(data)
-    except WireError as exc:
-        raise WireError(f"{p}{exc}") from None
-    if (hh, ww) != (h, w):
-        raise WireError(f"{p}data: encoded image is {hh}x{ww}, declared {h}x{w}")
-    if enc == "png":
-        try:
-            _png_check(data)
-        except WireError as exc:
-            raise WireError(f"{p}{exc}") from None
+        hh, ww = encoded_image.png_size(data) if enc == "png" else encoded_image.jpeg_size(data)
+        if (hh, ww) != (h, w):
+            raise encoded_image.EncodedImageError(f"encoded image is {hh}x{ww}, declared {h}x{w}")
+        encoded_image.check_stream(data, "png" if enc == "png" else "jpeg")
+    except encoded_image.EncodedImageError as exc:
+        raise WireError(f"{p}data: {exc}") from None
     flag = cv2.IMREAD_GRAYSCALE if c == 1 else cv2.IMREAD_COLOR
     decoded = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), flag)
     if decoded is None or decoded.shape[:2] != (h, w):

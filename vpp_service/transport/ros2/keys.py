@@ -24,6 +24,7 @@ import xxhash
 
 #: The message types this transport reads or writes, by their ROS name.
 IMAGE = "sensor_msgs/msg/Image"
+COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 POINT_CLOUD2 = "sensor_msgs/msg/PointCloud2"
 DISPARITY_IMAGE = "stereo_msgs/msg/DisparityImage"
@@ -32,6 +33,7 @@ TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 #: REP 2011 type-description hashes (identical from Iron through Rolling).
 TYPE_HASHES: dict[str, str] = {
     IMAGE: "RIHS01_d31d41a9a4c4bc8eae9be757b0beed306564f7526c88ea6a4588fb9582527d47",
+    COMPRESSED_IMAGE: "RIHS01_15640771531571185e2efc8a100baf923961a4d15d5569652e6cb6691e8e371a",
     CAMERA_INFO: "RIHS01_b3dfd68ff46c9d56c80fd3bd4ed22c7a4ddce8c8348f2f59c299e73118e7e275",
     POINT_CLOUD2: "RIHS01_9198cabf7da3796ae6fe19c4cb3bdd3525492988c70522628af5daa124bae2b5",
     DISPARITY_IMAGE: "RIHS01_1ec1ff6b5bace919e4544a37f2d96ead9f81783701b7b7a4d97a09325ecf2711",
@@ -376,6 +378,7 @@ def entity_gid(token_key: str) -> bytes:
 
 __all__ = [
     "CAMERA_INFO",
+    "COMPRESSED_IMAGE",
     "DEFAULT_PUBLISHER",
     "DISPARITY_IMAGE",
     "DISTROS",

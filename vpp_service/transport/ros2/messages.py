@@ -1,14 +1,16 @@
-"""ROS 2 messages <-> numpy: ``Image``, ``CameraInfo``, ``PointCloud2``, ``DisparityImage``, ``TFMessage``.
+"""ROS 2 messages <-> numpy: ``Image``, ``CompressedImage``, ``CameraInfo``, ``PointCloud2``, ``DisparityImage``, ...
 
-The CDR codec is the ``rosbags`` type store (Jazzy definitions; these four types are
+The CDR codec is the ``rosbags`` type store (Jazzy definitions; these types are
 identical from Iron through Rolling). Decoding an ``Image`` is zero-copy where the
 layout allows (``rgb8``/``mono8`` without row padding): the array is a read-only view
 of the payload.
 
 Every decoder bounds the cost before doing work: the payload size is checked before
 the CDR is parsed (:class:`Limits`), then the pixel or point count before any array
-is built. A refused message raises :class:`~vpp_service.transport.ros2.errors.Ros2Error`
-whose ``reason`` names the cause (``too_large``, ``cdr``, ``encoding``, ``layout``,
+is built; a ``CompressedImage``'s size is read from its PNG/JPEG header and bounded
+before the stream is decoded (:mod:`vpp_service.transport.encoded_image`). A refused
+message raises :class:`~vpp_service.transport.ros2.errors.Ros2Error` whose ``reason``
+names the cause (``too_large``, ``cdr``, ``encoding``, ``layout``, ``corrupt``,
 ``calibration``, ``fields``, ``tf``).
 
 Conventions of the ``DisparityImage`` we write (as stereo_image_proc fills it):
@@ -26,16 +28,26 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal, TypeVar
 
+import cv2
 import numpy as np
 
 from vpp_service.frame import Calibration
+from vpp_service.transport import encoded_image
 from vpp_service.transport.ros2.errors import Ros2Error
-from vpp_service.transport.ros2.keys import CAMERA_INFO, DISPARITY_IMAGE, IMAGE, POINT_CLOUD2, TF_MESSAGE
+from vpp_service.transport.ros2.keys import (
+    CAMERA_INFO,
+    COMPRESSED_IMAGE,
+    DISPARITY_IMAGE,
+    IMAGE,
+    POINT_CLOUD2,
+    TF_MESSAGE,
+)
 from vpp_service.transport.wire import DEFAULT_LIMITS
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
     from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__CameraInfo as CameraInfo
+    from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__CompressedImage as CompressedImage
     from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__Image as Image
     from rosbags.typesys.stores.ros2_jazzy import sensor_msgs__msg__PointCloud2 as PointCloud2
     from rosbags.typesys.stores.ros2_jazzy import std_msgs__msg__Header as Header
@@ -44,8 +56,37 @@ if TYPE_CHECKING:
 
 M = TypeVar("M")
 
+#: Bayer mosaics (8 bit) -> OpenCV's demosaicing to RGB, edge-aware. OpenCV names a pattern by the second row's
+#: second and third pixels, so ROS's ``rggb`` (R at (0, 0)) is OpenCV's ``BG`` (cv_bridge's mapping).
+_BAYER = {
+    "bayer_rggb8": cv2.COLOR_BayerBG2RGB_EA,
+    "bayer_bggr8": cv2.COLOR_BayerRG2RGB_EA,
+    "bayer_gbrg8": cv2.COLOR_BayerGR2RGB_EA,
+    "bayer_grbg8": cv2.COLOR_BayerGB2RGB_EA,
+}
+#: Packed YUV 4:2:2 (2 bytes a pixel) -> OpenCV's conversion to RGB. ``yuv422`` is UYVY (cv_bridge's reading);
+#: ``uyvy``, ``yuyv`` and ``yuv422_yuy2`` are the names sensor_msgs added later.
+_YUV422 = {
+    "yuv422": cv2.COLOR_YUV2RGB_UYVY,
+    "uyvy": cv2.COLOR_YUV2RGB_UYVY,
+    "yuv422_yuy2": cv2.COLOR_YUV2RGB_YUY2,
+    "yuyv": cv2.COLOR_YUV2RGB_YUY2,
+}
+#: Bytes per pixel of each image encoding accepted as stereo input.
+_STEREO_BPP = {
+    "rgb8": 3,
+    "bgr8": 3,
+    "rgba8": 4,
+    "bgra8": 4,
+    "mono8": 1,
+    "mono16": 2,
+    **dict.fromkeys(_BAYER, 1),
+    **dict.fromkeys(_YUV422, 2),
+}
 #: Image encodings accepted as stereo input.
-STEREO_ENCODINGS = ("rgb8", "bgr8", "mono8", "mono16")
+STEREO_ENCODINGS = tuple(_STEREO_BPP)
+#: Codecs of a ``CompressedImage`` accepted as stereo input (the ``compressed`` transport's two).
+COMPRESSED_CODECS = ("jpeg", "png")
 #: Image encodings accepted as a depth map registered to the left camera.
 DEPTH_ENCODINGS = ("32FC1", "16UC1")
 #: How invalid disparity pixels are written.
@@ -56,6 +97,7 @@ _CLASSES = {
     "Time": "builtin_interfaces__msg__Time",
     "Header": "std_msgs__msg__Header",
     "Image": "sensor_msgs__msg__Image",
+    "CompressedImage": "sensor_msgs__msg__CompressedImage",
     "CameraInfo": "sensor_msgs__msg__CameraInfo",
     "RegionOfInterest": "sensor_msgs__msg__RegionOfInterest",
     "PointField": "sensor_msgs__msg__PointField",
@@ -65,6 +107,7 @@ _CLASSES = {
 }
 _SUPPORTED = {
     IMAGE: "Image",
+    COMPRESSED_IMAGE: "CompressedImage",
     CAMERA_INFO: "CameraInfo",
     POINT_CLOUD2: "PointCloud2",
     DISPARITY_IMAGE: "DisparityImage",
@@ -204,12 +247,23 @@ def _pixels(msg: Image, bpp: int, limits: Limits) -> np.ndarray:
     return msg.data.reshape(h, step)[:, : w * bpp]
 
 
+def _mono16_to_8(v: np.ndarray) -> np.ndarray:
+    """16-bit samples to 8 bits by ``v / 257``, rounded: the full 16-bit range onto the full 8-bit range."""
+    return ((v.astype(np.uint32) * 255 + 32767) // 65535).astype(np.uint8)
+
+
 def image_to_array(msg: Image, limits: Limits) -> np.ndarray:
     """A stereo input image as H x W (mono) or H x W x 3 (RGB) uint8.
 
-    ``rgb8`` and ``mono8`` without row padding are read-only views of the payload;
-    ``bgr8`` is reordered to RGB; ``mono16`` is scaled to 8 bits by ``v / 257``
-    (full 16-bit range to full 8-bit range; big-endian data is honoured).
+    - ``rgb8`` and ``mono8`` without row padding are read-only views of the payload;
+      ``bgr8`` is reordered to RGB; ``rgba8``/``bgra8`` lose their alpha.
+    - ``mono16`` is scaled to 8 bits by ``v / 257`` (the full 16-bit range onto the full
+      8-bit range, rounded; big-endian data is honoured). A 10- or 12-bit camera that
+      publishes its counts unscaled in ``mono16`` thus uses only the lowest levels.
+    - ``bayer_rggb8``, ``bayer_bggr8``, ``bayer_gbrg8``, ``bayer_grbg8`` are demosaiced to
+      RGB (OpenCV's edge-aware demosaicing).
+    - ``yuv422`` (= ``uyvy``, byte order U Y V Y) and ``yuv422_yuy2`` (= ``yuyv``, Y U Y V)
+      are converted to RGB (BT.601); their width must be even.
 
     Raises
     ------
@@ -217,18 +271,87 @@ def image_to_array(msg: Image, limits: Limits) -> np.ndarray:
         ``encoding`` (not in :data:`STEREO_ENCODINGS`), ``too_large`` or ``layout``.
     """
     enc = msg.encoding
-    if enc not in STEREO_ENCODINGS:
+    if enc not in _STEREO_BPP:
         raise Ros2Error("encoding", f"image encoding {enc!r} not supported; accepted: {', '.join(STEREO_ENCODINGS)}")
-    bpp = {"rgb8": 3, "bgr8": 3, "mono8": 1, "mono16": 2}[enc]
+    bpp = _STEREO_BPP[enc]
     px = _pixels(msg, bpp, limits)
     h, w = int(msg.height), int(msg.width)
     if enc == "mono8":
         return px
     if enc == "mono16":
-        v = np.ascontiguousarray(px).view(">u2" if msg.is_bigendian else "<u2").reshape(h, w)
-        return ((v.astype(np.uint32) * 255 + 32767) // 65535).astype(np.uint8)
-    rgb = px.reshape(h, w, 3)
-    return np.ascontiguousarray(rgb[:, :, ::-1]) if enc == "bgr8" else rgb
+        return _mono16_to_8(np.ascontiguousarray(px).view(">u2" if msg.is_bigendian else "<u2").reshape(h, w))
+    if enc in _BAYER:
+        return cv2.cvtColor(np.ascontiguousarray(px), _BAYER[enc])
+    if enc in _YUV422:
+        if w % 2:
+            raise Ros2Error("layout", f"{enc} image width {w} is odd (two pixels share their U and V)")
+        return cv2.cvtColor(np.ascontiguousarray(px).reshape(h, w, 2), _YUV422[enc])
+    pixels = px.reshape(h, w, bpp)
+    if enc == "rgb8":
+        return pixels
+    return np.ascontiguousarray(pixels[:, :, 2::-1] if enc.startswith("bgr") else pixels[:, :, :3])
+
+
+def _compressed_format(fmt: str) -> tuple[str, str | None]:
+    """``(original encoding, codec)`` of a ``CompressedImage.format`` as image_transport writes it.
+
+    ``"rgb8; jpeg compressed bgr8"``, ``"mono8; png compressed "`` (compressed_image_transport) or
+    just ``"jpeg"`` / ``"png"`` (older publishers); an empty format names nothing (the stream's magic
+    bytes decide). The codec is None when the format names none.
+
+    Raises
+    ------
+    Ros2Error
+        ``encoding``: a codec other than JPEG or PNG, or a ``compressedDepth`` stream.
+    """
+    original, sep, rest = fmt.partition(";")
+    if not sep:
+        original, rest = "", original
+    words = rest.strip().lower().split()
+    if "compresseddepth" in words:
+        raise Ros2Error("encoding", f"compressed format {fmt!r} is a compressedDepth stream (a depth map, not a view)")
+    if not words:
+        return original.strip(), None
+    codec = {"jpeg": "jpeg", "jpg": "jpeg", "png": "png"}.get(words[0])
+    if codec is None:
+        raise Ros2Error("encoding", f"compressed format {fmt!r}: codec {words[0]!r} not supported; accepted: jpeg, png")
+    return original.strip(), codec
+
+
+def compressed_to_array(msg: CompressedImage, limits: Limits) -> np.ndarray:
+    """A ``CompressedImage`` stereo view (JPEG or PNG) as H x W (mono) or H x W x 3 (RGB) uint8.
+
+    The stream's header is read first and its declared size bounded by ``max_pixels``
+    before anything is decoded (a PNG or JPEG "bomb" is refused, ``too_large``); then the
+    stream's structure is checked (a PNG's chunks and CRCs, a JPEG's end-of-image marker:
+    a truncated stream is refused, ``corrupt``); only then is it decoded. A one-component
+    stream (``mono8``/``mono16`` as compressed_image_transport writes them) gives a mono
+    image, others RGB (alpha dropped); 16-bit PNG samples are scaled as ``mono16`` is; a
+    one-component stream whose format names a ``bayer_*`` encoding is demosaiced.
+
+    Raises
+    ------
+    Ros2Error
+        ``encoding`` (the format names another codec than the stream's, or one other than
+        JPEG/PNG), ``too_large`` (declared size over ``max_pixels``) or ``corrupt`` (not a
+        PNG/JPEG stream, truncated, bad CRC, undecodable).
+    """
+    original, named = _compressed_format(str(msg.format))
+    data = msg.data
+    try:
+        header = encoded_image.probe(data, limits.max_pixels)
+        if named is not None and named != header.codec:
+            raise Ros2Error(
+                "encoding", f"compressed format {msg.format!r} says {named}, the data is a {header.codec} stream"
+            )
+        encoded_image.check_stream(data, header.codec)
+        bayer = _BAYER.get(original.lower()[: len("bayer_rggb")] + "8") if header.channels == 1 else None
+        img = encoded_image.decode(data, header, grey=header.channels <= 2 or original.startswith("mono"))
+    except encoded_image.TooLargeError as exc:
+        raise Ros2Error("too_large", f"compressed image: {exc}") from None
+    except encoded_image.EncodedImageError as exc:
+        raise Ros2Error("corrupt", f"compressed image: {exc}") from None
+    return cv2.cvtColor(img, bayer) if bayer is not None else img
 
 
 def depth_image_to_array(msg: Image, limits: Limits) -> np.ndarray:
@@ -629,10 +752,12 @@ def disparity_from_message(msg: DisparityImage, limits: Limits) -> Disparity:
 
 
 __all__ = [
+    "COMPRESSED_CODECS",
     "DEPTH_ENCODINGS",
     "STEREO_ENCODINGS",
     "CameraInfo",
     "CameraModel",
+    "CompressedImage",
     "Disparity",
     "DisparityImage",
     "DisparityRange",
@@ -647,6 +772,7 @@ __all__ = [
     "camera_info_message",
     "camera_model",
     "cloud_to_xyz",
+    "compressed_to_array",
     "depth_image_to_array",
     "deserialize",
     "disparity_from_message",
