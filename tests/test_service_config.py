@@ -67,6 +67,10 @@ def test_max_disparity_auto_is_the_default_and_a_fixed_integer_is_honoured():
     assert fixed.to_dict()["matcher"] == {"name": "sgbm", "max_disparity": 96}
 
 
+def test_reject_log_period_zero_logs_every_reject():
+    assert load_config(None, {"service": {"reject_log_period_s": 0.0}}).service.reject_log_period_s == 0.0
+
+
 def test_vpp_disabled():
     assert load_config(None, {"vpp": {"enabled": False}}).vpp is None
 
@@ -83,6 +87,8 @@ def test_vpp_disabled():
         ({"service": {"rig": "-x"}}, "service"),
         ({"service": {"rig": "r" * 300}}, "service"),
         ({"service": {"rig": "a b"}}, "service"),
+        ({"service": {"reject_log_period_s": -1.0}}, "service"),
+        ({"service": {"summary_period_s": 0.0}}, "service"),
         ({"zenoh": {"mode": "mesh"}}, "zenoh.mode"),
         ({"zenoh": {"listen": "tcp/127.0.0.1:1"}}, "zenoh.listen"),
         ({"zenoh": {"listen": ["127.0.0.1"]}}, "zenoh"),

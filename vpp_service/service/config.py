@@ -100,7 +100,7 @@ class ServiceSection:
     timing_window : int
         Frames in the sliding window of the timing statistics.
     reject_log_period_s : float
-        At most one log line per this period about rejected inputs.
+        At most one log line per this period about rejected inputs (0: a line for every one).
     seed : int
         Seed of the VPP pattern (frame ``seq`` is added).
     reuse_memory : bool
@@ -148,9 +148,11 @@ class ServiceSection:
             raise ValueError(f"max_frames must be >= 0, got {self.max_frames}")
         if not self.out:
             raise ValueError("out: must be a folder name")
-        for name in ("summary_period_s", "shutdown_timeout_s", "reject_log_period_s"):
+        for name in ("summary_period_s", "shutdown_timeout_s"):
             if not 0 < getattr(self, name) <= 3600:
                 raise ValueError(f"{name} must be in (0, 3600], got {getattr(self, name)}")
+        if not 0 <= self.reject_log_period_s <= 3600:
+            raise ValueError(f"reject_log_period_s must be in [0, 3600], got {self.reject_log_period_s}")
         if not 1 <= self.timing_window <= 100000:
             raise ValueError(f"timing_window must be in [1, 100000], got {self.timing_window}")
 
