@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import threading
 import time
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
@@ -32,50 +33,58 @@ DISPARITY_KEY = (
 )
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("scene_name", SCENES)
-def test_robot_receives_disparity(tmp_path, scene_name):
-    scene = load_scene(scene_name)
-    rig, gt, maxd = scene.rig, scene.gt, scene.max_disparity
+@contextmanager
+def ros2_service(config: dict, topics: dict[str, str] | None = None, join_s: float = 10.0):
+    """A service (``config`` plus a peer Zenoh section) behind a router, and a robot whose subscribers it has.
+
+    Yields ``(robot, disparity subscriber, status)``; ``status`` holds the service's final status once
+    the block has ended (the service stopped, the robot closed).
+    """
     ep = f"tcp/127.0.0.1:{free_port()}"
-    cfg = validate_config(
-        {
-            "service": {"out": str(tmp_path / "run"), "summary": False, "shutdown_timeout_s": 3.0},
-            # as rmw_zenoh nodes: peers that listen on a random port and meet through the router (gossip)
-            "zenoh": {"mode": "peer", "listen": ["tcp/127.0.0.1:0"], "connect": [ep]},
-            "source": {"type": "ros2", "depth_wait_ms": 2000.0},
-            "matcher": {"name": "sgbm", "max_disparity": maxd},
-            "queues": {"input_policy": "block", "output_policy": "block"},
-            "sinks": [{"type": "ros2", "outputs": ["disparity"], "max_disparity": float(maxd)}],
-        }
-    )
+    # as rmw_zenoh nodes: peers that listen on a random port and meet through the router (gossip)
+    cfg = validate_config({**config, "zenoh": {"mode": "peer", "listen": ["tcp/127.0.0.1:0"], "connect": [ep]}})
     stop = threading.Event()
     status: dict = {}
     with zenoh.open(zenoh_test_config(listen=[ep], mode="router")):
         svc = threading.Thread(target=lambda: status.update(run_service(cfg, stop, None)), daemon=True)
         svc.start()
         with zenoh.open(zenoh_test_config(listen=["tcp/127.0.0.1:0"], connect=[ep])) as robot_session:
-            robot = Robot(robot_session)
+            robot = Robot(robot_session) if topics is None else Robot(robot_session, topics=topics)
             sub = robot.subscribe_disparity()
             try:
-                names = ["left/image_rect", "left/camera_info", "right/image_rect", "right/camera_info", "points"]
-                assert robot.wait_for_subscribers(names, timeout=15.0), robot.graph()
-                stamp = 1_700_000_000_123_456_789
-                sample = None
-                deadline = time.monotonic() + 30.0
-                while sample is None and time.monotonic() < deadline:
-                    robot.publish(rig, stamp)
-                    t_end = time.monotonic() + 3.0
-                    while sample is None and time.monotonic() < t_end:
-                        sample = sub.try_recv()
-                        time.sleep(0.02)
-                    stamp += 100_000_000 if sample is None else 0
-                assert sample is not None, "no DisparityImage received"
-                graph = robot.graph()
+                assert robot.wait_for_subscribers(list(robot.topics), timeout=15.0), robot.graph()
+                yield robot, sub, status
             finally:
                 stop.set()
-                svc.join(10.0)
+                svc.join(join_s)
                 robot.close()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene_name", SCENES)
+def test_robot_receives_disparity(tmp_path, scene_name):
+    scene = load_scene(scene_name)
+    rig, gt, maxd = scene.rig, scene.gt, scene.max_disparity
+    config = {
+        "service": {"out": str(tmp_path / "run"), "summary": False, "shutdown_timeout_s": 3.0},
+        "source": {"type": "ros2", "depth_wait_ms": 2000.0},
+        "matcher": {"name": "sgbm", "max_disparity": maxd},
+        "queues": {"input_policy": "block", "output_policy": "block"},
+        "sinks": [{"type": "ros2", "outputs": ["disparity"], "max_disparity": float(maxd)}],
+    }
+    with ros2_service(config) as (robot, sub, status):
+        stamp = 1_700_000_000_123_456_789
+        sample = None
+        deadline = time.monotonic() + 30.0
+        while sample is None and time.monotonic() < deadline:
+            robot.publish(rig, stamp)
+            t_end = time.monotonic() + 3.0
+            while sample is None and time.monotonic() < t_end:
+                sample = sub.try_recv()
+                time.sleep(0.02)
+            stamp += 100_000_000 if sample is None else 0
+        assert sample is not None, "no DisparityImage received"
+        graph = robot.graph()
     assert str(sample.key_expr) == DISPARITY_KEY
     att = sample.attachment.to_bytes()
     assert len(att) == 33 and att[16] == 0x10 and int.from_bytes(att[:8], "little") >= 1
@@ -123,56 +132,39 @@ ORDERS = ("cloud_first", "cloud_last", "cloud_late")
 
 def replay(tmp_path, rigs: list[StereoRig], stamps: list[int], order: str) -> list[bytes]:
     """Publish each set in ``order`` to a fresh service over a router, await its DisparityImage; their raw bytes."""
-    ep = f"tcp/127.0.0.1:{free_port()}"
-    cfg = validate_config(
-        {
-            "service": {"out": str(tmp_path / order), "summary": False, "shutdown_timeout_s": 3.0},
-            "zenoh": {"mode": "peer", "listen": ["tcp/127.0.0.1:0"], "connect": [ep]},
-            "source": {"type": "ros2", "depth_wait_ms": 2000.0, "depth_tolerance_ms": 50.0},
-            "matcher": {"name": "sgbm", "max_disparity": "auto"},
-            "queues": {"input_policy": "block", "output_policy": "block"},
-            "sinks": [{"type": "ros2", "outputs": ["disparity"]}],
-        }
-    )
-    stop = threading.Event()
+    config = {
+        "service": {"out": str(tmp_path / order), "summary": False, "shutdown_timeout_s": 3.0},
+        "source": {"type": "ros2", "depth_wait_ms": 2000.0, "depth_tolerance_ms": 50.0},
+        "matcher": {"name": "sgbm", "max_disparity": "auto"},
+        "queues": {"input_policy": "block", "output_policy": "block"},
+        "sinks": [{"type": "ros2", "outputs": ["disparity"]}],
+    }
     out: list[bytes] = []
-    with zenoh.open(zenoh_test_config(listen=[ep], mode="router")):
-        svc = threading.Thread(target=lambda: run_service(cfg, stop, None), daemon=True)
-        svc.start()
-        with zenoh.open(zenoh_test_config(listen=["tcp/127.0.0.1:0"], connect=[ep])) as robot_session:
-            robot = Robot(robot_session)
-            sub = robot.subscribe_disparity()
-            try:
-                names = ["left/image_rect", "left/camera_info", "right/image_rect", "right/camera_info", "points"]
-                assert robot.wait_for_subscribers(names, timeout=15.0), robot.graph()
-                for rig, stamp in zip(rigs, stamps, strict=True):
-                    h, w = rig.left.shape[:2]
-                    images = [
-                        ("left/image_rect", image_msg(rig.left, stamp, "left_optical")),
-                        ("right/image_rect", image_msg(rig.right, stamp, "right_optical")),
-                        ("left/camera_info", camera_info_from_p(stamp, "left_optical", (w, h), rig.projection(False))),
-                        ("right/camera_info", camera_info_from_p(stamp, "right_optical", (w, h), rig.projection(True))),
-                    ]
-                    cloud = ("points", cloud_msg(rig.cloud, stamp, "left_optical"))
-                    for k, (name, msg) in enumerate([cloud, *images] if order == "cloud_first" else [*images, cloud]):
-                        if order == "cloud_late" and k == 4:
-                            time.sleep(0.3)
-                        robot.put(name, msg)
-                    deadline, got = time.monotonic() + 20.0, None
-                    while got is None and time.monotonic() < deadline:  # the reply awaited before the next set
-                        sample = sub.try_recv()
-                        if sample is None:
-                            time.sleep(0.01)
-                            continue
-                        msg = TS.deserialize_cdr(sample.payload.to_bytes(), "stereo_msgs/msg/DisparityImage")
-                        if msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec == stamp:
-                            got = msg
-                    assert got is not None, f"no DisparityImage for stamp {stamp} ({order})"
-                    out.append(got.image.data.tobytes())
-            finally:
-                stop.set()
-                svc.join(10.0)
-                robot.close()
+    with ros2_service(config) as (robot, sub, _):
+        for rig, stamp in zip(rigs, stamps, strict=True):
+            h, w = rig.left.shape[:2]
+            images = [
+                ("left/image_rect", image_msg(rig.left, stamp, "left_optical")),
+                ("right/image_rect", image_msg(rig.right, stamp, "right_optical")),
+                ("left/camera_info", camera_info_from_p(stamp, "left_optical", (w, h), rig.projection(False))),
+                ("right/camera_info", camera_info_from_p(stamp, "right_optical", (w, h), rig.projection(True))),
+            ]
+            cloud = ("points", cloud_msg(rig.cloud, stamp, "left_optical"))
+            for k, (name, msg) in enumerate([cloud, *images] if order == "cloud_first" else [*images, cloud]):
+                if order == "cloud_late" and k == 4:
+                    time.sleep(0.3)
+                robot.put(name, msg)
+            deadline, got = time.monotonic() + 20.0, None
+            while got is None and time.monotonic() < deadline:  # the reply awaited before the next set
+                sample = sub.try_recv()
+                if sample is None:
+                    time.sleep(0.01)
+                    continue
+                msg = TS.deserialize_cdr(sample.payload.to_bytes(), "stereo_msgs/msg/DisparityImage")
+                if msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec == stamp:
+                    got = msg
+            assert got is not None, f"no DisparityImage for stamp {stamp} ({order})"
+            out.append(got.image.data.tobytes())
     return out
 
 
@@ -246,63 +238,46 @@ def play_raw_rig(tmp_path, transport: str, sets: list[tuple[int, list[tuple[str,
     A set marked answered is awaited (its DisparityImage, by stamp) before the next is sent; the
     others are sent and passed over. Returns ``({stamp: DisparityImage}, service status)``.
     """
-    ep = f"tcp/127.0.0.1:{free_port()}"
-    cfg = validate_config(
-        {
-            "service": {
-                "out": str(tmp_path / f"run_{transport}"),
-                "summary": False,
-                "shutdown_timeout_s": 3.0,
-                "reject_log_period_s": 0.001,
-            },
-            "zenoh": {"mode": "peer", "listen": ["tcp/127.0.0.1:0"], "connect": [ep]},
-            "source": {
-                "type": "ros2",
-                "rectify": True,
-                "transport": transport,
-                "left_image": "left/image_raw",
-                "right_image": "right/image_raw",
-                "depth_type": "none",
-            },
-            "vpp": {"enabled": False},
-            "matcher": {"name": "sgbm", "max_disparity": 96},
-            "queues": {"input_policy": "block", "output_policy": "block"},
-            "sinks": [{"type": "ros2", "outputs": ["disparity"], "max_disparity": 96.0}],
-        }
-    )
-    stop = threading.Event()
-    status: dict = {}
+    config = {
+        "service": {
+            "out": str(tmp_path / f"run_{transport}"),
+            "summary": False,
+            "shutdown_timeout_s": 3.0,
+            "reject_log_period_s": 0.0,  # a line for every reject: the test reads each
+        },
+        "source": {
+            "type": "ros2",
+            "rectify": True,
+            "transport": transport,
+            "left_image": "left/image_raw",
+            "right_image": "right/image_raw",
+            "depth_type": "none",
+        },
+        "vpp": {"enabled": False},
+        "matcher": {"name": "sgbm", "max_disparity": 96},
+        "queues": {"input_policy": "block", "output_policy": "block"},
+        "sinks": [{"type": "ros2", "outputs": ["disparity"], "max_disparity": 96.0}],
+    }
     replies: dict[int, object] = {}
-    with zenoh.open(zenoh_test_config(listen=[ep], mode="router")):
-        svc = threading.Thread(target=lambda: status.update(run_service(cfg, stop, None)), daemon=True)
-        svc.start()
-        with zenoh.open(zenoh_test_config(listen=["tcp/127.0.0.1:0"], connect=[ep])) as robot_session:
-            robot = Robot(robot_session, topics=raw_rig_topics(transport))
-            sub = robot.subscribe_disparity()
-            try:
-                assert robot.wait_for_subscribers(list(robot.topics), timeout=15.0), robot.graph()
-                for stamp, msgs, answered in sets:
-                    for name, msg in msgs:
-                        robot.put(name, msg)
-                    deadline = time.monotonic() + 30.0
-                    while answered and stamp not in replies and time.monotonic() < deadline:
-                        sample = sub.try_recv()
-                        if sample is None:
-                            time.sleep(0.01)
-                            continue
-                        msg = TS.deserialize_cdr(sample.payload.to_bytes(), "stereo_msgs/msg/DisparityImage")
-                        replies[msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec] = msg
-                    assert not answered or stamp in replies, f"no DisparityImage for stamp {stamp} ({transport})"
-            finally:
-                stop.set()
-                svc.join(15.0)
-                robot.close()
+    with ros2_service(config, topics=raw_rig_topics(transport), join_s=15.0) as (robot, sub, status):
+        for stamp, msgs, answered in sets:
+            for name, msg in msgs:
+                robot.put(name, msg)
+            deadline = time.monotonic() + 30.0
+            while answered and stamp not in replies and time.monotonic() < deadline:
+                sample = sub.try_recv()
+                if sample is None:
+                    time.sleep(0.01)
+                    continue
+                msg = TS.deserialize_cdr(sample.payload.to_bytes(), "stereo_msgs/msg/DisparityImage")
+                replies[msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec] = msg
+            assert not answered or stamp in replies, f"no DisparityImage for stamp {stamp} ({transport})"
     return replies, status
 
 
 def answered_bad2(msg, gt: np.ndarray) -> float:
     """bad-2 (%) on the answered pixels of a DisparityImage (its cx_l = cx_r: ROS units are the project's)."""
-    from vpp_service.evaluation.metrics import answered_metrics
+    from vpp_service.metrics import answered_metrics
 
     d = msg.image.data.view("<f4").reshape(msg.image.height, msg.image.width).astype(np.float32)
     d[d < msg.min_disparity] = np.nan
@@ -311,10 +286,10 @@ def answered_bad2(msg, gt: np.ndarray) -> float:
 
 def rectified_bad2(scene) -> float:
     """bad-2 (%) on the answered pixels of the scene's rectified pair, matched as the service does (SGBM, no VPP)."""
-    from vpp_service.evaluation.metrics import answered_metrics
     from vpp_service.frame import StereoFrame
     from vpp_service.fusion import fuse
     from vpp_service.matchers import build_matcher
+    from vpp_service.metrics import answered_metrics
 
     res = fuse(
         StereoFrame(left=scene.left, right=scene.right), build_matcher("sgbm", {"max_disparity": 96}), depth=False

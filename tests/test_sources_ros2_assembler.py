@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from helpers.ros2_robot import TS, camera_info_msg, cloud_msg, image_msg, tf_message
+from helpers.ros2_robot import TS, camera_info_msg, cloud_msg, image_msg, raw_camera_info_msg, tf_message
 from vpp_service.settings import SettingsError, from_mapping
 from vpp_service.sources.ros2_assembler import StereoAssembler, StereoTopics
 
@@ -284,28 +284,8 @@ def test_bad_options(opts):
 
 
 def raw_info(stamp: int, frame_id: str, info, **changes: object) -> bytes:
-    """A raw camera's CameraInfo (``K``, ``D``, ``R``, ``P`` of ``info``), fields replaced by ``changes``."""
-    from helpers.ros2_robot import T, header
-
-    roi = T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False)
-    fields = {
-        "k": info.k.ravel().copy(),
-        "d": info.d.copy(),
-        "r": info.r.ravel().copy(),
-        "p": info.p.ravel().copy(),
-        **changes,
-    }
-    msg = T["sensor_msgs/msg/CameraInfo"](
-        header=header(stamp, frame_id),
-        height=info.height,
-        width=info.width,
-        distortion_model=info.distortion_model,
-        binning_x=0,
-        binning_y=0,
-        roi=roi,
-        **fields,
-    )
-    return cdr(msg, "sensor_msgs/msg/CameraInfo")
+    """A raw camera's CameraInfo (``K``, ``D``, ``R``, ``P`` of ``info``), fields replaced by ``changes``, as CDR."""
+    return cdr(raw_camera_info_msg(stamp, frame_id, info, **changes), "sensor_msgs/msg/CameraInfo")
 
 
 def test_raw_images_are_rectified_with_the_camera_info_as_stereo_image_proc_does():
