@@ -48,7 +48,6 @@ from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import SINKS, SinkContext
 from vpp_service.sinks.colorize import colorize_disparity
 from vpp_service.sinks.folder import FolderSink, check_pattern, path_inside, write_atomic
-from vpp_service.sinks.ordered import check_reorder_options
 
 log = logging.getLogger(__name__)
 
@@ -84,11 +83,6 @@ class FilesSinkOptions:
         Also save a colour-mapped RGB PNG of the disparity (``<stem>_disparity_preview.png``).
     preview_max_disparity : float
         Top of the preview's colour range (pixels, >= 0); 0 = each frame's own range.
-    reorder_window : int
-        In a worker pool, results held to write them in ``seq`` order
-        (:mod:`vpp_service.sinks.ordered`); 0 = off. Outside a pool results come in order.
-    reorder_wait_ms : float
-        The longest a result waits for the ones before it.
     """
 
     dir: str
@@ -100,11 +94,8 @@ class FilesSinkOptions:
     create_dir: bool = False
     preview: bool = False
     preview_max_disparity: float = 0.0
-    reorder_window: int = 16
-    reorder_wait_ms: float = 500.0
 
     def __post_init__(self) -> None:
-        check_reorder_options(self.reorder_window, self.reorder_wait_ms)
         if not (self.preview_max_disparity >= 0 and np.isfinite(self.preview_max_disparity)):
             raise ValueError(f"preview_max_disparity: must be a finite number >= 0, got {self.preview_max_disparity}")
         if not self.dir.strip():
