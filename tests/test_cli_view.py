@@ -167,23 +167,26 @@ def test_rig_path():
     assert rig_path("x/w.rrd", "r1", wildcard=True) == str(Path("x/w-r1.rrd"))
 
 
-def test_viewer_logs_each_output_in_seq_order_once(tmp_path):
-    """A pool's outputs arrive out of order and one twice: the viewer logs them in order, once, counting a gap."""
+def test_viewer_logs_messages_as_they_come_and_counts_the_gaps(tmp_path):
+    """Each output is logged in arrival order; seq values skipped are gaps, per output; a restart is not one."""
     from vpp_service.cli.view import Viewer
 
-    viewer = Viewer({"mode": "save", "path": str(tmp_path / "v.rrd"), "max_hz": 0, "queue_size": 64}, False, 60000)
+    viewer = Viewer({"mode": "save", "path": str(tmp_path / "v.rrd"), "max_hz": 0, "queue_size": 64}, False)
     logged: list[int] = []
     submit = viewer.sink("r1").submit
     viewer.sinks["r1"].submit = lambda parts: (logged.append(parts.seq), submit(parts))  # type: ignore[method-assign]
-    for seq in (1, 0, 3, 2, 2, 5, 4, 7):  # 6 never comes
-        fr = make_frame().with_(rig="r1", seq=seq)
-        payload = wire.encode_output(FusionResult(fr, np.full(fr.shape, float(seq), np.float32)), "disparity")
-        assert viewer.handle("vpp/r1/out/disparity", payload) == "disparity"
+    seqs = (0, 1, 3, 4, 8, 2, 3)  # 2 and 5-7 never come; then the service restarts at 2
+    for seq in seqs:
+        fr = make_frame(depth="disparity").with_(rig="r1", seq=seq)
+        res = FusionResult(fr, np.full(fr.shape, float(seq), np.float32))
+        assert viewer.handle("vpp/r1/out/disparity", wire.encode_output(res, "disparity")) == "disparity"
+        if seq in (0, 1, 8):
+            assert viewer.handle("vpp/r1/out/sparse", wire.encode_output(res, "sparse")) == "sparse"
     summary = viewer.close()
-    assert logged == [0, 1, 2, 3, 4, 5, 7]
-    order = summary["rigs"]["r1"]["order"]["disparity"]  # type: ignore[index]
-    assert order["duplicates"] == 1 and order["gaps"] == 1 and order["late"] == 0
-    assert read_rrd(tmp_path / "v.rrd")["/r1/disparity"]["seq"] == [0, 1, 2, 3, 4, 5, 7]
+    assert logged == [0, 0, 1, 1, 3, 4, 8, 8, 2, 3]
+    rig = summary["rigs"]["r1"]  # type: ignore[index]
+    assert rig["gaps"] == {"disparity": 1 + 3, "sparse": 6} and rig["received"] == {"disparity": 7, "sparse": 3}
+    assert read_rrd(tmp_path / "v.rrd")["/r1/disparity"]["seq"] == sorted(seqs)  # the recording, on its seq timeline
 
 
 def test_view_to_a_closed_port_says_it_could_not_connect(tmp_path, capsys):

@@ -48,10 +48,11 @@ def sad16(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def repo(tmp_path_factory, sad16) -> Path:
-    """A model repository: the SAD network, a slow copy, a broken one and one whose metadata the card contradicts."""
+    """A model repository: the SAD network, a slow and a slower copy, a broken one and one the card contradicts."""
     r = tmp_path_factory.mktemp("repo")
     write_model(r, "sad16", sad16, IO, OUT)
     write_model(r, "sad16_slow", sad16, IO, OUT, delay_ms=150)
+    write_model(r, "sad16_stuck", sad16, IO, OUT, delay_ms=1000)  # answers after a stop gave up on them
     write_model(r, "sad16_wrong_shape", sad16, IO, OUT, mode="wrong_shape")
     write_model(r, "sad16_other", sad16, {"L": (1, 1, None, None), "right": (1, 3, 64, 64)}, {"disparity": (1, 1, -1)})
     write_model(r, "sad16_fp16", sad16, IO, OUT, dtype="TYPE_FP16")
@@ -230,6 +231,30 @@ def test_two_servers_answer_every_frame_once_in_order(servers, sad16):
     local = build_matcher("onnx", {"model": str(sad16), "engine": "onnxruntime", "card": CARD, "max_disparity": D})
     _, local_seqs = run_stream(local, 4, 1)
     assert local_seqs == [0, 1, 2, 3]
+
+
+def test_a_stop_that_times_out_counts_the_frames_left_on_the_server(servers):
+    """Frames on the server when a stop gives up waiting: lost under ``shutdown``, once; late answers ignored."""
+    m = remote(servers[0].url, "sad16_stuck", in_flight=4, max_disparity=D, timeout_ms=20_000)
+    sink = Collect()
+    pipe = Pipeline(stream(12), Fusion(m, None, depth=False), [sink], input_size=2, in_flight=4)
+    pipe.start()
+    assert pipe.source.finished.wait(30)
+    deadline = time.monotonic() + 30
+    while pipe.status()["queues"]["in_flight"]["len"] < 4 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    pipe.stop(0.5)  # the server holds each answer 1 s: the stop cannot wait for them
+    st = pipe.status()
+    c, d = st["counters"], st["dropped"]
+    assert c["received"] == 12 and c["errors"] == 0 and d["sink.Collect"] == 0
+    assert d["shutdown"] >= 4  # the frames on the server
+    assert c["published"] + d["shutdown"] + d["input_queue"] == c["received"]  # every frame once
+    assert [r.frame.seq for r in sink.results] == list(range(c["published"]))
+    while (net := pipe.status()["network"])["answered"] < net["requests"] and time.monotonic() < deadline:
+        time.sleep(0.05)  # the server answers late
+    assert net["answered"] == net["requests"]
+    st = pipe.status()
+    assert st["counters"] == c and st["dropped"] == d and len(sink.results) == c["published"]
 
 
 def test_a_server_killed_mid_stream_loses_no_frame(tmp_path, repo):

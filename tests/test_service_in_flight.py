@@ -70,3 +70,25 @@ def test_a_failure_is_reported_in_its_place_exactly_once():
 def test_window_size_must_be_positive():
     with pytest.raises(ValueError, match="n must be >= 1"):
         InFlight(0, lambda i: i, lambda r: None, lambda i, e: None)
+
+
+def test_abandon_counts_what_was_not_handed_on_and_never_hands_it_on():
+    """A stop that cannot wait: the items still out are counted once, their late answers ignored."""
+    release = threading.Event()
+    done: list[int] = []
+    failed: list[int] = []
+    window: InFlight[int, int] = InFlight(
+        3, lambda i: i if i == 0 else (release.wait(10), i)[1], done.append, lambda i, e: failed.append(i)
+    )
+    for i in range(3):
+        assert window.submit(i)
+    deadline = time.monotonic() + 5
+    while not done and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert done == [0] and window.outstanding == 2
+    assert window.abandon() == 2  # 1 and 2 are still out
+    assert window.abandon() == 0  # counted once
+    assert window.submit(3) is False  # takes nothing more
+    release.set()  # the late answers come
+    assert window.close(10)
+    assert done == [0] and failed == [] and window.outstanding == 0

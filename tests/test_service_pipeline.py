@@ -415,6 +415,47 @@ def test_every_loss_is_in_one_dropped_count_with_its_cause():
     assert set(d) >= {"input_queue", "shutdown", "sink.CollectSink"}  # the output stage is gone: each sink its queue
 
 
+class Unanswered:
+    """A process step whose frames stay on a server that does not answer until ``release`` is set."""
+
+    def __init__(self) -> None:
+        self.release = threading.Event()
+        self.started = 0
+        self.lock = threading.Lock()
+
+    def __call__(self, frame: StereoFrame) -> FusionResult:
+        with self.lock:
+            self.started += 1
+        self.release.wait(30)
+        return FusionResult(frame=frame, disparity=np.zeros(frame.shape, np.float32))
+
+
+@pytest.mark.parametrize("in_flight", [1, 4])
+def test_a_stop_that_times_out_counts_the_frames_still_being_matched(in_flight):
+    """Every frame received is published or lost under ``shutdown``, also those a stop left on the server."""
+    step, sink = Unanswered(), CollectSink()
+    pipe = Pipeline(sim_source(30, rate_hz=100), step, [sink], input_size=2, input_policy="latest", in_flight=in_flight)
+    pipe.start()
+    assert pipe.source.finished.wait(20)  # every frame emitted: on the server, queued behind it or dropped
+    deadline = time.monotonic() + 20
+    while step.started < in_flight and time.monotonic() < deadline:
+        time.sleep(0.01)
+    queued = len(pipe.input)
+    assert step.started == in_flight and queued >= 1
+    t0 = time.monotonic()
+    pipe.stop(0.5)
+    assert time.monotonic() - t0 < 4.0  # the stop did not wait for the server
+    st = pipe.status()
+    c, d = st["counters"], st["dropped"]
+    assert c["received"] == 30 and c["processed"] == c["published"] == 0 and sink.results == []
+    assert d["shutdown"] >= in_flight + queued  # the frames on the server and those queued behind them
+    assert d["shutdown"] + d["input_queue"] == c["received"]  # each frame counted once
+    assert c["dropped"] == sum(d.values()) == c["received"]
+    step.release.set()  # the server answers late: nothing is published or counted twice
+    time.sleep(0.5)
+    assert pipe.status()["counters"] == c and pipe.status()["dropped"] == d and sink.results == []
+
+
 def test_block_end_to_end_through_zenoh_loses_nothing(zenoh_endpoint):
     """Policy block, a reliable BLOCK publisher at ~4x the processing rate: every frame is processed, 0 dropped."""
     n = 40

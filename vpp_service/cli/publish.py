@@ -168,7 +168,7 @@ def _confirm_delivery(session: zenoh.Session, prefix: str, rig: str, seconds: fl
     from vpp_service.transport import wire
 
     t0 = time.monotonic()
-    replies = session.get(wire.topic(prefix, rig, "@status/**"), timeout=seconds)
+    replies = session.get(wire.topic(prefix, rig, "@status"), timeout=seconds)
     if any(reply.ok is not None for reply in replies):
         return True
     waited = time.monotonic() - t0

@@ -10,12 +10,14 @@ or ``.rrd`` files (``--save PATH``: ``PATH`` itself when one rig was seen; with
 the suffix; the files written are named on stderr). Stops on Ctrl-C / SIGTERM, after
 ``--max-frames`` disparity maps or after ``--duration`` seconds, and prints a
 JSON summary (messages received per rig and output, rejected messages, the
-Rerun sinks' counters, the files written, and per output how it was put in order).
+Rerun sinks' counters, the files written, and per output its ``gaps``: ``seq``
+values skipped between two messages, frames the service dropped or did not answer
+or messages lost on the way, e.g. those its zenoh sink's ``congestion_control =
+"drop"`` drops to a viewer that does not keep up).
 
-Each output stream is logged in ``seq`` order: the workers of a pool (``run
---pool``) answer frames in parallel, so their outputs arrive out of order; the
-viewer holds up to 16 messages for at most ``--reorder-ms`` to fill a hole, then
-counts it as a gap. A frame answered twice is shown once (counted as a duplicate).
+Messages are logged as they arrive: each output comes from the rig's one
+service, which publishes it in ``seq`` order, and Zenoh delivers a publisher's
+messages in order.
 
 Example (the service on the robot, the viewer on a laptop)::
 
@@ -41,7 +43,6 @@ from typing import TYPE_CHECKING
 
 from vpp_service.errors import StartupError
 from vpp_service.queueing import QueueWorker
-from vpp_service.transport.reorder import ReorderBuffer
 
 if TYPE_CHECKING:
     import zenoh
@@ -53,8 +54,6 @@ log = logging.getLogger(__name__)
 
 #: The outputs the viewer shows.
 VIEWED = ("disparity", "depth", "left_vpp", "right_vpp", "sparse")
-#: Messages of one output held at most to put them in ``seq`` order.
-REORDER_WINDOW = 16
 
 
 def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -80,12 +79,6 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     where.add_argument("--rerun-connect", metavar="URL", help="stream to a running viewer (rerun+http://H:P/proxy)")
     p.add_argument("--max-frames", type=int, default=0, help="stop after N disparity maps (0 = no limit)")
     p.add_argument("--duration", type=float, default=0.0, help="stop after S seconds (0 = no limit)")
-    p.add_argument(
-        "--reorder-ms",
-        type=float,
-        default=300.0,
-        help="longest a message waits for the ones before it (seq order) before their gap is counted",
-    )
     p.set_defaults(func=main)
 
 
@@ -143,11 +136,11 @@ class Viewer:
         Watching ``'*'``: one ``.rrd`` per rig.
     """
 
-    def __init__(self, options: dict[str, object], wildcard: bool, reorder_ms: float = 300.0) -> None:
+    def __init__(self, options: dict[str, object], wildcard: bool) -> None:
         self.options = options
         self.wildcard = wildcard
-        self.reorder_s = reorder_ms / 1e3
-        self.order: dict[tuple[str, str], ReorderBuffer[RerunParts]] = {}
+        self.last_seq: dict[tuple[str, str], int] = {}  # per rig and output
+        self.gaps: dict[str, Counter[str]] = defaultdict(Counter)
         self.sinks: dict[str, RerunSink] = {}
         self.workers: dict[str, QueueWorker[RerunParts]] = {}  # each rig's queue and logging thread
         self.received: dict[str, Counter[str]] = defaultdict(Counter)
@@ -197,26 +190,16 @@ class Viewer:
             log.warning("view: %s rejected: %s", key, exc)
             return None
         self.received[rig][name] += 1
-        buf = self.order.get((rig, name))
-        if buf is None:
-            buf = self.order[rig, name] = ReorderBuffer(REORDER_WINDOW, self.reorder_s)
-        self._submit(rig, buf.push(parts.seq, parts))
+        last = self.last_seq.get((rig, name))
+        if last is not None and parts.seq > last + 1:
+            self.gaps[rig][name] += parts.seq - last - 1  # a seq at or below the last: the service restarted
+        self.last_seq[rig, name] = parts.seq
+        self.sink(rig)
+        self.workers[rig].put(parts)  # logged on the rig's thread; a full queue drops the oldest (counted)
         return name
 
-    def _submit(self, rig: str, released: list[tuple[int, RerunParts]]) -> None:
-        for _, parts in released:
-            self.sink(rig)
-            self.workers[rig].put(parts)  # logged on the rig's thread; a full queue drops the oldest (counted)
-
-    def poll(self) -> None:
-        """Log the messages whose wait for the ones before them expired."""
-        for (rig, _), buf in self.order.items():
-            self._submit(rig, buf.poll())
-
     def close(self, timeout: float = 5.0) -> dict[str, object]:
-        """Close every sink; the summary of what was received, put in order and logged."""
-        for (rig, _), buf in self.order.items():
-            self._submit(rig, buf.flush())
+        """Close every sink; the summary of what was received and logged."""
         for rig, sink in self.sinks.items():
             self.workers[rig].close(timeout)
             sink.close(timeout)
@@ -224,14 +207,11 @@ class Viewer:
         if self.wildcard and len(saved) == 1:  # '*' and one rig seen: the file asked for, not PATH-<rig>
             (only,) = self.sinks.values()
             saved = [_rename(Path(saved[0]), Path(str(self.options["path"])), only.options.max_files)]
-        order: dict[str, dict[str, object]] = defaultdict(dict)
-        for (rig, name), buf in self.order.items():
-            order[rig][name] = buf.stats()
         return {
             "rigs": {
                 rig: {
                     "received": dict(self.received[rig]),
-                    "order": order[rig],
+                    "gaps": {name: self.gaps[rig][name] for name in self.received[rig]},
                     "rerun": sink.stats(),
                     "queue_dropped": self.workers[rig].dropped + self.workers[rig].discarded,
                 }
@@ -270,9 +250,7 @@ def main(args: argparse.Namespace) -> int:
     if args.rig != "*":
         topic(args.prefix, args.rig, "out")  # validates the names (ValueError: exit 2)
     options = _rerun_options(args)
-    if not 0 < args.reorder_ms <= 60000:
-        raise ValueError(f"--reorder-ms must be in (0, 60000], got {args.reorder_ms}")
-    viewer = Viewer(options, wildcard=args.rig == "*", reorder_ms=args.reorder_ms)
+    viewer = Viewer(options, wildcard=args.rig == "*")
     inbox: queue.Queue[tuple[str, bytes]] = queue.Queue(maxsize=256)
     lost = [0]
 
@@ -304,7 +282,6 @@ def main(args: argparse.Namespace) -> int:
             where = ", ".join(zsec.connect)
             print(f"view: watching {args.prefix}/{args.rig}/out/* via {where}", file=sys.stderr, flush=True)
             while not stop.is_set() and time.monotonic() < t_end:
-                viewer.poll()
                 try:
                     key, payload = inbox.get(timeout=0.1)
                 except queue.Empty:

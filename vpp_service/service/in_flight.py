@@ -6,6 +6,10 @@ answer. :class:`InFlight` runs ``work(frame)`` on up to ``n`` threads;
 :meth:`InFlight.submit` waits while ``n`` frames are in flight (back-pressure:
 the pipeline's input queue fills and its policy applies), and one thread hands
 each result (or failure) on in submission order, exactly once.
+
+A stop that cannot wait for the servers calls :meth:`InFlight.abandon`: the items
+not yet handed on are never handed on (their answers are ignored when they come),
+and it returns how many there were, for the caller to count as lost.
 """
 
 from __future__ import annotations
@@ -13,7 +17,7 @@ from __future__ import annotations
 import queue
 import threading
 from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from typing import Generic, TypeVar
 
 T = TypeVar("T")
@@ -56,6 +60,8 @@ class InFlight(Generic[T, R]):
         self._thread.start()
         self._lock = threading.Lock()
         self._outstanding = 0
+        self._unclaimed = 0  # submitted, neither handed on (nor being handed on) nor abandoned
+        self._abandoned = False
         self.high_water = 0
 
     @property
@@ -65,12 +71,19 @@ class InFlight(Generic[T, R]):
             return self._outstanding
 
     def submit(self, item: T, stop: threading.Event | None = None) -> bool:
-        """Start ``item`` once a slot is free (waits while ``n`` are in flight); False when ``stop`` was set first."""
+        """Start ``item`` once a slot is free (waits while ``n`` are in flight).
+
+        False when ``stop`` was set first, or after :meth:`abandon`: the item was not taken.
+        """
         while not self._slots.acquire(timeout=0.1):
             if stop is not None and stop.is_set():
                 return False
         with self._lock:
+            if self._abandoned:
+                self._slots.release()
+                return False
             self._outstanding += 1
+            self._unclaimed += 1
             self.high_water = max(self.high_water, self._outstanding)
         self._order.put((item, self._pool.submit(self._work, item)))
         return True
@@ -81,7 +94,16 @@ class InFlight(Generic[T, R]):
             if entry is None:
                 return
             item, fut = entry
+            while not (fut.done() or self._abandoned):
+                wait((fut,), timeout=0.1)  # the answer, or an abandon() meanwhile
+            with self._lock:
+                claimed = not self._abandoned  # else counted by abandon(): never handed on
+                if claimed:
+                    self._unclaimed -= 1
             try:
+                if not claimed:
+                    fut.cancel()  # not started yet: never sent
+                    continue
                 exc = fut.exception()
                 if exc is None:
                     self._done(fut.result())
@@ -93,6 +115,17 @@ class InFlight(Generic[T, R]):
                 with self._lock:
                     self._outstanding -= 1
                 self._slots.release()
+
+    def abandon(self) -> int:
+        """Hand nothing more on (a stop that cannot wait); how many items that leaves unanswered.
+
+        An item whose answer came and is being handed on right now is not among them: it is handed on.
+        Later calls return 0, and :meth:`submit` takes no more items.
+        """
+        with self._lock:
+            self._abandoned = True
+            n, self._unclaimed = self._unclaimed, 0
+        return n
 
     def close(self, timeout: float | None = None) -> bool:
         """Deliver what is in flight, then end the threads; False when that took longer than ``timeout``."""

@@ -27,7 +27,8 @@ the ``<prefix>/<rig>/@status`` queryable; a liveliness token
 
 Every loss of valid input or output anywhere is in one count: ``counters["dropped"]``
 is the sum of ``status()["dropped"]``, which names each cause (``input_queue``,
-``shutdown`` for frames and results still queued when a stop abandons them, the
+``shutdown`` for frames and results still queued, or frames still being matched
+(e.g. on a Triton server), when a stop that timed out abandons them, the
 source's own losses such as ``source_ring`` and ``sync``, and ``sink.<Name>``
 for each sink's: its full queue's drops plus what the sink itself lost). Under the ``block`` input
 policy the source is asked to back-pressure its producer instead of dropping.
@@ -242,6 +243,10 @@ class Pipeline:
         self._token: zenoh.LivelinessToken | None = None
         self._opened: list[Sink] = []
         self._refused = 0  # frames the source emitted while the pipeline was stopping
+        self._matching = 0  # frames in the process step now (in_flight == 1: 0 or 1)
+        self._abandoned = False  # a stop gave up on the frames still being matched
+        self._lost_matching = 0  # frames a stop gave up on while they were being matched (on a server, ...)
+        self._unsent = 0  # results a stop left without a sink queue to go to (one per sink)
         #: Sinks whose close raised or did not return within the shutdown timeout (their output may be incomplete).
         self.unfinished_sinks: list[str] = []
         self._snapshot_lock = threading.Lock()
@@ -315,16 +320,42 @@ class Pipeline:
         """
         if self._enough.is_set():
             return
-        if self.in_flight > 1:
-            if self._window is None:
-                self._window = InFlight(
-                    self.in_flight, self.process, self._processed, self._process_failed, name="pipeline-match"
-                )
+        if self._window is not None:
             if not self._window.submit(frame, self._stop):
                 with self._lock:
                     self._refused += 1  # stopping while the window was full: counted as shutdown
             return
-        self._processed(self.process(frame))
+        with self._lock:
+            if self._abandoned:  # taken from the queue just before a stop gave up: never matched
+                self._refused += 1
+                return
+            self._matching += 1
+        try:
+            result = self.process(frame)
+        except Exception:
+            if self._settled():
+                raise  # the input stage's on_error: _process_failed
+            return
+        if self._settled():
+            self._processed(result)
+
+    def _settled(self) -> bool:
+        """The process step returned (in_flight 1): True to hand its outcome on, False when a stop counted it lost."""
+        with self._lock:
+            self._matching -= 1
+            return not self._abandoned
+
+    def _abandon(self) -> None:
+        """A stop that cannot wait: the frames still being matched are lost (counted under ``shutdown``)."""
+        with self._lock:
+            self._abandoned = True
+            lost = self._matching
+        if self._window is not None:
+            lost += self._window.abandon()
+        with self._lock:
+            self._lost_matching += lost
+        if lost:
+            log.warning("stopping: %d frame(s) still being matched are abandoned (counted as shutdown)", lost)
 
     def _processed(self, result: FusionResult) -> None:
         """A frame's result: timings, metrics and counters, then to the sinks."""
@@ -435,10 +466,16 @@ class Pipeline:
             if worker.policy == "block":
                 while not worker.put(delivery, timeout=0.1):
                     if self._stop.is_set() or worker.closed:
-                        self._delivered(delivery, dropped=True)
+                        self._unsendable(delivery)
                         break
-            elif not worker.put(delivery):
-                self._delivered(delivery, dropped=True)
+            elif not worker.put(delivery):  # a latest queue refuses only once closed: a stop aborted it
+                self._unsendable(delivery)
+
+    def _unsendable(self, delivery: _Delivery) -> None:
+        """A sink's queue refused ``delivery`` while stopping: lost there (counted under ``shutdown``)."""
+        with self._lock:
+            self._unsent += 1
+        self._delivered(delivery, dropped=True)
 
     def _write(self, sink: Sink, delivery: _Delivery) -> None:
         """One sink's thread: write one result, then count it delivered there."""
@@ -517,6 +554,10 @@ class Pipeline:
             self._queryable = self.session.declare_queryable(self.status_key, self._on_query)
             self._token = self.session.liveliness().declare_token(topic(self.prefix, self.rig, "@alive"))
         self._started = time.monotonic()
+        if self.in_flight > 1:
+            self._window = InFlight(
+                self.in_flight, self.process, self._processed, self._process_failed, name="pipeline-match"
+            )
         for worker in self.sink_workers:
             worker.start()
         self.input.start()
@@ -532,7 +573,7 @@ class Pipeline:
     def _on_query(self, query: zenoh.Query) -> None:
         # runs on a Zenoh thread: reply with the cached snapshot, never block
         try:
-            # the service's own key, not the query's: a wildcard query gets one entry per rig (and worker)
+            # the service's own key, not the query's: a wildcard query gets one entry per rig
             query.reply(self.status_key, self._status_snapshot())
         except Exception as exc:  # noqa: BLE001 - session closing; nothing may raise into Zenoh's thread
             log.debug("@status reply failed: %s", exc)
@@ -569,6 +610,7 @@ class Pipeline:
             log.warning("pipeline threads did not drain within %.1f s; abandoning the queued results", timeout)
             self._stop.set()
             self.input.abort()
+            self._abandon()
             for worker in self.sink_workers:
                 worker.abort()
             self.input.join(1.0)
@@ -695,9 +737,10 @@ class Pipeline:
         out = {
             "input_queue": self.input.dropped,
             # frames left queued when max_frames is reached were not wanted: only a stop's discards are losses
-            "shutdown": (0 if self._enough.is_set() else self.input.discarded)
+            "shutdown": (0 if self._enough.is_set() else self.input.discarded + self._lost_matching)
             + sum(w.discarded for w in self.sink_workers)
-            + self._refused,
+            + self._refused
+            + self._unsent,
         }
         try:
             out.update({k: int(v) for k, v in self.source.losses().items()})

@@ -52,7 +52,6 @@ from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import SINKS, SinkContext
 from vpp_service.sinks.colorize import colorize_disparity
 from vpp_service.sinks.folder import FolderSink, check_pattern, path_inside, write_atomic
-from vpp_service.sinks.ordered import check_reorder_options
 from vpp_service.sinks.ply import encode_ply
 from vpp_service.transport.backproject import DEFAULT_STRIDE, check_stride, depth_to_points
 
@@ -95,11 +94,6 @@ class FilesSinkOptions:
     points_stride : int
         Every ``points_stride``-th row and column of the depth map becomes a point (1 = every
         pixel; the default 4 keeps a 720p cloud under 57 600 points).
-    reorder_window : int
-        In a worker pool, results held to write them in ``seq`` order
-        (:mod:`vpp_service.sinks.ordered`); 0 = off. Outside a pool results come in order.
-    reorder_wait_ms : float
-        The longest a result waits for the ones before it.
     """
 
     dir: str
@@ -113,11 +107,8 @@ class FilesSinkOptions:
     preview_max_disparity: float = 0.0
     points: bool = False
     points_stride: int = DEFAULT_STRIDE
-    reorder_window: int = 16
-    reorder_wait_ms: float = 500.0
 
     def __post_init__(self) -> None:
-        check_reorder_options(self.reorder_window, self.reorder_wait_ms)
         check_stride(self.points_stride)
         if not (self.preview_max_disparity >= 0 and np.isfinite(self.preview_max_disparity)):
             raise ValueError(f"preview_max_disparity: must be a finite number >= 0, got {self.preview_max_disparity}")

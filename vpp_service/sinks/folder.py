@@ -24,7 +24,6 @@ import numpy as np
 
 from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import Sink, SinkContext
-from vpp_service.sinks.ordered import OrderedWrites
 
 #: Fields a file-name pattern may use, with the sample values used to check it.
 PATTERN_FIELDS = {"rig": "rig0", "seq": 0, "stamp_ns": 0, "name": "scene"}
@@ -198,14 +197,6 @@ class FolderOptions(Protocol):
         """Create the folder (with parents) when it is missing."""
 
     @property
-    def reorder_window(self) -> int:
-        """Results held to write them in ``seq`` order (:mod:`vpp_service.sinks.ordered`)."""
-
-    @property
-    def reorder_wait_ms(self) -> float:
-        """The longest a result waits for the ones before it."""
-
-    @property
     def pattern(self) -> str:
         """File-name stem pattern over :data:`PATTERN_FIELDS`."""
 
@@ -215,7 +206,7 @@ class FolderSink(Sink):
 
     Subclasses set ``Options`` (a dataclass with ``dir``, ``create_dir`` and
     ``pattern``, see :class:`FolderOptions`), ``NAME``, ``DIR_KEY`` / ``DIR_WHAT`` for error messages,
-    and :meth:`write_one`; :meth:`write` calls it in ``seq`` order when ``reorder_window`` asks for it.
+    and :meth:`write_one`, which :meth:`write` calls once it checked the sink and the result.
     """
 
     options: FolderOptions
@@ -229,7 +220,6 @@ class FolderSink(Sink):
         super().__init__(options, context or SinkContext())
         self._dir = Path(options.dir).expanduser()
         self._open = False
-        self._ordered = OrderedWrites(options.reorder_window, options.reorder_wait_ms, self.context, self._write_one)
 
     @classmethod
     def check_paths(cls, options: FolderOptions, section: str, created_dirs: frozenset[Path] = frozenset()) -> None:
@@ -259,7 +249,7 @@ class FolderSink(Sink):
         self._open = True
 
     def write(self, result: FusionResult) -> None:
-        """Write ``result`` (synchronously), in ``seq`` order when reordering is on (:meth:`write_one` writes).
+        """Write ``result`` (synchronously, :meth:`write_one` writes).
 
         Raises
         ------
@@ -272,24 +262,15 @@ class FolderSink(Sink):
             raise RuntimeError(f"{self.NAME} sink: write() before open() or after close()")
         if not isinstance(result, FusionResult):
             raise TypeError(f"result: must be a FusionResult, got {type(result).__name__}")
-        self._ordered.write(result)
-
-    def _write_one(self, result: FusionResult) -> None:
-        self.write_one(result)  # looked up per call: a subclass's (or an instrumented) write_one
+        self.write_one(result)
 
     @abstractmethod
     def write_one(self, result: FusionResult) -> None:
         """Write the files of one result."""
 
     def close(self, timeout: float = 5.0) -> None:
-        """Write the results held for reordering (writes are otherwise synchronous); marks the sink closed."""
-        if self._open:
-            self._ordered.flush()
+        """Nothing is buffered (writes are synchronous); marks the sink closed."""
         self._open = False
-
-    def stats(self) -> dict[str, int]:
-        """The counters, plus ``order_*`` when reordering is on."""
-        return {**super().stats(), **self._ordered.stats()}
 
     def frame_stem(self, result: FusionResult) -> str:
         """File-name stem of ``result`` from ``options.pattern``, built from validated parts only.

@@ -53,7 +53,6 @@ from typing import Literal
 from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import SINKS, SinkContext
 from vpp_service.sinks.folder import FolderSink, check_pattern, path_inside, write_atomic
-from vpp_service.sinks.ordered import check_reorder_options
 from vpp_service.transport import wire
 
 log = logging.getLogger(__name__)
@@ -89,11 +88,6 @@ class RecordSinkOptions:
         ``rig``, ``seq``, ``stamp_ns``, ``name``; must not contain path
         separators. Replay order is name order, so keep it sortable in time,
         e.g. ``"{rig}_{stamp_ns}"`` to record several runs into one folder.
-    reorder_window : int
-        In a worker pool, frames held to record them in ``seq`` order
-        (:mod:`vpp_service.sinks.ordered`); 0 = off. Outside a pool results come in order.
-    reorder_wait_ms : float
-        The longest a frame waits for the ones before it.
     """
 
     dir: str
@@ -103,11 +97,8 @@ class RecordSinkOptions:
     max_bytes: int = 0
     overwrite: bool = False
     pattern: str = "{rig}_{seq:09d}"
-    reorder_window: int = 16
-    reorder_wait_ms: float = 500.0
 
     def __post_init__(self) -> None:
-        check_reorder_options(self.reorder_window, self.reorder_wait_ms)
         if not self.dir.strip():
             raise ValueError("dir: must not be empty")
         if self.enc not in ENCODINGS:

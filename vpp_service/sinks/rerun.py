@@ -81,7 +81,6 @@ from urllib.parse import urlsplit
 
 from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import SINKS, QueueSpec, Sink, SinkContext
-from vpp_service.sinks.ordered import OrderedWrites, check_reorder_options
 from vpp_service.sinks.rerun_log import ENTITY_RE, RerunLayout, RerunParts, depth_stride, parts_from_result
 from vpp_service.sinks.rotation import rotate, rotated_paths
 from vpp_service.transport.backproject import DEFAULT_STRIDE, check_stride
@@ -188,11 +187,6 @@ class RerunSinkOptions:
     analytics : bool
         Leave the spawned viewer's usage analytics as configured (true) or
         opt out before spawning (false, default).
-    reorder_window : int
-        In a worker pool, results held to log them in ``seq`` order
-        (:mod:`vpp_service.sinks.ordered`); 0 = off. Outside a pool results come in order.
-    reorder_wait_ms : float
-        The longest a result waits for the ones before it.
     """
 
     mode: Literal["save", "spawn", "connect", "serve"] = "save"
@@ -219,8 +213,6 @@ class RerunSinkOptions:
     application_id: str | None = None
     recording_id: str | None = None
     analytics: bool = False
-    reorder_window: int = 16
-    reorder_wait_ms: float = 500.0
 
     def __post_init__(self) -> None:
         if not self.path.strip():
@@ -249,7 +241,6 @@ class RerunSinkOptions:
             raise ValueError("application_id: must not be empty when given")
         if self.recording_id is not None and not self.recording_id.strip():
             raise ValueError("recording_id: must not be empty when given")
-        check_reorder_options(self.reorder_window, self.reorder_wait_ms)
 
     def _check_network(self) -> None:
         if self.url is not None and not _URL_RE.match(self.url):
@@ -322,7 +313,6 @@ class RerunSink(Sink):
             raise ValueError(f"context.rig: must be letters, digits, '_', '-', '.', got {context.rig!r}")
         super().__init__(options, context)
         self._counters.update({"throttled": 0, "undelivered": 0, "reconnects": 0, "rotations": 0})
-        self._ordered = OrderedWrites(options.reorder_window, options.reorder_wait_ms, context, self._accept)
         self._state: Literal["new", "open", "finished", "closed"] = "new"
         o = options
         self.layout = RerunLayout(
@@ -413,10 +403,9 @@ class RerunSink(Sink):
         self._attach_once()
 
     def finish(self) -> None:
-        """Log the results still held for ordering, flush and disconnect, on the thread that logs."""
+        """Flush and disconnect, on the thread that logs."""
         if self._state != "open":
             return
-        self._ordered.flush()
         self._state = "finished"
         self._flush()
 
@@ -499,7 +488,7 @@ class RerunSink(Sink):
         return self._ready.wait(timeout)
 
     def write(self, result: FusionResult) -> None:
-        """Log ``result`` (throttled by ``max_hz``; in ``seq`` order in a pool), synchronously.
+        """Log ``result`` (throttled by ``max_hz``), synchronously.
 
         Raises
         ------
@@ -511,7 +500,7 @@ class RerunSink(Sink):
         if not isinstance(result, FusionResult):
             raise TypeError(f"result: must be a FusionResult, got {type(result).__name__}")
         self._check_open()
-        self._ordered.write(result)
+        self._accept(result)
 
     @property
     def max_hz(self) -> float:
@@ -522,7 +511,7 @@ class RerunSink(Sink):
         return 0.0 if o.mode == "save" else VIEWER_MAX_HZ
 
     def _accept(self, result: FusionResult) -> None:
-        """Throttle (``max_hz``, a two-frame token bucket) and queue one result, in order when reordering is on."""
+        """Throttle (``max_hz``, a two-frame token bucket) and queue one result."""
         hz = self.max_hz
         if hz > 0:
             now = time.monotonic()
@@ -608,7 +597,6 @@ class RerunSink(Sink):
         Also ``reconnects`` (network modes) and ``rotations`` (``save`` with ``max_mb``).
         """
         out = super().stats()
-        out.update(self._ordered.stats())
         out["dropped"] = out["undelivered"]  # throttled frames were skipped on purpose
         return out
 

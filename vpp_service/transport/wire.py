@@ -752,9 +752,6 @@ def _map_message(result: FusionResult, arr: np.ndarray, extra: Mapping[str, obje
         "calib": fr.calib.to_dict() if fr.calib is not None else None,
         "timing_ms": {str(k): float(v) for k, v in result.timing_ms.items()},
     }
-    worker = fr.meta.get("worker")
-    if isinstance(worker, str):  # a pool worker's id (extension: decoders keep it in ``extra``)
-        msg["worker"] = worker
     msg.update(extra)
     # the map's bytes stay a separate part (one copy out of the array): a
     # publisher writes the parts straight into its buffer without joining them
