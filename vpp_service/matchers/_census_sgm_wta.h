@@ -186,6 +186,48 @@ static void csgm_lr_row(const float* CSGM_RESTRICT dl, const float* CSGM_RESTRIC
     }
 }
 
+/* --------------------------------------------------------- confidence ----
+ * Computed only when asked (csgm_finish_row with a confidence map), in plain loops beside the WTAs so that
+ * neither WTA changes.  Per pixel: the best disparity b (lowest d on ties, over the n valid ones), its cost
+ * and the runner-up outside b - 1 .. b + 1 give the peak-ratio term min(1, (1 - best / second) / peak)
+ * (0 without a runner-up or with second == 0); the row's right WTA then gives the left-right term
+ * max(0, 1 - |b - d_R(x - b)| / span); the confidence is their product, in [0, 1]. */
+
+/* The peak-ratio term of one pixel from its n costs c[d] >> shift (shift 7: keys, see csgm_pack_px); *best
+ * gets b. */
+CSGM_INLINE float csgm_conf_pixel(const uint16_t* CSGM_RESTRICT c, int n, int shift, double peak,
+                                  uint16_t* CSGM_RESTRICT best) {
+    unsigned bv = 0xFFFFFFFFu;
+    int b = 0;
+    for (int d = 0; d < n; d++) {
+        const unsigned v = (unsigned)(c[d] >> shift);
+        if (v < bv) {
+            bv = v;
+            b = d;
+        }
+    }
+    unsigned second = 0xFFFFFFFFu;
+    for (int d = 0; d < n; d++) {
+        const unsigned v = (unsigned)(c[d] >> shift);
+        if ((d < b - 1 || d > b + 1) && v < second) second = v;
+    }
+    *best = (uint16_t)b;
+    if (second == 0xFFFFFFFFu || second == 0) return 0.0f;
+    double m = (1.0 - (double)bv / (double)second) / peak;
+    return (float)(m < 1.0 ? m : 1.0);
+}
+
+/* The confidence of a row in place: conf[x] (the peak-ratio term) times the left-right term of the best d
+ * b[x] against the row's right WTA r (integer disparities). */
+static void csgm_conf_row(const uint16_t* CSGM_RESTRICT b, const float* CSGM_RESTRICT r, float* CSGM_RESTRICT conf,
+                          int W, double span) {
+    for (int x = 0; x < W; x++) {
+        const double diff = fabs((double)b[x] - (double)r[x - b[x]]);
+        const double lr = 1.0 - diff / span;
+        conf[x] = lr > 0.0 ? (float)((double)conf[x] * lr) : 0.0f;
+    }
+}
+
 #if defined(__AVX2__)
 /* ------------------------------------------------- WTA on keys (p->packed) --
  * With narrow partial sums a pixel's full sum S[d] is at most 2 * 255 = 510, so for D <= 128 the 16-bit
