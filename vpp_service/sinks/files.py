@@ -20,11 +20,13 @@ metric depth (metres, NaN invalid) as float32 ``.npy``, and ``preview`` saves a
 colour-mapped 8-bit RGB PNG of the disparity (turbo, near = red, invalid = black)
 for looking at: the 16-bit PNGs look black in an ordinary image viewer. Its range
 is ``[0, preview_max_disparity]`` (fixed, comparable between frames) or, when that
-is 0, each frame's own range of valid values.
+is 0, each frame's own range of valid values. ``confidence`` saves the per-pixel
+confidence of the disparity (0..1, 0 = no answer) as float32 ``.npy`` and as a
+16-bit PNG, value = round(confidence * 65535) (:func:`encode_confidence_png16`).
 
 File names are ``<pattern>_<what>.<ext>`` where ``pattern`` (default
 ``{rig}_{seq:06d}``) may use ``rig``, ``seq``, ``stamp_ns`` and ``name``, and
-``<what>`` is ``disparity``, ``disparity_preview``, ``depth``, ``left_vpp`` or ``right_vpp``.
+``<what>`` is ``disparity``, ``disparity_preview``, ``depth``, ``confidence``, ``left_vpp`` or ``right_vpp``.
 
 Every file is written to a temporary name in the same folder and then renamed
 into place, so readers never see a partial file. After :meth:`FilesSink.open`
@@ -72,6 +74,9 @@ class FilesSinkOptions:
         Also save the painted pair (``left_vpp``/``right_vpp``) as PNG when present.
     depth : bool
         Also save metric depth as float32 ``.npy`` when present.
+    confidence : bool
+        Also save the per-pixel confidence as float32 ``.npy`` and 16-bit PNG
+        (``<stem>_confidence.npy`` / ``.png``); the service computes it only then.
     pattern : str
         File name stem, a ``str.format`` pattern over ``rig``, ``seq``,
         ``stamp_ns``, ``name``; must not contain path separators.
@@ -95,6 +100,7 @@ class FilesSinkOptions:
     formats: tuple[str, ...] = ("png16",)
     painted: bool = False
     depth: bool = False
+    confidence: bool = False
     pattern: str = "{rig}_{seq:06d}"
     overwrite: bool = False
     create_dir: bool = False
@@ -218,6 +224,11 @@ class FilesSink(FolderSink):
         """True when the ``depth`` files are written."""
         return options.depth
 
+    @classmethod
+    def needs_confidence(cls, options: FilesSinkOptions) -> bool:
+        """True when the ``confidence`` files are written."""
+        return options.confidence
+
     DIR_KEY = "sinks.files.dir"
     DIR_WHAT = "output folder"
     NAME = "files"
@@ -231,8 +242,8 @@ class FilesSink(FolderSink):
         """The files :meth:`write` would produce for ``result``, by kind.
 
         Keys are ``png16``/``pfm``/``npy`` (the enabled formats), and
-        ``preview``, ``depth``, ``left_vpp``, ``right_vpp`` when enabled (whether or not the
-        result carries that data).
+        ``preview``, ``depth``, ``confidence`` / ``confidence_png``, ``left_vpp``, ``right_vpp`` when
+        enabled (whether or not the result carries that data).
 
         Raises
         ------
@@ -247,6 +258,9 @@ class FilesSink(FolderSink):
             names["preview"] = f"{stem}_disparity_preview.png"
         if self.options.depth:
             names["depth"] = f"{stem}_depth.npy"
+        if self.options.confidence:
+            names["confidence"] = f"{stem}_confidence.npy"
+            names["confidence_png"] = f"{stem}_confidence.png"
         if self.options.painted:
             names["left_vpp"] = f"{stem}_left_vpp.png"
             names["right_vpp"] = f"{stem}_right_vpp.png"
@@ -275,7 +289,7 @@ class FilesSink(FolderSink):
         if failures == 0:
             self._counters["written"] += 1
 
-    def _writer(self, kind: str, result: FusionResult) -> Callable[[str], object] | None:
+    def _writer(self, kind: str, result: FusionResult) -> Callable[[str], object] | None:  # noqa: PLR0911 - a branch per kind
         """A ``f(tmp_path)`` writing ``kind`` for ``result``, or None when absent."""
         if kind == "png16":
             data = encode_png16(result.disparity)
@@ -290,6 +304,8 @@ class FilesSink(FolderSink):
             top = self.options.preview_max_disparity
             rgb = colorize_disparity(d, 0.0, top) if top > 0 else colorize_disparity(d)
             return _png_writer(rgb, kind)
+        if kind in ("confidence", "confidence_png"):
+            return _confidence_writer(result.confidence, png=kind == "confidence_png")
         if kind in ("npy", "depth"):
             arr = result.disparity if kind == "npy" else result.depth
             if arr is None:
@@ -301,6 +317,42 @@ class FilesSink(FolderSink):
             data = buf.getvalue()
             return lambda p: Path(p).write_bytes(data)
         return _painted_writer(result.left_vpp if kind == "left_vpp" else result.right_vpp, kind)
+
+
+def _confidence_writer(confidence: np.ndarray | None, png: bool) -> Callable[[str], object] | None:
+    """A ``f(tmp_path)`` writing the confidence as 16-bit PNG (``png``) or float32 ``.npy``; None when absent."""
+    if confidence is None:
+        return None
+    if png:
+        data = encode_confidence_png16(confidence)
+    else:
+        buf = io.BytesIO()
+        np.save(buf, np.asarray(confidence, np.float32), allow_pickle=False)
+        data = buf.getvalue()
+    return lambda p: Path(p).write_bytes(data)
+
+
+def encode_confidence_png16(confidence: np.ndarray) -> bytes:
+    """16-bit PNG of a confidence map: value = round(clip(confidence, 0, 1) * 65535) (NaN -> 0).
+
+    Parameters
+    ----------
+    confidence : ndarray
+        H x W float confidence in [0, 1].
+
+    Returns
+    -------
+    bytes
+        The PNG file; read back with ``cv2.imread(path, cv2.IMREAD_UNCHANGED) / 65535``.
+    """
+    c = np.asarray(confidence, np.float64)
+    if c.ndim != 2:
+        raise ValueError(f"confidence: must be an H x W map, got shape {c.shape}")
+    q = np.rint(np.clip(np.nan_to_num(c, nan=0.0), 0.0, 1.0) * 65535.0).astype(np.uint16)
+    ok, png = cv2.imencode(".png", q)
+    if not ok:
+        raise ValueError(f"confidence: OpenCV could not encode shape {c.shape}")
+    return png.tobytes()
 
 
 def _painted_writer(img: np.ndarray | None, kind: str) -> Callable[[str], object] | None:
@@ -322,4 +374,4 @@ def _png_writer(img: np.ndarray, kind: str) -> Callable[[str], object]:
     return lambda p: Path(p).write_bytes(data)
 
 
-__all__ = ["FORMATS", "FilesSink", "FilesSinkOptions", "decode_png16", "encode_png16"]
+__all__ = ["FORMATS", "FilesSink", "FilesSinkOptions", "decode_png16", "encode_confidence_png16", "encode_png16"]

@@ -6,7 +6,11 @@ to them (Zenoh's matching status; default: the painted pair and the sparse
 points, which ``vpp-service view`` shows), so they cost nothing otherwise.
 ``sparse`` carries the sparse input points.
 
-``disparity`` and ``depth`` (float32 maps) are published at ``Priority.DATA``
+``confidence`` is the per-pixel confidence of the disparity (float32 0..1,
+0 where there is no answer); the service computes it only when a sink lists
+it (for matchers other than census-sgm it costs a second matching pass).
+
+``disparity``, ``depth`` and ``confidence`` (float32 maps) are published at ``Priority.DATA``
 with ``CongestionControl.DROP`` by default (``congestion_control`` option):
 Zenoh's ``BLOCK`` would make the publisher wait for the slowest subscriber, so
 one consumer that stops reading would slow every other consumer down to its
@@ -46,7 +50,7 @@ class ZenohSinkOptions:
     Attributes
     ----------
     outputs : list of str
-        Which of ``disparity``, ``depth``, ``left_vpp``, ``right_vpp``, ``sparse`` to publish.
+        Which of ``disparity``, ``depth``, ``confidence``, ``left_vpp``, ``right_vpp``, ``sparse`` to publish.
     on_request : list of str
         Outputs (not in ``outputs``) published only while a subscriber matches.
     image_enc : {"raw", "png", "jpeg"}
@@ -110,6 +114,11 @@ class ZenohSink(Sink):
     def needs_depth(cls, options: ZenohSinkOptions) -> bool:
         """True when ``depth`` is among the published ``outputs``."""
         return "depth" in options.outputs or "depth" in options.on_request
+
+    @classmethod
+    def needs_confidence(cls, options: ZenohSinkOptions) -> bool:
+        """True when ``confidence`` is published (in ``outputs`` or ``on_request``)."""
+        return "confidence" in options.outputs or "confidence" in options.on_request
 
     def __init__(self, options: ZenohSinkOptions, context: SinkContext) -> None:
         super().__init__(options, context)

@@ -17,6 +17,7 @@ Topics (``prefix`` defaults to ``"vpp"``)::
     <prefix>/<rig>/in/depth          depth topic message (separate-topics mode)
     <prefix>/<rig>/out/disparity     dense disparity, float32 px, NaN = invalid
     <prefix>/<rig>/out/depth         dense depth, float32 metres, NaN = invalid
+    <prefix>/<rig>/out/confidence    per-pixel confidence of the disparity, float32 0..1 (0 = no answer)
     <prefix>/<rig>/out/left_vpp|right_vpp   painted pair, as Images
     <prefix>/<rig>/out/sparse        the sparse input points, n x 3 float32 (x, y, disparity)
     <prefix>/<rig>/@status           queryable, JSON
@@ -43,7 +44,7 @@ VERSION = 1
 #: Default key prefix.
 DEFAULT_PREFIX = "vpp"
 #: Output names a sink may publish.
-OUTPUTS = ("disparity", "depth", "left_vpp", "right_vpp", "sparse")
+OUTPUTS = ("disparity", "depth", "left_vpp", "right_vpp", "sparse", "confidence")
 
 
 class WireError(ValueError):
@@ -854,8 +855,9 @@ def encode_output_parts(result: FusionResult, name: str, enc: str = "raw") -> li
                 if isinstance(v, (int, float, np.number))
             }
         return _map_message(result, result.disparity, extra)
-    if name == "depth":
-        return None if result.depth is None else _map_message(result, result.depth, {})
+    if name in ("depth", "confidence"):
+        arr = result.depth if name == "depth" else result.confidence
+        return None if arr is None else _map_message(result, arr, {})
     if name == "sparse":
         pts = sparse_to_points(fr.sparse_disparity)
         if pts is None:
@@ -877,10 +879,11 @@ def encode_output_parts(result: FusionResult, name: str, enc: str = "raw") -> li
 
 
 def encode_output(result: FusionResult, name: str, enc: str = "raw") -> bytes | None:
-    """Serialize one output (``disparity``, ``depth``, ``left_vpp``, ``right_vpp``).
+    """Serialize one output (``disparity``, ``depth``, ``confidence``, ``left_vpp``, ``right_vpp``, ``sparse``).
 
     Returns None when the result does not have that output (e.g. no depth
-    without calibration, no painted pair when VPP was skipped). The
+    without calibration, no painted pair when VPP was skipped, no confidence
+    when nothing asked for it). The
     ``disparity`` message also carries ``metrics`` (vs ground truth) and
     ``vpp`` (VPP counters) as extensions when known.
     """
@@ -890,7 +893,7 @@ def encode_output(result: FusionResult, name: str, enc: str = "raw") -> bytes | 
 
 @dataclass
 class OutputMap:
-    """A decoded ``out/disparity`` or ``out/depth`` message."""
+    """A decoded ``out/disparity``, ``out/depth`` or ``out/confidence`` message."""
 
     rig: str
     seq: int
@@ -913,7 +916,7 @@ def _numbers(m: Mapping[str, object]) -> dict[str, float]:
 
 
 def decode_output(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> OutputMap:
-    """Parse and validate an ``out/disparity`` or ``out/depth`` message.
+    """Parse and validate an ``out/disparity``, ``out/depth`` or ``out/confidence`` message.
 
     Raises
     ------
