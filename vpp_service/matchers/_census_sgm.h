@@ -100,7 +100,7 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CS
             if (!l) continue; /* aggregation only (timing) */
             l[x] = csgm_wta_keys(k, nv, D, p->uniqueness, p->subpixel);
             if (right) csgm_right_keys(k, nv, t->rbc + (W - 1 - x));
-            if (cf) cf[x] = csgm_conf_pixel(k, nv, 7, p->conf_peak, t->cbest + x);
+            if (cf) cf[x] = csgm_conf_keys(k, p->conf_peak, t->cbest + x);
         }
     } else
 #endif
@@ -118,7 +118,7 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CS
         if (!l) continue; /* aggregation only (timing) */
         l[x] = csgm_wta_pixel(S, nv, D, p->uniqueness, p->subpixel);
         if (right) csgm_right_pixel(S, nv, t->rbc + (W - 1 - x), t->rbd + (W - 1 - x));
-        if (cf) cf[x] = csgm_conf_pixel(S, nv, 0, p->conf_peak, t->cbest + x);
+        if (cf) cf[x] = csgm_conf_pixel(S, nv, p->conf_peak, t->cbest + x);
     }
     if (!l) return;
     float* r = dr + (ptrdiff_t)y * W;

@@ -29,9 +29,8 @@ CSGM_INLINE int csgm_first_eq(const uint16_t* CSGM_RESTRICT c, int n, uint16_t v
     return 0;
 }
 
-/* Left WTA of one pixel over its n valid disparities (lowest d on ties), uniqueness, parabola.  In the left
- * band (n < D) a minimum at the largest existing d = n - 1 is rejected: the match may lie beyond the image. */
-CSGM_INLINE float csgm_wta_pixel(const uint16_t* CSGM_RESTRICT c, int n, int D, double uniqueness, int subpixel) {
+/* The smallest of the n >= 1 costs c[0 .. n). */
+CSGM_INLINE uint16_t csgm_min16(const uint16_t* CSGM_RESTRICT c, int n) {
     uint16_t bv = 0xFFFFu;
     int d = 0;
 #if defined(__AVX2__)
@@ -43,37 +42,50 @@ CSGM_INLINE float csgm_wta_pixel(const uint16_t* CSGM_RESTRICT c, int n, int D, 
     }
 #endif
     for (; d < n; d++) bv = c[d] < bv ? c[d] : bv;
+    return bv;
+}
+
+/* The smallest c[d] over d < n with |d - b| > 1 (0xFFFF when there is none). */
+CSGM_INLINE uint16_t csgm_min_outside(const uint16_t* CSGM_RESTRICT c, int n, int b) {
+    uint16_t second = 0xFFFFu;
+    int d = 0;
+#if defined(__AVX2__)
+    {
+        /* lanes with d - (b - 1) in [0, 2] (unsigned) are left out */
+        const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+        const __m256i bias = _mm256_set1_epi16((int16_t)0x8000);
+        const __m256i two = _mm256_set1_epi16((int16_t)(2 ^ 0x8000));
+        __m256i vs = _mm256_set1_epi16(-1);
+        const int blo = (b > 0 ? b - 1 : 0) >> 4, bhi = (b + 1) >> 4; /* the blocks holding b - 1 .. b + 1 */
+        for (; d + 16 <= n; d += 16) {
+            __m256i v = _mm256_loadu_si256((const __m256i*)(c + d));
+            if ((d >> 4) == blo || (d >> 4) == bhi) {
+                __m256i rel = _mm256_sub_epi16(_mm256_add_epi16(lane, _mm256_set1_epi16((int16_t)d)),
+                                               _mm256_set1_epi16((int16_t)(b - 1)));
+                __m256i out = _mm256_cmpgt_epi16(_mm256_xor_si256(rel, bias), two); /* rel > 2 unsigned */
+                v = _mm256_or_si256(v, _mm256_andnot_si256(out, _mm256_set1_epi16(-1)));
+            }
+            vs = _mm256_min_epu16(vs, v);
+        }
+        __m128i h = _mm_min_epu16(_mm256_castsi256_si128(vs), _mm256_extracti128_si256(vs, 1));
+        second = (uint16_t)_mm_cvtsi128_si32(_mm_minpos_epu16(h));
+    }
+#endif
+    for (; d < n; d++) {
+        uint16_t v = (d < b - 1 || d > b + 1) ? c[d] : (uint16_t)0xFFFFu;
+        second = v < second ? v : second;
+    }
+    return second;
+}
+
+/* Left WTA of one pixel over its n valid disparities (lowest d on ties), uniqueness, parabola.  In the left
+ * band (n < D) a minimum at the largest existing d = n - 1 is rejected: the match may lie beyond the image. */
+CSGM_INLINE float csgm_wta_pixel(const uint16_t* CSGM_RESTRICT c, int n, int D, double uniqueness, int subpixel) {
+    const uint16_t bv = csgm_min16(c, n);
     const int b = csgm_first_eq(c, n, bv);
     if (n < D && b == n - 1) return NAN;
     if (b >= 2 || b + 2 <= n - 1) { /* some d with |d - best| > 1 */
-        uint16_t second = 0xFFFFu;
-        d = 0;
-#if defined(__AVX2__)
-        {
-            /* lanes with d - (b - 1) in [0, 2] (unsigned) are left out */
-            const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-            const __m256i bias = _mm256_set1_epi16((int16_t)0x8000);
-            const __m256i two = _mm256_set1_epi16((int16_t)(2 ^ 0x8000));
-            __m256i vs = _mm256_set1_epi16(-1);
-            const int blo = (b > 0 ? b - 1 : 0) >> 4, bhi = (b + 1) >> 4; /* the blocks holding b - 1 .. b + 1 */
-            for (; d + 16 <= n; d += 16) {
-                __m256i v = _mm256_loadu_si256((const __m256i*)(c + d));
-                if ((d >> 4) == blo || (d >> 4) == bhi) {
-                    __m256i rel = _mm256_sub_epi16(_mm256_add_epi16(lane, _mm256_set1_epi16((int16_t)d)),
-                                                   _mm256_set1_epi16((int16_t)(b - 1)));
-                    __m256i out = _mm256_cmpgt_epi16(_mm256_xor_si256(rel, bias), two); /* rel > 2 unsigned */
-                    v = _mm256_or_si256(v, _mm256_andnot_si256(out, _mm256_set1_epi16(-1)));
-                }
-                vs = _mm256_min_epu16(vs, v);
-            }
-            __m128i h = _mm_min_epu16(_mm256_castsi256_si128(vs), _mm256_extracti128_si256(vs, 1));
-            second = (uint16_t)_mm_cvtsi128_si32(_mm_minpos_epu16(h));
-        }
-#endif
-        for (; d < n; d++) {
-            uint16_t v = (d < b - 1 || d > b + 1) ? c[d] : (uint16_t)0xFFFFu;
-            second = v < second ? v : second;
-        }
+        const uint16_t second = csgm_min_outside(c, n, b);
         if (!((double)bv < uniqueness * (double)second)) return NAN;
     }
     if (subpixel && b > 0 && b < n - 1) {
@@ -193,28 +205,20 @@ static void csgm_lr_row(const float* CSGM_RESTRICT dl, const float* CSGM_RESTRIC
  * (0 without a runner-up or with second == 0); the row's right WTA then gives the left-right term
  * max(0, 1 - |b - d_R(x - b)| / span); the confidence is their product, in [0, 1]. */
 
-/* The peak-ratio term of one pixel from its n costs c[d] >> shift (shift 7: keys, see csgm_pack_px); *best
- * gets b. */
-CSGM_INLINE float csgm_conf_pixel(const uint16_t* CSGM_RESTRICT c, int n, int shift, double peak,
-                                  uint16_t* CSGM_RESTRICT best) {
-    unsigned bv = 0xFFFFFFFFu;
-    int b = 0;
-    for (int d = 0; d < n; d++) {
-        const unsigned v = (unsigned)(c[d] >> shift);
-        if (v < bv) {
-            bv = v;
-            b = d;
-        }
-    }
-    unsigned second = 0xFFFFFFFFu;
-    for (int d = 0; d < n; d++) {
-        const unsigned v = (unsigned)(c[d] >> shift);
-        if ((d < b - 1 || d > b + 1) && v < second) second = v;
-    }
-    *best = (uint16_t)b;
-    if (second == 0xFFFFFFFFu || second == 0) return 0.0f;
-    double m = (1.0 - (double)bv / (double)second) / peak;
+/* The peak-ratio term from the best cost bv and the runner-up second (have: a runner-up exists). */
+CSGM_INLINE float csgm_peak_term(unsigned bv, unsigned second, int have, double peak) {
+    if (!have || second == 0) return 0.0f;
+    const double m = (1.0 - (double)bv / (double)second) / peak;
     return (float)(m < 1.0 ? m : 1.0);
+}
+
+/* The peak-ratio term of one pixel from its n costs c (the WTA's helpers); *best gets b. */
+CSGM_INLINE float csgm_conf_pixel(const uint16_t* CSGM_RESTRICT c, int n, double peak, uint16_t* CSGM_RESTRICT best) {
+    const uint16_t bv = csgm_min16(c, n);
+    const int b = csgm_first_eq(c, n, bv);
+    *best = (uint16_t)b;
+    const int have = b >= 2 || b + 2 <= n - 1;
+    return csgm_peak_term(bv, have ? csgm_min_outside(c, n, b) : 0u, have, peak);
 }
 
 /* The confidence of a row in place: conf[x] (the peak-ratio term) times the left-right term of the best d
@@ -293,6 +297,29 @@ CSGM_INLINE float csgm_wta_keys(const uint16_t* CSGM_RESTRICT k, int n, int D, d
         if (denom > 0) return (float)((double)b + (double)(c0 - c2) / (2.0 * (double)denom));
     }
     return (float)b;
+}
+
+/* csgm_conf_pixel on the keys k (csgm_pack_px: absent disparities are 0xFFFF): the smallest key gives b and
+ * its cost; the runner-up is the smallest key outside b - 1 .. b + 1 (0xFFFF: none). */
+CSGM_INLINE float csgm_conf_keys(const uint16_t* CSGM_RESTRICT k, double peak, uint16_t* CSGM_RESTRICT best) {
+    const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const __m256i bias = _mm256_set1_epi16((int16_t)0x8000);
+    const __m256i two = _mm256_set1_epi16((int16_t)(2 ^ 0x8000));
+    __m256i m = _mm256_loadu_si256((const __m256i*)k);
+    for (int i = 16; i < 128; i += 16) m = _mm256_min_epu16(m, _mm256_loadu_si256((const __m256i*)(k + i)));
+    const unsigned key = csgm_hmin16u(m);
+    const int b = (int)(key & 127u);
+    __m256i vs = _mm256_set1_epi16(-1);
+    for (int i = 0; i < 128; i += 16) {
+        const __m256i rel = _mm256_sub_epi16(_mm256_add_epi16(lane, _mm256_set1_epi16((int16_t)i)),
+                                             _mm256_set1_epi16((int16_t)(b - 1)));
+        const __m256i out = _mm256_cmpgt_epi16(_mm256_xor_si256(rel, bias), two); /* outside b - 1 .. b + 1 */
+        const __m256i v = _mm256_loadu_si256((const __m256i*)(k + i));
+        vs = _mm256_min_epu16(vs, _mm256_or_si256(v, _mm256_andnot_si256(out, _mm256_set1_epi16(-1))));
+    }
+    const unsigned second = csgm_hmin16u(vs);
+    *best = (uint16_t)b;
+    return csgm_peak_term(key >> 7, second >> 7, second != 0xFFFFu, peak);
 }
 
 /* Right WTA update of one left pixel on its keys k (n valid): bk[d] (right pixel x - d, reversed) keeps the
