@@ -57,6 +57,50 @@ static void csgm_post_row(const csgm_params* p, float* CSGM_RESTRICT row) {
     if (p->gap_size) vpp_gap_row(row, row, W, p->gap_size, p->gap_step);
 }
 
+#if defined(__AVX2__)
+/* The WTAs of a row on keys (p->packed), see csgm_finish_row; cf NULL (a constant at one call site): no
+ * confidence, the loop the compiler keeps for it has none of its work. */
+CSGM_INLINE void csgm_wta_row_keys(const csgm_params* p, csgm_thread* t, const uint8_t* CSGM_RESTRICT a8,
+                                   const uint8_t* CSGM_RESTRICT b8, float* l, int right, float* cf) {
+    const int W = p->W, D = p->D;
+    uint16_t* CSGM_RESTRICT k = t->keys + 16;
+    for (int x = 0; x < W; x++) {
+        const int nv = x + 1 < D ? x + 1 : D;
+        csgm_pack_px(a8 + (ptrdiff_t)x * D, b8 + (ptrdiff_t)x * D, k, nv, D);
+        if (!l) continue; /* aggregation only (timing) */
+        l[x] = csgm_wta_keys(k, nv, D, p->uniqueness, p->subpixel, p->conf_peak, cf ? cf + x : NULL,
+                             t->cbest + x);
+        if (right) csgm_right_keys(k, nv, t->rbc + (W - 1 - x));
+    }
+}
+#endif
+
+/* The WTAs of a row on the plain sums, see csgm_finish_row and csgm_wta_row_keys. */
+CSGM_INLINE void csgm_wta_row_sums(const csgm_params* p, csgm_thread* t, const void* CSGM_RESTRICT a,
+                                   const void* CSGM_RESTRICT b, float* l, int right, float* cf) {
+    const int W = p->W, D = p->D;
+    const uint8_t* CSGM_RESTRICT a8 = (const uint8_t*)a;
+    const uint8_t* CSGM_RESTRICT b8 = (const uint8_t*)b;
+    const uint16_t* CSGM_RESTRICT a16 = (const uint16_t*)a;
+    const uint16_t* CSGM_RESTRICT b16 = (const uint16_t*)b;
+    uint16_t* CSGM_RESTRICT S = t->sum;
+    for (int x = 0; x < W; x++) {
+        const int nv = x + 1 < D ? x + 1 : D;
+        if (p->narrow) {
+            const uint8_t* CSGM_RESTRICT ax = a8 + (ptrdiff_t)x * D;
+            const uint8_t* CSGM_RESTRICT bx = b8 + (ptrdiff_t)x * D;
+            for (int d = 0; d < D; d++) S[d] = (uint16_t)(ax[d] + bx[d]);
+        } else {
+            const uint16_t* CSGM_RESTRICT ax = a16 + (ptrdiff_t)x * D;
+            const uint16_t* CSGM_RESTRICT bx = b16 + (ptrdiff_t)x * D;
+            for (int d = 0; d < D; d++) S[d] = (uint16_t)(ax[d] + bx[d]);
+        }
+        if (!l) continue; /* aggregation only (timing) */
+        l[x] = csgm_wta_pixel(S, nv, D, p->uniqueness, p->subpixel, p->conf_peak, cf ? cf + x : NULL, t->cbest + x);
+        if (right) csgm_right_pixel(S, nv, t->rbc + (W - 1 - x), t->rbd + (W - 1 - x));
+    }
+}
+
 /* Finish row y: S = a + b (a, b: the passes' partial sums of the row, uint8 when p->narrow); then either
  * copy S to sout (invalid entries CSGM_NOCOST) or run the left and right WTA (on keys when p->packed) and
  * the left-right check into dl, dr, lr; with conf (not NULL) also the confidence of the row (the right WTA
@@ -66,14 +110,13 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CS
                             float* lr, float* conf) {
     const int W = p->W, D = p->D;
     const ptrdiff_t n = (ptrdiff_t)W * D;
-    const int narrow = p->narrow;
-    const uint8_t* CSGM_RESTRICT a8 = (const uint8_t*)a;
-    const uint8_t* CSGM_RESTRICT b8 = (const uint8_t*)b;
-    const uint16_t* CSGM_RESTRICT a16 = (const uint16_t*)a;
-    const uint16_t* CSGM_RESTRICT b16 = (const uint16_t*)b;
     if (sout) {
+        const uint8_t* CSGM_RESTRICT a8 = (const uint8_t*)a;
+        const uint8_t* CSGM_RESTRICT b8 = (const uint8_t*)b;
+        const uint16_t* CSGM_RESTRICT a16 = (const uint16_t*)a;
+        const uint16_t* CSGM_RESTRICT b16 = (const uint16_t*)b;
         uint16_t* CSGM_RESTRICT S = sout + (ptrdiff_t)y * n;
-        if (narrow)
+        if (p->narrow)
             for (ptrdiff_t i = 0; i < n; i++) S[i] = (uint16_t)(a8[i] + b8[i]);
         else
             for (ptrdiff_t i = 0; i < n; i++) S[i] = (uint16_t)(a16[i] + b16[i]);
@@ -81,8 +124,7 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CS
             for (int d = x + 1; d < D; d++) S[(ptrdiff_t)x * D + d] = CSGM_NOCOST;
         return;
     }
-    /* pixel by pixel: its sum S (D entries, in L1), left WTA, right WTA update */
-    uint16_t* CSGM_RESTRICT S = t->sum;
+    /* pixel by pixel: its sum S (D entries, in L1) or keys, left WTA, right WTA update */
     float* l = dl ? dl + (ptrdiff_t)y * W : NULL;
     float* cf = l && conf ? conf + (ptrdiff_t)y * W : NULL;
     const int right = l && (p->lr_check || cf);
@@ -93,33 +135,16 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CS
     }
 #if defined(__AVX2__)
     if (p->packed) {
-        uint16_t* CSGM_RESTRICT k = t->keys + 16;
-        for (int x = 0; x < W; x++) {
-            const int nv = x + 1 < D ? x + 1 : D;
-            csgm_pack_px(a8 + (ptrdiff_t)x * D, b8 + (ptrdiff_t)x * D, k, nv, D);
-            if (!l) continue; /* aggregation only (timing) */
-            l[x] = csgm_wta_keys(k, nv, D, p->uniqueness, p->subpixel);
-            if (right) csgm_right_keys(k, nv, t->rbc + (W - 1 - x));
-            if (cf) cf[x] = csgm_conf_keys(k, p->conf_peak, t->cbest + x);
-        }
+        if (cf)
+            csgm_wta_row_keys(p, t, (const uint8_t*)a, (const uint8_t*)b, l, right, cf);
+        else
+            csgm_wta_row_keys(p, t, (const uint8_t*)a, (const uint8_t*)b, l, right, NULL);
     } else
 #endif
-    for (int x = 0; x < W; x++) {
-        const int nv = x + 1 < D ? x + 1 : D;
-        if (narrow) {
-            const uint8_t* CSGM_RESTRICT ax = a8 + (ptrdiff_t)x * D;
-            const uint8_t* CSGM_RESTRICT bx = b8 + (ptrdiff_t)x * D;
-            for (int d = 0; d < D; d++) S[d] = (uint16_t)(ax[d] + bx[d]);
-        } else {
-            const uint16_t* CSGM_RESTRICT ax = a16 + (ptrdiff_t)x * D;
-            const uint16_t* CSGM_RESTRICT bx = b16 + (ptrdiff_t)x * D;
-            for (int d = 0; d < D; d++) S[d] = (uint16_t)(ax[d] + bx[d]);
-        }
-        if (!l) continue; /* aggregation only (timing) */
-        l[x] = csgm_wta_pixel(S, nv, D, p->uniqueness, p->subpixel);
-        if (right) csgm_right_pixel(S, nv, t->rbc + (W - 1 - x), t->rbd + (W - 1 - x));
-        if (cf) cf[x] = csgm_conf_pixel(S, nv, p->conf_peak, t->cbest + x);
-    }
+    if (cf)
+        csgm_wta_row_sums(p, t, a, b, l, right, cf);
+    else
+        csgm_wta_row_sums(p, t, a, b, l, right, NULL);
     if (!l) return;
     float* r = dr + (ptrdiff_t)y * W;
     if (right) {
