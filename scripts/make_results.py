@@ -32,6 +32,13 @@ matcher with that ONNX model instead (baseline and VPP at 5 % points on Middlebu
 between the ``deep-matcher`` markers, beside the census-sgm numbers of the
 ``results.json`` already there (nothing else on the page is re-run or rewritten). A
 later full run keeps that section as long as ``results_deep.json`` is there.
+
+``--confidence`` (opt-in) measures how well census-sgm's per-pixel confidence ranks its
+answers behind VPP (5 % points, seed 0) on every scene found: for thresholds 0.1 .. 0.9,
+the fraction of the answered pixels kept (confidence >= threshold) and bad-2 on them
+(:mod:`vpp_service.evaluation.confidence`), writes ``<out>/results/results_confidence.json``
+and puts its table into ``<out>/results.md`` between the ``confidence`` markers (kept by a
+later full run as long as the JSON is there).
 """
 
 from __future__ import annotations
@@ -94,6 +101,9 @@ PAPER_OURS = {
 DEEP_MATCHER = "psmnet"
 DEEP_DATASETS = ("middlebury2006", "eth3d", "kitti2012")
 DEEP_MARKS = ("<!-- deep-matcher: scripts/make_results.py --deep, do not edit by hand -->", "<!-- /deep-matcher -->")
+#: ``--confidence``: the markers around its section of the page, and the threshold the target is stated at.
+CONF_MARKS = ("<!-- confidence: scripts/make_results.py --confidence, do not edit by hand -->", "<!-- /confidence -->")
+CONF_TARGET = 0.5
 
 COLS = (
     ("bad1", "bad-1"),
@@ -376,6 +386,130 @@ def render_deep(deep: dict[str, Any], classic: dict[str, Any] | None) -> str:
                 )
     P += [_table(header, lines, (0, 1, 2)), "", DEEP_MARKS[1]]
     return "\n".join(P)
+
+
+def run_confidence(data: Path, limit: int | None) -> dict[str, Any]:
+    """census-sgm + VPP (and alone) with the confidence on every dataset found; the ``results_confidence.json``."""
+    import cv2
+
+    from vpp_service.datasets import open_dataset
+    from vpp_service.evaluation.confidence import THRESHOLDS, confidence_curve, summarize
+    from vpp_service.vpp import VPPConfig
+
+    cv2.setNumThreads(1)
+    t0 = time.perf_counter()
+    rows: list[dict[str, Any]] = []
+    alone: list[dict[str, Any]] = []  # the matcher on the raw pair
+    for folder, key, _ in DATASETS:
+        if not (data / folder).is_dir():
+            print(f"skip {folder}: not found under {data}", file=sys.stderr)
+            continue
+        ds = open_dataset("auto", data / folder)
+        ds.select(None, limit)
+        print(f"[confidence {key}] {len(ds)} scene(s), {time.perf_counter() - t0:.0f} s", file=sys.stderr)
+        curve = confidence_curve(ds, "census-sgm", vpp_config=VPPConfig(), density=DENSITY, seed=SEED)
+        rows += [{**r, "dataset": key} for r in curve]
+        alone += [{**r, "dataset": key} for r in confidence_curve(ds, "census-sgm", vpp=False)]
+    if not rows:
+        raise SystemExit(f"--data: no dataset under {data}")
+    meta = {
+        "date_utc": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "git_commit": _git("rev-parse", "HEAD"),
+        "seconds": round(time.perf_counter() - t0, 1),
+        **_machine(),
+    }
+    config = {"matcher": "census-sgm", "method": "vpp", "density": DENSITY, "seed": SEED, "limit": limit}
+    summary = {"all": summarize(rows, THRESHOLDS), "baseline": summarize(alone, THRESHOLDS)}
+    for _, key, _ in DATASETS:
+        sub = [r for r in rows if r["dataset"] == key]
+        if sub:
+            summary[key] = summarize(sub, THRESHOLDS)
+    return {
+        "meta": meta,
+        "config": config,
+        "thresholds": list(THRESHOLDS),
+        "summary": summary,
+        "results": rows,
+        "results_baseline": alone,
+    }
+
+
+def render_confidence(doc: dict[str, Any]) -> str:
+    """The confidence section of the page (between :data:`CONF_MARKS`)."""
+    meta, cfg, summ = doc["meta"], doc["config"], doc["summary"]
+    names = {k: n for _, k, n in DATASETS}
+    allp = summ["all"]
+    at = next(p for p in allp["points"] if abs(p["threshold"] - CONF_TARGET) < 1e-9)
+    cut = 1 - at["bad2_kept"] / allp["bad2_answered"]
+    P = [
+        CONF_MARKS[0],
+        "## Confidence: bad-2 of the kept pixels",
+        "",
+        "census-sgm behind VPP (5 % uniform points, seed "
+        f"{cfg['seed']}) with its per-pixel confidence (peak ratio of the aggregated cost curve times the "
+        "left-right agreement; `min_confidence` in the matcher options turns the pixels below a threshold into "
+        "holes). Over the pixels with valid ground truth that the matcher answered (holes not filled): "
+        "`kept` = the share of them with confidence >= the threshold, `bad-2 kept` = bad-2 on those "
+        f"(percent); mean over the {allp['frames']} scenes, and pooled over every pixel of them; the last two "
+        "columns: the matcher alone on the raw pair (no points). "
+        f"At {CONF_TARGET:g}: {at['kept']:.1f} % kept, bad-2 {allp['bad2_answered']:.2f} -> "
+        f"{at['bad2_kept']:.2f} % ({100 * cut:.0f} % lower).",
+        "",
+        f"Regenerate: `python scripts/make_results.py --confidence [--update-docs]`. Last run: {meta['date_utc']}, "
+        f"commit `{meta['git_commit'][:12]}`, {meta['seconds']:.0f} s on {meta['cpu']}. Data: "
+        "[`results/results_confidence.json`](results/results_confidence.json)."
+        + (f" **Partial run: first {cfg['limit']} scene(s) per dataset.**" if cfg.get("limit") else ""),
+        "",
+    ]
+    base = summ["baseline"]
+    header = ["threshold", "kept %", "bad-2 kept %", "kept % (pooled)", "bad-2 kept % (pooled)"]
+    header += ["alone: kept %", "alone: bad-2 kept %"]
+    lines = [["all answered", "100", _f(allp["bad2_answered"]), "100", _f(allp["bad2_answered_pooled"])]]
+    lines[0] += ["100", _f(base["bad2_answered"])]
+    lines += [
+        [
+            f"{p['threshold']:g}",
+            _f(p["kept"], 1),
+            _f(p["bad2_kept"]),
+            _f(p["kept_pooled"], 1),
+            _f(p["bad2_kept_pooled"]),
+            _f(q["kept"], 1),
+            _f(q["bad2_kept"]),
+        ]
+        for p, q in zip(allp["points"], base["points"], strict=True)
+    ]
+    P += [_table(header, lines), "", f"Per dataset, at {CONF_TARGET:g}:", ""]
+    dlines = []
+    for key, s in summ.items():
+        if key in ("all", "baseline"):
+            continue
+        q = next(p for p in s["points"] if abs(p["threshold"] - CONF_TARGET) < 1e-9)
+        label = f"{names.get(key, key)}, {s['frames']} scene(s)"
+        dlines.append([label, _f(s["bad2_answered"]), _f(q["kept"], 1), _f(q["bad2_kept"])])
+    P += [_table(["dataset", "bad-2 answered %", "kept %", "bad-2 kept %"], dlines), "", CONF_MARKS[1]]
+    return "\n".join(P)
+
+
+def write_confidence(doc: dict[str, Any], out: Path) -> None:
+    """``results_confidence.json`` and the confidence section of ``<out>/results.md`` (the rest kept)."""
+    res_dir = out / "results"
+    res_dir.mkdir(parents=True, exist_ok=True)
+    doc = _json_safe(doc)
+    (res_dir / "results_confidence.json").write_text(json.dumps(doc, indent=1) + "\n")
+    page_path = out / "results.md"
+    page = page_path.read_text() if page_path.is_file() else "# Results\n"
+    page_path.write_text(splice_section(page, render_confidence(doc), CONF_MARKS))
+
+
+def splice_section(page: str, section: str, marks: tuple[str, str]) -> str:
+    """``page`` with the section between ``marks`` replaced by ``section`` (inserted before "## Beside the paper")."""
+    start, end = page.find(marks[0]), page.find(marks[1])
+    if start >= 0 and end > start:
+        return page[:start] + section + page[end + len(marks[1]) :]
+    at = page.find("## Beside the paper")
+    if at < 0:
+        return page.rstrip("\n") + "\n\n" + section + "\n"
+    return page[:at] + section + "\n\n" + page[at:]
 
 
 def splice_deep(page: str, section: str) -> str:
@@ -843,6 +977,9 @@ def write_outputs(doc: dict[str, Any], out: Path) -> None:
     deep = res_dir / "results_deep.json"
     if deep.is_file():  # a --deep run's section survives a full regeneration
         page = splice_deep(page, render_deep(json.loads(deep.read_text()), doc))
+    conf = res_dir / "results_confidence.json"
+    if conf.is_file():  # so does a --confidence run's
+        page = splice_section(page, render_confidence(json.loads(conf.read_text())), CONF_MARKS)
     (out / "results.md").write_text(page.rstrip("\n") + "\n\n" + kept + "\n" if kept else page)
 
 
@@ -886,6 +1023,11 @@ def main(argv: list[str] | None = None) -> int:
         help="evaluate psmnet with this .onnx (baseline, VPP) and update only the deep-matcher section",
     )
     ap.add_argument("--threads", type=int, default=2, help="--deep: the network's CPU threads (default 2)")
+    ap.add_argument(
+        "--confidence",
+        action="store_true",
+        help="measure census-sgm's confidence curve (VPP, 5 %% points) and update only its section",
+    )
     a = ap.parse_args(argv)
     if a.out is None:
         a.out = REPO / "docs" if a.update_docs else DEFAULT_OUT
@@ -903,6 +1045,13 @@ def main(argv: list[str] | None = None) -> int:
             f"wrote {a.out / 'results' / 'results_deep.json'} and its section of {a.out / 'results.md'}",
             file=sys.stderr,
         )
+        return 0
+    if a.confidence:
+        if not a.data.is_dir():
+            ap.error(f"--data: folder not found: {a.data}")
+        write_confidence(run_confidence(a.data.resolve(), a.limit), a.out)
+        done = a.out / "results" / "results_confidence.json"
+        print(f"wrote {done} and its section of {a.out / 'results.md'}", file=sys.stderr)
         return 0
     if a.render_only:
         src = a.out / "results" / "results.json"

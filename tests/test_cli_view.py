@@ -101,7 +101,10 @@ def test_view_wildcard_keeps_one_recording_per_rig(tmp_path, zenoh_endpoint, rig
         sinks = {
             rig: build_sink(
                 "zenoh",
-                {"outputs": ["disparity", "depth", "left_vpp", "right_vpp", "sparse"], "image_enc": "png"},
+                {
+                    "outputs": ["disparity", "depth", "confidence", "left_vpp", "right_vpp", "sparse"],
+                    "image_enc": "png",
+                },
                 SinkContext(rig=rig, session=session),
             )
             for rig in rigs
@@ -123,6 +126,7 @@ def test_view_wildcard_keeps_one_recording_per_rig(tmp_path, zenoh_endpoint, rig
                         frame=fr.with_(sparse_disparity=sparse),
                         disparity=disp,
                         depth=np.full(fr.shape, 2.0, np.float32),
+                        confidence=np.full(fr.shape, 0.75, np.float32),
                         left_vpp=fr.left,
                         right_vpp=fr.right,
                     )
@@ -144,7 +148,13 @@ def test_view_wildcard_keeps_one_recording_per_rig(tmp_path, zenoh_endpoint, rig
         assert [r.application_id for r in RrdReader(path).recordings()] == [f"vpp-service-{rig}"]
         data = read_rrd(path)
         assert {e.split("/")[1] for e in data} == {rig}  # only this rig's entities
-        assert {f"/{rig}/disparity", f"/{rig}/left", f"/{rig}/right", f"/{rig}/left/sparse"} <= set(data)
+        assert {
+            f"/{rig}/disparity",
+            f"/{rig}/confidence",
+            f"/{rig}/left",
+            f"/{rig}/right",
+            f"/{rig}/left/sparse",
+        } <= set(data)
         disp = data[f"/{rig}/disparity"]
         for s, buf in zip(disp["seq"], disp["DepthImage:buffer"], strict=True):
             values = np.frombuffer(bytes(np.asarray(buf[0], np.uint8)), np.float32)
@@ -158,6 +168,9 @@ def test_decode_part_rejects_a_foreign_rig():
     res = FusionResult(frame=fr, disparity=np.ones(fr.shape, np.float32))
     payload = wire.encode_output(res, "disparity")
     assert decode_part("disparity", payload, "rigA").disparity is not None
+    res.confidence = np.full(fr.shape, 0.5, np.float32)
+    conf = decode_part("confidence", wire.encode_output(res, "confidence"), "rigA").confidence
+    assert conf is not None and np.array_equal(conf, res.confidence)
     with pytest.raises(wire.WireError, match="rig"):
         decode_part("disparity", payload, "rigB")
 

@@ -198,3 +198,35 @@ def test_fuse_with_a_depth_clip_clips_before_depth_and_metrics(frame, matcher):
     )
     with pytest.raises(TypeError, match="depth_clip"):
         Fusion(matcher, depth_clip={"max_depth_m": 3.0})
+
+
+def test_fuse_with_confidence_carries_the_matchers_map_with_the_clips_holes(frame, matcher):
+    """confidence=True: the matcher's compute_with_confidence on the painted pair, 0 where the depth clip cut."""
+    from vpp_service.matchers.depth_clip import DepthClip
+
+    cfg = VPPConfig()
+    assert fuse(frame, matcher, cfg, seed=5).confidence is None  # not asked: not computed
+    painted = project(frame.left, frame.right, frame.sparse_disparity, cfg, seed=5)
+    disp, conf = matcher.compute_with_confidence(painted.left, painted.right)
+    res = fuse(frame, matcher, cfg, seed=5, confidence=True)
+    np.testing.assert_array_equal(res.disparity, disp)
+    np.testing.assert_array_equal(res.confidence, conf)
+    assert res.confidence.dtype == np.float32 and 0 < res.confidence.max() <= 1
+    c = frame.calib
+    clip = DepthClip(max_depth_m=c.f * c.baseline / 12.0)  # nothing beyond 12 px
+    clipped = fuse(frame, matcher, cfg, seed=5, confidence=True, depth_clip=clip)
+    cut = np.isfinite(disp) & np.isnan(clipped.disparity)
+    assert cut.any() and np.all(clipped.confidence[cut] == 0)
+    np.testing.assert_array_equal(clipped.confidence[~cut], conf[~cut])
+    assert Fusion(matcher, cfg, confidence=True)(frame).confidence is not None
+
+
+def test_min_confidence_of_the_matcher_makes_holes_in_fuse(frame):
+    """The matcher's min_confidence applies in fuse whether or not the map is asked for."""
+    loose = build_matcher("census-sgm", {"max_disparity": 32})
+    strict = build_matcher("census-sgm", {"max_disparity": 32, "min_confidence": 0.5})
+    full = fuse(frame, loose, VPPConfig(), seed=5, confidence=True)
+    held = fuse(frame, strict, VPPConfig(), seed=5)
+    want = np.where(full.confidence >= 0.5, full.disparity, np.nan)
+    np.testing.assert_array_equal(held.disparity, want)
+    assert np.isfinite(full.disparity).sum() > np.isfinite(held.disparity).sum() > 0

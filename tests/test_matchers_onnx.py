@@ -82,6 +82,23 @@ def test_sad_network_gives_the_exact_shift_through_padding_and_cropping(sad16, e
 
 
 @pytest.mark.parametrize("engine", ENGINES)
+def test_confidence_is_the_left_right_check_of_a_second_pass(sad16, engine):
+    """compute_with_confidence runs the network again on the mirrored pair: where both views see the shift, 1."""
+    h, w, shift = 32, 96, 7
+    left, right = shifted_pair(h, w, shift, seed=2)
+    m = build_matcher("onnx", {"model": str(sad16), "engine": engine, "max_disparity": 16, "card": card()})
+    disp, conf = m.compute_with_confidence(left, right)
+    np.testing.assert_array_equal(disp, m.compute(left, right))
+    assert conf.dtype == np.float32 and conf.shape == (h, w)
+    # left x >= 16 has its exact answer; its right pixel x - 7 has one too while x - 7 <= w - 17 (mirrored: >= 16)
+    np.testing.assert_array_equal(conf[:, 16 : w - 9], 1.0)
+    assert np.all(conf[np.isnan(disp)] == 0)
+    right[:, 40:60] = 128  # a flat band: the right view has no answer there, its left pixels lose confidence
+    disp, conf = m.compute_with_confidence(left, right)
+    assert conf[:, 16 + shift : 40 + shift].min() == 1.0 and conf[:, 41 + shift : 59 + shift].mean() < 0.25
+
+
+@pytest.mark.parametrize("engine", ENGINES)
 def test_both_engines_agree_and_run_on_the_chosen_engine(sad16, engine):
     left, right = shifted_pair(40, 80, 3, seed=1)
     m = build_matcher("onnx", {"model": str(sad16), "engine": engine, "max_disparity": 16, "card": card()})

@@ -133,6 +133,48 @@ def test_healthy_run_exits_0(tmp_path):
     assert args.func(args) == 0
 
 
+@pytest.mark.parametrize(
+    ("sinks", "confidence"),
+    [
+        ([{"type": "zenoh", "outputs": ["disparity", "depth"]}], False),
+        ([{"type": "zenoh", "outputs": ["disparity"], "on_request": ["confidence"]}], True),
+        ([{"type": "ros2", "outputs": ["disparity", "confidence"]}], True),
+        ([{"type": "files", "dir": "F", "depth": True}], False),
+        ([{"type": "files", "dir": "F", "confidence": True}], True),
+        ([{"type": "rerun", "path": "x.rrd"}], False),
+        ([{"type": "rerun", "path": "x.rrd", "confidence": True}], True),
+    ],
+)
+def test_confidence_only_when_a_sink_reads_it(tmp_path, sinks, confidence):
+    for s in sinks:
+        if "dir" in s:
+            s["dir"] = str(tmp_path / s["dir"])
+    pipe = build_pipeline(validate_config(config(sinks)), session=None)  # built, not opened
+    assert pipe.process.confidence is confidence
+
+
+def test_a_run_writes_the_confidence_and_min_confidence_makes_holes(tmp_path):
+    """census-sgm with min_confidence 0.5 and the files sink's confidence: every answered pixel has >= 0.5."""
+    import numpy as np
+
+    data = small_config(tmp_path)
+    data["matcher"] = {"name": "census-sgm", "max_disparity": 16, "min_confidence": 0.5}
+    data["sinks"] = [
+        {"type": "files", "dir": str(tmp_path / "F"), "create_dir": True, "formats": ["npy"], "confidence": True}
+    ]
+    cfg = tmp_path / "conf.toml"
+    cfg.write_text(toml_dumps(data))
+    args = build_parser().parse_args(["run", "--config", str(cfg), "--no-summary"])
+    assert args.func(args) == 0
+    confs = sorted((tmp_path / "F").glob("*_confidence.npy"))
+    assert len(confs) == 3 and len(list((tmp_path / "F").glob("*_confidence.png"))) == 3
+    for path in confs:
+        conf = np.load(path)
+        disp = np.load(str(path).replace("_confidence.npy", "_disparity.npy"))
+        assert conf.shape == disp.shape and np.isfinite(disp).any()
+        assert np.all(conf[np.isfinite(disp)] >= 0.5) and np.all(conf[np.isnan(disp)] == 0)
+
+
 def test_summary_write_failure_is_counted_not_fatal(tmp_path):
     """summary.json cannot be written (its name is taken by a non-empty folder): counted, logged, run ends."""
     out = tmp_path / "out"

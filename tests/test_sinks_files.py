@@ -339,3 +339,21 @@ def test_points_skipped_without_metric_depth(tmp_path, result):
 def test_bad_points_stride(tmp_path, bad):
     with pytest.raises(SettingsError, match=r"sinks\.files.*points_stride"):
         make_sink(tmp_path, points=True, points_stride=bad)
+
+
+def test_confidence_npy_and_png16(tmp_path, result):
+    """The files sink with confidence = true: the float32 map as .npy, and a 16-bit PNG scaled to 65535."""
+    conf = np.random.default_rng(1).random((H, W), dtype=np.float32)
+    conf[3, 4] = 0.0
+    result.confidence = conf
+    sink = make_sink(tmp_path, formats=["npy"], confidence=True)
+    assert FilesSink.needs_confidence(sink.options) and not FilesSink.needs_confidence(make_sink(tmp_path).options)
+    sink.write(result)
+    np.testing.assert_array_equal(np.load(tmp_path / "rigA_000042_confidence.npy"), conf)
+    png = cv2.imread(str(tmp_path / "rigA_000042_confidence.png"), cv2.IMREAD_UNCHANGED)
+    assert png.dtype == np.uint16 and png.shape == (H, W) and png[3, 4] == 0
+    assert np.abs(png / 65535.0 - conf).max() <= 0.5 / 65535 + 1e-9
+    result.confidence = None  # not computed: nothing written, nothing counted as an error
+    sink.write(result.__class__(result.frame.with_(seq=43), result.disparity))
+    assert not (tmp_path / "rigA_000043_confidence.npy").exists()
+    assert sink.stats()["errors"] == 0

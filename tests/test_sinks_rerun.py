@@ -642,3 +642,20 @@ def test_points_without_the_depth_image_keep_the_pinhole(tmp_path):
 def test_bad_points_stride_is_refused(bad):
     with pytest.raises(SettingsError, match=r"sinks\.rerun.*points_stride"):
         build_sink("rerun", {"points": True, "points_stride": bad}, SinkContext(rig=RIG))
+
+
+def test_confidence_image(tmp_path):
+    """``confidence = true``: the map as a DepthImage on <rig>/confidence (values as given), the blueprint shows it."""
+    sink = save_sink(tmp_path, confidence=True)
+    assert RerunSink.needs_confidence(sink.options) and sink.layout.confidence
+    assert not RerunSink.needs_confidence(build_sink("rerun", {"mode": "save"}, SinkContext(rig=RIG)).options)
+    res = make_result(0)
+    res.confidence = np.random.default_rng(2).random((H, W), dtype=np.float32)
+    sink.write(res)
+    sink.write(make_result(1))  # no confidence computed for it: nothing logged
+    sink.close(timeout=10)
+    data = read_rrd(tmp_path / "out.rrd")
+    logged = data[f"/{RIG}/confidence"]["DepthImage:buffer"]
+    assert len(logged) == 1
+    conf = np.frombuffer(bytes(image_bytes(logged[0])), np.float32).reshape(H, W)
+    np.testing.assert_array_equal(conf, res.confidence)

@@ -25,12 +25,17 @@ def result() -> FusionResult:
     disp[0, 0] = np.nan
     depth = (100.0 * 0.2 / (disp + 3.0)).astype(np.float32)
     frame = StereoFrame(left=left, right=left, calib=calib, stamp_ns=9, meta={"ros": {"stamp_ns": 77, "frame_id": "L"}})
-    return FusionResult(frame=frame, disparity=disp, depth=depth, left_vpp=left, right_vpp=left[:, :, 0])
+    conf = np.linspace(0, 1, 20, dtype=np.float32).reshape(4, 5)
+    conf[0, 0] = 0.0  # no answer, no confidence
+    return FusionResult(
+        frame=frame, disparity=disp, depth=depth, confidence=conf, left_vpp=left, right_vpp=left[:, :, 0]
+    )
 
 
 TOPICS = {
     "disparity": ("/cam/disparity", "stereo_msgs/msg/DisparityImage"),
     "depth": ("/cam/depth", "sensor_msgs/msg/Image"),
+    "confidence": ("/cam/confidence", "sensor_msgs/msg/Image"),
     "points2": ("/cam/points2", "sensor_msgs/msg/PointCloud2"),
     "left_vpp": ("/cam/left/image_vpp", "sensor_msgs/msg/Image"),
     "right_vpp": ("/cam/right/image_vpp", "sensor_msgs/msg/Image"),
@@ -62,6 +67,9 @@ def test_all_outputs(sessions, layout):
     assert img[1, 1] == 10.0 and img[0, 0] < d.min_disparity and d.min_disparity == 3.0
     assert d.f == 100.0 and d.t == pytest.approx(0.2)
     assert msgs["depth"].encoding == "32FC1" and np.isnan(msgs["depth"].data.view("<f4")[0])
+    conf = msgs["confidence"]
+    assert (conf.encoding, conf.height, conf.width, conf.step) == ("32FC1", 4, 5, 20)
+    np.testing.assert_array_equal(conf.data.view("<f4").reshape(4, 5), result().confidence)
     cloud = msgs["points2"]  # organized by default, as stereo_image_proc's points2
     assert (cloud.height, cloud.width, cloud.is_dense) == (4, 5, False)
     assert [f.name for f in cloud.fields] == ["x", "y", "z", "rgb"]
@@ -155,6 +163,8 @@ def test_needs_depth():
 
     assert not Ros2Sink.needs_depth(parse_sink_options("ros2", {}))
     assert Ros2Sink.needs_depth(parse_sink_options("ros2", {"outputs": ["points2"]}))
+    assert not Ros2Sink.needs_confidence(parse_sink_options("ros2", {"outputs": ["disparity", "depth"]}))
+    assert Ros2Sink.needs_confidence(parse_sink_options("ros2", {"outputs": ["confidence"]}))
 
 
 @pytest.mark.parametrize(
@@ -162,7 +172,7 @@ def test_needs_depth():
     [
         {"outputs": []},
         {"outputs": ["disparity", "disparity"]},
-        {"outputs": ["confidence"]},
+        {"outputs": ["certainty"]},
         {"topics": {"disparity": "bad name"}},
         {"attachment": "v2"},
         {"delta_d": 0.0},

@@ -178,3 +178,27 @@ def test_points_output_over_zenoh(sessions):
         cloud = wire.decode_output_cloud(sample.payload.to_bytes())
         assert cloud.seq == res.frame.seq and cloud.stride == 2
         assert_cloud_is_depth(cloud.xyz, cloud.rgb, res, 2)
+
+
+def test_publishes_confidence(sessions):
+    """``confidence``: the float32 map as an OutputMap on out/confidence; needs_confidence asks the service for it."""
+    from vpp_service.sinks.zenoh import ZenohSink
+
+    svc, client = sessions
+    sub = client.declare_subscriber("vpp/s/out/confidence", zenoh.handlers.FifoChannel(8))
+    opts = {"outputs": ["disparity", "confidence"], "on_request": [], "congestion_control": "block"}
+    sink = build_sink("zenoh", opts, SinkContext(rig="s", session=svc))
+    assert ZenohSink.needs_confidence(sink.options)
+    assert not ZenohSink.needs_confidence(build_sink("zenoh", {}, SinkContext(rig="s", session=svc)).options)
+    sink.open()
+    time.sleep(0.3)
+    res = result(4)
+    res.confidence = np.linspace(0, 1, 48, dtype=np.float32).reshape(6, 8)
+    sink.write(res)
+    sink.write(result(5))  # no confidence in this result: nothing published for it
+    sink.close(3.0)
+    got = collect(sub, 2, timeout=1.0)
+    assert len(got) == 1
+    out = wire.decode_output(got[0].payload.to_bytes())
+    assert out.seq == 4
+    np.testing.assert_array_equal(out.data, res.confidence)

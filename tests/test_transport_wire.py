@@ -185,6 +185,11 @@ def test_output_roundtrip():
     assert out.seq == 7 and out.timing_ms == {"match": 1.5} and out.metrics == {"bad2": 4.0}
     assert out.calib == fr.calib and out.extra["vpp"] == {"projected": 2}
     np.testing.assert_array_equal(wire.decode_output(wire.encode_output(res, "depth")).data, disp * 2)
+    assert wire.encode_output(res, "confidence") is None  # not computed
+    res.confidence = np.linspace(0, 1, disp.size, dtype=np.float32).reshape(disp.shape)
+    conf = wire.decode_output(wire.encode_output(res, "confidence"))
+    np.testing.assert_array_equal(conf.data, res.confidence)
+    assert conf.seq == 7 and conf.calib == fr.calib and conf.data.dtype == np.float32
     seq, img = wire.decode_output_image(wire.encode_output(res, "left_vpp", "png"))
     assert seq == 7
     np.testing.assert_array_equal(img, fr.left)

@@ -141,6 +141,10 @@ class FusionResult:
         H x W float32 dense disparity of the left view; NaN = invalid.
     depth : ndarray or None
         H x W float32 metric depth (metres, NaN = invalid) when calibrated.
+    confidence : ndarray or None
+        H x W float32 per-pixel confidence of ``disparity`` in [0, 1], 0 where it is NaN
+        (:meth:`Matcher.compute_with_confidence <vpp_service.matchers.base.Matcher.compute_with_confidence>`);
+        None when nothing asked for it.
     left_vpp, right_vpp : ndarray or None
         The painted pair fed to the matcher (None when VPP was disabled).
     occluded : ndarray or None
@@ -160,6 +164,7 @@ class FusionResult:
     frame: StereoFrame
     disparity: np.ndarray
     depth: np.ndarray | None = None
+    confidence: np.ndarray | None = None
     left_vpp: np.ndarray | None = None
     right_vpp: np.ndarray | None = None
     occluded: np.ndarray | None = None

@@ -29,6 +29,11 @@
   from the matcher's range and the rig: nothing below ``max(min_disparity, 1)``
   px, nothing above the top of the range) become NaN, before depth, metrics and
   every output, so they all agree on what is invalid.
+* **Confidence.** With ``confidence=True`` the matcher runs
+  :meth:`~vpp_service.matchers.Matcher.compute_with_confidence` and
+  ``FusionResult.confidence`` carries its map (0 wherever the disparity is
+  NaN, the depth clip's holes included). The matcher's ``min_confidence``
+  applies either way (its low-confidence pixels are holes).
 * **Depth.** With ``depth=True`` and a calibration, metric depth of the result.
 * **Metrics.** When the frame carries ground truth,
   :func:`~vpp_service.metrics.compute_metrics` of the disparity over
@@ -121,6 +126,7 @@ def fuse(
     sparse: np.ndarray | None = None,
     depth_filter: DepthFilter | None = DEFAULT_DEPTH_FILTER,
     depth_clip: DepthClip | None = None,
+    confidence: bool = False,
 ) -> FusionResult:
     """Process one frame: VPP (or guidance) on its sparse points, the matcher, depth and metrics.
 
@@ -150,6 +156,9 @@ def fuse(
         The valid depth range: disparities outside it become NaN before depth
         and metrics; None (default) keeps the matcher's output as it is
         (what ``eval`` scores).
+    confidence : bool
+        Compute the per-pixel confidence (``FusionResult.confidence``); for
+        matchers other than census-sgm a second matching pass.
 
     Returns
     -------
@@ -190,10 +199,17 @@ def fuse(
             raise ValueError(f"guide: frame {frame.name or frame.seq!r} has no sparse points")
         hints = sparse
     t0 = time.perf_counter()
-    disp = np.asarray(matcher.compute(m_left, m_right, hints=hints), dtype=np.float32)
+    conf = None
+    if confidence:
+        disp, conf = matcher.compute_with_confidence(m_left, m_right, hints=hints)
+        disp = np.asarray(disp, dtype=np.float32)
+    else:
+        disp = np.asarray(matcher.compute(m_left, m_right, hints=hints), dtype=np.float32)
     timing["match"] = (time.perf_counter() - t0) * 1e3
     if depth_clip is not None:
         disp = depth_clip.apply(disp, matcher, frame.calib)
+    if conf is not None:
+        conf[np.isnan(disp)] = 0.0
     depth_map = None
     if depth and frame.calib is not None:
         c = frame.calib
@@ -204,6 +220,7 @@ def fuse(
         frame=frame,
         disparity=disp,
         depth=depth_map,
+        confidence=conf,
         left_vpp=left_vpp,
         right_vpp=right_vpp,
         occluded=occluded,
@@ -240,6 +257,8 @@ class Fusion:
     depth_clip : DepthClip or None
         The valid depth range of every output (:func:`fuse`); the service
         always passes one (``[depth_clip]``, defaults from the matcher and the rig).
+    confidence : bool
+        Compute the per-pixel confidence (:func:`fuse`; only when a sink publishes it).
 
     Attributes
     ----------
@@ -259,6 +278,7 @@ class Fusion:
         *,
         depth_filter: DepthFilter | None = DEFAULT_DEPTH_FILTER,
         depth_clip: DepthClip | None = None,
+        confidence: bool = False,
     ) -> None:
         if not isinstance(matcher, Matcher):
             raise TypeError(
@@ -276,6 +296,7 @@ class Fusion:
         self.vpp_config = vpp_config
         self.seed = int(seed)
         self.depth = bool(depth)
+        self.confidence = bool(confidence)
         self.counters = {"vpp": 0, "no_depth": 0}
         limit = matcher.max_range  # a network's fixed range caps "auto"
         if disparity_range is not None and limit is not None and disparity_range.limit > limit:
@@ -342,6 +363,7 @@ class Fusion:
             sparse=sparse,
             depth_filter=self.depth_filter,
             depth_clip=self.depth_clip,
+            confidence=self.confidence,
         )
         if result.left_vpp is not None:
             with self._lock:

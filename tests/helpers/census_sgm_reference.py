@@ -219,3 +219,26 @@ def ref_match(
     if median:
         disp = ref_median(disp)
     return disp
+
+
+def ref_confidence(S: np.ndarray, peak: float, tol: float = 1.0) -> np.ndarray:
+    """The kernel's confidence: peak-ratio term of the best ``b`` times the left-right term of ``b``.
+
+    Over ``d <= min(x, D - 1)``: ``b`` the first minimum (before the uniqueness test and the left band's
+    rejection), ``second`` the minimum over ``|d - b| > 1``;
+    ``pk = min(1, (1 - S[b] / second) / peak)`` (0 without ``second`` or when it is 0), stored as float32;
+    ``lr = 1 - |b - ref_right(S)[x - b]| / (tol + 1)``; confidence ``pk * lr`` where ``lr > 0``, else 0.
+    """
+    H, W, D = S.shape
+    dr = ref_right(S)
+    out = np.zeros((H, W), np.float32)
+    for y in range(H):
+        for x in range(W):
+            c = [int(v) for v in S[y, x, : min(x + 1, D)]]
+            best = int(np.argmin(c))
+            others = [c[d] for d in range(len(c)) if abs(d - best) > 1]
+            second = min(others) if others else 0
+            pk = np.float32(min(1.0, (1.0 - c[best] / second) / peak)) if second > 0 else np.float32(0.0)
+            lr = 1.0 - abs(best - float(dr[y, x - best])) / (tol + 1.0)
+            out[y, x] = np.float32(float(pk) * lr) if lr > 0 else 0.0
+    return out

@@ -1,8 +1,9 @@
 """``vpp-service view``: watch a running service's outputs in Rerun, from another machine.
 
-Subscribes to ``<prefix>/<rig>/out/*`` (disparity, depth, the painted pair and
-the sparse points; the service's zenoh sink publishes the last three only while
-someone subscribes, see its ``on_request`` option) of one rig or of every rig
+Subscribes to ``<prefix>/<rig>/out/*`` (disparity, depth, the confidence when the
+service publishes it, the painted pair and the sparse points; the service's zenoh
+sink publishes the last three only while someone subscribes, see its
+``on_request`` option) of one rig or of every rig
 (``--rig '*'``) and logs them with the Rerun sink's own layout, one recording
 per rig: into a spawned viewer (default), a viewer at ``--rerun-connect URL``,
 or ``.rrd`` files (``--save PATH``: ``PATH`` itself when one rig was seen; with
@@ -53,7 +54,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 #: The outputs the viewer shows.
-VIEWED = ("disparity", "depth", "left_vpp", "right_vpp", "sparse")
+VIEWED = ("disparity", "depth", "confidence", "left_vpp", "right_vpp", "sparse")
 
 
 def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -101,11 +102,13 @@ def decode_part(name: str, payload: bytes, rig: str) -> RerunParts:
     from vpp_service.sinks.rerun_log import RerunParts
     from vpp_service.transport import wire
 
-    if name in ("disparity", "depth"):
+    if name in ("disparity", "depth", "confidence"):
         m = wire.decode_output(payload)
         parts = RerunParts(m.rig, m.seq, m.stamp_ns, timing_ms=m.timing_ms)
         if name == "disparity":
             parts.disparity = m.data
+        elif name == "confidence":
+            parts.confidence = m.data
         else:  # metric depth and its calibration: the 3-D view
             parts.depth, parts.calib = m.data, m.calib
     elif name == "sparse":

@@ -57,53 +57,36 @@ static void csgm_post_row(const csgm_params* p, float* CSGM_RESTRICT row) {
     if (p->gap_size) vpp_gap_row(row, row, W, p->gap_size, p->gap_step);
 }
 
-/* Finish row y: S = a + b (a, b: the passes' partial sums of the row, uint8 when p->narrow); then either
- * copy S to sout (invalid entries CSGM_NOCOST) or run the left and right WTA (on keys when p->packed) and
- * the left-right check into dl, dr, lr. */
-static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CSGM_RESTRICT a,
-                            const void* CSGM_RESTRICT b, int y, uint16_t* sout, float* dl, float* dr,
-                            float* lr) {
+#if defined(__AVX2__)
+/* The WTAs of a row on keys (p->packed), see csgm_finish_row; cf NULL (a constant at one call site): no
+ * confidence, the loop the compiler keeps for it has none of its work. */
+CSGM_INLINE void csgm_wta_row_keys(const csgm_params* p, csgm_thread* t, const uint8_t* CSGM_RESTRICT a8,
+                                   const uint8_t* CSGM_RESTRICT b8, float* l, int right, float* cf) {
     const int W = p->W, D = p->D;
-    const ptrdiff_t n = (ptrdiff_t)W * D;
-    const int narrow = p->narrow;
+    uint16_t* CSGM_RESTRICT k = t->keys + 16;
+    for (int x = 0; x < W; x++) {
+        const int nv = x + 1 < D ? x + 1 : D;
+        csgm_pack_px(a8 + (ptrdiff_t)x * D, b8 + (ptrdiff_t)x * D, k, nv, D);
+        if (!l) continue; /* aggregation only (timing) */
+        l[x] = csgm_wta_keys(k, nv, D, p->uniqueness, p->subpixel, p->conf_peak, cf ? cf + x : NULL,
+                             t->cbest + x);
+        if (right) csgm_right_keys(k, nv, t->rbc + (W - 1 - x));
+    }
+}
+#endif
+
+/* The WTAs of a row on the plain sums, see csgm_finish_row and csgm_wta_row_keys. */
+CSGM_INLINE void csgm_wta_row_sums(const csgm_params* p, csgm_thread* t, const void* CSGM_RESTRICT a,
+                                   const void* CSGM_RESTRICT b, float* l, int right, float* cf) {
+    const int W = p->W, D = p->D;
     const uint8_t* CSGM_RESTRICT a8 = (const uint8_t*)a;
     const uint8_t* CSGM_RESTRICT b8 = (const uint8_t*)b;
     const uint16_t* CSGM_RESTRICT a16 = (const uint16_t*)a;
     const uint16_t* CSGM_RESTRICT b16 = (const uint16_t*)b;
-    if (sout) {
-        uint16_t* CSGM_RESTRICT S = sout + (ptrdiff_t)y * n;
-        if (narrow)
-            for (ptrdiff_t i = 0; i < n; i++) S[i] = (uint16_t)(a8[i] + b8[i]);
-        else
-            for (ptrdiff_t i = 0; i < n; i++) S[i] = (uint16_t)(a16[i] + b16[i]);
-        for (int x = 0; x < W && x < D - 1; x++)
-            for (int d = x + 1; d < D; d++) S[(ptrdiff_t)x * D + d] = CSGM_NOCOST;
-        return;
-    }
-    /* pixel by pixel: its sum S (D entries, in L1), left WTA, right WTA update */
     uint16_t* CSGM_RESTRICT S = t->sum;
-    float* l = dl ? dl + (ptrdiff_t)y * W : NULL;
-    const int right = l && p->lr_check;
-    if (right) {
-        for (int i = 0; i < W + 16; i++) t->rbc[i] = 0xFFFFu;
-        if (!p->packed)
-            for (int i = 0; i < W; i++) t->rbd[i] = 0;
-    }
-#if defined(__AVX2__)
-    if (p->packed) {
-        uint16_t* CSGM_RESTRICT k = t->keys + 16;
-        for (int x = 0; x < W; x++) {
-            const int nv = x + 1 < D ? x + 1 : D;
-            csgm_pack_px(a8 + (ptrdiff_t)x * D, b8 + (ptrdiff_t)x * D, k, nv, D);
-            if (!l) continue; /* aggregation only (timing) */
-            l[x] = csgm_wta_keys(k, nv, D, p->uniqueness, p->subpixel);
-            if (right) csgm_right_keys(k, nv, t->rbc + (W - 1 - x));
-        }
-    } else
-#endif
     for (int x = 0; x < W; x++) {
         const int nv = x + 1 < D ? x + 1 : D;
-        if (narrow) {
+        if (p->narrow) {
             const uint8_t* CSGM_RESTRICT ax = a8 + (ptrdiff_t)x * D;
             const uint8_t* CSGM_RESTRICT bx = b8 + (ptrdiff_t)x * D;
             for (int d = 0; d < D; d++) S[d] = (uint16_t)(ax[d] + bx[d]);
@@ -113,19 +96,67 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CS
             for (int d = 0; d < D; d++) S[d] = (uint16_t)(ax[d] + bx[d]);
         }
         if (!l) continue; /* aggregation only (timing) */
-        l[x] = csgm_wta_pixel(S, nv, D, p->uniqueness, p->subpixel);
+        l[x] = csgm_wta_pixel(S, nv, D, p->uniqueness, p->subpixel, p->conf_peak, cf ? cf + x : NULL, t->cbest + x);
         if (right) csgm_right_pixel(S, nv, t->rbc + (W - 1 - x), t->rbd + (W - 1 - x));
     }
+}
+
+/* Finish row y: S = a + b (a, b: the passes' partial sums of the row, uint8 when p->narrow); then either
+ * copy S to sout (invalid entries CSGM_NOCOST) or run the left and right WTA (on keys when p->packed) and
+ * the left-right check into dl, dr, lr; with conf (not NULL) also the confidence of the row (the right WTA
+ * then runs even without the check). */
+static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CSGM_RESTRICT a,
+                            const void* CSGM_RESTRICT b, int y, uint16_t* sout, float* dl, float* dr,
+                            float* lr, float* conf) {
+    const int W = p->W, D = p->D;
+    const ptrdiff_t n = (ptrdiff_t)W * D;
+    if (sout) {
+        const uint8_t* CSGM_RESTRICT a8 = (const uint8_t*)a;
+        const uint8_t* CSGM_RESTRICT b8 = (const uint8_t*)b;
+        const uint16_t* CSGM_RESTRICT a16 = (const uint16_t*)a;
+        const uint16_t* CSGM_RESTRICT b16 = (const uint16_t*)b;
+        uint16_t* CSGM_RESTRICT S = sout + (ptrdiff_t)y * n;
+        if (p->narrow)
+            for (ptrdiff_t i = 0; i < n; i++) S[i] = (uint16_t)(a8[i] + b8[i]);
+        else
+            for (ptrdiff_t i = 0; i < n; i++) S[i] = (uint16_t)(a16[i] + b16[i]);
+        for (int x = 0; x < W && x < D - 1; x++)
+            for (int d = x + 1; d < D; d++) S[(ptrdiff_t)x * D + d] = CSGM_NOCOST;
+        return;
+    }
+    /* pixel by pixel: its sum S (D entries, in L1) or keys, left WTA, right WTA update */
+    float* l = dl ? dl + (ptrdiff_t)y * W : NULL;
+    float* cf = l && conf ? conf + (ptrdiff_t)y * W : NULL;
+    const int right = l && (p->lr_check || cf);
+    if (right) {
+        for (int i = 0; i < W + 16; i++) t->rbc[i] = 0xFFFFu;
+        if (!p->packed)
+            for (int i = 0; i < W; i++) t->rbd[i] = 0;
+    }
+#if defined(__AVX2__)
+    if (p->packed) {
+        if (cf)
+            csgm_wta_row_keys(p, t, (const uint8_t*)a, (const uint8_t*)b, l, right, cf);
+        else
+            csgm_wta_row_keys(p, t, (const uint8_t*)a, (const uint8_t*)b, l, right, NULL);
+    } else
+#endif
+    if (cf)
+        csgm_wta_row_sums(p, t, a, b, l, right, cf);
+    else
+        csgm_wta_row_sums(p, t, a, b, l, right, NULL);
     if (!l) return;
-    if (!right) {
-        if (lr != l) memcpy(lr + (ptrdiff_t)y * W, l, (size_t)W * sizeof(float));
-    } else {
-        float* r = dr + (ptrdiff_t)y * W;
+    float* r = dr + (ptrdiff_t)y * W;
+    if (right) {
         const uint16_t* best = p->packed ? t->rbc : t->rbd; /* keys: the disparity is the low 7 bits */
         const unsigned mask = p->packed ? 127u : 0xFFFFu;
         for (int xr = 0; xr < W; xr++) r[xr] = (float)(best[W - 1 - xr] & mask);
-        csgm_lr_row(l, r, lr + (ptrdiff_t)y * W, W, p->tolerance);
     }
+    if (p->lr_check)
+        csgm_lr_row(l, r, lr + (ptrdiff_t)y * W, W, p->tolerance);
+    else if (lr != l)
+        memcpy(lr + (ptrdiff_t)y * W, l, (size_t)W * sizeof(float));
+    if (cf) csgm_conf_row(t->cbest, r, cf, W, p->tolerance + 1.0);
     csgm_post_row(p, lr + (ptrdiff_t)y * W);
 }
 
@@ -135,7 +166,7 @@ static void csgm_finish_row(const csgm_params* p, csgm_thread* t, const void* CS
  * and other[y].  own is NULL for the one-thread backward pass (always second). */
 static void csgm_pass(const csgm_params* p, const uint16_t* cost, const uint8_t* g, csgm_thread* t, int s,
                       void* own, const void* other, int* rowcnt, uint16_t* sout, float* dl, float* dr,
-                      float* lr) {
+                      float* lr, float* conf) {
     const int H = p->H;
     const size_t n = (size_t)p->W * p->D * (p->narrow ? 1 : 2); /* bytes of a row of partial sums */
     for (int i = 0; i < H; i++) {
@@ -146,12 +177,12 @@ static void csgm_pass(const csgm_params* p, const uint16_t* cost, const uint8_t*
             memcpy((uint8_t*)own + (size_t)y * n, t->part, n);
             if (__atomic_fetch_add(&rowcnt[y], 1, __ATOMIC_ACQ_REL) == 0) continue;
         }
-        csgm_finish_row(p, t, t->part, (const uint8_t*)other + (size_t)y * n, y, sout, dl, dr, lr);
+        csgm_finish_row(p, t, t->part, (const uint8_t*)other + (size_t)y * n, y, sout, dl, dr, lr, conf);
     }
 }
 
 /* The buffers of csgm_sgm.  With sout, it writes the aggregated volume there (no WTA); else disp is the
- * result, dl NULL stops after the aggregation (timing).  Only threads 0 and 1 use scratch (2 blocks). */
+ * result (and conf, when set, its confidence), dl NULL stops after the aggregation (timing).  Only threads 0 and 1 use scratch (2 blocks). */
 typedef struct {
     uint16_t* vf;     /* H x W x D partial sums (when csgm_narrow holds, the passes use the first H W D bytes as */
     uint16_t* vb;     /* uint8 sums); vb unused with one thread */
@@ -163,6 +194,7 @@ typedef struct {
     float* lr;        /* H x W after the left-right check, border step and short gaps (may be dl) */
     float* pad;       /* (H + 2) x (W + 2) floats for the median */
     float* disp;      /* H x W final disparity */
+    float* conf;      /* H x W confidence (csgm_conf_pixel, csgm_conf_row), or NULL: not computed */
 } csgm_buffers;
 
 /* SGM + WTA (+ right WTA, left-right check, median) of a cost volume (cost == NULL: of the Hamming costs of
@@ -173,7 +205,7 @@ static void csgm_sgm(const csgm_params* p0, const uint16_t* cost, const uint8_t*
     uint16_t *vf = b->vf, *vb = b->vb, *sout = b->sout;
     int* rowcnt = b->rowcnt;
     uint8_t* scratch = b->scratch;
-    float *dl = b->dl, *dr = b->dr, *lr = b->lr, *pad = b->pad, *disp = b->disp;
+    float *dl = b->dl, *dr = b->dr, *lr = b->lr, *pad = b->pad, *disp = b->disp, *conf = b->conf;
     csgm_params q = *p0;
     q.narrow = csgm_narrow(q.paths, q.p2lut, cost != NULL);
     q.narrow8 = csgm_narrow8(q.paths, q.p2lut, cost != NULL, q.D);
@@ -204,12 +236,12 @@ static void csgm_sgm(const csgm_params* p0, const uint16_t* cost, const uint8_t*
 #endif
         }
         if (team == 1) {
-            csgm_pass(p, cost, g, &t, 1, vf, vf, rowcnt, sout, dl, dr, lr);
-            csgm_pass(p, cost, g, &t, -1, NULL, vf, rowcnt, sout, dl, dr, lr);
+            csgm_pass(p, cost, g, &t, 1, vf, vf, rowcnt, sout, dl, dr, lr, conf);
+            csgm_pass(p, cost, g, &t, -1, NULL, vf, rowcnt, sout, dl, dr, lr, conf);
         } else if (tid == 0) {
-            csgm_pass(p, cost, g, &t, 1, vf, vb, rowcnt, sout, dl, dr, lr);
+            csgm_pass(p, cost, g, &t, 1, vf, vb, rowcnt, sout, dl, dr, lr, conf);
         } else if (tid == 1) {
-            csgm_pass(p, cost, g, &t, -1, vb, vf, rowcnt, sout, dl, dr, lr);
+            csgm_pass(p, cost, g, &t, -1, vb, vf, rowcnt, sout, dl, dr, lr, conf);
         }
         if (!sout && dl && p->median) {
 #ifdef _OPENMP

@@ -47,8 +47,12 @@ def sgm_stage(
     gr: npt.NDArray[np.uint8] | None,
     out: npt.NDArray[np.float32],
     nthreads: int,
+    conf: npt.NDArray[np.float32] | None = None,
 ) -> None:
-    """(Census of ``gl``, ``gr``,) SGM of ``cost`` (None: of ``ws.cl``, ``ws.cr``), WTAs, checks, median: ``out``."""
+    """(Census of ``gl``, ``gr``,) SGM of ``cost`` (None: of ``ws.cl``, ``ws.cr``), WTAs, checks, median: ``out``.
+
+    With ``conf`` (H x W float32) also each pixel's confidence in [0, 1].
+    """
 
 def census5x5(img: npt.NDArray[np.uint8], out: npt.NDArray[np.uint32], nthreads: int) -> None:
     """24-bit 5x5 census of ``img`` (H x W) into ``out`` (H x W)."""

@@ -58,6 +58,7 @@ cdef extern from "_census_sgm.h" nogil:
         int border_margin
         int gap_size
         double gap_step
+        double conf_peak
     int csgm_build_avx2()
     int csgm_narrow(int paths, const int16_t* p2lut, int have_cost)
     int csgm_narrow8(int paths, const int16_t* p2lut, int have_cost, int D)
@@ -91,6 +92,7 @@ cdef extern from "_census_sgm.h" nogil:
         float* lr
         float* pad
         float* disp
+        float* conf
     void csgm_sgm(const csgm_params* p, const uint16_t* cost, const uint8_t* g, const csgm_buffers* b,
                   const csgm_census_io* census, int nthreads)
     void csgm_cost(const csgm_census_io* io, int H, int W, int D, uint32_t* cl, uint32_t* cr, uint16_t* cost,
@@ -214,6 +216,7 @@ cdef struct StageParams:
     int border_margin       # border.reject_border_matches (0 = off)
     int gap_size            # holes.fill_short_gaps (0 = off) with gap_step
     double gap_step
+    double conf_peak        # confidence: the peak-ratio margin that counts as sure
     int wta                 # 0: stop after the aggregation (benchmarks)
 
 
@@ -239,6 +242,7 @@ cdef csgm_params make_params(int H, int W, int D, int paths, int P1, const int16
     p.border_margin = 0
     p.gap_size = 0
     p.gap_step = 0.0
+    p.conf_peak = 1.0
     return p
 
 
@@ -255,6 +259,7 @@ cdef csgm_buffers buffers(uint16_t[:, :, ::1] vf, uint16_t[:, :, ::1] vb, int[::
     b.lr = NULL
     b.pad = NULL
     b.disp = NULL
+    b.conf = NULL
     return b
 
 
@@ -276,7 +281,8 @@ def aggregate(const uint16_t[:, :, ::1] C, const uint8_t[:, ::1] g,
 
 
 def sgm_stage(dict params, const int16_t[::1] p2lut, ws, const uint16_t[:, :, ::1] cost,
-              const uint8_t[:, ::1] gl, const uint8_t[:, ::1] gr, float[:, ::1] out, int nthreads):
+              const uint8_t[:, ::1] gl, const uint8_t[:, ::1] gr, float[:, ::1] out, int nthreads,
+              float[:, ::1] conf=None):
     """(Census,) aggregation, left and right WTA, left-right check and median in one parallel region.
 
     ``params``: the settings (the dict of ``census_sgm.stage_params``, converted to the ``StageParams``
@@ -294,6 +300,12 @@ def sgm_stage(dict params, const int16_t[::1] p2lut, ws, const uint16_t[:, :, ::
     straight to ``out``. ``wta`` False stops after the aggregation (benchmarks time the stage so).
     ``border_margin`` and ``gap_size``, ``gap_step`` (0 = off) run ``border.reject_border_matches`` and
     ``holes.fill_short_gaps`` (``_gaps.h``) on each row right after its left-right check, before the median.
+    ``conf`` (H x W float32, or None: not computed, no cost) gets each pixel's confidence in [0, 1] from
+    its best disparity ``b`` (lowest cost, lowest ``d`` on ties; before the uniqueness test): the peak ratio
+    ``min(1, (1 - S_best / S_second) / conf_peak)`` (``S_second`` the lowest cost with ``|d - b| > 1``; 0
+    without one or when it is 0) times ``max(0, 1 - |b - d_R(x - b)| / (tolerance + 1))`` (``d_R`` the right
+    view's integer WTA, computed for it even without the left-right check). The disparity is the same
+    either way.
     """
     cdef StageParams s = params
     cdef uint16_t[:, :, ::1] vf = ws.vf, vb = ws.vb
@@ -326,6 +338,9 @@ def sgm_stage(dict params, const int16_t[::1] p2lut, ws, const uint16_t[:, :, ::
     p.border_margin = s.border_margin
     p.gap_size = s.gap_size
     p.gap_step = s.gap_step
+    p.conf_peak = s.conf_peak
+    if conf is not None:
+        b.conf = &conf[0, 0]
     if cost is not None:
         volume = &cost[0, 0, 0]
     else:

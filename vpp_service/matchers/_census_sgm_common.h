@@ -51,6 +51,7 @@ typedef struct {
     int border_margin; /* after the left-right check: border.reject_border_matches (0 = off) */
     int gap_size;      /* then holes.fill_short_gaps (0 = off) with gap_step */
     double gap_step;
+    double conf_peak; /* confidence (csgm_conf_pixel): the peak-ratio margin 1 - best / second that counts as sure */
 } csgm_params;
 
 static size_t csgm_align(size_t n) { return (n + 63) & ~(size_t)63; }

@@ -224,6 +224,7 @@ typedef struct {
     uint16_t* rbc;  /* W + 16: right WTA best cost (reversed x), or best key (p->packed) */
     uint16_t* rbd;  /* W: right WTA best d */
     uint16_t* keys; /* CSGM_KEYS: a pixel's keys (p->packed), see csgm_pack_px */
+    uint16_t* cbest; /* W: the best d of each pixel of the row (confidence only, csgm_conf_pixel) */
 } csgm_thread;
 
 /* A pixel's path costs in a buffer: CSGM_OFF int16 of which the last is the sentinel left of d = 0, the D
@@ -243,6 +244,7 @@ static size_t csgm_scratch_bytes(int W, int D) {
     b += csgm_align((size_t)W * 4);
     b += csgm_align(((size_t)W + 16) * 2) + csgm_align((size_t)W * 2);
     b += csgm_align(CSGM_KEYS * 2);
+    b += csgm_align((size_t)W * 2); /* cbest */
     return b + 64;
 }
 
@@ -266,6 +268,7 @@ static void csgm_thread_init(csgm_thread* t, uint8_t* base, int W, int D) {
     CSGM_TAKE(rbc, uint16_t, (size_t)W + 16)
     CSGM_TAKE(rbd, uint16_t, W)
     CSGM_TAKE(keys, uint16_t, CSGM_KEYS)
+    CSGM_TAKE(cbest, uint16_t, W)
 #undef CSGM_TAKE
     memset(t->keys, 0xFF, CSGM_KEYS * sizeof(uint16_t)); /* keys of d >= D and the padding: never written */
     /* sentinels left of d = 0 and right of d = D - 1 (never overwritten) */

@@ -29,9 +29,8 @@ CSGM_INLINE int csgm_first_eq(const uint16_t* CSGM_RESTRICT c, int n, uint16_t v
     return 0;
 }
 
-/* Left WTA of one pixel over its n valid disparities (lowest d on ties), uniqueness, parabola.  In the left
- * band (n < D) a minimum at the largest existing d = n - 1 is rejected: the match may lie beyond the image. */
-CSGM_INLINE float csgm_wta_pixel(const uint16_t* CSGM_RESTRICT c, int n, int D, double uniqueness, int subpixel) {
+/* The smallest of the n >= 1 costs c[0 .. n). */
+CSGM_INLINE uint16_t csgm_min16(const uint16_t* CSGM_RESTRICT c, int n) {
     uint16_t bv = 0xFFFFu;
     int d = 0;
 #if defined(__AVX2__)
@@ -43,39 +42,66 @@ CSGM_INLINE float csgm_wta_pixel(const uint16_t* CSGM_RESTRICT c, int n, int D, 
     }
 #endif
     for (; d < n; d++) bv = c[d] < bv ? c[d] : bv;
-    const int b = csgm_first_eq(c, n, bv);
-    if (n < D && b == n - 1) return NAN;
-    if (b >= 2 || b + 2 <= n - 1) { /* some d with |d - best| > 1 */
-        uint16_t second = 0xFFFFu;
-        d = 0;
+    return bv;
+}
+
+/* The smallest c[d] over d < n with |d - b| > 1 (0xFFFF when there is none). */
+CSGM_INLINE uint16_t csgm_min_outside(const uint16_t* CSGM_RESTRICT c, int n, int b) {
+    uint16_t second = 0xFFFFu;
+    int d = 0;
 #if defined(__AVX2__)
-        {
-            /* lanes with d - (b - 1) in [0, 2] (unsigned) are left out */
-            const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-            const __m256i bias = _mm256_set1_epi16((int16_t)0x8000);
-            const __m256i two = _mm256_set1_epi16((int16_t)(2 ^ 0x8000));
-            __m256i vs = _mm256_set1_epi16(-1);
-            const int blo = (b > 0 ? b - 1 : 0) >> 4, bhi = (b + 1) >> 4; /* the blocks holding b - 1 .. b + 1 */
-            for (; d + 16 <= n; d += 16) {
-                __m256i v = _mm256_loadu_si256((const __m256i*)(c + d));
-                if ((d >> 4) == blo || (d >> 4) == bhi) {
-                    __m256i rel = _mm256_sub_epi16(_mm256_add_epi16(lane, _mm256_set1_epi16((int16_t)d)),
-                                                   _mm256_set1_epi16((int16_t)(b - 1)));
-                    __m256i out = _mm256_cmpgt_epi16(_mm256_xor_si256(rel, bias), two); /* rel > 2 unsigned */
-                    v = _mm256_or_si256(v, _mm256_andnot_si256(out, _mm256_set1_epi16(-1)));
-                }
-                vs = _mm256_min_epu16(vs, v);
+    {
+        /* lanes with d - (b - 1) in [0, 2] (unsigned) are left out */
+        const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+        const __m256i bias = _mm256_set1_epi16((int16_t)0x8000);
+        const __m256i two = _mm256_set1_epi16((int16_t)(2 ^ 0x8000));
+        __m256i vs = _mm256_set1_epi16(-1);
+        const int blo = (b > 0 ? b - 1 : 0) >> 4, bhi = (b + 1) >> 4; /* the blocks holding b - 1 .. b + 1 */
+        for (; d + 16 <= n; d += 16) {
+            __m256i v = _mm256_loadu_si256((const __m256i*)(c + d));
+            if ((d >> 4) == blo || (d >> 4) == bhi) {
+                __m256i rel = _mm256_sub_epi16(_mm256_add_epi16(lane, _mm256_set1_epi16((int16_t)d)),
+                                               _mm256_set1_epi16((int16_t)(b - 1)));
+                __m256i out = _mm256_cmpgt_epi16(_mm256_xor_si256(rel, bias), two); /* rel > 2 unsigned */
+                v = _mm256_or_si256(v, _mm256_andnot_si256(out, _mm256_set1_epi16(-1)));
             }
-            __m128i h = _mm_min_epu16(_mm256_castsi256_si128(vs), _mm256_extracti128_si256(vs, 1));
-            second = (uint16_t)_mm_cvtsi128_si32(_mm_minpos_epu16(h));
+            vs = _mm256_min_epu16(vs, v);
         }
-#endif
-        for (; d < n; d++) {
-            uint16_t v = (d < b - 1 || d > b + 1) ? c[d] : (uint16_t)0xFFFFu;
-            second = v < second ? v : second;
-        }
-        if (!((double)bv < uniqueness * (double)second)) return NAN;
+        __m128i h = _mm_min_epu16(_mm256_castsi256_si128(vs), _mm256_extracti128_si256(vs, 1));
+        second = (uint16_t)_mm_cvtsi128_si32(_mm_minpos_epu16(h));
     }
+#endif
+    for (; d < n; d++) {
+        uint16_t v = (d < b - 1 || d > b + 1) ? c[d] : (uint16_t)0xFFFFu;
+        second = v < second ? v : second;
+    }
+    return second;
+}
+
+/* The peak-ratio term from the best cost bv and the runner-up second (have: a runner-up exists). */
+CSGM_INLINE float csgm_peak_term(unsigned bv, unsigned second, int have, double peak) {
+    if (!have || second == 0) return 0.0f;
+    const double m = (1.0 - (double)bv / (double)second) / peak;
+    return (float)(m < 1.0 ? m : 1.0);
+}
+
+/* Left WTA of one pixel over its n valid disparities (lowest d on ties), uniqueness, parabola.  In the left
+ * band (n < D) a minimum at the largest existing d = n - 1 is rejected: the match may lie beyond the image.
+ * With conf (not NULL; callers pass a constant NULL to leave it out), also the pixel's peak-ratio term (see
+ * csgm_conf_row) into *conf and its best d (before any rejection) into *best. */
+CSGM_INLINE float csgm_wta_pixel(const uint16_t* CSGM_RESTRICT c, int n, int D, double uniqueness, int subpixel,
+                                 double peak, float* CSGM_RESTRICT conf, uint16_t* CSGM_RESTRICT best) {
+    const uint16_t bv = csgm_min16(c, n);
+    const int b = csgm_first_eq(c, n, bv);
+    const int band = n < D && b == n - 1;
+    const int have = b >= 2 || b + 2 <= n - 1; /* some d with |d - best| > 1 */
+    const uint16_t second = have && (conf || !band) ? csgm_min_outside(c, n, b) : (uint16_t)0xFFFFu;
+    if (conf) {
+        *best = (uint16_t)b;
+        *conf = csgm_peak_term(bv, second, have, peak);
+    }
+    if (band) return NAN;
+    if (have && !((double)bv < uniqueness * (double)second)) return NAN;
     if (subpixel && b > 0 && b < n - 1) {
         int c0 = c[b - 1], c2 = c[b + 1];
         int denom = c0 - 2 * (int)bv + c2;
@@ -88,7 +114,7 @@ static void csgm_wta_row(const uint16_t* CSGM_RESTRICT S, float* CSGM_RESTRICT o
                          double uniqueness, int subpixel) {
     for (int x = 0; x < W; x++) {
         const int n = x + 1 < D ? x + 1 : D;
-        out[x] = csgm_wta_pixel(S + (ptrdiff_t)x * D, n, D, uniqueness, subpixel);
+        out[x] = csgm_wta_pixel(S + (ptrdiff_t)x * D, n, D, uniqueness, subpixel, 0.0, NULL, NULL);
     }
 }
 
@@ -186,6 +212,25 @@ static void csgm_lr_row(const float* CSGM_RESTRICT dl, const float* CSGM_RESTRIC
     }
 }
 
+/* --------------------------------------------------------- confidence ----
+ * Computed only when asked (csgm_finish_row with a confidence map), the disparity unchanged.  Per pixel the
+ * left WTA (csgm_wta_pixel, csgm_wta_keys) gives, from the costs it already has, the best disparity b
+ * (lowest d on ties, over the n valid ones) and the peak-ratio term of its cost and the runner-up outside
+ * b - 1 .. b + 1, min(1, (1 - best / second) / peak) (0 without a runner-up or with second == 0); the row's
+ * right WTA then gives the left-right term max(0, 1 - |b - d_R(x - b)| / span); the confidence is their
+ * product, in [0, 1]. */
+
+/* The confidence of a row in place: conf[x] (the peak-ratio term) times the left-right term of the best d
+ * b[x] against the row's right WTA r (integer disparities). */
+static void csgm_conf_row(const uint16_t* CSGM_RESTRICT b, const float* CSGM_RESTRICT r, float* CSGM_RESTRICT conf,
+                          int W, double span) {
+    for (int x = 0; x < W; x++) {
+        const double diff = fabs((double)b[x] - (double)r[x - b[x]]);
+        const double lr = 1.0 - diff / span;
+        conf[x] = lr > 0.0 ? (float)((double)conf[x] * lr) : 0.0f;
+    }
+}
+
 #if defined(__AVX2__)
 /* ------------------------------------------------- WTA on keys (p->packed) --
  * With narrow partial sums a pixel's full sum S[d] is at most 2 * 255 = 510, so for D <= 128 the 16-bit
@@ -214,7 +259,8 @@ CSGM_INLINE void csgm_pack_px(const uint8_t* CSGM_RESTRICT ax, const uint8_t* CS
  * and second-smallest key over the 8 blocks; the smallest over the lanes gives b and its cost.  The
  * runner-up outside b - 1 .. b + 1 is each lane's smallest key, or its second where the smallest is one
  * of those three (keys are distinct, so equality identifies it). */
-CSGM_INLINE float csgm_wta_keys(const uint16_t* CSGM_RESTRICT k, int n, int D, double uniqueness, int subpixel) {
+CSGM_INLINE float csgm_wta_keys(const uint16_t* CSGM_RESTRICT k, int n, int D, double uniqueness, int subpixel,
+                                double peak, float* CSGM_RESTRICT conf, uint16_t* CSGM_RESTRICT bestd) {
     const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     __m256i lo[4], hi[4];
     for (int i = 0; i < 4; i++) {
@@ -232,8 +278,10 @@ CSGM_INLINE float csgm_wta_keys(const uint16_t* CSGM_RESTRICT k, int n, int D, d
     const unsigned best = csgm_hmin16u(lo[0]);
     const int b = (int)(best & 127u);
     const unsigned bv = best >> 7;
-    if (n < D && b == n - 1) return NAN;
-    if (b >= 2 || b + 2 <= n - 1) { /* some d with |d - best| > 1 */
+    const int band = n < D && b == n - 1;
+    const int have = b >= 2 || b + 2 <= n - 1; /* some d with |d - best| > 1 */
+    unsigned second = 0xFFFFu;
+    if (have && (conf || !band)) {
         const int base = (b - 1) & ~15, r = (b - 1) & 15; /* b - 1 .. b + 1: lanes r .. r + 2 (mod 16) */
         const __m256i rv = _mm256_set1_epi16((int16_t)r);
         const __m256i rel = _mm256_and_si256(_mm256_sub_epi16(lane, rv), _mm256_set1_epi16(15));
@@ -242,9 +290,14 @@ CSGM_INLINE float csgm_wta_keys(const uint16_t* CSGM_RESTRICT k, int n, int D, d
                                              _mm256_loadu_si256((const __m256i*)(k + base + 16)),
                                              _mm256_cmpgt_epi16(rv, lane)); /* lanes < r: the next block */
         const __m256i use2 = _mm256_and_si256(three, _mm256_cmpeq_epi16(lo[0], w));
-        const unsigned second = csgm_hmin16u(_mm256_blendv_epi8(lo[0], hi[0], use2)) >> 7;
-        if (!((double)bv < uniqueness * (double)second)) return NAN;
+        second = csgm_hmin16u(_mm256_blendv_epi8(lo[0], hi[0], use2)) >> 7;
     }
+    if (conf) { /* csgm_wta_pixel's */
+        *bestd = (uint16_t)b;
+        *conf = csgm_peak_term(bv, second, have, peak);
+    }
+    if (band) return NAN;
+    if (have && !((double)bv < uniqueness * (double)second)) return NAN;
     if (subpixel && b > 0 && b < n - 1) {
         int c0 = k[b - 1] >> 7, c2 = k[b + 1] >> 7;
         int denom = c0 - 2 * (int)bv + c2;

@@ -17,6 +17,10 @@ Conventions (all matchers)
   range is ``0 .. D - 1`` and ``D`` must be smaller than the image width.
 * Guided stereo: matchers with ``supports_guidance`` accept ``hints``, an
   H x W float32 sparse disparity map (NaN or <= 0 = no hint).
+* Confidence: :meth:`Matcher.compute_with_confidence` also returns an H x W
+  float32 confidence in ``[0, 1]`` (0 where there is no answer), see
+  :mod:`~vpp_service.matchers.confidence`; ``options.min_confidence`` turns the
+  pixels below it into holes in every call.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from typing import ClassVar, TypedDict
 
 import numpy as np
 
+from vpp_service.matchers.confidence import apply_min_confidence, check_min_confidence, lr_confidence, right_view
 from vpp_service.matchers.holes import fill_holes
 from vpp_service.matchers.inputs import check_hints, check_pair
 from vpp_service.registry import Registry
@@ -50,10 +55,16 @@ class MatcherOptions:
     fill : bool
         Fill invalid pixels with background interpolation
         (:func:`~vpp_service.matchers.holes.fill_holes`). Default False.
+    min_confidence : float
+        Pixels whose confidence (:meth:`Matcher.compute_with_confidence`) is below
+        this become holes (NaN), before ``fill``; in [0, 1], 0 (default) = off. Any
+        value above 0 makes every call compute the confidence (for matchers other
+        than census-sgm, a second matching pass).
     """
 
     max_disparity: int = 128
     fill: bool = False
+    min_confidence: float = 0.0
 
     def __post_init__(self) -> None:
         if isinstance(self.max_disparity, bool) or not isinstance(self.max_disparity, int):
@@ -64,6 +75,7 @@ class MatcherOptions:
             raise ValueError(f"max_disparity must be <= 4096, got {self.max_disparity}")
         if not isinstance(self.fill, bool):
             raise ValueError(f"fill must be a bool, got {self.fill!r}")
+        check_min_confidence(self.min_confidence)
 
 
 class DisparityRangeError(ValueError):
@@ -215,16 +227,67 @@ class Matcher(ABC):
             the width (:class:`DisparityRangeError`, :meth:`check_width`), or
             ``hints`` given to a matcher without guidance.
         """
+        if self.options.min_confidence > 0:
+            return self.compute_with_confidence(left, right, hints)[0]
+        hints = self._check_inputs(left, right, hints)
+        disp = self._compute(left, right, hints)
+        if self.options.fill:
+            disp = fill_holes(disp)
+        return disp
+
+    def compute_with_confidence(
+        self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Dense disparity of the left view and its per-pixel confidence.
+
+        Parameters are those of :meth:`compute`. The confidence is census-SGM's own
+        (one pass) or, for every other matcher, the left-right agreement of a second
+        pass on the mirrored pair (:mod:`~vpp_service.matchers.confidence`). Pixels
+        below ``options.min_confidence`` become holes; then ``fill`` runs.
+
+        Returns
+        -------
+        disparity : ndarray
+            H x W float32, as :meth:`compute` returns it.
+        confidence : ndarray
+            H x W float32 in [0, 1]; 0 wherever the matcher gave no answer (its holes,
+            and with ``fill`` the pixels the filling interpolated).
+
+        Raises
+        ------
+        TypeError, ValueError
+            As :meth:`compute`.
+        """
+        hints = self._check_inputs(left, right, hints)
+        disp, conf = self._compute_confidence(left, right, hints)
+        disp = apply_min_confidence(np.asarray(disp, dtype=np.float32), conf, self.options.min_confidence)
+        if self.options.fill:
+            disp = fill_holes(disp)
+        return disp, conf
+
+    def _check_inputs(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray | None:
+        """Validate the pair, the width and the hints (returned checked) for :meth:`compute`."""
         check_pair(left, right)
         self.check_width(left.shape[1])
         if hints is not None:
             if not self.supports_guidance:
                 raise ValueError(f"matcher {self.name!r} does not support guidance (hints)")
             hints = check_hints(hints, left.shape[:2])
-        disp = self._compute(left, right, hints)
-        if self.options.fill:
-            disp = fill_holes(disp)
-        return disp
+        return hints
+
+    def _compute_confidence(
+        self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The disparity and its confidence on validated inputs (a new, writeable float32 map).
+
+        The default: :meth:`_compute`, then the right view's disparity from a second
+        pass on the mirrored pair (no hints: they belong to the left view) and the
+        left-right agreement (:func:`~vpp_service.matchers.confidence.lr_confidence`).
+        Matchers with a cheaper confidence of their own override it.
+        """
+        disp = np.asarray(self._compute(left, right, hints), dtype=np.float32)
+        disp_right = right_view(lambda a, b: self._compute(a, b, None), left, right)
+        return disp, lr_confidence(disp, disp_right)
 
     @abstractmethod
     def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:

@@ -390,6 +390,10 @@ class CensusSGMOptions(MatcherOptions):
         (default 2) are invalidated, as in the paper's rSGM setup.
     guided_k, guided_c : float
         Guided-stereo modulation height and width (10 and 1) used with ``hints``.
+    confidence_peak : float
+        The confidence's peak-ratio margin, in (0, 1]: the peak term is
+        ``min(1, (1 - S_best / S_second) / confidence_peak)`` (``S_second`` the best aggregated cost outside
+        ``d_best +- 1``). Default 1: the plain peak ratio; a smaller margin calls flatter minima sure.
     threads : int
         OpenMP threads (default 1; 0 = :func:`~vpp_service.threads.default_threads`). Two threads run
         the forward and the backward SGM pass at once (they meet only through a
@@ -415,6 +419,7 @@ class CensusSGMOptions(MatcherOptions):
     speckle_diff: float = 2.0
     guided_k: float = 10.0
     guided_c: float = 1.0
+    confidence_peak: float = 1.0
     threads: int = 1
 
     def __post_init__(self) -> None:
@@ -438,6 +443,8 @@ class CensusSGMOptions(MatcherOptions):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a finite number > 0, got {v}")
+        if not (math.isfinite(self.confidence_peak) and 0 < self.confidence_peak <= 1):
+            raise ValueError(f"confidence_peak must be in (0, 1], got {self.confidence_peak}")
         if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 0:
             raise ValueError(f"threads must be an integer >= 0, got {self.threads!r}")
 
@@ -455,6 +462,7 @@ class StageParams(TypedDict):
     border_margin: int
     gap_size: int
     gap_step: float
+    conf_peak: float
     wta: bool
 
 
@@ -484,6 +492,7 @@ def stage_params(options: CensusSGMOptions, *, wta: bool = True) -> StageParams:
         border_margin=int(options.border_margin),
         gap_size=int(options.gap_size),
         gap_step=GAP_STEP,
+        conf_peak=float(options.confidence_peak),
         wta=wta,
     )
 
@@ -610,11 +619,13 @@ class CensusSGM(Matcher):
         *,
         own_cost: bool,
         right_gray: np.ndarray | None = None,
+        conf: np.ndarray | None = None,
     ) -> np.ndarray:
         """Steps 3-8 on ``cost`` (modified in place only when ``own_cost``: the workspace's volume).
 
         ``cost`` None: the SGM passes compute the Hamming costs row by row from ``ws.cl``, ``ws.cr`` (no
         hints), which the same parallel region computes first from ``gray`` and ``right_gray`` when given.
+        ``conf`` (H x W float32, or None): the kernel's confidence of each pixel goes there.
         """
         o = self.options
         t = ws.key[3]
@@ -627,7 +638,7 @@ class CensusSGM(Matcher):
         # The kernel finishes each row (left-right check, border step, short gaps) and runs the median in
         # its parallel region (with right_gray, the census first).
         out = np.empty(gray.shape, np.float32)
-        _k.sgm_stage(self._stage, self._p2lut, ws, cost, gray, right_gray, out, t)
+        _k.sgm_stage(self._stage, self._p2lut, ws, cost, gray, right_gray, out, t, conf)
         if o.speckle_size:
             out = remove_speckles(out, o.speckle_size, o.speckle_diff, threads=t)
         return out
@@ -640,21 +651,43 @@ class CensusSGM(Matcher):
         return self._ws
 
     def _compute(self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None) -> np.ndarray:
+        return self._run(left, right, hints, None)
+
+    def _compute_confidence(
+        self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The disparity and the kernel's confidence, from the one SGM pass (no second matching).
+
+        Per pixel, from its best disparity ``b`` (lowest aggregated cost ``S_best``): the peak ratio
+        ``min(1, (1 - S_best / S_second) / confidence_peak)`` (``S_second`` the lowest cost with
+        ``|d - b| > 1``) times the left-right term ``max(0, 1 - |b - d_R(x - b)| / (lr_tolerance + 1))``
+        (``d_R`` the right view's WTA, computed even with ``lr_check`` off). The disparity is the same as
+        :meth:`compute`'s.
+        """
+        conf = np.empty(left.shape[:2], np.float32)
+        return self._run(left, right, hints, conf), conf
+
+    def _run(
+        self, left: np.ndarray, right: np.ndarray, hints: np.ndarray | None, conf: np.ndarray | None
+    ) -> np.ndarray:
         gl, gr = to_gray(left), to_gray(right)
         h, w = gl.shape
         if not self._ws_lock.acquire(blocking=False):  # another thread is using the kept buffers
-            return self._match(gl, gr, hints, SGMWorkspace(h, w, self.options.max_disparity, self._threads()))
+            ws = SGMWorkspace(h, w, self.options.max_disparity, self._threads())
+            return self._match(gl, gr, hints, ws, conf)
         try:
-            return self._match(gl, gr, hints, self._workspace(h, w))
+            return self._match(gl, gr, hints, self._workspace(h, w), conf)
         finally:
             self._ws_lock.release()
 
-    def _match(self, gl: np.ndarray, gr: np.ndarray, hints: np.ndarray | None, ws: SGMWorkspace) -> np.ndarray:
+    def _match(
+        self, gl: np.ndarray, gr: np.ndarray, hints: np.ndarray | None, ws: SGMWorkspace, conf: np.ndarray | None
+    ) -> np.ndarray:
         """Census and SGM in one parallel region; with hints, the census and cost volume first, then the SGM."""
         if hints is None:
-            return self._sgm(None, gl, None, ws, own_cost=True, right_gray=gr)
+            return self._sgm(None, gl, None, ws, own_cost=True, right_gray=gr, conf=conf)
         self._census(gl, gr, ws, volume=True)
-        return self._sgm(ws.cost, gl, hints, ws, own_cost=True)
+        return self._sgm(ws.cost, gl, hints, ws, own_cost=True, conf=conf)
 
 
 __all__ = [

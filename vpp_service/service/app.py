@@ -235,6 +235,8 @@ def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> 
     matcher = MATCHERS.get(cfg.matcher.name)(options)
     # metric depth is computed only when a sink reads it (each sink says so)
     needs_depth = any(SINKS.get(sp.name).needs_depth(sp.options) for sp in cfg.sinks)
+    # so is the confidence (for most matchers a second matching pass)
+    needs_confidence = any(SINKS.get(sp.name).needs_confidence(sp.options) for sp in cfg.sinks)
     fusion = Fusion(
         matcher,
         cfg.vpp,
@@ -243,6 +245,7 @@ def build_pipeline(cfg: ServiceConfig, session: zenoh.Session | None = None) -> 
         disparity_range=cfg.disparity_range,
         depth_filter=cfg.depth_filter if cfg.depth_filter is not None else DEFAULT_DEPTH_FILTER,
         depth_clip=cfg.depth_clip or DepthClip(),  # one valid depth range for every output
+        confidence=needs_confidence,
     )
     process: Callable[[StereoFrame], FusionResult] = fusion
     if cfg.rectify is not None:  # the rig sends raw frames: rectify them first (maps computed once, here)

@@ -104,6 +104,21 @@ class Sink(Plugin):
         """
         return True
 
+    @classmethod
+    def needs_confidence(cls, options: Any) -> bool:
+        """Whether this sink, with these options, reads ``FusionResult.confidence``.
+
+        The service computes the per-pixel confidence only when some sink does
+        (for matchers other than census-sgm it costs a second matching pass). The
+        default is False: only sinks with a ``confidence`` output say True.
+
+        Parameters
+        ----------
+        options : Any
+            The parsed ``Options`` instance.
+        """
+        return False
+
     @abstractmethod
     def write(self, result: FusionResult) -> None:
         """Consume one result, synchronously (on the sink's own thread when the pipeline drives it)."""

@@ -25,10 +25,14 @@ binary little-endian PLY (:mod:`vpp_service.sinks.ply`: ``x y z`` float32 metres
 rectified left camera, x right, y down, z forward; ``red green blue`` uchar from the left
 image): the valid (depth-clipped) pixels on every ``points_stride``-th row and column,
 back-projected by :mod:`vpp_service.transport.backproject` (calibrated frames only).
+``confidence`` saves the per-pixel confidence of the disparity (0..1, 0 = no answer)
+as float32 ``.npy`` and as a 16-bit PNG, value = round(confidence * 65535)
+(:func:`encode_confidence_png16`).
 
 File names are ``<pattern>_<what>.<ext>`` where ``pattern`` (default
 ``{rig}_{seq:06d}``) may use ``rig``, ``seq``, ``stamp_ns`` and ``name``, and
-``<what>`` is ``disparity``, ``disparity_preview``, ``depth``, ``points``, ``left_vpp`` or ``right_vpp``.
+``<what>`` is ``disparity``, ``disparity_preview``, ``depth``, ``confidence``, ``points``,
+``left_vpp`` or ``right_vpp``.
 
 Every file is written to a temporary name in the same folder and then renamed
 into place, so readers never see a partial file. After :meth:`FilesSink.open`
@@ -77,6 +81,9 @@ class FilesSinkOptions:
         Also save the painted pair (``left_vpp``/``right_vpp``) as PNG when present.
     depth : bool
         Also save metric depth as float32 ``.npy`` when present.
+    confidence : bool
+        Also save the per-pixel confidence as float32 ``.npy`` and 16-bit PNG
+        (``<stem>_confidence.npy`` / ``.png``); the service computes it only then.
     pattern : str
         File name stem, a ``str.format`` pattern over ``rig``, ``seq``,
         ``stamp_ns``, ``name``; must not contain path separators.
@@ -100,6 +107,7 @@ class FilesSinkOptions:
     formats: tuple[str, ...] = ("png16",)
     painted: bool = False
     depth: bool = False
+    confidence: bool = False
     pattern: str = "{rig}_{seq:06d}"
     overwrite: bool = False
     create_dir: bool = False
@@ -223,6 +231,11 @@ class FilesSink(FolderSink):
         """True when the ``depth`` or ``points`` files are written."""
         return options.depth or options.points
 
+    @classmethod
+    def needs_confidence(cls, options: FilesSinkOptions) -> bool:
+        """True when the ``confidence`` files are written."""
+        return options.confidence
+
     DIR_KEY = "sinks.files.dir"
     DIR_WHAT = "output folder"
     NAME = "files"
@@ -236,8 +249,8 @@ class FilesSink(FolderSink):
         """The files :meth:`write` would produce for ``result``, by kind.
 
         Keys are ``png16``/``pfm``/``npy`` (the enabled formats), and
-        ``preview``, ``depth``, ``points``, ``left_vpp``, ``right_vpp`` when enabled (whether or not the
-        result carries that data).
+        ``preview``, ``depth``, ``confidence`` / ``confidence_png``, ``points``, ``left_vpp``, ``right_vpp``
+        when enabled (whether or not the result carries that data).
 
         Raises
         ------
@@ -254,6 +267,9 @@ class FilesSink(FolderSink):
             names["depth"] = f"{stem}_depth.npy"
         if self.options.points:
             names["points"] = f"{stem}_points.ply"
+        if self.options.confidence:
+            names["confidence"] = f"{stem}_confidence.npy"
+            names["confidence_png"] = f"{stem}_confidence.png"
         if self.options.painted:
             names["left_vpp"] = f"{stem}_left_vpp.png"
             names["right_vpp"] = f"{stem}_right_vpp.png"
@@ -282,7 +298,7 @@ class FilesSink(FolderSink):
         if failures == 0:
             self._counters["written"] += 1
 
-    def _writer(self, kind: str, result: FusionResult) -> Callable[[str], object] | None:
+    def _writer(self, kind: str, result: FusionResult) -> Callable[[str], object] | None:  # noqa: PLR0911 - a branch per kind
         """A ``f(tmp_path)`` writing ``kind`` for ``result``, or None when absent."""
         if kind == "png16":
             data = encode_png16(result.disparity)
@@ -297,6 +313,8 @@ class FilesSink(FolderSink):
             top = self.options.preview_max_disparity
             rgb = colorize_disparity(d, 0.0, top) if top > 0 else colorize_disparity(d)
             return _png_writer(rgb, kind)
+        if kind in ("confidence", "confidence_png"):
+            return _confidence_writer(result.confidence, png=kind == "confidence_png")
         if kind in ("npy", "depth"):
             arr = result.disparity if kind == "npy" else result.depth
             if arr is None:
@@ -327,6 +345,42 @@ class FilesSink(FolderSink):
         return lambda p: Path(p).write_bytes(data)
 
 
+def _confidence_writer(confidence: np.ndarray | None, png: bool) -> Callable[[str], object] | None:
+    """A ``f(tmp_path)`` writing the confidence as 16-bit PNG (``png``) or float32 ``.npy``; None when absent."""
+    if confidence is None:
+        return None
+    if png:
+        data = encode_confidence_png16(confidence)
+    else:
+        buf = io.BytesIO()
+        np.save(buf, np.asarray(confidence, np.float32), allow_pickle=False)
+        data = buf.getvalue()
+    return lambda p: Path(p).write_bytes(data)
+
+
+def encode_confidence_png16(confidence: np.ndarray) -> bytes:
+    """16-bit PNG of a confidence map: value = round(clip(confidence, 0, 1) * 65535) (NaN -> 0).
+
+    Parameters
+    ----------
+    confidence : ndarray
+        H x W float confidence in [0, 1].
+
+    Returns
+    -------
+    bytes
+        The PNG file; read back with ``cv2.imread(path, cv2.IMREAD_UNCHANGED) / 65535``.
+    """
+    c = np.asarray(confidence, np.float64)
+    if c.ndim != 2:
+        raise ValueError(f"confidence: must be an H x W map, got shape {c.shape}")
+    q = np.rint(np.clip(np.nan_to_num(c, nan=0.0), 0.0, 1.0) * 65535.0).astype(np.uint16)
+    ok, png = cv2.imencode(".png", q)
+    if not ok:
+        raise ValueError(f"confidence: OpenCV could not encode shape {c.shape}")
+    return png.tobytes()
+
+
 def _painted_writer(img: np.ndarray | None, kind: str) -> Callable[[str], object] | None:
     """A ``f(tmp_path)`` writing the painted image ``img`` as PNG, or None when absent."""
     if img is None:
@@ -346,4 +400,4 @@ def _png_writer(img: np.ndarray, kind: str) -> Callable[[str], object]:
     return lambda p: Path(p).write_bytes(data)
 
 
-__all__ = ["FORMATS", "FilesSink", "FilesSinkOptions", "decode_png16", "encode_png16"]
+__all__ = ["FORMATS", "FilesSink", "FilesSinkOptions", "decode_png16", "encode_confidence_png16", "encode_png16"]

@@ -169,6 +169,10 @@ class RerunSinkOptions:
         Most sparse points logged per frame (>= 1).
     point_cloud : bool
         Log pinhole + depth image for the 3-D view.
+    confidence : bool
+        Log the per-pixel confidence of the disparity (``<rig>/confidence``, 0..1);
+        the service computes it only then (for matchers other than census-sgm a
+        second matching pass).
     max_points : int
         Upper bound of logged depth pixels (the depth image is decimated by an
         integer stride).
@@ -207,6 +211,7 @@ class RerunSinkOptions:
     sparse_points: bool = True
     max_sparse_points: int = 5000
     point_cloud: bool = True
+    confidence: bool = False
     max_points: int = 200_000
     points: bool = False
     points_stride: int = DEFAULT_STRIDE
@@ -305,6 +310,11 @@ class RerunSink(Sink):
     Options = RerunSinkOptions
     options: RerunSinkOptions
 
+    @classmethod
+    def needs_confidence(cls, options: RerunSinkOptions) -> bool:
+        """True when the sink logs the confidence (``confidence``)."""
+        return options.confidence
+
     def __init__(self, options: RerunSinkOptions, context: SinkContext | None = None) -> None:
         if not isinstance(options, RerunSinkOptions):
             raise TypeError(f"options: must be RerunSinkOptions, got {type(options).__name__}")
@@ -324,6 +334,7 @@ class RerunSink(Sink):
             point_cloud=o.point_cloud,
             points=o.points,
             points_stride=o.points_stride,
+            confidence=o.confidence,
         )
         self.application_id = o.application_id or f"vpp-service-{context.rig}"
         self._rec: rr.RecordingStream | None = None

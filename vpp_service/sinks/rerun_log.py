@@ -16,6 +16,10 @@ Entities (root = the rig's name)
 ``<rig>/disparity``
     Dense disparity as data, ``rr.DepthImage`` (values in pixels on hover,
     0 = invalid) with the ``turbo`` colour map over a fixed ``disparity_range``.
+``<rig>/confidence``
+    When logged (the sink's ``confidence``): the per-pixel confidence of the
+    disparity as ``rr.DepthImage`` (values 0..1 on hover, 0 = no answer) with the
+    ``viridis`` colour map over ``[0, 1]``.
 ``<rig>/camera`` and ``<rig>/camera/depth``
     ``rr.Pinhole`` at the origin of the 3-D view and the metric depth as
     ``rr.DepthImage`` (``meter = 1``), decimated to ``max_points`` pixels: the viewer
@@ -82,6 +86,8 @@ class RerunParts:
         N x 3 float32 rows ``(x, y, disparity)`` (pixel indices).
     colors : ndarray or None
         The image the 3-D points are coloured from (the unpainted left image); None = grey.
+    confidence : ndarray or None
+        H x W float32 confidence of the disparity in [0, 1] (0 = no answer).
     timing_ms : dict
         Stage name -> milliseconds.
     accuracy : dict
@@ -98,6 +104,7 @@ class RerunParts:
     calib: Calibration | None = None
     sparse: np.ndarray | None = None
     colors: np.ndarray | None = None
+    confidence: np.ndarray | None = None
     timing_ms: dict[str, float] = field(default_factory=dict)
     accuracy: dict[str, float] = field(default_factory=dict)
 
@@ -121,6 +128,7 @@ def parts_from_result(result: FusionResult, log_painted: bool = True) -> RerunPa
         calib=fr.calib,
         sparse=sparse_to_points(fr.sparse_disparity),
         colors=fr.left,
+        confidence=result.confidence,
         timing_ms=dict(result.timing_ms),
         accuracy={k: float(result.metrics[k]) for k in ACCURACY_KEYS if k in result.metrics},
     )
@@ -191,6 +199,8 @@ class RerunLayout:
         Log the pinhole and the point cloud as ``rr.Points3D`` (``<rig>/points``).
     points_stride : int
         Every ``points_stride``-th row and column of the depth map becomes a point.
+    confidence : bool
+        The blueprint shows ``<rig>/confidence`` beside the disparity.
     """
 
     jpeg_quality: int = 85
@@ -201,6 +211,7 @@ class RerunLayout:
     point_cloud: bool = True
     points: bool = False
     points_stride: int = DEFAULT_STRIDE
+    confidence: bool = False
 
     def blueprint(self, rig: str) -> rrb.Blueprint:
         """The default layout: the pair on top; disparity, 3-D and timing below."""
@@ -217,6 +228,9 @@ class RerunLayout:
                 look_target=(0.0, 0.0, mid),
                 eye_up=(0.0, -1.0, 0.0),
             )
+        disparity: rrb.Container | rrb.View = rrb.Spatial2DView(origin=f"{r}/disparity", name="disparity [px]")
+        if self.confidence:
+            disparity = rrb.Vertical(disparity, rrb.Spatial2DView(origin=f"{r}/confidence", name="confidence"))
         return rrb.Blueprint(
             rrb.Vertical(
                 rrb.Horizontal(
@@ -224,7 +238,7 @@ class RerunLayout:
                     rrb.Spatial2DView(origin=f"{r}/right", name="right (painted)"),
                 ),
                 rrb.Horizontal(
-                    rrb.Spatial2DView(origin=f"{r}/disparity", name="disparity [px]"),
+                    disparity,
                     rrb.Spatial3DView(
                         origin=r, contents=[f"{r}/camera/**", f"{r}/points"], name="3-D", eye_controls=eye
                     ),
@@ -297,6 +311,9 @@ class RerunLayout:
                 f"{root}/disparity",
                 rr.DepthImage(_valid_map(parts.disparity), meter=1.0, colormap="turbo", depth_range=drng),
             )
+        if parts.confidence is not None:
+            conf = np.asarray(parts.confidence, dtype=np.float32)
+            rec.log(f"{root}/confidence", rr.DepthImage(conf, meter=1.0, colormap="viridis", depth_range=(0.0, 1.0)))
         if parts.sparse is not None and self.max_sparse_points:
             pts = parts.sparse
             if len(pts) > self.max_sparse_points:

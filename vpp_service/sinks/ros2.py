@@ -11,6 +11,10 @@ Under ``namespace`` (default ``/stereo``) and ``domain_id`` (default 0), outputs
     (or NaN with ``invalid = "nan"``), see :mod:`vpp_service.transport.ros2.messages`.
 ``depth`` -> ``depth``
     ``sensor_msgs/Image`` ``32FC1``, metres, NaN = invalid.
+``confidence`` -> ``confidence``
+    ``sensor_msgs/Image`` ``32FC1``, the per-pixel confidence of the disparity in 0..1 (0 = no
+    answer); computed only when an output asks for it (for matchers other than census-sgm a
+    second matching pass).
 ``points2`` -> ``points2``
     ``sensor_msgs/PointCloud2``, x y z rgb in the left optical frame. ``points2_layout =
     "organized"`` (default) as stereo_image_proc's point_cloud_node publishes it: height =
@@ -61,6 +65,7 @@ HASH_CHECK_S = 2.0
 OUTPUTS: dict[str, tuple[str, str]] = {
     "disparity": ("disparity", keys.DISPARITY_IMAGE),
     "depth": ("depth", keys.IMAGE),
+    "confidence": ("confidence", keys.IMAGE),
     "points2": ("points2", keys.POINT_CLOUD2),
     "left_vpp": ("left/image_vpp", keys.IMAGE),
     "right_vpp": ("right/image_vpp", keys.IMAGE),
@@ -76,7 +81,7 @@ class Ros2OutputOptions:
     namespace : str
         ROS namespace of the output topics.
     outputs : list of str
-        Which of ``disparity``, ``depth``, ``points2``, ``left_vpp``, ``right_vpp`` to write.
+        Which of ``disparity``, ``depth``, ``confidence``, ``points2``, ``left_vpp``, ``right_vpp`` to write.
     topics : dict
         Topic remapping per output name, e.g. ``{disparity = "/robot/disparity"}``.
     frame_id : str
@@ -193,6 +198,10 @@ class Ros2Encoder:
             if result.depth is None:
                 return None
             msg = rm.array_to_image(np.asarray(result.depth, np.float32), header, "32FC1")
+        elif name == "confidence":
+            if result.confidence is None:
+                return None
+            msg = rm.array_to_image(np.asarray(result.confidence, np.float32), header, "32FC1")
         elif name == "points2":
             if result.depth is None or calib is None:
                 return None
@@ -219,6 +228,11 @@ class Ros2Sink(Sink):
     def needs_depth(cls, options: Ros2SinkOptions) -> bool:
         """True when ``depth`` or ``points2`` is published."""
         return "depth" in options.outputs or "points2" in options.outputs
+
+    @classmethod
+    def needs_confidence(cls, options: Ros2SinkOptions) -> bool:
+        """True when ``confidence`` is published."""
+        return "confidence" in options.outputs
 
     def __init__(self, options: Ros2SinkOptions, context: SinkContext) -> None:
         super().__init__(options, context)

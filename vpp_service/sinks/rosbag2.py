@@ -73,6 +73,11 @@ class Rosbag2Sink(Sink):
         """True when ``depth`` or ``points2`` is recorded."""
         return "depth" in options.outputs or "points2" in options.outputs
 
+    @classmethod
+    def needs_confidence(cls, options: Rosbag2SinkOptions) -> bool:
+        """True when ``confidence`` is recorded."""
+        return "confidence" in options.outputs
+
     def __init__(self, options: Rosbag2SinkOptions, context: SinkContext) -> None:
         super().__init__(options, context)
         self.options: Rosbag2SinkOptions = options

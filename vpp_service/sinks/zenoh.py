@@ -9,7 +9,12 @@ depth map's valid pixels on every ``points_stride``-th row and column, back-proj
 into the rectified left camera (x y z float32 metres) with their colours (RGB uint8);
 docs/wire-format.md gives the layout.
 
-``disparity``, ``depth`` and ``points`` (the products) are published at ``Priority.DATA``
+``confidence`` is the per-pixel confidence of the disparity (float32 0..1,
+0 where there is no answer); the service computes it only when a sink lists
+it (for matchers other than census-sgm it costs a second matching pass).
+
+``disparity``, ``depth``, ``confidence`` (float32 maps) and ``points`` (the products) are
+published at ``Priority.DATA``
 with ``CongestionControl.DROP`` by default (``congestion_control`` option):
 Zenoh's ``BLOCK`` would make the publisher wait for the slowest subscriber, so
 one consumer that stops reading would slow every other consumer down to its
@@ -50,7 +55,8 @@ class ZenohSinkOptions:
     Attributes
     ----------
     outputs : list of str
-        Which of ``disparity``, ``depth``, ``left_vpp``, ``right_vpp``, ``sparse``, ``points`` to publish.
+        Which of ``disparity``, ``depth``, ``confidence``, ``left_vpp``, ``right_vpp``, ``sparse``,
+        ``points`` to publish.
     on_request : list of str
         Outputs (not in ``outputs``) published only while a subscriber matches.
     image_enc : {"raw", "png", "jpeg"}
@@ -61,7 +67,7 @@ class ZenohSinkOptions:
         Shared-memory pool the large outputs are published from
         (:mod:`vpp_service.transport.shm`); 0 = plain puts only.
     congestion_control : {"drop", "block"}
-        Zenoh congestion control of ``disparity`` / ``depth`` / ``points``: ``drop`` (a
+        Zenoh congestion control of ``disparity`` / ``depth`` / ``confidence`` / ``points``: ``drop`` (a
         consumer that does not read loses messages, the others keep their
         rate) or ``block`` (lossless, at the pace of the slowest consumer).
     points_stride : int
@@ -119,6 +125,11 @@ class ZenohSink(Sink):
     def needs_depth(cls, options: ZenohSinkOptions) -> bool:
         """True when ``depth`` or ``points`` is among the published outputs."""
         return any(name in (*options.outputs, *options.on_request) for name in ("depth", "points"))
+
+    @classmethod
+    def needs_confidence(cls, options: ZenohSinkOptions) -> bool:
+        """True when ``confidence`` is published (in ``outputs`` or ``on_request``)."""
+        return "confidence" in options.outputs or "confidence" in options.on_request
 
     def __init__(self, options: ZenohSinkOptions, context: SinkContext) -> None:
         super().__init__(options, context)

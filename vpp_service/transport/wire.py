@@ -17,6 +17,7 @@ Topics (``prefix`` defaults to ``"vpp"``)::
     <prefix>/<rig>/in/depth          depth topic message (separate-topics mode)
     <prefix>/<rig>/out/disparity     dense disparity, float32 px, NaN = invalid
     <prefix>/<rig>/out/depth         dense depth, float32 metres, NaN = invalid
+    <prefix>/<rig>/out/confidence    per-pixel confidence of the disparity, float32 0..1 (0 = no answer)
     <prefix>/<rig>/out/left_vpp|right_vpp   painted pair, as Images
     <prefix>/<rig>/out/sparse        the sparse input points, n x 3 float32 (x, y, disparity)
     <prefix>/<rig>/out/points        the point cloud, n x 3 float32 x y z (metres) + n x 3 uint8 RGB
@@ -43,7 +44,7 @@ VERSION = 1
 #: Default key prefix.
 DEFAULT_PREFIX = "vpp"
 #: Output names a sink may publish.
-OUTPUTS = ("disparity", "depth", "left_vpp", "right_vpp", "sparse", "points")
+OUTPUTS = ("disparity", "depth", "left_vpp", "right_vpp", "sparse", "points", "confidence")
 
 
 class WireError(ValueError):
@@ -781,8 +782,9 @@ def encode_output_parts(
                 if isinstance(v, (int, float, np.number))
             }
         return _map_message(result, result.disparity, extra)
-    if name == "depth":
-        return None if result.depth is None else _map_message(result, result.depth, {})
+    if name in ("depth", "confidence"):
+        arr = result.depth if name == "depth" else result.confidence
+        return None if arr is None else _map_message(result, arr, {})
     img = result.left_vpp if name == "left_vpp" else result.right_vpp
     if img is None:
         return None
@@ -809,10 +811,11 @@ def _sparse_parts(fr: StereoFrame) -> list[bytes] | None:
 def encode_output(
     result: FusionResult, name: str, enc: str = "raw", points_stride: int = DEFAULT_STRIDE
 ) -> bytes | None:
-    """Serialize one output (``disparity``, ``depth``, ``left_vpp``, ``right_vpp``, ``sparse``, ``points``).
+    """Serialize one of :data:`OUTPUTS` (``disparity``, ``depth``, ``confidence``, ``points``, ...).
 
     Returns None when the result does not have that output (e.g. no depth
-    without calibration, no painted pair when VPP was skipped). The
+    without calibration, no painted pair when VPP was skipped, no confidence
+    when nothing asked for it). The
     ``disparity`` message also carries ``metrics`` (vs ground truth) and
     ``vpp`` (VPP counters) as extensions when known. ``points_stride``: the
     ``points`` output's decimation (:mod:`vpp_service.transport.backproject`).
@@ -823,7 +826,7 @@ def encode_output(
 
 @dataclass
 class OutputMap:
-    """A decoded ``out/disparity`` or ``out/depth`` message."""
+    """A decoded ``out/disparity``, ``out/depth`` or ``out/confidence`` message."""
 
     rig: str
     seq: int
@@ -846,7 +849,7 @@ def _numbers(m: Mapping[str, object]) -> dict[str, float]:
 
 
 def decode_output(payload: bytes, limits: WireLimits = DEFAULT_LIMITS) -> OutputMap:
-    """Parse and validate an ``out/disparity`` or ``out/depth`` message.
+    """Parse and validate an ``out/disparity``, ``out/depth`` or ``out/confidence`` message.
 
     Raises
     ------
