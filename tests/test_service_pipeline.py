@@ -490,9 +490,9 @@ def test_block_end_to_end_through_zenoh_loses_nothing(zenoh_endpoint):
 
 def test_fps_is_measured_over_a_recent_window(monkeypatch):
     """Fps falls to 0 once frames stop coming (not processed / uptime, which only decays)."""
-    from vpp_service.service import pipeline as pipeline_module
+    from vpp_service.service import ledger as ledger_module
 
-    monkeypatch.setattr(pipeline_module, "FPS_WINDOW_S", 0.5)
+    monkeypatch.setattr(ledger_module, "FPS_WINDOW_S", 0.5)
     sink = CollectSink()
     pipe = Pipeline(sim_source(10), lambda f: FusionResult(f, np.zeros(f.shape, np.float32)), [sink])
     pipe.start()
@@ -573,7 +573,7 @@ def test_summary_line_says_what_it_waits_on_before_the_first_frame(sessions):
 
 def test_a_status_query_flood_is_served_from_one_snapshot_per_period(sessions):
     """300 @status queries as fast as a peer sends them: at most one status build per 100 ms, the rest counted."""
-    from vpp_service.service.pipeline import STATUS_SNAPSHOT_S
+    from vpp_service.service.ledger import STATUS_SNAPSHOT_S
 
     listener, peer = sessions
     process = lambda f: FusionResult(frame=f, disparity=np.zeros(f.shape, np.float32))  # noqa: E731

@@ -34,7 +34,8 @@ from vpp_service.fusion import DEFAULT_DEPTH_FILTER, Fusion
 from vpp_service.matchers.depth_clip import DepthClip
 from vpp_service.service.allocator import reuse_freed_memory, trim_freed_memory
 from vpp_service.service.config import ServiceConfig, ZenohSection
-from vpp_service.service.pipeline import COUNTER_NAMES, Pipeline, PipelineStatus
+from vpp_service.service.ledger import COUNTER_NAMES, PipelineStatus
+from vpp_service.service.pipeline import Pipeline
 from vpp_service.sinks.folder import write_atomic
 
 if TYPE_CHECKING:  # zenoh is imported where it is used
@@ -156,7 +157,7 @@ def zenoh_session(section: ZenohSection) -> Iterator[zenoh.Session]:
 
 
 def has_link(session: zenoh.Session) -> bool:
-    """True when ``session`` is connected to at least one router or peer (a connect endpoint answered)."""
+    """True when ``session`` is connected to at least one router or peer (a connect endpoint replied)."""
     info = session.info
     return bool(list(info.routers_zid()) or list(info.peers_zid()))
 
@@ -167,7 +168,7 @@ def open_session(
 ) -> Iterator[zenoh.Session | None]:
     """``with open_session(cfg.zenoh, stop) as session`` (None when zenoh is disabled, or ``stop`` set first).
 
-    An open that fails because no endpoint answers (a client whose router is
+    An open that fails because no endpoint replies (a client whose router is
     down) is retried every ``retry_s`` seconds until it succeeds or ``stop`` is set.
 
     Raises

@@ -16,22 +16,12 @@ camera: the freshest frame wins, drops are counted) or ``block`` (lossless: the
 producer waits; always for a sink that must never drop, such as a recording).
 When the source has finished, the process stage handles what is queued and
 finishes the sink threads; the last one to exit sets :attr:`Pipeline.done`. A
-result is ``published`` once every sink has handled it (none dropped it).
-Counters (``received``, ``rejected``, ``dropped``, ``processed``, ``published``, ``no_depth``,
-``errors``, and ``sparse.see_through``: sparse points the fusion step's see-through filter
-removed before VPP, :mod:`vpp_service.vpp.see_through`), per-stage timings (mean, p50, p99 over a sliding window)
-and what runs the matcher (``matcher``: engine, device, precision, threads, the range in use) are
-reported by :meth:`Pipeline.status`, which the service also serves as JSON on
-the ``<prefix>/<rig>/@status`` queryable; a liveliness token
-``<prefix>/<rig>/@alive`` is held while the pipeline runs.
-
-Every loss of valid input or output anywhere is in one count: ``counters["dropped"]``
-is the sum of ``status()["dropped"]``, which names each cause (``input_queue``,
-``shutdown`` for frames and results still queued, or frames still being matched
-(e.g. on a Triton server), when a stop that timed out abandons them, the
-source's own losses such as ``source_ring`` and ``sync``, and ``sink.<Name>``
-for each sink's: its full queue's drops plus what the sink itself lost). Under the ``block`` input
-policy the source is asked to back-pressure its producer instead of dropping.
+result is ``published`` once every sink has handled it (none dropped it). What became
+of every frame (counters, losses by cause, timings, accuracy) is kept by the pipeline's
+:class:`~vpp_service.service.ledger.Ledger` and reported by :meth:`Pipeline.status`,
+which the service also serves as JSON on the ``<prefix>/<rig>/@status`` queryable; a
+liveliness token ``<prefix>/<rig>/@alive`` is held while the pipeline runs. Under the
+``block`` input policy the source is asked to back-pressure its producer instead of dropping.
 
 A source whose thread dies on an exception ends the pipeline like an exhausted
 one, but ``status()["source_error"]`` names the exception (the service exits 1).
@@ -44,10 +34,9 @@ the range not below its width) stops the pipeline like an exhausted source,
 with ``status()["config_error"]`` saying why (the service exits 2), instead of
 rejecting every frame of that size; from a network source, where any peer may
 send any size, it is rejected like other bad input, with one error line per size. ``max_frames`` counts rejected frames
-with the processed ones. The ``latency`` statistic runs from
-when the frame was received (``meta["recv_ns"]``, :func:`time.monotonic_ns`: a
-wall-clock step cannot corrupt the percentiles), never from the sender's
-``stamp_ns``, which any peer can set. A frame whose ``rig`` (it comes from
+with the processed ones. Each frame is stamped when received (``meta["recv_ns"]``,
+:func:`time.monotonic_ns`: a wall-clock step cannot corrupt the ``latency`` percentiles), never
+trusting the sender's ``stamp_ns``, which any peer can set. A frame whose ``rig`` (it comes from
 the message) is not the rig the pipeline serves is rejected before it is queued,
 so sinks never see a foreign or forged rig name.
 """
@@ -55,22 +44,17 @@ so sinks never see a foreign or forged rig name.
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import threading
 import time
-from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, NotRequired, TypedDict
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.matchers.base import DisparityRangeError
-from vpp_service.metrics import answered_metrics
 from vpp_service.queueing import Policy, QueueWorker
 from vpp_service.service.in_flight import InFlight
-from vpp_service.timing import StageTimer
+from vpp_service.service.ledger import Ledger, PipelineStatus, QueueStatus, StatusReplies, queue_status, summary_line
 
 if TYPE_CHECKING:  # zenoh, sources and sinks are imported where they are used
     import zenoh
@@ -79,66 +63,6 @@ if TYPE_CHECKING:  # zenoh, sources and sinks are imported where they are used
     from vpp_service.sources.base import Source
 
 log = logging.getLogger(__name__)
-
-
-class QueueStatus(TypedDict):
-    """Fill and drops of one pipeline queue (``Pipeline.status()["queues"][name]``)."""
-
-    len: int
-    size: int
-    policy: Policy
-    dropped: int
-    high_water: int
-
-
-class MetricsStatus(TypedDict):
-    """Accuracy against ground truth (frames that carry it), means over the timing window.
-
-    The three numbers of every report (:mod:`vpp_service.metrics`):
-    ``bad2_answered_mean`` is bad-2 (percent) over the pixels with ground truth
-    that got a value, ``density_mean`` the percentage of pixels with ground truth
-    that got one, and ``bad2_filled_mean`` bad-2 with the holes filled first, as
-    ``eval`` scores. ``last`` is the last frame's
-    :func:`~vpp_service.metrics.compute_metrics` (raw: a pixel without
-    a value counts as bad) plus the three. None until a frame with ground truth
-    was processed.
-    """
-
-    last: dict[str, float]
-    bad2_answered_mean: float | None
-    density_mean: float | None
-    bad2_filled_mean: float | None
-
-
-#: The pipeline's counters (``counters`` in :meth:`Pipeline.status` adds ``dropped``, the sum of every loss).
-COUNTER_NAMES = ("received", "rejected", "processed", "published", "no_depth", "errors", "sparse.see_through")
-#: ``@status`` replies within this many seconds of a snapshot reuse it (a query flood cannot load the service).
-STATUS_SNAPSHOT_S = 0.1
-#: Seconds over which ``fps`` is measured (a recent window: it falls to 0 when frames stop coming).
-FPS_WINDOW_S = 5.0
-
-
-class PipelineStatus(TypedDict):
-    """What :meth:`Pipeline.status` reports (JSON-ready; also served on ``@status``)."""
-
-    rig: str
-    prefix: str
-    uptime_s: float
-    counters: dict[str, int]
-    dropped: dict[str, int]
-    source_error: str | None
-    config_error: str | None
-    zenoh: dict[str, int] | None
-    fps: float
-    queues: dict[str, QueueStatus]
-    timing_ms: dict[str, dict[str, float]]
-    status_queries: dict[str, int]
-    source: Mapping[str, object]
-    sinks: dict[str, Mapping[str, object]]
-    metrics: MetricsStatus
-    #: What runs the matcher (:attr:`Pipeline.matcher_runtime`), when the process step says.
-    matcher: NotRequired[dict[str, object]]
-    network: NotRequired[Mapping[str, object]]
 
 
 class Pipeline:
@@ -215,8 +139,8 @@ class Pipeline:
         self.max_frames = max_frames
         self.session = session
         self.prefix, self.rig = prefix, rig
-        self.timer = StageTimer(timing_window)
-        self.reject_log_period_s = reject_log_period_s
+        #: What became of every frame: counters, losses by cause, timings, accuracy (the status's figures).
+        self.ledger = Ledger(timing_window, reject_log_period_s)
         #: Why the pipeline stopped on its own: a frame the configuration cannot process (the disparity
         #: range does not fit its width); None otherwise. The service then exits 2.
         self.config_error: str | None = None
@@ -225,42 +149,24 @@ class Pipeline:
             raise ValueError(f"in_flight must be an integer >= 1, got {in_flight!r}")
         self.in_flight = in_flight
         self._window: InFlight[StereoFrame, FusionResult] | None = None
-        self._counts = dict.fromkeys(COUNTER_NAMES, 0)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._enough = threading.Event()
         self.done = threading.Event()
-        self._last_reject_log = 0.0
-        self._last_error_log = 0.0
-        self._suppressed = 0
         self._started = 0.0
-        self._last_metrics: dict[str, float] = {}
-        self._bad2_filled: deque[float] = deque(maxlen=timing_window)
-        self._bad2_answered: deque[float] = deque(maxlen=timing_window)
-        self._density: deque[float] = deque(maxlen=timing_window)
-        self._done_at: deque[float] = deque(maxlen=10000)  # monotonic time of each processed frame (for fps)
         self._queryable: zenoh.Queryable[None] | None = None
         self._token: zenoh.LivelinessToken | None = None
         self._opened: list[Sink] = []
-        self._refused = 0  # frames the source emitted while the pipeline was stopping
         self._matching = 0  # frames in the process step now (in_flight == 1: 0 or 1)
         self._abandoned = False  # a stop gave up on the frames still being matched
-        self._lost_matching = 0  # frames a stop gave up on while they were being matched (on a server, ...)
-        self._unsent = 0  # results a stop left without a sink queue to go to (one per sink)
         #: Sinks whose close raised or did not return within the shutdown timeout (their output may be incomplete).
         self.unfinished_sinks: list[str] = []
-        self._snapshot_lock = threading.Lock()
-        self._snapshot: tuple[float, str] | None = None  # (monotonic time, JSON) of the last @status reply built
-        self._status_queries = {"queries": 0, "snapshots": 0, "cached": 0}
+        self._replies = StatusReplies(self.status)  # the @status replies, one snapshot per period
         #: What runs the matcher (the process step's ``runtime()``: name, engine, device, precision, threads,
         #: max_disparity), taken at :meth:`start`; None when the process step has no ``runtime``.
         self.matcher_runtime: dict[str, object] | None = None
 
     # ----------------------------------------------------------- counters
-    def _inc(self, key: str, n: int = 1) -> None:
-        with self._lock:
-            self._counts[key] += n
-
     @property
     def counters(self) -> dict[str, int]:
         """A snapshot of the counters; ``dropped`` is the sum of every loss by cause (:meth:`status`)."""
@@ -269,14 +175,12 @@ class Pipeline:
     @property
     def rejected(self) -> int:
         """``counters["rejected"]`` without building the whole :meth:`status` (cheap enough to poll)."""
-        with self._lock:
-            return self._counts["rejected"]
+        return self.ledger.get("rejected")
 
     def _emit(self, frame: StereoFrame) -> bool:
-        self._inc("received")
+        self.ledger.count("received")
         if frame.rig != self.rig:  # the rig comes from the message: only the served rig's frames go on
             self._reject(f"frame seq={frame.seq}: rig {frame.rig[:64]!r} is not the served rig {self.rig!r}")
-            self._count_towards_limit()
             return False
         frame.meta.setdefault("recv_ns", time.monotonic_ns())  # sources that receive stamp it earlier
         return self._enqueue(frame)
@@ -292,24 +196,17 @@ class Pipeline:
         elif not (self._stop.is_set() or self._enough.is_set()):
             ok = self.input.put(frame)
         if not ok and not self._enough.is_set():  # after max_frames, input is unwanted, not lost
-            with self._lock:
-                self._refused += 1
+            self.ledger.lost_at_stop("refused")
         return ok
 
     def _source_reject(self, reason: str) -> None:
-        self._inc("received")
+        self.ledger.count("received")
         self._reject(reason)
-        self._count_towards_limit()
 
     def _reject(self, reason: str) -> None:
-        self._inc("rejected")
-        now = time.monotonic()
-        if now - self._last_reject_log >= self.reject_log_period_s:
-            extra = f" (+{self._suppressed} more since the last report)" if self._suppressed else ""
-            log.warning("rejected input: %s%s", reason, extra)
-            self._last_reject_log, self._suppressed = now, 0
-        else:
-            self._suppressed += 1
+        """Count and log (rate-limited) one rejected message; it counts towards ``max_frames``."""
+        self.ledger.reject(reason)
+        self._count_towards_limit()
 
     # -------------------------------------------------------------- stages
     def _process(self, frame: StereoFrame) -> None:
@@ -322,14 +219,15 @@ class Pipeline:
             return
         if self._window is not None:
             if not self._window.submit(frame, self._stop):
-                with self._lock:
-                    self._refused += 1  # stopping while the window was full: counted as shutdown
+                self.ledger.lost_at_stop("refused")  # stopping while the window was full: counted as shutdown
             return
         with self._lock:
-            if self._abandoned:  # taken from the queue just before a stop gave up: never matched
-                self._refused += 1
-                return
-            self._matching += 1
+            abandoned = self._abandoned
+            if not abandoned:
+                self._matching += 1
+        if abandoned:  # taken from the queue just before a stop gave up: never matched
+            self.ledger.lost_at_stop("refused")
+            return
         try:
             result = self.process(frame)
         except Exception:
@@ -352,32 +250,15 @@ class Pipeline:
             lost = self._matching
         if self._window is not None:
             lost += self._window.abandon()
-        with self._lock:
-            self._lost_matching += lost
+        self.ledger.lost_at_stop("abandoned", lost)
         if lost:
             log.warning("stopping: %d frame(s) still being matched are abandoned (counted as shutdown)", lost)
 
     def _processed(self, result: FusionResult) -> None:
-        """A frame's result: timings, metrics and counters, then to the sinks."""
+        """A frame's result: into the ledger (timings, accuracy, counters), then to the sinks."""
         if self._enough.is_set():
             return  # max_frames reached while it was in flight: unwanted, not lost
-        for stage, ms in result.timing_ms.items():
-            self.timer.add(stage, ms)
-        if result.metrics:
-            split = answered_metrics(result.metrics)
-            self._last_metrics = {**result.metrics, **split}
-            if "bad2_filled" in result.metrics:
-                self._bad2_filled.append(result.metrics["bad2_filled"])
-            if split:
-                self._density.append(split["density"])
-                if np.isfinite(split["bad2_answered"]):
-                    self._bad2_answered.append(split["bad2_answered"])
-        if result.frame.sparse_disparity is None and result.frame.sensor_depth is None:
-            self._inc("no_depth")
-        if result.see_through:
-            self._inc("sparse.see_through", result.see_through)
-        self._inc("processed")
-        self._done_at.append(time.monotonic())
+        self.ledger.processed(result)
         self._deliver(result)
         prepare = getattr(self.process, "prepare_next", None)
         if prepare is not None:
@@ -389,11 +270,7 @@ class Pipeline:
 
     def _count_towards_limit(self) -> None:
         """After a frame was processed or rejected: stop taking input once ``max_frames`` of them were."""
-        if not self.max_frames:
-            return
-        with self._lock:
-            handled = self._counts["processed"] + self._counts["rejected"]
-        if handled >= self.max_frames:
+        if self.max_frames and self.ledger.handled() >= self.max_frames:
             self._halt()
 
     def _halt(self) -> None:
@@ -418,9 +295,8 @@ class Pipeline:
                     self._range_misfits.add((h, w))
                     log.error("rejecting every %d x %d frame: %s", w, h, why)
                 self._reject(why)
-                self._count_towards_limit()
                 return
-            self._inc("rejected")
+            self.ledger.count("rejected")
             if self.config_error is None:
                 self.config_error = why
                 log.info("stopping: %s", self.config_error)
@@ -428,13 +304,8 @@ class Pipeline:
             return
         if isinstance(exc, ValueError):  # a frame the matcher/VPP cannot take (size, range)
             self._reject(f"frame seq={frame.seq}: {exc}")
-            self._count_towards_limit()
             return
-        self._inc("errors")  # never let one frame kill the service
-        now = time.monotonic()
-        if now - self._last_error_log >= self.reject_log_period_s:
-            self._last_error_log = now
-            log.error("processing frame seq=%s failed: %r", frame.seq, exc)
+        self.ledger.failed(frame.seq, exc)  # never let one frame kill the service
 
     def _sink_worker(self, sink: Sink, size: int, policy: Policy) -> QueueWorker[_Delivery]:
         """The queue and thread of ``sink``, from its :meth:`~vpp_service.sinks.base.Sink.queue_spec`.
@@ -473,8 +344,7 @@ class Pipeline:
 
     def _unsendable(self, delivery: _Delivery) -> None:
         """A sink's queue refused ``delivery`` while stopping: lost there (counted under ``shutdown``)."""
-        with self._lock:
-            self._unsent += 1
+        self.ledger.lost_at_stop("unsent")
         self._delivered(delivery, dropped=True)
 
     def _write(self, sink: Sink, delivery: _Delivery) -> None:
@@ -486,7 +356,7 @@ class Pipeline:
 
     def _sink_failed(self, sink: Sink, delivery: _Delivery, exc: Exception) -> None:
         """A sink raised on a result: counted (the pipeline's ``errors`` and the sink's), the others go on."""
-        self._inc("errors")
+        self.ledger.count("errors")
         sink.count("errors")
         log.warning("sink %s: %s", type(sink).__name__, exc)
 
@@ -501,16 +371,12 @@ class Pipeline:
 
     def _published(self, result: FusionResult) -> None:
         """Every sink has the result: latency and ``published``."""
-        # latency from when this service received the frame, never from the sender's stamp_ns (a peer sets it)
-        recv_ns = result.frame.meta.get("recv_ns")
-        if isinstance(recv_ns, int):
-            self.timer.add("latency", (time.monotonic_ns() - recv_ns) / 1e6)
-        self._inc("published")
+        self.ledger.published(result)
 
     def _process_done(self) -> None:
         """The process stage ended: the sink threads finish what is queued (or ``done`` now, without sinks)."""
         if self._window is not None:
-            self._window.close()  # the frames in flight are answered and handed on first
+            self._window.close()  # the frames in flight get their results, handed on first
         for worker in self.sink_workers:
             worker.finish()
         if not self.sink_workers:
@@ -574,24 +440,9 @@ class Pipeline:
         # runs on a Zenoh thread: reply with the cached snapshot, never block
         try:
             # the service's own key, not the query's: a wildcard query gets one entry per rig
-            query.reply(self.status_key, self._status_snapshot())
+            query.reply(self.status_key, self._replies.reply())
         except Exception as exc:  # noqa: BLE001 - session closing; nothing may raise into Zenoh's thread
             log.debug("@status reply failed: %s", exc)
-
-    def _status_snapshot(self) -> str:
-        """The ``@status`` reply: one JSON snapshot per :data:`STATUS_SNAPSHOT_S`, shared by the queries meanwhile.
-
-        A query flood costs a lookup per query, not a status build each (counted as ``cached``).
-        """
-        with self._snapshot_lock:
-            self._status_queries["queries"] += 1
-            now = time.monotonic()
-            if self._snapshot is None or now - self._snapshot[0] >= STATUS_SNAPSHOT_S:
-                self._status_queries["snapshots"] += 1
-                self._snapshot = (now, json.dumps(self.status()))
-            else:
-                self._status_queries["cached"] += 1
-            return self._snapshot[1]
 
     def wait(self, timeout: float | None = None) -> bool:
         """Block until the pipeline is done (source exhausted / max_frames) or ``timeout``."""
@@ -631,9 +482,12 @@ class Pipeline:
 
     # -------------------------------------------------------------- status
     def status(self) -> PipelineStatus:
-        """Counters, queue fill, timings, source and sink stats (JSON-ready)."""
-        with self._lock:
-            counters = dict(self._counts)
+        """Counters, losses by cause, queue fill, timings, source and sink stats (JSON-ready; the ledger's figures).
+
+        With what runs the matcher (``matcher``: engine, device, precision, threads, the range in use)
+        when the process step says, and a network's requests and servers (``network``) when it has them.
+        """
+        counters = self.ledger.counts()
         elapsed = time.monotonic() - self._started if self._started else 0.0
         sinks: dict[str, Mapping[str, object]] = {}
         for s in self.sinks:
@@ -641,7 +495,8 @@ class Pipeline:
                 sinks[type(s).__name__] = s.stats()
             except Exception:  # noqa: BLE001 - a sink's broken counters must not break @status
                 sinks[type(s).__name__] = {}
-        dropped = self._losses(sinks)
+        sink_queues = [(type(s).__name__, w) for s, w in zip(self.sinks, self.sink_workers, strict=True)]
+        dropped = self.ledger.losses(self.source, self.input, sink_queues, sinks, halted=self._enough.is_set())
         counters["dropped"] = sum(dropped.values())  # derived: every cause in one count
         status: PipelineStatus = {
             "rig": self.rig,
@@ -652,37 +507,17 @@ class Pipeline:
             "source_error": None if self.source.error is None else repr(self.source.error),
             "config_error": self.config_error,
             "zenoh": self.connectivity(),
-            "fps": self._recent_fps(elapsed),
+            "fps": self.ledger.fps(elapsed),
             "queues": {
-                "input": {
-                    "len": len(self.input),
-                    "size": self.input.size,
-                    "policy": self.input.policy,
-                    "dropped": self.input.dropped,
-                    "high_water": self.input.high_water,
-                },
-                **{
-                    f"sink.{type(sink).__name__}": {
-                        "len": len(w),
-                        "size": w.size,
-                        "policy": w.policy,
-                        "dropped": w.dropped,
-                        "high_water": w.high_water,
-                    }
-                    for sink, w in zip(self.sinks, self.sink_workers, strict=True)
-                },
+                "input": queue_status(self.input),
+                **{f"sink.{name}": queue_status(w) for name, w in sink_queues},
                 **self._window_status(),
             },
-            "timing_ms": self.timer.summary(),
-            "status_queries": self._status_queries_copy(),
+            "timing_ms": self.ledger.timer.summary(),
+            "status_queries": self._replies.counts(),
             "source": self.source.stats(),
             "sinks": sinks,
-            "metrics": {
-                "last": self._last_metrics,
-                "bad2_answered_mean": _mean(self._bad2_answered),
-                "density_mean": _mean(self._density),
-                "bad2_filled_mean": _mean(self._bad2_filled),
-            },
+            "metrics": self.ledger.metrics(),
         }
         if self.matcher_runtime is not None:
             status["matcher"] = self._matcher_status()
@@ -717,11 +552,6 @@ class Pipeline:
             }
         }
 
-    def _status_queries_copy(self) -> dict[str, int]:
-        """``@status`` queries: ``queries`` answered, ``snapshots`` built, ``cached`` (answered from a snapshot)."""
-        # not under _snapshot_lock: status() runs inside it when a query builds a snapshot
-        return dict(self._status_queries)
-
     def connectivity(self) -> dict[str, int] | None:
         """Routers and peers the session reaches now (None without a session)."""
         if self.session is None:
@@ -732,60 +562,13 @@ class Pipeline:
         except Exception:  # noqa: BLE001 - a closing session must not break @status
             return None
 
-    def _losses(self, sinks: Mapping[str, Mapping[str, object]]) -> dict[str, int]:
-        """Every loss by cause (see the module docstring); ``counters["dropped"]`` is their sum."""
-        out = {
-            "input_queue": self.input.dropped,
-            # frames left queued when max_frames is reached were not wanted: only a stop's discards are losses
-            "shutdown": (0 if self._enough.is_set() else self.input.discarded + self._lost_matching)
-            + sum(w.discarded for w in self.sink_workers)
-            + self._refused
-            + self._unsent,
-        }
-        try:
-            out.update({k: int(v) for k, v in self.source.losses().items()})
-        except Exception:  # a source's broken counters must not break @status
-            log.debug("source.losses() failed", exc_info=True)
-        for sink, worker in zip(self.sinks, self.sink_workers, strict=True):
-            name = type(sink).__name__
-            n = sinks.get(name, {}).get("dropped", 0)  # the sink's own losses (a viewer gone, ...)
-            out[f"sink.{name}"] = (n if isinstance(n, int) else 0) + worker.dropped  # + its full queue's
-        return out
-
-    def _recent_fps(self, elapsed: float) -> float:
-        """Frames processed per second over the last :data:`FPS_WINDOW_S` (0 when input stopped that long ago)."""
-        span = min(FPS_WINDOW_S, elapsed)
-        if span <= 0:
-            return 0.0
-        cutoff = time.monotonic() - span
-        recent = sum(1 for t in list(self._done_at) if t >= cutoff)
-        return recent / span
-
     def summary_line(self, status: PipelineStatus | None = None) -> str:
-        """One-line live summary: fps, latency p50/p99, bad-2 vs GT when known, counters.
+        """One-line live summary (:func:`~vpp_service.service.ledger.summary_line`).
 
         ``status`` is a :meth:`status` the caller already has (None: taken now).
         """
         st = self.status() if status is None else status
-        c = st["counters"]
-        if c["received"] == 0 and not self._stop.is_set():  # running, nothing yet (the final line has counters)
-            return f"waiting for frames on {self.source.waits_on()}: nothing has arrived yet"
-        lat = st["timing_ms"].get("latency")
-        lat_s = f"lat p50 {lat['p50']:.0f} ms p99 {lat['p99']:.0f} ms" if lat else "lat -"
-        m = st["metrics"]
-        bad_s = ""
-        if m["density_mean"] is not None:
-            # two numbers, never mixed: accuracy of the values given, and how many pixels got one
-            bad2, filled = m["bad2_answered_mean"], m["bad2_filled_mean"]
-            bad_s = (" | bad-2 -" if bad2 is None else f" | bad-2 {bad2:.2f} % of answered") + (
-                f", density {m['density_mean']:.1f} %" + ("" if filled is None else f", filled {filled:.2f} %")
-            )
-        throttled = sum(n for s in st["sinks"].values() if isinstance(n := s.get("throttled"), int))
-        thr_s = f" throttled {throttled}" if throttled else ""  # skipped on purpose (a viewer's max_hz), not lost
-        return (
-            f"{st['fps']:.1f} fps | {lat_s}{bad_s} | recv {c['received']} proc {c['processed']} "
-            f"pub {c['published']} drop {c['dropped']} rej {c['rejected']} no-depth {c['no_depth']}{thr_s}"
-        )
+        return summary_line(st, None if self._stop.is_set() else self.source.waits_on)
 
 
 class _Delivery:
@@ -825,16 +608,4 @@ def _close_within(sink: Sink, timeout: float) -> bool:
     return True
 
 
-def _mean(values: deque[float]) -> float | None:
-    """Mean of a window, None when empty."""
-    return float(np.mean(values)) if values else None
-
-
-__all__ = [
-    "COUNTER_NAMES",
-    "FPS_WINDOW_S",
-    "MetricsStatus",
-    "Pipeline",
-    "PipelineStatus",
-    "QueueStatus",
-]
+__all__ = ["Pipeline"]
