@@ -249,7 +249,7 @@ class _Camera:
         self.got.release()
 
     def query_status(self, timeout: float = 3.0) -> dict[str, Any] | None:
-        """The service's ``@status`` (None when it does not answer)."""
+        """The service's ``@status`` (None when it does not reply)."""
         for reply in self.cli.get(self.status_key, timeout=timeout):
             if reply.ok is not None:
                 status: dict[str, Any] = json.loads(reply.ok.payload.to_string())
@@ -332,7 +332,7 @@ def _wait_until_up(camera: _Camera, proc: subprocess.Popen[bytes], log_path: Pat
         if camera.got.acquire(timeout=5.0):
             w += 1
         elif proc.poll() is not None or time.monotonic() > deadline:
-            raise RuntimeError(f"service not answering:\n{log_path.read_text()[-3000:]}")
+            raise RuntimeError(f"service not replying:\n{log_path.read_text()[-3000:]}")
     time.sleep(0.3)
     while camera.got.acquire(timeout=0.2):
         pass

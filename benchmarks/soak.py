@@ -16,7 +16,7 @@ size is sampled, and every kind is decoded in-process at the full 64 MiB caps.
 Checks and figures (printed as a table, written as JSON to ``--json``,
 default ``out/soak.json``, a path git ignores):
 
-* the service never crashes and answers ``@status`` to the end;
+* the service never crashes and replies to ``@status`` to the end;
 * 100 % of valid frames processed; every hostile message counted (``rejected``
   plus anything a ring dropped);
 * no file written outside the sinks' folders;

@@ -13,8 +13,8 @@ What it runs (in-process, one thread, seed 0, default :class:`~vpp_service.vpp.V
 1. every dataset found under ``--data`` x matcher (``census-sgm``, ``sgbm``) x method
    (baseline, guided - census-sgm only, sgbm has no cost volume -, vpp) at 5 % uniform
    points; KITTI also with the simulated 64-beam ``lidar`` sensor (no raw scan ships);
-2. a density sweep 0.5 - 5 % (0 % = the matcher alone) on Middlebury 2005/2006 with
-   census-sgm (its 5 % rows are the main-table rows of that dataset);
+2. a point-fraction sweep 0.5 - 5 % (the ``uniform`` sensor's ``density``; 0 % = the matcher alone)
+   on Middlebury 2005/2006 with census-sgm (its 5 % rows are the main-table rows of that dataset);
 3. writes ``<out>/results/results.json`` (config, machine, git commit, every per-scene
    row, summaries, the paper's numbers), ``<out>/results/sweep_middlebury2006.json``,
    ``<out>/results/sweep_middlebury2006.png`` and ``<out>/results.md``.
@@ -791,11 +791,13 @@ def render(doc: dict[str, Any], out: Path) -> str:
     if sweep and sweep.get("baseline"):
         n = next(iter(sweep["baseline"].values()))["scenes"]
         P += [
-            "## Density sweep (Middlebury 2005/2006, census-sgm)",
+            "## Point-fraction sweep (Middlebury 2005/2006, census-sgm)",
             "",
-            "![bad-2 and avg error vs density](results/sweep_middlebury2006.png)",
+            "![bad-2 and avg error vs point fraction](results/sweep_middlebury2006.png)",
             "",
-            "Data: [`results/sweep_middlebury2006.json`](results/sweep_middlebury2006.json). 0 % = census-sgm alone.",
+            "Data: [`results/sweep_middlebury2006.json`](results/sweep_middlebury2006.json). "
+            "The point fraction is the share of the valid ground-truth pixels given a sparse point "
+            "(the `uniform` sensor's `density`); 0 % = census-sgm alone.",
             "",
         ]
         dens = list(sweep["baseline"].keys())

@@ -20,8 +20,8 @@ every value is NaN and ``n`` is 0.
 **The three numbers every report shows** (``demo``, the live line, ``summary.json``,
 ``@status``, Rerun), always under these names:
 
-* ``bad2_answered`` - bad-2 (%) over the pixels with ground truth that got a value;
-* ``density`` - the percentage of pixels with ground truth that got a value;
+* ``bad2_answered`` - bad-2 (%) over the answered pixels (those that got a value) with ground truth;
+* ``density`` - the percentage of pixels with ground truth that got a value (answered);
 * ``bad2_filled`` - bad-2 (%) over every pixel with ground truth after the holes are
   filled by background interpolation, as ``eval`` and ``docs/results.md`` score.
 """

@@ -8,8 +8,8 @@
   the stub needs numpy 1.x's C API.
 * :func:`write_model` - a Python-backend model (``model.py`` + ``config.pbtxt``)
   that runs an ``.onnx`` file with ONNX Runtime: the same protocol and tensors
-  as Triton's ONNX Runtime backend. ``mode="wrong_shape"`` answers one column
-  short (a broken server); ``delay_ms`` holds each answer back (frames stay in flight).
+  as Triton's ONNX Runtime backend. ``mode="wrong_shape"`` replies one column
+  short (a broken server); ``delay_ms`` holds each reply back (frames stay in flight).
 * :class:`TritonServer` - ``tritonserver`` on 127.0.0.1 with free ports, waited
   for until ready; :meth:`~TritonServer.kill` (SIGKILL) and :meth:`~TritonServer.stop`.
 """

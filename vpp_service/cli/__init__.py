@@ -27,7 +27,7 @@ COMMANDS = ("run", "publish", "status", "view", "eval", "demo", "models")
 
 #: Exit status of a configuration or start-up error (bad flag, bad config key, missing path, Zenoh cannot open).
 EXIT_STARTUP = 2
-#: Exit status of a failure after start-up (nobody answered or subscribed, an unexpected error while running).
+#: Exit status of a failure after start-up (nobody replied or subscribed, an unexpected error while running).
 EXIT_FAILURE = 1
 #: Exit status of a command interrupted (Ctrl-C) before its work was done: during start-up, ``publish``'s
 #: wait for a subscriber, ``eval`` and ``demo``. ``run``, ``view`` and ``publish`` once running stop cleanly: 0.

@@ -41,7 +41,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         "--density",
         type=float,
         default=0.05,
-        help="fraction of GT pixels sampled as sparse depth (default: %(default)s)",
+        help="point fraction: fraction of GT pixels sampled as sparse depth (default: %(default)s)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed for sampling and the pattern (default: %(default)s)")
     p.add_argument("--matcher", default="sgbm", help="matcher name (default: %(default)s)")

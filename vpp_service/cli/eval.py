@@ -98,7 +98,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
         "--density",
         type=_densities,
         default=[0.05],
-        help="fraction of valid GT pixels (uniform sensor); a comma list runs a sweep",
+        help="point fraction: fraction of valid GT pixels given a point (uniform sensor); a comma list runs a sweep",
     )
     g.add_argument("--seed", type=int, default=0, help="seed of the points and of the VPP pattern")
     g.add_argument(

@@ -58,7 +58,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
     p.add_argument("--scene", default="motorcycle", choices=["motorcycle", "synthetic"], help="simulator scene")
     p.add_argument("--scale", type=float, default=1.0, help="resize factor in (0, 1]")
     p.add_argument("--sensor", default="uniform", help="sensor simulator (uniform, lidar, tof, none)")
-    p.add_argument("--density", type=float, default=0.05, help="uniform sensor density")
+    p.add_argument("--density", type=float, default=0.05, help="point fraction of the uniform sensor (its density)")
     p.add_argument(
         "--nominal-f",
         type=float,
@@ -350,7 +350,7 @@ def _publish(
                 return EXIT_INTERRUPTED
             if zsec.connect and not args.send_anyway and not has_link(session):
                 print(
-                    f"vpp-service publish: could not connect to {', '.join(zsec.connect)} (nothing answers there); "
+                    f"vpp-service publish: could not connect to {', '.join(zsec.connect)} (nothing replies there); "
                     "start `vpp-service run --source zenoh` there, or pass --connect",
                     file=sys.stderr,
                 )

@@ -1,11 +1,11 @@
 """vpp-service status: query running services' @status and print the replies as JSON.
 
 The output maps each service's own key (<prefix>/<rig>/@status) to its status,
-so --rig '*' lists every rig that answered, one entry each. When no service answers within
+so --rig '*' lists every rig that replied, one entry each. When no service replies within
 --timeout it says so on stderr and exits 1; when the endpoint cannot be reached
 it says it could not connect (exit 1).
 
-Which services answer: every service reachable through a Zenoh router, or, in a
+Which services reply: every service reachable through a Zenoh router, or, in a
 router-less mesh of peers, the services this command's session links to (the one
 at --connect, and the peers gossip leads it to that listen on an endpoint). A
 service that only connects out to another peer and listens nowhere cannot be
@@ -55,7 +55,7 @@ def query_status(
     *,
     unreachable_error: bool = False,
 ) -> dict[str, Any]:
-    """Query ``<prefix>/<rig>/@status``; returns ``{service key: reply JSON}``, one entry per answering rig.
+    """Query ``<prefix>/<rig>/@status``; returns ``{service key: reply JSON}``, one entry per rig that replied.
 
     Raises
     ------
@@ -80,12 +80,12 @@ def query_status(
                 except json.JSONDecodeError as exc:
                     raise ValueError(f"{reply.ok.key_expr}: reply is not JSON: {exc}") from None
         if unreachable_error and not out and connect and not has_link(session):
-            raise ConnectionError(f"could not connect to {', '.join(connect)} (nothing answers there)")
+            raise ConnectionError(f"could not connect to {', '.join(connect)} (nothing replies there)")
     return dict(sorted(out.items()))
 
 
 def main(args: argparse.Namespace) -> int:
-    """Print the replies as JSON; exit 1 with a message when no service answered."""
+    """Print the replies as JSON; exit 1 with a message when no service replied."""
     from vpp_service.service.config import default_endpoint
 
     connect = args.connect or [default_endpoint()]

@@ -12,7 +12,7 @@ the suffix; the files written are named on stderr). Stops on Ctrl-C / SIGTERM, a
 ``--max-frames`` disparity maps or after ``--duration`` seconds, and prints a
 JSON summary (messages received per rig and output, rejected messages, the
 Rerun sinks' counters, the files written, and per output its ``gaps``: ``seq``
-values skipped between two messages, frames the service dropped or did not answer
+values skipped between two messages, frames the service dropped or did not publish
 or messages lost on the way, e.g. those its zenoh sink's ``congestion_control =
 "drop"`` drops to a viewer that does not keep up).
 

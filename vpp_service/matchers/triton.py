@@ -42,7 +42,7 @@ from vpp_service.errors import StartupError
 from vpp_service.matchers.inference import Engine, EngineUnavailable, Shape
 from vpp_service.matchers.model_card import ModelCard
 
-#: gRPC status codes of a server that could not answer (marked down, the request re-sent elsewhere).
+#: gRPC status codes of a server that could not reply (marked down, the request re-sent elsewhere).
 TRANSPORT_CODES = frozenset({"StatusCode.UNAVAILABLE", "StatusCode.DEADLINE_EXCEEDED", "StatusCode.CANCELLED"})
 
 #: Engines kept open by :func:`open_triton` (their server health and counters are shared by matchers).
@@ -54,7 +54,7 @@ class ServerUnavailable(StartupError):
 
 
 class ModelUnavailable(ServerUnavailable):
-    """Servers answer but none is ready or has the model ready (it may be loading: ``run`` retries)."""
+    """Servers reply but none is ready or has the model ready (it may be loading: ``run`` retries)."""
 
 
 @dataclass(frozen=True)
@@ -132,7 +132,7 @@ class _Server:
     outstanding: int = 0
     down_until: float = 0.0
     error: str = ""
-    answered: int = 0
+    replies: int = 0
 
 
 class TritonEngine(Engine):
@@ -143,8 +143,9 @@ class TritonEngine(Engine):
     dtypes : dict of str to str
         KServe datatypes of the model's tensors (``"FP32"``), from its metadata.
     counters : dict of str to int
-        ``requests``, ``answered``, ``retried`` (re-sent after a server failed), ``bad_replies``,
-        ``failed`` (no server answered), ``bytes_out`` / ``bytes_in`` (tensor bytes on the wire).
+        ``requests``, ``answered`` (requests a server replied to), ``retried`` (re-sent after a server
+        failed), ``bad_replies``, ``failed`` (no server replied), ``bytes_out`` / ``bytes_in`` (tensor
+        bytes on the wire).
     """
 
     kind = "triton"
@@ -273,7 +274,7 @@ class TritonEngine(Engine):
         Raises
         ------
         RuntimeError
-            No server answered within ``retry_s`` (the next frame tries again).
+            No server replied within ``retry_s`` (the next frame tries again).
         """
         if self._known:
             return
@@ -318,12 +319,12 @@ class TritonEngine(Engine):
     def run(self, feeds: Mapping[str, np.ndarray], output: str) -> np.ndarray:
         """Send ``feeds`` to a server and return its ``output`` tensor (float32, the shape the server sent).
 
-        Many calls may run at once (one per frame in flight); each is answered once.
+        Many calls may run at once (one per frame in flight); each gets one reply.
 
         Raises
         ------
         RuntimeError
-            No server answered within ``retry_s``, or the server refused the request (one line).
+            No server replied within ``retry_s``, or the server refused the request (one line).
         ValueError
             The reply lacks ``output`` or it is not float32 (counted ``bad_replies``).
         """
@@ -346,7 +347,7 @@ class TritonEngine(Engine):
             if server is None:
                 self._count("failed")
                 errors = "; ".join(sorted({x.error for x in self._servers if x.error})) or "no server up"
-                raise RuntimeError(f"model {s.model}: no Triton server answered within {s.retry_s:g} s: {errors}")
+                raise RuntimeError(f"model {s.model}: no Triton server replied within {s.retry_s:g} s: {errors}")
             if tried:
                 self._count("retried")
             tried.add(server.url)
@@ -363,7 +364,7 @@ class TritonEngine(Engine):
                 raise RuntimeError(f"model {s.model}: triton server {server.url} refused: {_message(exc)}") from None
             self._release(server)
             with self._cond:
-                server.answered += 1
+                server.replies += 1
             self._count("bytes_out", sent)
             return self._output(result, output, server.url)
 
@@ -396,13 +397,13 @@ class TritonEngine(Engine):
         return self.run(feeds, output)
 
     def status(self) -> dict[str, Any]:
-        """Counters and each server's state (``outstanding``, ``answered``, ``down``, ``error``)."""
+        """Counters and each server's state (``outstanding``, ``answered``: its replies, ``down``, ``error``)."""
         now = time.monotonic()
         with self._cond:
             servers = {
                 s.url: {
                     "outstanding": s.outstanding,
-                    "answered": s.answered,
+                    "answered": s.replies,
                     "down": s.down_until > now,
                     "error": s.error,
                 }

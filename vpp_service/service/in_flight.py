@@ -2,13 +2,13 @@
 
 A network on a remote server (:mod:`vpp_service.matchers.triton`) is latency-bound:
 the process stage keeps several frames on the servers instead of waiting for each
-answer. :class:`InFlight` runs ``work(frame)`` on up to ``n`` threads;
+result. :class:`InFlight` runs ``work(frame)`` on up to ``n`` threads;
 :meth:`InFlight.submit` waits while ``n`` frames are in flight (back-pressure:
 the pipeline's input queue fills and its policy applies), and one thread hands
 each result (or failure) on in submission order, exactly once.
 
 A stop that cannot wait for the servers calls :meth:`InFlight.abandon`: the items
-not yet handed on are never handed on (their answers are ignored when they come),
+not yet handed on are never handed on (their results are ignored when they come),
 and it returns how many there were, for the caller to count as lost.
 """
 
@@ -95,7 +95,7 @@ class InFlight(Generic[T, R]):
                 return
             item, fut = entry
             while not (fut.done() or self._abandoned):
-                wait((fut,), timeout=0.1)  # the answer, or an abandon() meanwhile
+                wait((fut,), timeout=0.1)  # the result, or an abandon() meanwhile
             with self._lock:
                 claimed = not self._abandoned  # else counted by abandon(): never handed on
                 if claimed:
@@ -117,9 +117,9 @@ class InFlight(Generic[T, R]):
                 self._slots.release()
 
     def abandon(self) -> int:
-        """Hand nothing more on (a stop that cannot wait); how many items that leaves unanswered.
+        """Hand nothing more on (a stop that cannot wait); how many items that leaves without a result.
 
-        An item whose answer came and is being handed on right now is not among them: it is handed on.
+        An item whose result came and is being handed on right now is not among them: it is handed on.
         Later calls return 0, and :meth:`submit` takes no more items.
         """
         with self._lock:

@@ -11,7 +11,7 @@ Depth and disparity are related by ``Z = f * b / (d + doffs)``.
 
 Sensors (``SENSORS.names()``):
 
-* ``uniform`` - the paper's protocol: a fraction ``density`` of the valid
+* ``uniform`` - the paper's protocol: a point fraction ``density`` of the valid
   ground-truth pixels, drawn uniformly at random (seeded), values = ground
   truth plus optional Gaussian disparity noise ``noise_px``.
 * ``lidar`` - a spinning multi-beam LiDAR: ``beams`` elevations evenly spread
