@@ -21,8 +21,9 @@ from vpp_service.settings import SettingsError
 from vpp_service.sinks import SINKS, build_sink
 from vpp_service.sinks.base import SinkContext
 from vpp_service.sinks.colorize import colorize_disparity, disparity_range
-from vpp_service.sinks.rerun import RerunSink, _rerun_binary, depth_stride, reachable, rotated_paths
+from vpp_service.sinks.rerun import RerunSink, depth_stride, rotated_paths
 from vpp_service.sinks.rerun_log import robust_range
+from vpp_service.sinks.rerun_output import _rerun_binary, reachable
 
 H, W = 30, 40
 RIG = "rigA"

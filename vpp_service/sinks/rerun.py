@@ -1,6 +1,9 @@
 """The ``rerun`` sink: stream results to a Rerun viewer, server or ``.rrd`` file.
 
-What is logged and the default layout: :mod:`vpp_service.sinks.rerun_log`.
+What is logged and the default layout: :mod:`vpp_service.sinks.rerun_log`; the
+recording stream and where it goes (the file and its rotation, the viewer spawned,
+connected to or served, reconnects): :mod:`vpp_service.sinks.rerun_output`. This
+module is the sink: its options, the throttle, the write path and the counts.
 
 Modes
 -----
@@ -63,45 +66,34 @@ dead URL) the logging thread is abandoned (daemon) rather than hanging.
 
 from __future__ import annotations
 
-import importlib.util
 import logging
 import math
 import re
-import shutil
-import socket
-import subprocess
-import sys
 import threading
 import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
-from urllib.parse import urlsplit
 
 from vpp_service.frame import FusionResult
 from vpp_service.sinks.base import SINKS, QueueSpec, Sink, SinkContext
 from vpp_service.sinks.rerun_log import ENTITY_RE, RerunLayout, RerunParts, depth_stride, parts_from_result
-from vpp_service.sinks.rotation import rotate, rotated_paths
+from vpp_service.sinks.rerun_output import RerunOutput, reachable
+from vpp_service.sinks.rotation import rotated_paths
 from vpp_service.transport.backproject import DEFAULT_STRIDE, check_stride
 
 if TYPE_CHECKING:
-    import rerun as rr
     import rerun.blueprint as rrb
 
 log = logging.getLogger(__name__)
 
 _MEMORY_RE = re.compile(r"^\s*(\d+(\.\d+)?)\s*(B|KB|MB|GB|TB|KiB|MiB|GiB|TiB)\s*$|^\s*(\d+(\.\d+)?)\s*%\s*$")
 _URL_RE = re.compile(r"^rerun(\+https?)?://[^/\s]+/proxy$")
-_DEFAULT_URL = "rerun+http://127.0.0.1:9876/proxy"
-#: Seconds between two checks of an unreachable viewer's port.
-PROBE_INTERVAL_S = 0.5
 #: ``max_hz`` when the option is None and the sink streams to a viewer (a 10 Hz camera is never throttled).
 VIEWER_MAX_HZ = 15.0
 #: Frames the throttle's token bucket holds: a burst this long passes (a camera's jitter is not throttled).
 THROTTLE_BURST = 2.0
-#: Longest wait for one frame to reach the viewer before it counts as undelivered.
-FLUSH_TIMEOUT_S = 2.0
 
 
 def _range(value: list[float] | None, key: str) -> None:
@@ -260,41 +252,6 @@ class RerunSinkOptions:
             raise ValueError(f"bind: must be an IP address such as 127.0.0.1, got {self.bind!r}")
 
 
-def _rerun_binary() -> list[str]:
-    """Command that runs the Rerun CLI binary itself (not a wrapper that would outlive a kill)."""
-    spec = importlib.util.find_spec("rerun_cli")
-    if spec is not None and spec.origin:
-        exe = Path(spec.origin).parent / "rerun"
-        if exe.is_file():
-            return [str(exe)]
-    exe_path = shutil.which("rerun")
-    return [exe_path] if exe_path else [sys.executable, "-m", "rerun_cli"]
-
-
-def _disable_viewer_analytics() -> None:
-    """Run ``rerun analytics disable`` (the viewer's own opt-out); log failures."""
-    try:
-        subprocess.run(
-            [*_rerun_binary(), "analytics", "disable"],
-            check=True,
-            timeout=10,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )
-    except (OSError, subprocess.SubprocessError) as exc:
-        log.warning("rerun sink: could not disable viewer analytics: %s", exc)
-
-
-def reachable(url: str, timeout: float = 0.5) -> bool:
-    """Whether a TCP connection to the host and port of a ``rerun+http://HOST:PORT/proxy`` URL succeeds."""
-    parts = urlsplit(url.replace("rerun+", "", 1))
-    try:
-        socket.create_connection((parts.hostname or "127.0.0.1", parts.port or 9876), timeout=timeout).close()
-    except OSError:
-        return False
-    return True
-
-
 @SINKS.register("rerun")
 class RerunSink(Sink):
     """Log results to Rerun from a dedicated thread (see the module docstring).
@@ -337,30 +294,23 @@ class RerunSink(Sink):
             confidence=o.confidence,
         )
         self.application_id = o.application_id or f"vpp-service-{context.rig}"
-        self._rec: rr.RecordingStream | None = None
+        #: The recording stream and the file or viewer it goes to.
+        self.output = RerunOutput(o, self.layout, context.rig, self.count)
         self._last_accept = time.monotonic()
         self._tokens = THROTTLE_BURST  # the throttle's token bucket (frames that may be logged now)
         self._ready = threading.Event()
         self._close_deadline = math.inf
-        self._url: str | None = None  # the viewer / server the network modes stream to
-        self._connected = False
-        self._last_probe = -math.inf
-        self._server: subprocess.Popen[bytes] | None = None
         self._said_throttle = False
-        self._blueprint_sent = False
-        self.server_uri: str | None = None
+
+    @property
+    def server_uri(self) -> str | None:
+        """``serve``: the URL viewers connect to (None before the server runs)."""
+        return self.output.server_uri
 
     # -- life cycle -----------------------------------------------------------------
     def blueprint(self) -> rrb.Blueprint:
         """The default :class:`rerun.blueprint.Blueprint` of the sink's views."""
-        return self.layout.blueprint(self.context.rig)
-
-    def _first_blueprint(self) -> rrb.Blueprint | None:
-        """The blueprint when the 3-D view's framing is known (else it is sent with the first frame)."""
-        if self.layout.depth_range is None and self.layout.point_cloud:
-            return None
-        self._blueprint_sent = True
-        return self.blueprint()
+        return self.output.blueprint()
 
     @classmethod
     def check_paths(cls, options: RerunSinkOptions, section: str, created_dirs: frozenset[Path] = frozenset()) -> None:
@@ -387,21 +337,11 @@ class RerunSink(Sink):
         RuntimeError
             If the sink is already open.
         """
-        import rerun as rr
-
         if self._state != "new":
             raise RuntimeError("rerun sink: already open")
         o = self.options
-        rec_id = o.recording_id or f"{self.context.rig}-{uuid.uuid4()}"
-        self._rec = rec = rr.RecordingStream(self.application_id, recording_id=rec_id, send_properties=False)
+        self.output.open(self.application_id, o.recording_id or f"{self.context.rig}-{uuid.uuid4()}")
         if o.mode == "save":
-            path = Path(o.path).expanduser()
-            if not path.parent.is_dir():
-                raise FileNotFoundError(f"sinks.rerun.path: folder {str(path.parent)!r} does not exist")
-            if path.is_dir():
-                raise IsADirectoryError(f"sinks.rerun.path: {str(path)!r} is a folder, expected a .rrd file")
-            rec.save(str(path), default_blueprint=self._first_blueprint())
-            self.layout.log_static(rec, self.context.rig)
             self._ready.set()
         self._state = "open"
 
@@ -418,71 +358,7 @@ class RerunSink(Sink):
         if self._state != "open":
             return
         self._state = "finished"
-        self._flush()
-
-    def _attach(self) -> None:
-        """Attach the network output (runs on the logging thread)."""
-        o, rec, bp = self.options, self._recording(), self._first_blueprint()
-        if o.mode == "spawn":
-            if not o.analytics:
-                _disable_viewer_analytics()
-            rec.spawn(port=o.grpc_port, memory_limit=o.memory_limit, default_blueprint=bp)
-            self._url = f"rerun+http://127.0.0.1:{o.grpc_port}/proxy"
-            self._connected = True
-            self.layout.log_static(rec, self.context.rig)
-        elif o.mode == "connect":
-            self._url = o.url or _DEFAULT_URL
-            if not self._reconnect():
-                log.warning("rerun sink: no viewer at %s yet; frames count as undelivered until it is", self._url)
-        elif o.mode == "serve":
-            self._start_server()
-            if not self._reconnect():
-                raise RuntimeError(f"the Rerun server at {self._url} does not accept connections")
-
-    def _start_server(self) -> None:
-        """Start ``rerun --serve-grpc`` bound to ``bind`` (and the web viewer) and wait until it listens."""
-        o = self.options
-        host = f"[{o.bind}]" if ":" in o.bind else o.bind
-        cmd = [
-            *_rerun_binary(),
-            "--serve-web" if o.web_port else "--serve-grpc",
-            "--bind",
-            o.bind,
-            "--port",
-            str(o.grpc_port),
-            "--server-memory-limit",
-            o.memory_limit,
-        ]
-        if o.web_port:
-            cmd += ["--web-viewer-port", str(o.web_port)]
-        self._server = subprocess.Popen(
-            cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
-        )
-        local = "127.0.0.1" if o.bind in ("0.0.0.0", "::") else host
-        self._url = f"rerun+http://{local}:{o.grpc_port}/proxy"
-        self.server_uri = f"rerun+http://{host}:{o.grpc_port}/proxy"
-        deadline = time.monotonic() + 10.0
-        while not reachable(self._url, 0.2):
-            if self._server.poll() is not None:
-                err = (self._server.stderr.read() if self._server.stderr else b"").decode(errors="replace")
-                raise RuntimeError(f"rerun server exited ({self._server.returncode}): {err.strip()[-300:]}")
-            if time.monotonic() > deadline:
-                raise RuntimeError(f"rerun server did not listen on {o.bind}:{o.grpc_port} within 10 s")
-            time.sleep(0.05)
-        log.info(
-            "rerun sink: serving %s%s", self.server_uri, f" (web viewer on {host}:{o.web_port})" * bool(o.web_port)
-        )
-
-    def _reconnect(self) -> bool:
-        """(Re)connect to the viewer when its port accepts connections; True when connected."""
-        self._last_probe = time.monotonic()
-        if self._url is None or not reachable(self._url):
-            return False
-        rec = self._recording()
-        rec.connect_grpc(self._url, default_blueprint=self._first_blueprint())
-        self.layout.log_static(rec, self.context.rig)
-        self._connected = True
-        return True
+        self.output.flush_and_disconnect(self._close_deadline)
 
     def wait_ready(self, timeout: float = 5.0) -> bool:
         """Attach the output now if :meth:`start` has not (the server runs, the viewer is spawned).
@@ -579,16 +455,7 @@ class RerunSink(Sink):
         self._close_deadline = time.monotonic() + max(0.0, float(timeout))
         self.finish()
         self._state = "closed"
-        if self._server is not None:
-            self._server.terminate()
-            try:
-                self._server.wait(timeout=2.0)
-            except subprocess.TimeoutExpired:
-                self._server.kill()
-                self._server.wait()
-            if self._server.stderr is not None:
-                self._server.stderr.close()
-            self._server = None
+        self.output.stop_server()
         st = self.stats()
         if st["dropped"] or st["throttled"]:
             log.info(
@@ -612,23 +479,11 @@ class RerunSink(Sink):
         return out
 
     # -- logging thread -------------------------------------------------------------
-    def _recording(self) -> rr.RecordingStream:
-        """The sink's recording stream; only the logging thread and :meth:`open` use it.
-
-        Raises
-        ------
-        RuntimeError
-            Before :meth:`open` created it.
-        """
-        if self._rec is None:
-            raise RuntimeError("rerun sink: not open")
-        return self._rec
-
     def _attach_once(self) -> None:
-        if self._ready.is_set() or self._rec is None:
+        if self._ready.is_set() or not self.output.opened:
             return
         try:
-            self._attach()
+            self.output.attach()
         except Exception as exc:  # noqa: BLE001 - reported via stats and log
             log.error("rerun sink: cannot attach %s output: %s", self.options.mode, exc)
             self._counters["errors"] += 1
@@ -636,74 +491,13 @@ class RerunSink(Sink):
 
     def _log_one(self, item: FusionResult | RerunParts) -> None:
         parts = parts_from_result(item, self.options.log_painted) if isinstance(item, FusionResult) else item
-        if self.options.mode == "save":
-            self._maybe_rotate()  # before logging: the newest file always holds the newest frame
-            self._log(parts)
-            if self.options.max_mb:
-                self._recording().flush(timeout_sec=FLUSH_TIMEOUT_S)  # the file sink batches; the size must be current
-            self._counters["written"] += 1
-            return
-        if not self._connected:
-            if time.monotonic() - self._last_probe >= PROBE_INTERVAL_S and self._reconnect():
-                self._counters["reconnects"] += 1
-                log.warning("rerun sink: reconnected to %s", self._url)
-            else:
-                self._counters["undelivered"] += 1
-                return
-        self._log(parts)
-        try:
-            self._recording().flush(timeout_sec=FLUSH_TIMEOUT_S)
-        except Exception as exc:  # noqa: BLE001 - "gRPC connection severed", "Flush timed out"
-            self._connected = False
-            self._last_probe = -math.inf
-            self._counters["undelivered"] += 1
-            log.warning("rerun sink: viewer at %s lost (%s); reconnecting when it is back", self._url, exc)
-            return
-        self._counters["written"] += 1
-
-    def _log(self, parts: RerunParts) -> None:
-        """Log one frame's pieces; send the blueprint again once the colour ranges are known."""
-        self.layout.log(self._recording(), parts)
-        if not self._blueprint_sent:
-            self._blueprint_sent = True
-            self._recording().send_blueprint(self.blueprint(), make_active=True, make_default=True)
-
-    def _maybe_rotate(self) -> None:
-        """``save`` with ``max_mb``: start a new file once the current one reached the cap."""
-        o = self.options
-        if not o.max_mb:
-            return
-        path = Path(o.path).expanduser()
-        try:
-            size = path.stat().st_size
-        except OSError:
-            return
-        if size < o.max_mb * 1e6:
-            return
-        rec = self._recording()
-        rotate(path, o.max_files)  # the file sink keeps writing to the renamed inode until save() below replaces it
-        rec.save(str(path), default_blueprint=self._first_blueprint())
-        self.layout.log_static(rec, self.context.rig)
-        self._counters["rotations"] += 1
+        self.count("written" if self.output.send(parts) else "undelivered")
 
     def _failed(self, item: FusionResult | RerunParts, exc: Exception) -> None:
         # a bad frame must not kill the sink
         seq = item.frame.seq if isinstance(item, FusionResult) else item.seq
         log.warning("rerun sink: cannot log frame %s: %s", seq, exc)
         self._counters["errors"] += 1
-
-    def _flush(self) -> None:
-        rec = self._recording()
-        if self.options.mode == "save" or self._connected:
-            try:
-                rec.flush(timeout_sec=min(5.0, max(0.05, self._close_deadline - time.monotonic())))
-            except Exception as exc:  # noqa: BLE001 - e.g. "Flush timed out" with a dead viewer
-                log.warning("rerun sink: flush failed: %s", exc)
-                self._counters["errors"] += 1
-        try:
-            rec.disconnect()
-        except Exception as exc:  # noqa: BLE001
-            log.warning("rerun sink: disconnect failed: %s", exc)
 
 
 __all__ = ["RerunSink", "RerunSinkOptions", "depth_stride", "reachable", "rotated_paths"]

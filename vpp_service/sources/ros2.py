@@ -13,14 +13,14 @@ and one subscriber token per topic, so lazy publishers start sending. The tokens
 source keeps: best effort, volatile, depth ``ring_size``, keep last under the ``latest``
 input policy and keep all under ``block``. Publishers of any type hash are received.
 
-The Zenoh callback only queues the sample in its topic's ring (the network
-sources' one ring type, :class:`~vpp_service.queueing.ReceiveRings`, ``ring_size``
-per topic): under the pipeline's ``latest`` input policy a full ring drops its
-oldest sample, under ``block`` the callback waits for room; every drop reaches the
-pipeline's ``dropped`` count through :meth:`Ros2Source.losses` (``source_ring``,
-with the synchronizer's ``sync`` and ``pending``). The
-source's thread checks each sample's size (``max_message_mb``) and attachment (both
-rmw_zenoh layouts accepted), then hands the payload to the
+The Zenoh callback checks each sample's size (``max_message_mb``) and attachment
+(both rmw_zenoh layouts accepted), refusing a failed one before it takes a ring slot,
+and queues the others in their topic's ring (the network sources' shared part,
+:class:`~vpp_service.sources.network.NetworkSource`, ``ring_size`` per topic): under
+the pipeline's ``latest`` input policy a full ring drops its oldest sample, under
+``block`` the callback waits for room; every drop reaches the pipeline's ``dropped``
+count through :meth:`Ros2Source.losses` (``source_ring``, with the synchronizer's
+``sync`` and ``pending``). The source's thread hands each payload to the
 :class:`~vpp_service.sources.ros2_assembler.StereoAssembler` (sync, calibration from
 camera_info, cloud -> depth, counted drops). Refusals are counted by cause in
 ``stats()["rejected_by"]``, and ``stats()["messages"]`` follows every sample the callback
@@ -32,13 +32,12 @@ assembler; at shutdown: never matched), ``unmatched``; ``received`` is their sum
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from vpp_service.frame import StereoFrame
-from vpp_service.queueing import ReceiveRings
-from vpp_service.sources.base import SOURCES, Emit, Reject, Source, SourceContext
+from vpp_service.sources.base import SOURCES, Reject, SourceContext
+from vpp_service.sources.network import NetworkSource, Refused
 from vpp_service.sources.ros2_assembler import TF_ROLE, StereoAssembler, StereoTopics
 from vpp_service.transport.ros2 import attachment, keys
 from vpp_service.transport.ros2.errors import Ros2Error
@@ -84,32 +83,27 @@ class Ros2SourceOptions(StereoTopics):
 
 
 @SOURCES.register("ros2")
-class Ros2Source(Source):
+class Ros2Source(NetworkSource["zenoh.Sample"]):
     """Stereo frames from ROS 2 topics over Zenoh (see the module docstring). Needs ``context.session``."""
 
     Options = Ros2SourceOptions
-    needs_session = True
-    network = True  # a live camera on the network: a service that resumes after a restart
+    options: Ros2SourceOptions
 
     def __init__(self, options: Ros2SourceOptions, context: SourceContext) -> None:
-        super().__init__(options, context)
-        self.options: Ros2SourceOptions = options
+        super().__init__(
+            options, context, max_message_bytes=int(options.max_message_mb * 1024 * 1024), poll_s=options.poll_s
+        )
         self._node: RosNode | None = None
-        self._rings: ReceiveRings[zenoh.Sample] | None = None  # one ring per topic, built at open
-        self._reject: Reject | None = None
         self._assembler: StereoAssembler | None = None
-        self._counters.update({"received": 0, "attachment_legacy": 0})
-        self._max_bytes = int(options.max_message_mb * 1024 * 1024)
+        self._counters["attachment_legacy"] = 0
 
     def open(self) -> None:
         """Declare the node, its subscribers and their tokens on the service's session."""
-        session = self.context.session
-        if session is None:
-            raise ValueError("source.ros2: needs an open zenoh session (service.zenoh section)")
+        session = self.session("ros2")
         o = self.options
         self._node = RosNode(session, o.domain_id, o.namespace, o.node_name, distro=o.ros_distro)
         self._node.open()
-        self._rings = ReceiveRings(dict.fromkeys(o.roles(), o.ring_size), self.input_policy)
+        self.open_rings(dict.fromkeys(o.roles(), o.ring_size))
         for role in o.roles():
             # /tf_static with tf2_ros' static listener QoS (transient local), the rest as the source keeps them
             qos = keys.TF_STATIC if role == TF_ROLE else self.subscription_qos()
@@ -126,75 +120,35 @@ class Ros2Source(Source):
         """The ROS topics subscribed to."""
         return "ROS topics " + ", ".join(self.options.topic(role) for role in self.options.roles())
 
-    def start(self, emit: Emit, reject: Reject | None = None, on_finished: Callable[[], None] | None = None) -> None:
-        """Start the source's thread; ``reject`` also hears of samples the subscriber callback turns away."""
-        self._reject = reject
-        super().start(emit, reject, on_finished)
+    def _topic_name(self, topic: str, sample: zenoh.Sample) -> str:
+        return self.options.topic(topic)
 
-    def _on_sample(self, role: str, sample: zenoh.Sample) -> None:
-        """Zenoh callback: the cheap checks (size, attachment), then the sample into its topic's ring.
-
-        A sample that fails them is refused here (counted by cause) and never takes a ring slot, so a junk
-        burst cannot evict genuine messages; the input policy decides what a full ring does.
-        """
-        assert self._rings is not None  # subscribed only after open built them
-        self.count("received")
+    def _admit(self, topic: str, sample: zenoh.Sample, recv_ns: int) -> zenoh.Sample:
+        """The attachment check in the callback (both rmw_zenoh layouts accepted); the sample itself is queued."""
+        att = sample.attachment
         try:
-            size = len(sample.payload)
-            if size > self._max_bytes:
-                raise Ros2Error("too_large", f"{size} bytes > max {self._max_bytes}")
-            att = sample.attachment
             _, layout = attachment.decode(att.to_bytes() if att is not None else None)
         except Ros2Error as exc:
-            self.count("rejected")
-            self.count(f"rejected.{exc.reason}")
-            if self._reject is not None:
-                self._reject(f"{self.options.topic(role)}: {exc}")
-            return
+            raise Refused(exc.reason, str(exc)) from exc
         if layout == "legacy":
             self.count("attachment_legacy")
-        self._rings.put(role, sample)
+        return sample
 
-    def run(self, emit: Emit, reject: Reject) -> None:
-        """Drain the rings, check, assemble and emit until stopped."""
-        asm = StereoAssembler(self.options, self.context.rig, reject)
-        self._assembler = asm
-        rings = self._rings
-        assert rings is not None  # run after open
-        while not self.stopping():
-            got = False
-            for role in rings.keys:
-                sample = rings.take(role)
-                if sample is None:
-                    continue
-                got = True
-                for frame in self._handle(asm, role, sample):
-                    self.count("emitted")
-                    emit(frame)
-            for frame in asm.expire():
-                self.count("emitted")
-                emit(frame)
-            if not got:
-                rings.wait(self.options.poll_s)
+    def _begin(self, reject: Reject) -> None:
+        self._assembler = StereoAssembler(self.options, self.context.rig, reject)
 
-    def _handle(self, asm: StereoAssembler, role: str, sample: zenoh.Sample) -> list[StereoFrame]:
+    def _handle(self, topic: str, item: zenoh.Sample, reject: Reject) -> list[StereoFrame]:
         """Assemble one sample that passed the callback's checks (the content is checked by the assembler)."""
+        asm = self._assembler
+        assert asm is not None  # built by _begin
         before = sum(asm.rejected_by.values())
-        frames = asm.add(role, sample.payload.to_bytes())
+        frames = asm.add(topic, item.payload.to_bytes())
         self.count("rejected", sum(asm.rejected_by.values()) - before)
         return frames
 
-    def request_stop(self) -> None:
-        """Ask the thread to stop and wake it, and every callback waiting for room."""
-        super().request_stop()
-        if self._rings is not None:
-            self._rings.close()
-
-    def stop(self, timeout: float = 5.0) -> None:
-        """Wake the thread and the callbacks, stop within ``timeout`` s and undeclare the node."""
-        if self._rings is not None:
-            self._rings.close()
-        super().stop(timeout)
+    def _expire(self) -> list[StereoFrame]:
+        """The frames whose depth wait ran out (see :meth:`StereoAssembler.expire`)."""
+        return self._assembler.expire() if self._assembler is not None else []
 
     def close(self) -> None:
         """Undeclare the node (the session belongs to the service)."""
@@ -202,12 +156,10 @@ class Ros2Source(Source):
             self._node.close()
             self._node = None
 
-    def stats(self) -> dict[str, object]:  # type: ignore[override]  # nested counters, like the zenoh source
+    def stats(self) -> dict[str, Any]:
         """Counters plus the assembler's (refusals by cause, sync state, cloud point counts)."""
-        counters = super().stats()
-        early = {k.split(".", 1)[1]: v for k, v in counters.items() if k.startswith("rejected.")}
-        out: dict[str, object] = {k: v for k, v in counters.items() if not k.startswith("rejected.")}
-        out["ring_dropped"] = self._rings.dropped_total if self._rings is not None else 0
+        out = super().stats()
+        early = self.refused_by()
         if self._assembler is not None:
             out.update(self._assembler.stats())
         known = out.get("rejected_by")
@@ -215,18 +167,18 @@ class Ros2Source(Source):
         for cause, n in early.items():  # refused by the callback's cheap checks, before a ring slot
             by_cause[cause] = by_cause.get(cause, 0) + n
         out["rejected_by"] = by_cause
-        out["messages"] = self._ledger(counters, sum(early.values()))
+        out["messages"] = self._ledger(out["received"], sum(early.values()))
         return out
 
-    def _ledger(self, counters: dict[str, int], early_rejected: int) -> dict[str, int]:
+    def _ledger(self, received: int, early_rejected: int) -> dict[str, int]:
         """Where the received samples ended (see the module docstring): the callback's share plus the assembler's."""
         rings, asm = self._rings, self._assembler
         held = asm.messages if asm is not None else {}
         return {
-            "received": counters.get("received", 0),
+            "received": received,
             "used": held.get("used", 0),
             "rejected": early_rejected + held.get("rejected", 0),
-            "ring_dropped": rings.dropped_total if rings is not None else 0,
+            "ring_dropped": self.ring_dropped,
             "sync_dropped": held.get("sync_dropped", 0),
             "pending_dropped": held.get("pending_dropped", 0),
             "depth_unused": held.get("depth_unused", 0),
@@ -237,7 +189,7 @@ class Ros2Source(Source):
         """Valid messages lost in this source, by cause: the rings (``latest``), the stereo synchronizer."""
         asm = self._assembler
         return {
-            "source_ring": self._rings.dropped_total if self._rings is not None else 0,
+            **super().losses(),
             "sync": asm.counters["sync_dropped"] if asm is not None else 0,
             "pending": asm.counters["pending_dropped"] if asm is not None else 0,
         }

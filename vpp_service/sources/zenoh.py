@@ -6,7 +6,10 @@ sources' one receive ring type (:class:`~vpp_service.queueing.ReceiveRings`,
 ``ring_size`` per topic). A bad message is rejected (counted, reason reported)
 and never enters a ring, so junk cannot displace valid frames; the source keeps
 serving. This source's thread wakes as soon as a message is queued, drains the
-rings, joins separate-topics parts and emits frames.
+rings, joins separate-topics parts and emits frames. The callback's size bound,
+the rings, the drain loop and their counts are the network sources' shared part
+(:class:`~vpp_service.sources.network.NetworkSource`); this module adds the wire
+decoding and the topics' layout.
 
 The callback runs directly on Zenoh's receive thread under both input
 policies (no channel in between: an indirect callback's channel would buffer
@@ -41,14 +44,14 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import partial
 from typing import TYPE_CHECKING, Any, Literal
 
 from vpp_service.frame import StereoFrame
-from vpp_service.queueing import ReceiveRings
-from vpp_service.sources.base import SOURCES, Emit, Reject, Source, SourceContext
+from vpp_service.sources.base import SOURCES, Reject, SourceContext
+from vpp_service.sources.network import NetworkSource, Refused
 from vpp_service.transport import wire
 from vpp_service.transport.sync import Synchronizer
 
@@ -137,37 +140,33 @@ class _Received:
 
 
 @SOURCES.register("zenoh")
-class ZenohSource(Source):
+class ZenohSource(NetworkSource[_Received]):
     """Frames from Zenoh (see the module docstring). Needs ``context.session``."""
 
     Options = ZenohSourceOptions
     options: ZenohSourceOptions
-    needs_session = True
-    network = True  # a live camera on the network: a service that resumes after a restart
+    received_at = "drain"  # a message a ring drops is counted in ring_dropped only
 
     def __init__(self, options: ZenohSourceOptions, context: SourceContext) -> None:
-        super().__init__(options, context)
-        self._subs: dict[str, zenoh.Subscriber[None]] = {}
-        self._limits = wire.WireLimits(
+        limits = wire.WireLimits(
             max_message_bytes=int(options.max_message_mb * 1024 * 1024), max_pixels=options.max_pixels
         )
-        self._rings: ReceiveRings[_Received] | None = None  # one ring per topic, built at open
-        self._reject: Reject | None = None
+        super().__init__(options, context, max_message_bytes=limits.max_message_bytes, poll_s=options.poll_s)
+        self._subs: dict[str, zenoh.Subscriber[None]] = {}
+        self._limits = limits
         self.sync: Synchronizer[wire.Part] | None = None
-        self._counters.update({"received": 0, "sync_dropped": 0, "sync_inconsistent": 0})
+        self._counters.update({"sync_dropped": 0, "sync_inconsistent": 0})
 
     def open(self) -> None:
         """Declare the subscribers on the service's session."""
         import zenoh
 
-        session: zenoh.Session | None = self.context.session
-        if session is None:
-            raise ValueError("source.zenoh: needs an open zenoh session (service.zenoh section)")
+        session = self.session("zenoh")
         o = self.options
         parts = (
             ["frame"] if o.topics == "frame" else (["left", "right", "depth"] if o.with_depth else ["left", "right"])
         )
-        self._rings = ReceiveRings({part: o.ring_sizes.get(part, o.ring_size) for part in parts}, self.input_policy)
+        self.open_rings({part: o.ring_sizes.get(part, o.ring_size) for part in parts})
         if o.topics == "separate":
             self.sync = Synchronizer(
                 parts, o.sync, o.sync_queue_size, int(o.sync_threshold_ms * 1e6), consistent=_parts_fit
@@ -184,75 +183,28 @@ class ZenohSource(Source):
         parts = self._rings.keys if self._rings is not None else []
         return ", ".join(wire.topic(self.context.prefix, self.context.rig, f"in/{part}") for part in parts)
 
-    def start(self, emit: Emit, reject: Reject | None = None, on_finished: Callable[[], None] | None = None) -> None:
-        """Start the receive thread; ``reject`` also hears of messages the subscriber callback turns away."""
-        self._reject = reject
-        super().start(emit, reject, on_finished)
+    def _too_large(self, size: int) -> Refused:
+        return Refused("too_large", f"message: {size} bytes exceeds the limit of {self.max_message_bytes}")
 
-    def _on_sample(self, part: str, sample: zenoh.Sample) -> None:
-        """Subscriber callback: decode and validate, buffer what is valid, wake the receive thread.
+    def _topic_name(self, topic: str, sample: zenoh.Sample) -> str:
+        return str(sample.key_expr)
 
-        An oversized message is rejected by its length before its payload is
-        copied. It runs on Zenoh's receive thread; under the ``block`` input policy a
-        full ring makes it wait for room (back-pressure through Zenoh); under
-        ``latest`` it never waits (the oldest sample is dropped and counted).
-        """
-        recv_ns = time.monotonic_ns()  # for durations (latency): a monotonic clock, immune to clock steps
-        n = len(sample.payload)
-        if n > self._limits.max_message_bytes:  # by its length, before the payload is copied out of Zenoh
-            self.count("received")
-            self.count("rejected")
-            if self._reject is not None:
-                self._reject(
-                    f"{sample.key_expr}: message: {n} bytes exceeds the limit of {self._limits.max_message_bytes}"
-                )
-            return
+    def _admit(self, topic: str, sample: zenoh.Sample, recv_ns: int) -> _Received:
+        """Decode and validate in the callback: only a valid frame or part takes a ring slot."""
         t0 = time.perf_counter()
         try:
             payload = sample.payload.to_bytes()
             value: wire.Part | StereoFrame = (
                 wire.decode_frame(payload, self._limits, metric_map=False)
-                if part == "frame"
-                else wire.decode_part(payload, part, self._limits)
+                if topic == "frame"
+                else wire.decode_part(payload, topic, self._limits)
             )
         except wire.WireError as exc:
-            self.count("received")  # received and rejected here; the valid ones count as received when drained
-            self.count("rejected")
-            if self._reject is not None:
-                self._reject(f"{sample.key_expr}: {exc}")
-            return
-        assert self._rings is not None  # subscribed only after open built them
-        self._rings.put(part, _Received(str(sample.key_expr), value, recv_ns, (time.perf_counter() - t0) * 1e3))
+            raise Refused("wire", str(exc)) from exc
+        return _Received(str(sample.key_expr), value, recv_ns, (time.perf_counter() - t0) * 1e3)
 
-    def run(self, emit: Emit, reject: Reject) -> None:
-        """Drain the rings, decode, validate, synchronize and emit until stopped."""
-        rings = self._rings
-        assert rings is not None  # run after open
-        while not self.stopping():
-            got = False
-            for part in rings.keys:
-                sample = rings.take(part)
-                if sample is None:
-                    continue
-                got = True
-                self.count("received")
-                self._handle(part, sample, emit, reject)
-            if not got:
-                rings.wait(self.options.poll_s)
-
-    def request_stop(self) -> None:
-        """Ask the receive thread to stop and wake it, and every callback waiting for room (safe from any thread)."""
-        super().request_stop()
-        if self._rings is not None:
-            self._rings.close()
-
-    def stop(self, timeout: float = 5.0) -> None:
-        """Wake the receive thread and the callbacks, stop within ``timeout`` seconds, undeclare the subscribers."""
-        if self._rings is not None:
-            self._rings.close()
-        super().stop(timeout)
-
-    def _handle(self, part: str, item: _Received, emit: Emit, reject: Reject) -> None:
+    def _handle(self, topic: str, item: _Received, reject: Reject) -> list[StereoFrame]:
+        """The frame a message completes: itself, or a separate-topics set the synchronizer joined."""
         t0 = time.perf_counter()
         if isinstance(item.value, StereoFrame):
             frame = item.value
@@ -260,21 +212,20 @@ class ZenohSource(Source):
             p = item.value
             assert self.sync is not None
             before, inconsistent = self.sync.dropped, self.sync.inconsistent
-            joined = self.sync.add(part, p.seq, p.stamp_ns, p)
+            joined = self.sync.add(topic, p.seq, p.stamp_ns, p)
             self.count("sync_dropped", self.sync.dropped - before)
             self.count("sync_inconsistent", self.sync.inconsistent - inconsistent)
             if joined is None:
-                return
+                return []
             try:  # the synchronizer only joins parts that fit; this guards the contract
                 frame = wire.assemble(joined["left"], joined["right"], joined.get("depth"))
             except wire.WireError as exc:
                 self.count("rejected")
                 reject(f"{item.key_expr}: {exc}")
-                return
+                return []
         frame.meta["recv_ns"] = item.recv_ns
         frame.meta["timing_ms"] = {"decode": item.decode_ms + (time.perf_counter() - t0) * 1e3}
-        self.count("emitted")
-        emit(frame)
+        return [frame]
 
     def close(self) -> None:
         """Undeclare the subscribers (the session belongs to the service)."""
@@ -287,8 +238,7 @@ class ZenohSource(Source):
 
     def stats(self) -> dict[str, Any]:
         """Counters (``received``, ``ring_dropped``, ``sync_dropped``, ``sync_inconsistent``, base ones), ``sync``."""
-        out: dict[str, Any] = super().stats()
-        out["ring_dropped"] = self._rings.dropped_total if self._rings is not None else 0
+        out = super().stats()
         if self.sync is not None:
             out["sync"] = self.sync.stats()
         return out
@@ -297,7 +247,7 @@ class ZenohSource(Source):
         """Valid messages lost in this source, by cause: the ring (``latest``), the synchronizer."""
         c = self.stats()
         return {
-            "source_ring": c["ring_dropped"],
+            **super().losses(),
             "sync": c["sync_dropped"],
             "sync_inconsistent": c["sync_inconsistent"],
         }
