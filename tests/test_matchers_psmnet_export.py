@@ -24,7 +24,7 @@ import onnx
 
 from helpers.shared_data import need_shared
 from vpp_service.matchers import build_matcher
-from vpp_service.matchers.model_card import PSMNET_CARD, read_card
+from vpp_service.matchers.model_card import read_card, shipped_card
 from vpp_service.matchers.psmnet_export import PSMNetModel, export_psmnet, load_checkpoint
 
 # PyTorch comes only with the optional 'export' extra (otherwise a CUDA build of several GB): taken from
@@ -108,7 +108,7 @@ def test_export_reproduces_the_shared_model_on_a_real_pair(tmp_path):
 
     state = state_from_onnx(psmnet)
     ours, card = export_psmnet(None, tmp_path / "psmnet_kitti2015.onnx", state=state, height=256, width=512)
-    assert read_card(card).max_disparity == PSMNET_CARD.max_disparity
+    assert read_card(card).max_disparity == shipped_card("psmnet").max_disparity
     frame = open_dataset("auto", kitti, color=True)[0]
     crop = (slice(376 - 256, 376), slice(300, 300 + 640))  # a real 256 x 640 piece of the pair
     left, right = (np.ascontiguousarray(img[crop]) for img in (frame.left, frame.right))
