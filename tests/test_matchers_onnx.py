@@ -541,6 +541,87 @@ def test_engine_options(sad16):
         choose("cuda", "openvino")
 
 
+# ---- ONNX Runtime's execution providers ----
+
+ORT = pytest.mark.skipif(importlib.util.find_spec("onnxruntime") is None, reason="onnxruntime is not installed")
+
+
+@ORT
+def test_providers_are_what_the_session_runs(sad16):
+    import onnxruntime as ort
+
+    clear_cache()
+    # every provider this ONNX Runtime has that runs on the CPU, the CPU's last (ONNX Runtime's fallback)
+    cpu_side = [p for p in ort.get_available_providers() if p in ("AzureExecutionProvider", "CPUExecutionProvider")]
+    opts = {"model": str(sad16), "providers": cpu_side, "card": card()}
+    opts["provider_options"] = {"CPUExecutionProvider": {"arena_extend_strategy": "kSameAsRequested"}}
+    m = build_matcher("onnx", opts)
+    eng = m.engine()
+    assert eng.kind == "onnxruntime" and eng.device == "cpu" and eng.providers == tuple(cpu_side)
+    assert m.runtime()["engine"] == "onnxruntime"
+    left, right = shifted_pair(32, 64, 5)
+    np.testing.assert_array_equal(m.compute(left, right)[:, 16:], 5.0)
+    # other provider options: another session (the engine cache tells them apart)
+    other = build_matcher("onnx", {**opts, "provider_options": {"CPUExecutionProvider": {}}})
+    assert other.engine() is not eng and other.engine().providers == eng.providers
+
+
+@ORT
+def test_io_binding_gives_what_the_plain_run_gives(sad16):
+    """The bound path (used off the CPU, with device "cuda") run here with CPU memory: the same output."""
+    from vpp_service.matchers.inference import OnnxRuntimeEngine
+    from vpp_service.matchers.onnx import network_feeds
+
+    eng = OnnxRuntimeEngine(sad16, "cpu", "f32", 1)
+    assert eng.bind_device is None  # on the CPU: a plain run
+    left, right = shifted_pair(32, 64, 4)
+    c = card_from_mapping(card(), "test")
+    tl, lay = to_tensor(left, c)
+    tr, _ = to_tensor(right, c, lay)
+    feeds = network_feeds(tl, tr, c)
+    plain = eng.run(feeds, "disparity")
+    bound = eng._run_bound(feeds, "disparity", "cpu")
+    assert bound.shape == plain.shape == (1, 32, 64) and np.array_equal(bound, plain)
+    np.testing.assert_array_equal(bound[0, :, 16:], 4.0)
+
+
+@ORT
+def test_a_provider_onnx_runtime_lacks_names_the_ones_it_has(sad16):
+    import onnxruntime as ort
+
+    missing = "TensorrtExecutionProvider"
+    if missing in ort.get_available_providers():
+        pytest.skip("this ONNX Runtime has TensorRT")
+    m = build_matcher("onnx", {"model": str(sad16), "providers": [missing, "CPUExecutionProvider"], "card": card()})
+    with pytest.raises(EngineUnavailable) as err:
+        m.check()
+    msg = str(err.value)
+    assert msg.startswith(f"providers: this ONNX Runtime has no {missing}; it has {ort.get_available_providers()}")
+    assert "\n" not in msg
+
+
+@pytest.mark.parametrize(
+    ("keys", "match"),
+    [
+        ({"providers": ["CPUExecutionProvider"], "engine": "openvino"}, r"providers choose ONNX Runtime and the dev"),
+        ({"providers": ["CUDAExecutionProvider"], "device": "cuda"}, r"providers choose .*device 'cuda'\)"),
+        ({"providers": ["CPUExecutionProvider", "CPUExecutionProvider"]}, r"providers must not repeat a provider"),
+        ({"providers": [""]}, r"providers must be a list of ONNX Runtime provider names"),
+        (
+            {"providers": ["CPUExecutionProvider"], "provider_options": {"CUDAExecutionProvider": {}}},
+            r"provider_options\.CUDAExecutionProvider: not among providers \['CPUExecutionProvider'\]",
+        ),
+        (
+            {"providers": ["CPUExecutionProvider"], "provider_options": {"CPUExecutionProvider": 3}},
+            r"provider_options\.CPUExecutionProvider must be a table of options, got 3",
+        ),
+    ],
+)
+def test_provider_options_are_checked(sad16, keys, match):
+    with pytest.raises(SettingsError, match=r"^matcher\.onnx: " + match):
+        build_matcher("onnx", {"model": str(sad16), "card": card(), **keys})
+
+
 def test_cuda_without_a_cuda_runtime_is_one_clear_error(sad16):
     from vpp_service.matchers.inference import cuda_available
 

@@ -246,6 +246,12 @@ class OnnxOptions(MatcherOptions):
         triton: a Triton Inference Server, :mod:`~vpp_service.matchers.triton`).
     precision : {"f32", "bf16", "f16"}
         Inference precision (default f32; bf16 / f16 only with OpenVINO).
+    providers : tuple of str
+        ONNX Runtime's execution providers in order (e.g. ``["TensorrtExecutionProvider",
+        "CUDAExecutionProvider"]``); () = from ``device``. Given, they pick ONNX Runtime
+        and the device (leave ``engine`` and ``device`` at auto).
+    provider_options : dict
+        Options per provider (``{CUDAExecutionProvider = {device_id = 1}}``); keys among ``providers``.
     threads : int
         CPU threads (0 = the project's policy, :func:`vpp_service.threads.default_threads`).
     max_disparity : int
@@ -272,6 +278,8 @@ class OnnxOptions(MatcherOptions):
     device: Literal["auto", "cpu", "cuda"] = "auto"
     engine: Literal["auto", "openvino", "onnxruntime", "triton"] = "auto"
     precision: Literal["f32", "bf16", "f16"] = "f32"
+    providers: tuple[str, ...] = ()
+    provider_options: dict[str, Any] = field(default_factory=dict)
     threads: int = 0
     url: str | tuple[str, ...] = ""
     model_version: str = ""
@@ -302,7 +310,26 @@ class OnnxOptions(MatcherOptions):
             raise ValueError(f"precision {self.precision!r} needs engine 'openvino' (ONNX Runtime runs f32)")
         if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 0:
             raise ValueError(f"threads must be an integer >= 0 (0 = the default policy), got {self.threads!r}")
+        self._check_providers()
         self._check_triton()
+
+    def _check_providers(self) -> None:
+        if not all(isinstance(p, str) and p.strip() for p in self.providers):
+            raise ValueError(f"providers must be a list of ONNX Runtime provider names, got {list(self.providers)}")
+        if len(set(self.providers)) != len(self.providers):
+            raise ValueError(f"providers must not repeat a provider, got {list(self.providers)}")
+        if self.providers and (self.engine not in ("auto", "onnxruntime") or self.device != "auto"):
+            raise ValueError(
+                f"providers choose ONNX Runtime and the device: leave engine and device 'auto' "
+                f"(engine is {self.engine!r}, device {self.device!r})"
+            )
+        if not isinstance(self.provider_options, dict):
+            raise ValueError(f"provider_options must be a table of tables, got {type(self.provider_options).__name__}")
+        for name, opts in self.provider_options.items():
+            if name not in self.providers:
+                raise ValueError(f"provider_options.{name}: not among providers {list(self.providers)}")
+            if not isinstance(opts, dict):
+                raise ValueError(f"provider_options.{name} must be a table of options, got {opts!r}")
 
     @property
     def urls(self) -> tuple[str, ...]:
@@ -467,7 +494,16 @@ class OnnxMatcher(Matcher):
                 self._engine = self._remote_engine()
                 return self._engine
             assert o.engine != "triton"
-            eng = open_engine(self.model_path, o.device, o.engine, o.precision, resolve_threads(o.threads or None))
+            threads = resolve_threads(o.threads or None)
+            eng = open_engine(
+                self.model_path,
+                o.device,
+                o.engine,
+                o.precision,
+                threads,
+                providers=o.providers,
+                provider_options=o.provider_options,
+            )
             self._check_graph(eng)
             self._engine = eng
         return self._engine
