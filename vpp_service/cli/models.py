@@ -51,7 +51,7 @@ def export(args: argparse.Namespace, folder: Path) -> int:
     if not args.checkpoint.is_file():
         raise FileNotFoundError(f"--checkpoint: no such file: {args.checkpoint}")
     try:
-        from vpp_service.matchers.psmnet_export import export_psmnet
+        from vpp_service.export.psmnet import export_psmnet
     except ImportError as exc:
         raise ValueError(f"models export needs PyTorch and onnx: pip install 'vpp-service[export]' ({exc})") from None
     out = args.out if args.out is not None else folder / shipped_card("psmnet").model_file

@@ -23,9 +23,9 @@ pytest.importorskip("onnxruntime", reason="the exported graph is run with ONNX R
 import onnx
 
 from helpers.shared_data import need_shared
+from vpp_service.export.psmnet import PSMNetModel, export_psmnet, load_checkpoint
 from vpp_service.matchers import build_matcher
 from vpp_service.matchers.model_card import read_card, shipped_card
-from vpp_service.matchers.psmnet_export import PSMNetModel, export_psmnet, load_checkpoint
 
 # PyTorch comes only with the optional 'export' extra (otherwise a CUDA build of several GB): taken from
 # importorskip, never imported by name, so a plain `.[test]` install skips this module with the reason above.
@@ -140,7 +140,7 @@ def test_models_export_cli(tmp_path, capsys, monkeypatch):
     ckpt = tmp_path / "pretrained.tar"
     torch.save({"state_dict": state, "epoch": 1}, ckpt)
     monkeypatch.setattr(
-        "vpp_service.matchers.psmnet_export.export_onnx",
+        "vpp_service.export.psmnet.export_onnx",
         lambda model, out, h, w: Path(out).write_bytes(b"stand-in") and Path(out),
     )
     assert main(["models", "export", "psmnet", "--checkpoint", str(ckpt), "--dir", str(tmp_path)]) == 0
