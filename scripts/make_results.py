@@ -284,7 +284,7 @@ def run_deep(data: Path, model: Path, limit: int | None, threads: int) -> dict[s
     options = {"model": str(model), "threads": threads}
     probe = build_matcher(DEEP_MATCHER, options)
     engine = probe.engine().describe() if hasattr(probe, "engine") else ""
-    vpp_config = VPPConfig(**MATCHERS.get(DEEP_MATCHER).vpp_defaults)
+    vpp_config = VPPConfig(**MATCHERS.get(DEEP_MATCHER).preferred_vpp(options))
     rows: list[dict[str, Any]] = []
     jobs: list[dict[str, Any]] = []
     t0 = time.perf_counter()

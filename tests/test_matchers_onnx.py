@@ -9,6 +9,7 @@ PSMNet's accuracy is measured against the KITTI ground truth of the shared data.
 from __future__ import annotations
 
 import importlib.util
+import tomllib
 from dataclasses import replace
 from pathlib import Path
 
@@ -18,19 +19,23 @@ import pytest
 pytest.importorskip("onnx", reason="the tiny test networks are built with the onnx package (the 'test' extra)")
 
 from helpers.shared_data import need_shared
-from helpers.tiny_networks import echo, nan_output, sad_stereo
+from helpers.tiny_networks import echo, nan_output, sad_stereo, sad_stereo_io
 from vpp_service.matchers import MATCHERS, build_matcher
 from vpp_service.matchers.inference import EngineUnavailable, choose, clear_cache
 from vpp_service.matchers.model_card import (
-    PSMNET_CARD,
+    NETWORK_VPP,
     ModelCard,
     card_from_mapping,
     card_to_toml,
     read_card,
+    shipped_card,
+    shipped_cards,
 )
 from vpp_service.matchers.model_store import MODELS_ENV, list_models, models_dir
-from vpp_service.matchers.onnx import BUILTIN_CARDS, OnnxMatcher, tensor_layout, to_tensor
+from vpp_service.matchers.onnx import OnnxMatcher, OnnxOptions, builtin_cards, tensor_layout, to_tensor
 from vpp_service.settings import SettingsError
+
+PSMNET_CARD = shipped_card("psmnet")
 
 ENGINES = [
     pytest.param(
@@ -230,6 +235,145 @@ def test_fixed_size_card_must_match_the_graph(tmp_path, sad16):
         build_matcher("onnx", {"model": str(net), "card": card()}).check()
 
 
+# ---- the card's I/O forms: one concatenated input, extra inputs, a strided output, float16 ----
+
+IO_FORMS = [
+    pytest.param({}, {"left_input": "left_in", "right_input": "right_in"}, id="two-inputs"),
+    pytest.param({"concat": "pair"}, {"concat_input": "pair"}, id="concat"),
+    pytest.param({"bias": "offset"}, {"left_input": "left_in", "right_input": "right_in"}, id="extra-input"),
+    pytest.param({"stride": 2}, {"left_input": "left_in", "right_input": "right_in"}, id="stride-2"),
+    pytest.param({"half": True}, {"left_input": "left_in", "right_input": "right_in"}, id="float16"),
+    pytest.param(
+        {"concat": "pair", "bias": "offset", "stride": 4, "half": True}, {"concat_input": "pair"}, id="all-at-once"
+    ),
+]
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize(("net", "keys"), IO_FORMS)
+def test_card_io_forms_feed_and_read_the_network(tmp_path, engine, net, keys):
+    h, w, shift, bias = 48, 96, 7, 2
+    model = sad_stereo_io(tmp_path / "io.onnx", 16, **net)
+    io = dict(keys, pad_multiple=16)
+    if "bias" in net:
+        io["extra_inputs"] = {net["bias"]: bias}
+    if "stride" in net:
+        io["output_stride"] = net["stride"]
+    if net.get("half"):
+        io["dtype"] = "float16"
+    want = shift + (bias if "bias" in net else 0)
+    m = build_matcher("onnx", {"model": str(model), "engine": engine, "max_disparity": 16, "card": card(**io)})
+    d = m.compute(*shifted_pair(h, w, shift))
+    assert d.shape == (h, w) and d.dtype == np.float32
+    # a strided output is upsampled back: columns whose samples all lie at x >= 16 hold the exact answer
+    first = 16 + 2 * net.get("stride", 1)
+    np.testing.assert_allclose(d[:, first:], want, rtol=0, atol=1e-5)
+
+
+@pytest.mark.parametrize(
+    ("net", "keys", "match"),
+    [
+        ({"concat": "pair"}, {}, r"card left_input 'left' is not an input of the graph; its inputs: \['pair'\]"),
+        ({}, {"concat_input": "pair"}, r"card concat_input 'pair' is not an input of the graph"),
+        (
+            {"concat": "pair"},
+            {"concat_input": "pair", "colour": "gray"},
+            r"input 'pair' takes 6 channels; card colour 'gray' gives 2 \(both images\)",
+        ),
+        (
+            {"bias": "offset"},
+            {"left_input": "left_in", "right_input": "right_in"},
+            r"the graph has inputs the card does not feed: \['offset'\]",
+        ),
+        (
+            {},
+            {"left_input": "left_in", "right_input": "right_in", "extra_inputs": {"iters": 4}},
+            r"card extra_inputs \['iters'\] are not inputs of the graph",
+        ),
+        (
+            {"stride": 2},
+            {"left_input": "left_in", "right_input": "right_in"},
+            r"output shape \(1, 16, 16\), expected \(1, 32, 32\) \(card output_layout 1HW at input 32 x 32\)",
+        ),
+        (
+            {},
+            {"left_input": "left_in", "right_input": "right_in", "output_stride": 2, "pad_multiple": 16},
+            r"output shape \(1, 32, 32\), expected \(1, 16, 16\) \(card output_layout 1HW, output_stride 2",
+        ),
+    ],
+)
+def test_card_io_and_graph_disagree(tmp_path, net, keys, match):
+    model = sad_stereo_io(tmp_path / "io.onnx", 4, **net)
+    m = build_matcher("onnx", {"model": str(model), "engine": "onnxruntime", "card": card(**keys)})
+    with pytest.raises(ValueError, match=match) as err:
+        m.check()
+    assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("keys", "match"),
+    [
+        ({"dtype": "int8"}, r"dtype: must be one of \['float32', 'float16'\], got 'int8'"),
+        ({"output_stride": 0}, r"output_stride must be an integer in \[1, 64\], got 0"),
+        ({"output_stride": 3, "pad_multiple": 16}, r"output_stride 3 must divide the input size: pad_multiple 16"),
+        ({"extra_inputs": {"left": 1}}, r"extra_inputs.left: is an image input of the card"),
+        ({"extra_inputs": {"iters": "many"}}, r"extra_inputs.iters: must be a finite number or a list of them"),
+        ({"vpp": {"alpha": 2.0}}, r"matcher\.onnx\.card: vpp.*alpha.*2\.0"),
+        ({"vpp": {"bogus": 1}}, r"matcher.onnx.card: vpp.bogus: unknown option"),
+    ],
+)
+def test_invalid_card_io_and_vpp_keys(sad16, keys, match):
+    with pytest.raises(SettingsError, match=match):
+        build_matcher("onnx", {"model": str(sad16), "card": card(**keys)})
+
+
+def test_extra_inputs_are_int64_or_the_cards_dtype():
+    c = card_from_mapping(card(dtype="float16", extra_inputs={"iters": 12, "scale": [0.5, 2.0]}), "test")
+    feeds = c.extra_feeds()
+    assert feeds["iters"].dtype == np.int64 and feeds["iters"].shape == () and int(feeds["iters"]) == 12
+    assert feeds["scale"].dtype == np.float16 and feeds["scale"].tolist() == [0.5, 2.0]
+
+
+# ---- cards as files: the shipped ones are matchers, a card's [vpp] table is its network's setting ----
+
+
+def test_every_shipped_card_is_a_matcher_of_its_name():
+    cards = shipped_cards()
+    assert "psmnet" in cards and all(p.suffix == ".toml" and p.is_file() for p in cards.values())
+    for name in cards:
+        cls = MATCHERS.get(name)
+        assert issubclass(cls, OnnxMatcher) and cls.name == name and cls.network == name
+        assert cls.Options is OnnxOptions and cls.shipped() == read_card(cards[name])
+        assert cls.shipped().model_file in builtin_cards()
+    assert OnnxMatcher.network == "" and OnnxMatcher.shipped() is None
+
+
+def test_the_shipped_psmnet_card_round_trips_through_toml():
+    assert card_from_mapping(tomllib.loads(card_to_toml(PSMNET_CARD)), "test") == PSMNET_CARD
+    assert PSMNET_CARD.model_file == "psmnet_kitti2015.onnx" and "models export psmnet" in PSMNET_CARD.howto
+
+
+def test_a_cards_vpp_table_is_its_networks_setting(tmp_path, sad16):
+    from vpp_service.service.config import validate_config
+    from vpp_service.vpp import VPPConfig
+
+    model = tmp_path / "net.onnx"
+    model.write_bytes(sad16.read_bytes())
+    mine = ModelCard(name="net", max_disparity=16, vpp={"alpha": 0.7, "patch": 3})
+    (tmp_path / "net.toml").write_text(card_to_toml(mine))
+    assert read_card(tmp_path / "net.toml") == mine
+    # the table is the whole setting (over VPP's defaults), the user's [vpp] keys over it
+    assert validate_config({"matcher": {"name": "onnx", "model": str(model)}}).vpp == VPPConfig(alpha=0.7, patch=3)
+    user = validate_config({"matcher": {"name": "onnx", "model": str(model)}, "vpp": {"alpha": 0.5}}).vpp
+    assert user == VPPConfig(alpha=0.5, patch=3)
+    # card keys in the config override the file's table; an empty table is VPP's own defaults
+    cfg = {"matcher": {"name": "onnx", "model": str(model), "card": {"vpp": {}}}}
+    assert validate_config(cfg).vpp == VPPConfig()
+    # a card without [vpp] gets the setting measured for networks
+    (tmp_path / "net.toml").write_text("max_disparity = 16\n")
+    assert OnnxMatcher.preferred_vpp({"model": str(model)}) == NETWORK_VPP
+
+
 # ---- errors: one line naming the problem ----
 
 
@@ -290,7 +434,7 @@ def test_psmnet_is_found_in_the_models_folder_with_its_builtin_card(tmp_path, mo
     m = build_matcher("psmnet")
     assert m.model_path == tmp_path / "psmnet_kitti2015.onnx" and m.card == PSMNET_CARD
     assert m.options.max_disparity == 192 and m.max_range == 192 and not m.supports_guidance
-    (found,) = list_models(tmp_path, BUILTIN_CARDS)
+    (found,) = list_models(tmp_path, builtin_cards())
     assert found.card == PSMNET_CARD
 
 
@@ -395,6 +539,87 @@ def test_engine_options(sad16):
         build_matcher("onnx", {"model": str(sad16), "engine": "onnxruntime", "precision": "bf16", "card": card()})
     with pytest.raises(ValueError, match="engine 'openvino' runs on CPU only"):
         choose("cuda", "openvino")
+
+
+# ---- ONNX Runtime's execution providers ----
+
+ORT = pytest.mark.skipif(importlib.util.find_spec("onnxruntime") is None, reason="onnxruntime is not installed")
+
+
+@ORT
+def test_providers_are_what_the_session_runs(sad16):
+    import onnxruntime as ort
+
+    clear_cache()
+    # every provider this ONNX Runtime has that runs on the CPU, the CPU's last (ONNX Runtime's fallback)
+    cpu_side = [p for p in ort.get_available_providers() if p in ("AzureExecutionProvider", "CPUExecutionProvider")]
+    opts = {"model": str(sad16), "providers": cpu_side, "card": card()}
+    opts["provider_options"] = {"CPUExecutionProvider": {"arena_extend_strategy": "kSameAsRequested"}}
+    m = build_matcher("onnx", opts)
+    eng = m.engine()
+    assert eng.kind == "onnxruntime" and eng.device == "cpu" and eng.providers == tuple(cpu_side)
+    assert m.runtime()["engine"] == "onnxruntime"
+    left, right = shifted_pair(32, 64, 5)
+    np.testing.assert_array_equal(m.compute(left, right)[:, 16:], 5.0)
+    # other provider options: another session (the engine cache tells them apart)
+    other = build_matcher("onnx", {**opts, "provider_options": {"CPUExecutionProvider": {}}})
+    assert other.engine() is not eng and other.engine().providers == eng.providers
+
+
+@ORT
+def test_io_binding_gives_what_the_plain_run_gives(sad16):
+    """The bound path (used off the CPU, with device "cuda") run here with CPU memory: the same output."""
+    from vpp_service.matchers.inference import OnnxRuntimeEngine
+    from vpp_service.matchers.onnx import network_feeds
+
+    eng = OnnxRuntimeEngine(sad16, "cpu", "f32", 1)
+    assert eng.bind_device is None  # on the CPU: a plain run
+    left, right = shifted_pair(32, 64, 4)
+    c = card_from_mapping(card(), "test")
+    tl, lay = to_tensor(left, c)
+    tr, _ = to_tensor(right, c, lay)
+    feeds = network_feeds(tl, tr, c)
+    plain = eng.run(feeds, "disparity")
+    bound = eng._run_bound(feeds, "disparity", "cpu")
+    assert bound.shape == plain.shape == (1, 32, 64) and np.array_equal(bound, plain)
+    np.testing.assert_array_equal(bound[0, :, 16:], 4.0)
+
+
+@ORT
+def test_a_provider_onnx_runtime_lacks_names_the_ones_it_has(sad16):
+    import onnxruntime as ort
+
+    missing = "TensorrtExecutionProvider"
+    if missing in ort.get_available_providers():
+        pytest.skip("this ONNX Runtime has TensorRT")
+    m = build_matcher("onnx", {"model": str(sad16), "providers": [missing, "CPUExecutionProvider"], "card": card()})
+    with pytest.raises(EngineUnavailable) as err:
+        m.check()
+    msg = str(err.value)
+    assert msg.startswith(f"providers: this ONNX Runtime has no {missing}; it has {ort.get_available_providers()}")
+    assert "\n" not in msg
+
+
+@pytest.mark.parametrize(
+    ("keys", "match"),
+    [
+        ({"providers": ["CPUExecutionProvider"], "engine": "openvino"}, r"providers choose ONNX Runtime and the dev"),
+        ({"providers": ["CUDAExecutionProvider"], "device": "cuda"}, r"providers choose .*device 'cuda'\)"),
+        ({"providers": ["CPUExecutionProvider", "CPUExecutionProvider"]}, r"providers must not repeat a provider"),
+        ({"providers": [""]}, r"providers must be a list of ONNX Runtime provider names"),
+        (
+            {"providers": ["CPUExecutionProvider"], "provider_options": {"CUDAExecutionProvider": {}}},
+            r"provider_options\.CUDAExecutionProvider: not among providers \['CPUExecutionProvider'\]",
+        ),
+        (
+            {"providers": ["CPUExecutionProvider"], "provider_options": {"CPUExecutionProvider": 3}},
+            r"provider_options\.CPUExecutionProvider must be a table of options, got 3",
+        ),
+    ],
+)
+def test_provider_options_are_checked(sad16, keys, match):
+    with pytest.raises(SettingsError, match=r"^matcher\.onnx: " + match):
+        build_matcher("onnx", {"model": str(sad16), "card": card(), **keys})
 
 
 def test_cuda_without_a_cuda_runtime_is_one_clear_error(sad16):
@@ -565,13 +790,13 @@ def test_networks_get_their_vpp_setting_where_the_user_sets_none(sad16):
     from vpp_service.service.config import validate_config
     from vpp_service.vpp import VPPConfig
 
-    assert OnnxMatcher.vpp_defaults["uniform_patch"] is True
-    assert validate_config({"matcher": {"name": "psmnet"}}).vpp == VPPConfig(**OnnxMatcher.vpp_defaults)
+    assert PSMNET_CARD.vpp == NETWORK_VPP and PSMNET_CARD.vpp["uniform_patch"] is True
+    assert validate_config({"matcher": {"name": "psmnet"}}).vpp == VPPConfig(**PSMNET_CARD.vpp)
     mine = validate_config({"matcher": {"name": "psmnet"}, "vpp": {"uniform_patch": False, "alpha": 0.6}}).vpp
     assert mine is not None and mine.uniform_patch is False and mine.alpha == 0.6
     assert validate_config({"matcher": {"name": "sgbm"}}).vpp == VPPConfig()  # classic matchers: VPP's defaults
     args = build_parser().parse_args(["eval", "--matcher", "psmnet", "--alpha", "0.2"])
-    assert _vpp_config(args) == VPPConfig(**{**OnnxMatcher.vpp_defaults, "alpha": 0.2})
+    assert _vpp_config(args) == VPPConfig(**{**PSMNET_CARD.vpp, "alpha": 0.2})
     probe = build_matcher("onnx", {"model": str(sad16), "card": card()})
-    assert _check_vpp_config(None, probe) == VPPConfig(**OnnxMatcher.vpp_defaults)  # run_evaluation(vpp_config=None)
+    assert _check_vpp_config(None, probe) == VPPConfig(**NETWORK_VPP)  # run_evaluation(vpp_config=None)
     assert _check_vpp_config(None, build_matcher("sgbm")) == VPPConfig()

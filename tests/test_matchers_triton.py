@@ -23,7 +23,7 @@ from vpp_service.cli import EXIT_STARTUP, main
 from vpp_service.frame import FusionResult
 from vpp_service.fusion import Fusion
 from vpp_service.matchers import build_matcher
-from vpp_service.matchers.model_card import PSMNET_CARD
+from vpp_service.matchers.model_card import shipped_card
 from vpp_service.matchers.triton import ServerUnavailable
 from vpp_service.service.pipeline import Pipeline
 from vpp_service.sinks.base import Sink, SinkContext
@@ -301,7 +301,7 @@ def test_psmnet_served_equals_the_local_engine(tmp_path):
     server = TritonServer(server_venv(), tmp_path / "repo", tmp_path / "server").start()
     try:
         m = build_matcher("psmnet", {"engine": "triton", "url": server.url})
-        assert m.card == PSMNET_CARD and m.triton_settings().model == "psmnet_kitti2015"
+        assert m.card == shipped_card("psmnet") and m.triton_settings().model == "psmnet_kitti2015"
         got = m.compute(left, right)
     finally:
         server.stop()

@@ -10,6 +10,9 @@
   shows exactly what the matcher fed the network (colour order, scale,
   mean/std, padding and where the image sits in the tensor).
 * :func:`nan_output` - outputs NaN everywhere.
+* :func:`sad_stereo_io` - the SAD network behind the I/O a card can describe:
+  one concatenated input, an extra input added to the answer, an output at
+  1/stride resolution, float16 tensors.
 """
 
 from __future__ import annotations
@@ -54,6 +57,16 @@ def sad_stereo(
     ``window`` > 1 sums the costs over a ``window x window`` box (zero-padded) before the ArgMin: one
     channel needs it (a single byte matches a wrong shift by chance too often).
     """
+    nodes, inits = _sad_nodes(max_disparity, names, output, window)
+    h, w = size if size is not None else ("H", "W")
+    out = helper.make_tensor_value_info(output, TensorProto.FLOAT, [1, h, w])
+    return _save(nodes, _inputs(names, channels, size), [out], inits, path)
+
+
+def _sad_nodes(
+    max_disparity: int, names: tuple[str, str], output: str, window: int
+) -> tuple[list[onnx.NodeProto], list[onnx.TensorProto]]:
+    """The SAD + ArgMin nodes from the inputs ``names`` to the float32 ``output`` (``1 x H x W``)."""
     nodes, inits = [], [_const("axes1", [1]), _const("axis3", [3]), _const("zero", [0])]
     costs = []
     for d in range(max_disparity):
@@ -84,9 +97,63 @@ def sad_stereo(
         helper.make_node("ArgMin", ["volume"], ["best"], axis=1, keepdims=0),
         helper.make_node("Cast", ["best"], [output], to=TensorProto.FLOAT),
     ]
-    h, w = size if size is not None else ("H", "W")
-    out = helper.make_tensor_value_info(output, TensorProto.FLOAT, [1, h, w])
-    return _save(nodes, _inputs(names, channels, size), [out], inits, path)
+    return nodes, inits
+
+
+def sad_stereo_io(
+    path: Path,
+    max_disparity: int,
+    *,
+    concat: str = "",
+    bias: str = "",
+    stride: int = 1,
+    half: bool = False,
+) -> Path:
+    """Write the SAD network (3 channels, window 1) behind the I/O forms of a card.
+
+    Parameters
+    ----------
+    concat : str
+        "" (inputs ``left``, ``right``), or the one input taking both, ``1 x 6 x H x W``.
+    bias : str
+        "" or the name of an int64 scalar input added to the answer.
+    stride : int
+        The output keeps every ``stride``-th row and column (``1 x H/s x W/s``).
+    half : bool
+        Image inputs and the output are float16 (cast to float32 inside).
+    """
+    ftype = TensorProto.FLOAT16 if half else TensorProto.FLOAT
+    channels = 6 if concat else 3
+    fed = [concat] if concat else ["left_in", "right_in"]
+    inputs = [helper.make_tensor_value_info(n, ftype, [1, channels, "H", "W"]) for n in fed]
+    nodes = [helper.make_node("Cast", [n], [f"{n}_f"], to=TensorProto.FLOAT) for n in fed]
+    inits = [_const("c0", [0]), _const("c3", [3]), _const("c6", [6]), _const("ch", [1])]
+    if concat:
+        nodes += [
+            helper.make_node("Slice", [f"{concat}_f", "c0", "c3", "ch"], ["left"]),
+            helper.make_node("Slice", [f"{concat}_f", "c3", "c6", "ch"], ["right"]),
+        ]
+    else:
+        nodes += [helper.make_node("Identity", [f"{n}_f"], [n.removesuffix("_in")]) for n in fed]
+    sad, sad_inits = _sad_nodes(max_disparity, ("left", "right"), "answer", 1)
+    nodes += sad
+    inits += sad_inits
+    last = "answer"
+    if bias:
+        inputs.append(helper.make_tensor_value_info(bias, TensorProto.INT64, []))
+        nodes += [
+            helper.make_node("Cast", [bias], ["bias_f"], to=TensorProto.FLOAT),
+            helper.make_node("Add", [last, "bias_f"], ["biased"]),
+        ]
+        last = "biased"
+    if stride > 1:
+        inits += [_const("hw_start", [0, 0]), _const("hw_end", [1 << 30, 1 << 30]), _const("hw_axes", [1, 2])]
+        inits.append(_const("hw_steps", [stride, stride]))
+        nodes.append(helper.make_node("Slice", [last, "hw_start", "hw_end", "hw_axes", "hw_steps"], ["strided"]))
+        last = "strided"
+    nodes.append(helper.make_node("Cast", [last], ["disparity"], to=ftype))
+    out = helper.make_tensor_value_info("disparity", ftype, [1, "H2", "W2"])
+    return _save(nodes, inputs, [out], inits, path)
 
 
 def echo(path: Path, channel: int = 0, *, channels: int = 3) -> Path:

@@ -146,7 +146,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
 
 
 def _vpp_config(args: argparse.Namespace) -> VPPConfig:
-    """The VPP flags over the matcher's preferred setting (``Matcher.vpp_defaults``) over VPP's defaults."""
+    """The VPP flags over the matcher's preferred setting (``Matcher.preferred_vpp``) over VPP's defaults."""
     from vpp_service.matchers import MATCHERS
     from vpp_service.vpp import VPPConfig
 
@@ -155,7 +155,8 @@ def _vpp_config(args: argparse.Namespace) -> VPPConfig:
         for k in ("pattern", "patch", "uniform_patch", "alpha", "splat", "occlusion", "adaptive_patch")
         if getattr(args, k) is not None
     }
-    return VPPConfig(**{**MATCHERS.get(args.matcher).vpp_defaults, **opts})
+    preferred = MATCHERS.get(args.matcher).preferred_vpp(dict(args.matcher_opt))
+    return VPPConfig(**{**preferred, **opts})
 
 
 def _frames(args: argparse.Namespace) -> tuple[Frames, str]:

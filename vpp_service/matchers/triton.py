@@ -1,7 +1,8 @@
 """The ``triton`` engine: a network served by NVIDIA Triton Inference Server (KServe v2 over gRPC).
 
 The matcher keeps its card's pre- and post-processing on the client and sends
-the tensors the card names (``left``, ``right``: ``1 x C x H x W`` float32);
+the tensors the card names (``left``, ``right``: ``1 x C x H x W`` of the
+card's ``dtype``, or its ``concat_input``, and its ``extra_inputs``);
 the server hosts the plain ``.onnx`` (ONNX Runtime or TensorRT backend,
 ``deploy/triton/``). No local model file is needed.
 
@@ -10,7 +11,7 @@ fewest outstanding requests; a server that cannot be reached or times out is
 marked down, the request is re-sent to another one (counted ``retried``) and
 the server is probed again after ``reprobe_s``. When no server is up a request
 waits for one for up to ``retry_s`` and then fails (the frame is counted as an
-error by the pipeline). A reply whose output is missing or is not float32 is
+error by the pipeline). A reply whose output is missing or is not FP32 / FP16 is
 rejected (counted ``bad_replies``, a ValueError: the pipeline counts the frame
 as rejected); a reply of the wrong shape is rejected by the matcher the same way.
 
@@ -44,6 +45,10 @@ from vpp_service.matchers.model_card import ModelCard
 
 #: gRPC status codes of a server that could not reply (marked down, the request re-sent elsewhere).
 TRANSPORT_CODES = frozenset({"StatusCode.UNAVAILABLE", "StatusCode.DEADLINE_EXCEEDED", "StatusCode.CANCELLED"})
+
+#: KServe datatypes of the tensors sent (numpy dtype name -> datatype): the card's float32 / float16 images,
+#: int64 or real extra inputs.
+KSERVE_DTYPES = {"float32": "FP32", "float16": "FP16", "int64": "INT64", "int32": "INT32", "float64": "FP64"}
 
 #: Engines kept open by :func:`open_triton` (their server health and counters are shared by matchers).
 CACHE_SIZE = 4
@@ -326,15 +331,15 @@ class TritonEngine(Engine):
         RuntimeError
             No server replied within ``retry_s``, or the server refused the request (one line).
         ValueError
-            The reply lacks ``output`` or it is not float32 (counted ``bad_replies``).
+            The reply lacks ``output`` or it is not FP32 / FP16 (counted ``bad_replies``).
         """
         self.ensure_metadata()
         g, s = self._grpc, self.settings
         inputs = []
         sent = 0
         for name, arr in feeds.items():
-            a = np.ascontiguousarray(arr, dtype=np.float32)
-            inp = g.InferInput(name, list(a.shape), "FP32")
+            a = np.ascontiguousarray(arr)
+            inp = g.InferInput(name, list(a.shape), KSERVE_DTYPES.get(a.dtype.name, "FP32"))
             inp.set_data_from_numpy(a)
             inputs.append(inp)
             sent += a.nbytes
@@ -369,16 +374,16 @@ class TritonEngine(Engine):
             return self._output(result, output, server.url)
 
     def _output(self, result: Any, output: str, url: str) -> np.ndarray:
-        """The reply's ``output`` as float32, or a counted ValueError."""
+        """The reply's ``output`` (FP32 or FP16) as float32, or a counted ValueError."""
         meta = result.get_output(output)
         if meta is None:
             self._count("bad_replies")
             raise ValueError(f"model {self.settings.model}: the reply of {url} has no output {output!r}")
-        if meta.datatype != "FP32":
+        if meta.datatype not in ("FP32", "FP16"):
             self._count("bad_replies")
             raise ValueError(
                 f"model {self.settings.model}: the reply of {url} has output {output!r} as {meta.datatype}, "
-                "expected FP32"
+                "expected FP32 (or FP16)"
             )
         try:
             arr = result.as_numpy(output)
@@ -447,37 +452,44 @@ def metadata_mismatches(engine: TritonEngine, card: ModelCard, output: str) -> l
     model = f"triton model {engine.settings.model!r}"
     lines: list[str] = []
     ins, outs, dtypes = engine.inputs, engine.outputs, engine.dtypes
-    for key in ("left_input", "right_input"):
+    want = KSERVE_DTYPES[card.dtype]
+    for key in ("concat_input",) if card.concat_input else ("left_input", "right_input"):
         name = getattr(card, key)
         if name not in ins:
             lines.append(f"card {key} {name!r}: {model} has no such input (its inputs: {sorted(ins)})")
             continue
         shape = ins[name]
-        if dtypes.get(name) != "FP32":
-            lines.append(f"card {key} {name!r} is float32 (FP32): {model} takes {dtypes.get(name)}")
+        if dtypes.get(name) != want:
+            lines.append(f"card {key} {name!r} is {card.dtype} ({want}): {model} takes {dtypes.get(name)}")
         if len(shape) != 4:
             lines.append(f"card {key} {name!r} is 1 x C x H x W (rank 4): {model} takes rank {len(shape)} {shape}")
             continue
-        if shape[1] is not None and shape[1] != card.channels:
+        if shape[1] is not None and shape[1] != card.input_channels:
             lines.append(
-                f"card {key} {name!r} has {card.channels} channels (colour {card.colour}): {model} takes {shape[1]}"
+                f"card {key} {name!r} has {card.input_channels} channels (colour {card.colour}): "
+                f"{model} takes {shape[1]}"
             )
         hw = shape[2:]
         if card.fixed and any(v is not None for v in hw) and tuple(hw) != tuple(card.input_size):
             lines.append(f"card input_size {list(card.input_size)}: {model} input {name!r} is {hw[0]} x {hw[1]}")
         if not card.fixed and all(v is not None for v in hw):
             lines.append(f"card input_size [] (dynamic): {model} input {name!r} is fixed at {hw[0]} x {hw[1]}")
-    extra = sorted(set(ins) - {card.left_input, card.right_input})
+    lines += [
+        f"card extra_inputs {name!r}: {model} has no such input (its inputs: {sorted(ins)})"
+        for name in sorted(set(card.extra_inputs) - set(ins))
+    ]
+    fed = [*card.image_inputs, *card.extra_inputs]
+    extra = sorted(set(ins) - set(fed))
     if extra:
-        lines.append(f"card feeds {[card.left_input, card.right_input]}: {model} also takes {extra}")
+        lines.append(f"card feeds {fed}: {model} also takes {extra}")
     if output and output not in outs:
         lines.append(f"card output {output!r}: {model} has no such output (its outputs: {sorted(outs)})")
     elif not output and len(outs) != 1:
         lines.append(f"card output '' (the only output): {model} has outputs {sorted(outs)}")
     else:
         name = output or next(iter(outs))
-        if dtypes.get(name) != "FP32":
-            lines.append(f"card output {name!r} is float32 (FP32): {model} gives {dtypes.get(name)}")
+        if dtypes.get(name) != want:
+            lines.append(f"card output {name!r} is {card.dtype} ({want}): {model} gives {dtypes.get(name)}")
         rank = len(outs[name])
         if rank != len(card.output_layout):
             lines.append(

@@ -5,7 +5,7 @@ Sections (every key is documented in ``deploy/config.example.toml``)::
     [service]   rig, prefix, max_frames, out, summary, ...      -> ServiceSection
     [zenoh]     enabled, mode, listen, connect, multicast_scouting, config_file
     [source]    type = "sim" | "files" | "zenoh", plus that source's options
-    [vpp]       enabled, plus VPPConfig fields (unset ones: the matcher's vpp_defaults, then VPPConfig's)
+    [vpp]       enabled, plus VPPConfig fields (unset ones: the matcher's preferred_vpp, then VPPConfig's)
     [matcher]   name = "sgbm" | "bm" | "census-sgm" | "psmnet" | "onnx", plus that matcher's options;
                 max_disparity = "auto" (default) | int, [matcher.auto_range] -> AutoRangeOptions
     [queues]    input_size, input_policy, output_size, output_policy
@@ -346,7 +346,7 @@ def _require_no_session(section: str, spec: PluginSpec, registry: Registry[P]) -
 
 
 def _parse_vpp(d: Mapping[str, Any], defaults: Mapping[str, object]) -> VPPConfig | None:
-    """The ``[vpp]`` table over the matcher's preferred VPP setting (``Matcher.vpp_defaults``); None if disabled."""
+    """The ``[vpp]`` table over the matcher's preferred VPP setting (``Matcher.preferred_vpp``); None if disabled."""
     raw = {**defaults, **d}
     enabled = raw.pop("enabled", True)
     if not isinstance(enabled, bool):
@@ -393,7 +393,7 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
         Unknown section or key, wrong type, unknown plugin, out-of-range value;
         the message names the key.
     """
-    from vpp_service.matchers import MATCHERS
+    from vpp_service.matchers import MATCHERS, MatcherOptions
     from vpp_service.sinks import SINKS  # registers the built-in sinks
     from vpp_service.sinks.base import parse_sink_options
     from vpp_service.sources import SOURCES, parse_source_options
@@ -417,7 +417,8 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
 
     matcher = _plugin(data.get("matcher", {"name": "sgbm"}), "matcher", "name", MATCHERS, parse_matcher)
     vpp_raw = dict(_table(data, "vpp"))
-    vpp = _parse_vpp(vpp_raw, MATCHERS.get(matcher.name).vpp_defaults)
+    assert isinstance(matcher.options, MatcherOptions)  # parse_matcher built it
+    vpp = _parse_vpp(vpp_raw, MATCHERS.get(matcher.name).preferred_vpp(matcher.options))
     queues_raw = dict(_table(data, "queues"))
     replay: Policy = "block" if SOURCES.get(source.name).finite else "latest"
     for key in ("input_policy", "output_policy"):

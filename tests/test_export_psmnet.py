@@ -23,9 +23,9 @@ pytest.importorskip("onnxruntime", reason="the exported graph is run with ONNX R
 import onnx
 
 from helpers.shared_data import need_shared
+from vpp_service.export.psmnet import PSMNetModel, export_psmnet, load_checkpoint
 from vpp_service.matchers import build_matcher
-from vpp_service.matchers.model_card import PSMNET_CARD, read_card
-from vpp_service.matchers.psmnet_export import PSMNetModel, export_psmnet, load_checkpoint
+from vpp_service.matchers.model_card import read_card, shipped_card
 
 # PyTorch comes only with the optional 'export' extra (otherwise a CUDA build of several GB): taken from
 # importorskip, never imported by name, so a plain `.[test]` install skips this module with the reason above.
@@ -108,7 +108,7 @@ def test_export_reproduces_the_shared_model_on_a_real_pair(tmp_path):
 
     state = state_from_onnx(psmnet)
     ours, card = export_psmnet(None, tmp_path / "psmnet_kitti2015.onnx", state=state, height=256, width=512)
-    assert read_card(card).max_disparity == PSMNET_CARD.max_disparity
+    assert read_card(card).max_disparity == shipped_card("psmnet").max_disparity
     frame = open_dataset("auto", kitti, color=True)[0]
     crop = (slice(376 - 256, 376), slice(300, 300 + 640))  # a real 256 x 640 piece of the pair
     left, right = (np.ascontiguousarray(img[crop]) for img in (frame.left, frame.right))
@@ -140,7 +140,7 @@ def test_models_export_cli(tmp_path, capsys, monkeypatch):
     ckpt = tmp_path / "pretrained.tar"
     torch.save({"state_dict": state, "epoch": 1}, ckpt)
     monkeypatch.setattr(
-        "vpp_service.matchers.psmnet_export.export_onnx",
+        "vpp_service.export.psmnet.export_onnx",
         lambda model, out, h, w: Path(out).write_bytes(b"stand-in") and Path(out),
     )
     assert main(["models", "export", "psmnet", "--checkpoint", str(ckpt), "--dir", str(tmp_path)]) == 0

@@ -12,7 +12,7 @@ behaviour of the 2018 ``F.upsample`` (``False`` costs accuracy).
 
 Export: the TorchScript exporter, opset 17, inputs ``left`` / ``right``
 (``1 x 3 x H x W``, H and W dynamic), output ``disparity`` (``1 x H x W``);
-the card (:data:`~vpp_service.matchers.model_card.PSMNET_CARD`, with the
+the card (the shipped ``vpp_service/matchers/cards/psmnet.toml``, with the
 checkpoint named in ``provenance``) is written beside it.
 
 torch is imported here at module level: import this module only where an
@@ -30,7 +30,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from vpp_service.matchers.model_card import PSMNET_CARD, card_to_toml
+from vpp_service.matchers.model_card import card_to_toml, shipped_card
 
 
 def _convbn(cin: int, cout: int, k: int, stride: int, pad: int, *, dilation: int = 1) -> nn.Sequential:
@@ -273,7 +273,8 @@ def export_psmnet(
         The model and the card written.
     """
     torch.manual_seed(seed)
-    model = PSMNetModel(PSMNET_CARD.max_disparity)
+    shipped = shipped_card("psmnet")
+    model = PSMNetModel(shipped.max_disparity)
     provenance = f"randomly initialised (seed {seed}): for tests only"
     if state is not None:
         model.load_state_dict(state, strict=True)
@@ -286,7 +287,7 @@ def export_psmnet(
             "vpp-service models export, ONNX opset 17"
         )
     path = export_onnx(model, out, height, width)
-    card = replace(PSMNET_CARD, name=path.stem, provenance=provenance)
+    card = replace(shipped, name=path.stem, provenance=provenance, model_file="", howto="")
     card_file = path.with_suffix(".toml")
     card_file.write_text(card_to_toml(card))
     return path, card_file
