@@ -30,6 +30,7 @@ counted and named in the next one), and so is a frame the process step failed on
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import threading
@@ -46,6 +47,9 @@ from vpp_service.queueing import Policy, QueueWorker
 from vpp_service.timing import StageTimer
 
 if TYPE_CHECKING:
+    import zenoh
+
+    from vpp_service.service.in_flight import InFlight
     from vpp_service.sources.base import Source
 
 log = logging.getLogger(__name__)
@@ -316,6 +320,32 @@ def queue_status(worker: QueueWorker[Any]) -> QueueStatus:
     }
 
 
+def window_status(window: InFlight[Any, Any] | None, size: int) -> dict[str, QueueStatus]:
+    """The frames in flight as a queue, ``{"in_flight": ...}`` (``{}`` for one frame at a time, ``size`` 1)."""
+    if size == 1:
+        return {}
+    return {
+        "in_flight": {
+            "len": 0 if window is None else window.outstanding,
+            "size": size,
+            "policy": "block",
+            "dropped": 0,
+            "high_water": 0 if window is None else window.high_water,
+        }
+    }
+
+
+def session_links(session: zenoh.Session | None) -> dict[str, int] | None:
+    """Routers and peers ``session`` reaches now (None without a session, or while it closes)."""
+    if session is None:
+        return None
+    try:
+        info = session.info
+        return {"routers": len(list(info.routers_zid())), "peers": len(list(info.peers_zid()))}
+    except Exception:  # noqa: BLE001 - a closing session must not break @status
+        return None
+
+
 class StatusReplies:
     """The ``@status`` replies: one JSON snapshot per :data:`STATUS_SNAPSHOT_S`, shared by the queries meanwhile.
 
@@ -332,6 +362,9 @@ class StatusReplies:
         self._lock = threading.Lock()
         self._snapshot: tuple[float, str] | None = None  # (monotonic time, JSON) of the last reply built
         self._counts = {"queries": 0, "snapshots": 0, "cached": 0}
+        self._key = ""
+        self._queryable: zenoh.Queryable[None] | None = None
+        self._token: zenoh.LivelinessToken | None = None
 
     def reply(self) -> str:
         """The JSON to reply to one ``@status`` query with."""
@@ -349,6 +382,29 @@ class StatusReplies:
         """``queries`` replied to, ``snapshots`` built, ``cached`` (replied to from a snapshot)."""
         # not under the lock: the status is built inside it when a query builds a snapshot
         return dict(self._counts)
+
+    def serve(self, session: zenoh.Session, key: str, alive_key: str) -> None:
+        """Answer ``@status`` queries on ``key`` and hold the liveliness token ``alive_key`` on ``session``."""
+        self._key = key
+        self._queryable = session.declare_queryable(key, self._on_query)
+        self._token = session.liveliness().declare_token(alive_key)
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        # runs on a Zenoh thread: reply with the cached snapshot, never block
+        try:
+            # the service's own key, not the query's: a wildcard query gets one entry per rig
+            query.reply(self._key, self.reply())
+        except Exception as exc:  # noqa: BLE001 - session closing; nothing may raise into Zenoh's thread
+            log.debug("@status reply failed: %s", exc)
+
+    def withdraw(self) -> None:
+        """Stop answering and drop the token (nothing to do when :meth:`serve` was not called)."""
+        for obj in (self._queryable, self._token):
+            if obj is not None:
+                # undeclaring fails only when the session is already closed, which undeclared it anyway
+                with contextlib.suppress(Exception):
+                    obj.undeclare()
+        self._queryable, self._token = None, None
 
 
 def summary_line(status: PipelineStatus, waits_on: Callable[[], str] | None = None) -> str:

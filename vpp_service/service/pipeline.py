@@ -8,14 +8,13 @@
         --> [queue of sink 2] --> sink 2's thread ...
 
 The pipeline owns every buffer after the source: the input queue, and one queue
-and thread per sink, sized from the sink's
-:meth:`~vpp_service.sinks.base.Sink.queue_spec` (a slow sink delays only itself).
-Each is a :class:`~vpp_service.queueing.QueueWorker` (a bounded queue and its
-thread) with a policy: ``latest`` drops the oldest item when full (a live
-camera: the freshest frame wins, drops are counted) or ``block`` (lossless: the
-producer waits; always for a sink that must never drop, such as a recording).
-When the source has finished, the process stage handles what is queued and
-finishes the sink threads; the last one to exit sets :attr:`Pipeline.done`. A
+and thread per sink (:class:`~vpp_service.service.fan_out.FanOut`: a slow sink
+delays only itself). Each is a :class:`~vpp_service.queueing.QueueWorker` (a
+bounded queue and its thread) with a policy: ``latest`` drops the oldest item when
+full (a live camera: the freshest frame wins, drops are counted) or ``block``
+(lossless: the producer waits; always for a sink that must never drop, such as a
+recording). When the source has finished, the process stage handles what is queued
+and finishes the sink threads; the last one to exit sets :attr:`Pipeline.done`. A
 result is ``published`` once every sink has handled it (none dropped it). What became
 of every frame (counters, losses by cause, timings, accuracy) is kept by the pipeline's
 :class:`~vpp_service.service.ledger.Ledger` and reported by :meth:`Pipeline.status`,
@@ -26,24 +25,20 @@ liveliness token ``<prefix>/<rig>/@alive`` is held while the pipeline runs. Unde
 A source whose thread dies on an exception ends the pipeline like an exhausted
 one, but ``status()["source_error"]`` names the exception (the service exits 1).
 
-Bad input never stops the pipeline: a rejected message is counted and logged
-(at most once per ``reject_log_period_s``); a frame the process step raises
-on is counted as rejected and dropped. One exception: a frame the configured
-disparity range cannot fit (:class:`~vpp_service.matchers.DisparityRangeError`,
-the range not below its width) stops the pipeline like an exhausted source,
-with ``status()["config_error"]`` saying why (the service exits 2), instead of
-rejecting every frame of that size; from a network source, where any peer may
-send any size, it is rejected like other bad input, with one error line per size. ``max_frames`` counts rejected frames
-with the processed ones. Each frame is stamped when received (``meta["recv_ns"]``,
-:func:`time.monotonic_ns`: a wall-clock step cannot corrupt the ``latency`` percentiles), never
-trusting the sender's ``stamp_ns``, which any peer can set. A frame whose ``rig`` (it comes from
-the message) is not the rig the pipeline serves is rejected before it is queued,
-so sinks never see a foreign or forged rig name.
+Bad input never stops the pipeline: a rejected message is counted and logged (at most once per
+``reject_log_period_s``); a frame the process step raises on is counted as rejected and dropped.
+One exception: a frame the configured disparity range cannot fit
+(:class:`~vpp_service.matchers.DisparityRangeError`) stops the pipeline like an exhausted source,
+``status()["config_error"]`` saying why (the service exits 2); from a network source, where any
+peer may send any size, it is rejected like other bad input, one error line per size.
+``max_frames`` counts rejected frames with the processed ones. Each frame is stamped when
+received (``meta["recv_ns"]``, :func:`time.monotonic_ns`), never trusting the sender's
+``stamp_ns``. A frame whose ``rig`` is not the rig the pipeline serves is rejected before it
+is queued, so sinks never see a foreign or forged rig name.
 """
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import threading
 import time
@@ -53,8 +48,17 @@ from typing import TYPE_CHECKING
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.matchers.base import DisparityRangeError
 from vpp_service.queueing import Policy, QueueWorker
+from vpp_service.service.fan_out import FanOut, close_within
 from vpp_service.service.in_flight import InFlight
-from vpp_service.service.ledger import Ledger, PipelineStatus, QueueStatus, StatusReplies, queue_status, summary_line
+from vpp_service.service.ledger import (
+    Ledger,
+    PipelineStatus,
+    StatusReplies,
+    queue_status,
+    session_links,
+    summary_line,
+    window_status,
+)
 
 if TYPE_CHECKING:  # zenoh, sources and sinks are imported where they are used
     import zenoh
@@ -123,11 +127,6 @@ class Pipeline:
         source.input_policy = input_policy  # "block": the source back-pressures its producer too
         self.process = process
         self.sinks = list(sinks)
-        # one queue and thread per sink, from its spec (the pipeline owns every buffer on the way out)
-        self.sink_workers: list[QueueWorker[_Delivery]] = [
-            self._sink_worker(sink, output_size, output_policy) for sink in self.sinks
-        ]
-        self._sinks_running = len(self.sinks)  # sink threads not yet exited; the last sets `done`
         self.input: QueueWorker[StereoFrame] = QueueWorker(
             self._process,
             size=input_size,
@@ -141,8 +140,18 @@ class Pipeline:
         self.prefix, self.rig = prefix, rig
         #: What became of every frame: counters, losses by cause, timings, accuracy (the status's figures).
         self.ledger = Ledger(timing_window, reject_log_period_s)
-        #: Why the pipeline stopped on its own: a frame the configuration cannot process (the disparity
-        #: range does not fit its width); None otherwise. The service then exits 2.
+        self._stop = threading.Event()
+        self.done = threading.Event()
+        #: One queue and thread per sink, from its spec (the pipeline owns every buffer on the way out).
+        self.fan_out = FanOut(
+            self.sinks,
+            size=output_size,
+            policy=output_policy,
+            ledger=self.ledger,
+            stopping=self._stop,
+            on_done=self.done.set,
+        )
+        #: Why the pipeline stopped on its own (a frame the disparity range cannot fit; the service exits 2).
         self.config_error: str | None = None
         self._range_misfits: set[tuple[int, int]] = set()  # frame sizes a network frame's range misfit was logged for
         if isinstance(in_flight, bool) or not isinstance(in_flight, int) or in_flight < 1:
@@ -150,20 +159,15 @@ class Pipeline:
         self.in_flight = in_flight
         self._window: InFlight[StereoFrame, FusionResult] | None = None
         self._lock = threading.Lock()
-        self._stop = threading.Event()
         self._enough = threading.Event()
-        self.done = threading.Event()
         self._started = 0.0
-        self._queryable: zenoh.Queryable[None] | None = None
-        self._token: zenoh.LivelinessToken | None = None
         self._opened: list[Sink] = []
         self._matching = 0  # frames in the process step now (in_flight == 1: 0 or 1)
         self._abandoned = False  # a stop gave up on the frames still being matched
         #: Sinks whose close raised or did not return within the shutdown timeout (their output may be incomplete).
         self.unfinished_sinks: list[str] = []
-        self._replies = StatusReplies(self.status)  # the @status replies, one snapshot per period
-        #: What runs the matcher (the process step's ``runtime()``: name, engine, device, precision, threads,
-        #: max_disparity), taken at :meth:`start`; None when the process step has no ``runtime``.
+        self._replies = StatusReplies(self.status)  # @status and @alive: the replies, one snapshot per period
+        #: What runs the matcher (the process step's ``runtime()``, taken at :meth:`start`; None without one).
         self.matcher_runtime: dict[str, object] | None = None
 
     # ----------------------------------------------------------- counters
@@ -223,8 +227,7 @@ class Pipeline:
             return
         with self._lock:
             abandoned = self._abandoned
-            if not abandoned:
-                self._matching += 1
+            self._matching += 0 if abandoned else 1
         if abandoned:  # taken from the queue just before a stop gave up: never matched
             self.ledger.lost_at_stop("refused")
             return
@@ -259,7 +262,7 @@ class Pipeline:
         if self._enough.is_set():
             return  # max_frames reached while it was in flight: unwanted, not lost
         self.ledger.processed(result)
-        self._deliver(result)
+        self.fan_out.deliver(result)
         prepare = getattr(self.process, "prepare_next", None)
         if prepare is not None:
             try:
@@ -307,91 +310,11 @@ class Pipeline:
             return
         self.ledger.failed(frame.seq, exc)  # never let one frame kill the service
 
-    def _sink_worker(self, sink: Sink, size: int, policy: Policy) -> QueueWorker[_Delivery]:
-        """The queue and thread of ``sink``, from its :meth:`~vpp_service.sinks.base.Sink.queue_spec`.
-
-        The sink's own ``block`` (a recording) or the pipeline's ``block`` output policy (a replay) make
-        the process stage wait for room; otherwise a full queue drops its oldest result (counted).
-        """
-        spec = sink.queue_spec()
-        name = type(sink).__name__
-        blocking = "block" in (policy, spec.policy)
-        return QueueWorker(
-            lambda d: self._write(sink, d),
-            size=spec.size or size,
-            policy="block" if blocking else "latest",
-            name=f"sink-{name}",
-            on_start=sink.start,
-            on_exit=lambda: self._sink_finished(sink),
-            on_error=lambda d, exc: self._sink_failed(sink, d, exc),
-            on_drop=lambda d: self._delivered(d, dropped=True),
-        )
-
-    def _deliver(self, result: FusionResult) -> None:
-        """Hand ``result`` to every sink's queue (waiting for room where it blocks)."""
-        delivery = _Delivery(result, len(self.sink_workers))
-        if not self.sink_workers:
-            self._published(result)
-            return
-        for worker in self.sink_workers:
-            if worker.policy == "block":
-                while not worker.put(delivery, timeout=0.1):
-                    if self._stop.is_set() or worker.closed:
-                        self._unsendable(delivery)
-                        break
-            elif not worker.put(delivery):  # a latest queue refuses only once closed: a stop aborted it
-                self._unsendable(delivery)
-
-    def _unsendable(self, delivery: _Delivery) -> None:
-        """A sink's queue refused ``delivery`` while stopping: lost there (counted under ``shutdown``)."""
-        self.ledger.lost_at_stop("unsent")
-        self._delivered(delivery, dropped=True)
-
-    def _write(self, sink: Sink, delivery: _Delivery) -> None:
-        """One sink's thread: write one result, then count it delivered there."""
-        try:
-            sink.write(delivery.result)
-        finally:
-            self._delivered(delivery)
-
-    def _sink_failed(self, sink: Sink, delivery: _Delivery, exc: Exception) -> None:
-        """A sink raised on a result: counted (the pipeline's ``errors`` and the sink's), the others go on."""
-        self.ledger.count("errors")
-        sink.count("errors")
-        log.warning("sink %s: %s", type(sink).__name__, exc)
-
-    def _delivered(self, delivery: _Delivery, *, dropped: bool = False) -> None:
-        """One sink is done with ``delivery`` (written, failed or dropped); the last one publishes it."""
-        with self._lock:
-            delivery.remaining -= 1
-            delivery.dropped |= dropped
-            last = delivery.remaining == 0
-        if last and not delivery.dropped:
-            self._published(delivery.result)
-
-    def _published(self, result: FusionResult) -> None:
-        """Every sink has the result: latency and ``published``."""
-        self.ledger.published(result)
-
     def _process_done(self) -> None:
         """The process stage ended: the sink threads finish what is queued (or ``done`` now, without sinks)."""
         if self._window is not None:
             self._window.close()  # the frames in flight get their results, handed on first
-        for worker in self.sink_workers:
-            worker.finish()
-        if not self.sink_workers:
-            self.done.set()
-
-    def _sink_finished(self, sink: Sink) -> None:
-        """A sink's thread is exiting: its ``finish`` hook, then ``done`` once every sink thread has."""
-        try:
-            sink.finish()
-        finally:
-            with self._lock:
-                self._sinks_running -= 1
-                last = self._sinks_running == 0
-            if last:
-                self.done.set()
+        self.fan_out.finish()
 
     # ----------------------------------------------------------- lifecycle
     def start(self) -> None:
@@ -417,32 +340,16 @@ class Pipeline:
         if self.session is not None:
             from vpp_service.transport.wire import topic
 
-            self._queryable = self.session.declare_queryable(self.status_key, self._on_query)
-            self._token = self.session.liveliness().declare_token(topic(self.prefix, self.rig, "@alive"))
+            at = (self.prefix, self.rig)
+            self._replies.serve(self.session, topic(*at, "@status"), topic(*at, "@alive"))
         self._started = time.monotonic()
         if self.in_flight > 1:
             self._window = InFlight(
                 self.in_flight, self.process, self._processed, self._process_failed, name="pipeline-match"
             )
-        for worker in self.sink_workers:
-            worker.start()
+        self.fan_out.start()
         self.input.start()
         self.source.start(self._emit, self._source_reject, on_finished=self.input.finish)
-
-    @property
-    def status_key(self) -> str:
-        """Where ``@status`` is served: ``<prefix>/<rig>/@status``."""
-        from vpp_service.transport.wire import topic
-
-        return topic(self.prefix, self.rig, "@status")
-
-    def _on_query(self, query: zenoh.Query) -> None:
-        # runs on a Zenoh thread: reply with the cached snapshot, never block
-        try:
-            # the service's own key, not the query's: a wildcard query gets one entry per rig
-            query.reply(self.status_key, self._replies.reply())
-        except Exception as exc:  # noqa: BLE001 - session closing; nothing may raise into Zenoh's thread
-            log.debug("@status reply failed: %s", exc)
 
     def wait(self, timeout: float | None = None) -> bool:
         """Block until the pipeline is done (source exhausted / max_frames) or ``timeout``."""
@@ -455,29 +362,19 @@ class Pipeline:
         deadline = time.monotonic() + timeout
         self.input.finish()
         drained = self.input.join(max(0.05, deadline - time.monotonic()))
-        for worker in self.sink_workers:
-            drained = worker.join(max(0.05, deadline - time.monotonic())) and drained
+        drained = self.fan_out.join(deadline) and drained
         if not drained:
             log.warning("pipeline threads did not drain within %.1f s; abandoning the queued results", timeout)
             self._stop.set()
             self.input.abort()
             self._abandon()
-            for worker in self.sink_workers:
-                worker.abort()
             self.input.join(1.0)
-            for worker in self.sink_workers:
-                worker.join(1.0)
+            self.fan_out.abort()
         self._stop.set()
         for sink in self._opened:
-            if not _close_within(sink, timeout):
+            if not close_within(sink, timeout):
                 self.unfinished_sinks.append(type(sink).__name__)
-        for obj in (self._queryable, self._token):
-            if obj is not None:
-                # undeclaring fails only when the session is already closed, which undeclared it anyway
-                with contextlib.suppress(Exception):
-                    obj.undeclare()
-        self._queryable = None
-        self._token = None
+        self._replies.withdraw()
         self.done.set()
 
     # -------------------------------------------------------------- status
@@ -495,7 +392,7 @@ class Pipeline:
                 sinks[type(s).__name__] = s.stats()
             except Exception:  # noqa: BLE001 - a sink's broken counters must not break @status
                 sinks[type(s).__name__] = {}
-        sink_queues = [(type(s).__name__, w) for s, w in zip(self.sinks, self.sink_workers, strict=True)]
+        sink_queues = self.fan_out.queues()
         dropped = self.ledger.losses(self.source, self.input, sink_queues, sinks, halted=self._enough.is_set())
         counters["dropped"] = sum(dropped.values())  # derived: every cause in one count
         status: PipelineStatus = {
@@ -511,7 +408,7 @@ class Pipeline:
             "queues": {
                 "input": queue_status(self.input),
                 **{f"sink.{name}": queue_status(w) for name, w in sink_queues},
-                **self._window_status(),
+                **window_status(self._window, self.in_flight),
             },
             "timing_ms": self.ledger.timer.summary(),
             "status_queries": self._replies.counts(),
@@ -537,30 +434,9 @@ class Pipeline:
             log.debug("runtime() failed", exc_info=True)
             return dict(self.matcher_runtime or {})
 
-    def _window_status(self) -> dict[str, QueueStatus]:
-        """The frames in flight as a queue (``in_flight`` > 1)."""
-        if self.in_flight == 1:
-            return {}
-        w = self._window
-        return {
-            "in_flight": {
-                "len": 0 if w is None else w.outstanding,
-                "size": self.in_flight,
-                "policy": "block",
-                "dropped": 0,
-                "high_water": 0 if w is None else w.high_water,
-            }
-        }
-
     def connectivity(self) -> dict[str, int] | None:
         """Routers and peers the session reaches now (None without a session)."""
-        if self.session is None:
-            return None
-        try:
-            info = self.session.info
-            return {"routers": len(list(info.routers_zid())), "peers": len(list(info.peers_zid()))}
-        except Exception:  # noqa: BLE001 - a closing session must not break @status
-            return None
+        return session_links(self.session)
 
     def summary_line(self, status: PipelineStatus | None = None) -> str:
         """One-line live summary (:func:`~vpp_service.service.ledger.summary_line`).
@@ -569,43 +445,6 @@ class Pipeline:
         """
         st = self.status() if status is None else status
         return summary_line(st, None if self._stop.is_set() else self.source.waits_on)
-
-
-class _Delivery:
-    """One result on its way to the sinks: how many sinks still have it queued, whether one dropped it."""
-
-    __slots__ = ("dropped", "remaining", "result")
-
-    def __init__(self, result: FusionResult, remaining: int) -> None:
-        self.result = result
-        self.remaining = remaining
-        self.dropped = False
-
-
-def _close_within(sink: Sink, timeout: float) -> bool:
-    """Close ``sink`` on a helper thread; True when it returned without an error within ``timeout`` + 1 s.
-
-    Whatever a sink's library does (a Rerun stream stuck disconnecting from a full disk, a viewer gone),
-    the shutdown goes on after the bound; the thread is a daemon and is abandoned.
-    """
-    failed: list[BaseException] = []
-
-    def close() -> None:
-        try:
-            sink.close(timeout)
-        except Exception as exc:  # noqa: BLE001 - one failing sink must not keep the others open
-            failed.append(exc)
-
-    thread = threading.Thread(target=close, name=f"close-{type(sink).__name__}", daemon=True)
-    thread.start()
-    thread.join(timeout + 1.0)
-    if thread.is_alive():
-        log.error("sink %s did not close within %.1f s; its output may be incomplete", type(sink).__name__, timeout)
-        return False
-    if failed:
-        log.error("closing sink %s failed: %s", type(sink).__name__, failed[0])
-        return False
-    return True
 
 
 __all__ = ["Pipeline"]
