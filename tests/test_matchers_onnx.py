@@ -313,12 +313,18 @@ def test_card_file_beside_the_model_is_read(tmp_path):
 @pytest.mark.parametrize(
     ("keys", "match"),
     [
-        ({"colour": "yuv"}, r"matcher.onnx.card.colour: must be one of"),
-        ({"std": [1.0, 0.0, 1.0]}, "std must be finite and > 0"),
-        ({"mean": [0.1, 0.2]}, "mean must have 1 or 3 values"),
-        ({"input_size": [30, 64], "pad_multiple": 16}, "must be multiples of pad_multiple 16"),
-        ({"bogus": 1}, r"matcher.onnx.card.bogus: unknown option"),
-        ({"left_input": "x", "right_input": "x"}, "must differ"),
+        ({"colour": "yuv"}, r"matcher\.onnx\.card\.colour: got 'yuv'; expected one of 'rgb', 'bgr', 'gray'"),
+        ({"std": [1.0, 0.0, 1.0]}, r"matcher\.onnx\.card\.std\[1\]: got 0\.0; expected > 0"),
+        ({"mean": [0.1, 0.2]}, r"matcher\.onnx\.card\.mean: got \[0\.1, 0\.2\]; expected 1 or 3 values"),
+        (
+            {"input_size": [30, 64], "pad_multiple": 16},
+            r"card\.input_size: got \[30, 64\]; expected multiples of pad_multiple \(16\)",
+        ),
+        ({"bogus": 1}, r"matcher\.onnx\.card\.bogus: got an unknown option; expected one of colour, "),
+        (
+            {"left_input": "x", "right_input": "x"},
+            r"card\.right_input: got 'x'; expected a name other than left_input \('x'\)",
+        ),
     ],
 )
 def test_invalid_card_keys(sad16, keys, match):
@@ -329,7 +335,7 @@ def test_invalid_card_keys(sad16, keys, match):
 def test_card_file_errors_name_the_file(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("scale = 0\n")
-    with pytest.raises(SettingsError, match=r"card\[.*bad.toml\]: scale must be a finite non-zero number"):
+    with pytest.raises(SettingsError, match=r"card\[.*bad.toml\]\.scale: got 0\.0; expected a non-zero number"):
         read_card(bad)
     bad.write_text("scale = \n")
     with pytest.raises(SettingsError, match="invalid TOML"):
@@ -389,9 +395,12 @@ def test_too_large_max_disparity(sad16, tmp_path, monkeypatch):
 
 
 def test_engine_options(sad16):
-    with pytest.raises(SettingsError, match=r"matcher\.onnx\.device: must be one of"):
+    with pytest.raises(SettingsError, match=r"matcher\.onnx\.device: got 'tpu'; expected one of 'auto', 'cpu', 'cuda'"):
         build_matcher("onnx", {"model": str(sad16), "device": "tpu", "card": card()})
-    with pytest.raises(SettingsError, match="precision 'bf16' needs engine 'openvino'"):
+    with pytest.raises(
+        SettingsError,
+        match=r"matcher\.onnx\.precision: got 'bf16'; expected 'f32' with engine 'onnxruntime' \(bf16/f16 need ",
+    ):
         build_matcher("onnx", {"model": str(sad16), "engine": "onnxruntime", "precision": "bf16", "card": card()})
     with pytest.raises(ValueError, match="engine 'openvino' runs on CPU only"):
         choose("cuda", "openvino")

@@ -32,25 +32,23 @@ file beside a model.
 
 from __future__ import annotations
 
-import math
 import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from vpp_service.settings import SettingsError, from_mapping
+from vpp_service.settings import Each, NonEmpty, Options, Range, Satisfies, SettingsError, from_mapping, reject
 
 #: Layouts of the disparity output (batch 1).
 OUTPUT_LAYOUTS = ("1HW", "11HW", "HW")
 
 
-def _check_name(key: str, v: str) -> None:
-    if not isinstance(v, str) or not v.strip():
-        raise ValueError(f"{key} must be a non-empty graph tensor name, got {v!r}")
+#: A finite number other than 0 (a scale factor).
+_NON_ZERO = Satisfies(lambda v: v != 0, "a non-zero number")
 
 
 @dataclass(frozen=True)
-class ModelCard:
+class ModelCard(Options):
     """How a stereo network is fed and read (see the module docstring for the TOML form).
 
     Attributes
@@ -95,60 +93,38 @@ class ModelCard:
     """
 
     name: str = ""
-    left_input: str = "left"
-    right_input: str = "right"
+    left_input: Annotated[str, NonEmpty()] = "left"
+    right_input: Annotated[str, NonEmpty()] = "right"
     output: str = ""
     colour: Literal["rgb", "bgr", "gray"] = "rgb"
-    scale: float = 1.0 / 255.0
-    mean: tuple[float, ...] = (0.0,)
-    std: tuple[float, ...] = (1.0,)
-    pad_multiple: int = 1
+    scale: Annotated[float, Range(), _NON_ZERO] = 1.0 / 255.0
+    mean: Annotated[tuple[float, ...], Each(Range())] = (0.0,)
+    std: Annotated[tuple[float, ...], Each(Range(0.0, lo_open=True))] = (1.0,)
+    pad_multiple: Annotated[int, Range(1, 1024)] = 1
     pad_rows: Literal["top", "bottom"] = "bottom"
     pad_cols: Literal["left", "right"] = "right"
-    min_size: tuple[int, ...] = ()
-    input_size: tuple[int, ...] = ()
+    min_size: Annotated[tuple[int, ...], Each(Range(1))] = ()
+    input_size: Annotated[tuple[int, ...], Each(Range(1, 16384))] = ()
     output_layout: Literal["1HW", "11HW", "HW"] = "1HW"
-    output_scale: float = 1.0
-    max_disparity: int = 192
+    output_scale: Annotated[float, Range(), _NON_ZERO] = 1.0
+    max_disparity: Annotated[int, Range(1, 4096)] = 192
     licence: str = ""
     provenance: str = ""
 
-    def __post_init__(self) -> None:
-        _check_name("left_input", self.left_input)
-        _check_name("right_input", self.right_input)
+    def cross_check(self) -> None:
+        """Distinct inputs, one mean/std per channel (or one), sizes of two sides, fixed sizes padded."""
         if self.left_input == self.right_input:
-            raise ValueError(f"left_input and right_input must differ, both are {self.left_input!r}")
-        if self.colour not in ("rgb", "bgr", "gray"):
-            raise ValueError(f"colour must be 'rgb', 'bgr' or 'gray', got {self.colour!r}")
-        for key in ("scale", "output_scale"):
-            v = getattr(self, key)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v == 0:
-                raise ValueError(f"{key} must be a finite non-zero number, got {v!r}")
-        for key, positive in (("mean", False), ("std", True)):
-            vals = getattr(self, key)
-            if len(vals) not in (1, self.channels):
-                raise ValueError(f"{key} must have 1 or {self.channels} values (colour {self.colour}), got {len(vals)}")
-            if any(not math.isfinite(v) or (positive and v <= 0) for v in vals):
-                raise ValueError(f"{key} must be finite{' and > 0' if positive else ''}, got {list(vals)}")
-        _check_int("pad_multiple", self.pad_multiple, 1, 1024)
-        _check_int("max_disparity", self.max_disparity, 1, 4096)
+            raise reject("right_input", self.right_input, f"a name other than left_input ({self.left_input!r})")
+        for key in ("mean", "std"):
+            if len(getattr(self, key)) not in (1, self.channels):
+                raise reject(key, list(getattr(self, key)), f"1 or {self.channels} values (colour {self.colour})")
         for key in ("min_size", "input_size"):
-            size = getattr(self, key)
-            if size and (len(size) != 2 or any(isinstance(v, bool) or not isinstance(v, int) or v < 1 for v in size)):
-                raise ValueError(f"{key} must be [] or [H, W] with H, W >= 1, got {list(size)}")
+            if len(getattr(self, key)) not in (0, 2):
+                raise reject(key, list(getattr(self, key)), "[] or [H, W]")
         if self.input_size and self.min_size:
-            raise ValueError("min_size applies to a dynamic input size only; input_size fixes it")
-        if self.input_size:
-            if len(self.input_size) != 2:
-                raise ValueError(f"input_size must be [] (dynamic) or [H, W], got {list(self.input_size)}")
-            for v in self.input_size:
-                _check_int("input_size", v, 1, 16384)
-                if v % self.pad_multiple:
-                    raise ValueError(
-                        f"input_size {list(self.input_size)} must be multiples of pad_multiple {self.pad_multiple}"
-                    )
-        if self.output_layout not in OUTPUT_LAYOUTS:
-            raise ValueError(f"output_layout must be one of {list(OUTPUT_LAYOUTS)}, got {self.output_layout!r}")
+            raise reject("min_size", list(self.min_size), "[] when input_size fixes the size")
+        if any(v % self.pad_multiple for v in self.input_size):
+            raise reject("input_size", list(self.input_size), f"multiples of pad_multiple ({self.pad_multiple})")
 
     @property
     def channels(self) -> int:
@@ -163,11 +139,6 @@ class ModelCard:
     def range_at(self, width: int) -> float:
         """The network's disparity range in pixels of an image ``width`` columns wide (fixed size: rescaled)."""
         return self.max_disparity * (width / self.input_size[1]) if self.fixed else float(self.max_disparity)
-
-
-def _check_int(key: str, v: object, lo: int, hi: int) -> None:
-    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-        raise ValueError(f"{key} must be an integer in [{lo}, {hi}], got {v!r}")
 
 
 def card_from_mapping(data: Any, section: str, base: ModelCard | None = None) -> ModelCard:
