@@ -227,7 +227,7 @@ def test_zenoh_disabled_is_fine_without_zenoh_plugins(tmp_path):
     ("sensor", "options", "message"),
     [
         ("radar", {}, "unknown sensor 'radar'"),
-        ("uniform", {"densty": 0.1}, "sensor.uniform.densty: unknown option"),
+        ("uniform", {"densty": 0.1}, "sensor.uniform.densty: got an unknown option; expected one of density, "),
         ("uniform", {"density": 2.0}, "sensor.uniform"),
     ],
 )
