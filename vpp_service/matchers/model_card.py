@@ -37,7 +37,17 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from vpp_service.settings import Each, NonEmpty, Options, Range, Satisfies, SettingsError, from_mapping, reject
+from vpp_service.settings import (
+    Each,
+    NonEmpty,
+    OptionError,
+    Options,
+    Range,
+    Satisfies,
+    SettingsError,
+    from_mapping,
+    reject,
+)
 
 #: Layouts of the disparity output (batch 1).
 OUTPUT_LAYOUTS = ("1HW", "11HW", "HW")
@@ -160,7 +170,7 @@ def card_from_mapping(data: Any, section: str, base: ModelCard | None = None) ->
     """
     merged: dict[str, Any] = {} if base is None else {f.name: getattr(base, f.name) for f in fields(base)}
     if not isinstance(data, dict):
-        raise SettingsError(f"{section}: must be a table of card keys, got {type(data).__name__}")
+        raise OptionError(section, type(data).__name__, "a table of card keys")
     merged.update(data)
     return from_mapping(ModelCard, merged, section)
 
