@@ -31,7 +31,7 @@ import numpy as np
 
 from vpp_service.datasets.skimage_scene import MOTORCYCLE_CALIB, motorcycle, motorcycle_arrays
 from vpp_service.frame import Calibration, StereoFrame
-from vpp_service.settings import Options, Range, SettingsError, reject
+from vpp_service.settings import OptionError, Options, Range, reject
 from vpp_service.sources.base import SOURCES, Emit, Pacer, Reject, Source, SourceContext
 
 if TYPE_CHECKING:
@@ -235,13 +235,19 @@ class SimSource(Source):
 
         Raises
         ------
-        SettingsError
-            ``<section>.sensor_options: ...`` (unknown sensor or invalid option).
+        OptionError
+            ``<section>.sensor: ...`` (unknown sensor) or ``<section>.sensor_options.<key>: ...``.
         """
+        from vpp_service.sources.sensors import SENSORS
+
+        if options.sensor != "none" and options.sensor not in SENSORS:
+            known = ", ".join(repr(n) for n in [*SENSORS.names(), "none"])
+            raise OptionError(f"{section}.sensor", repr(options.sensor), f"one of {known}")
         try:
             build_sensor_or_none(options.sensor, dict(options.sensor_options))
-        except ValueError as exc:
-            raise SettingsError(f"{section}.sensor_options: {exc}") from None
+        except OptionError as exc:  # name the key under this section, not the sensor's own
+            key = exc.key.removeprefix(f"sensor.{options.sensor}.")
+            raise OptionError(f"{section}.sensor_options.{key}", exc.got, exc.expected) from None
 
     @classmethod
     def check_paths(cls, options: SimSourceOptions, section: str, created_dirs: frozenset[Path] = frozenset()) -> None:
