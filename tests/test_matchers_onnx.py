@@ -29,8 +29,8 @@ from vpp_service.matchers.model_card import (
     read_card,
 )
 from vpp_service.matchers.model_store import MODELS_ENV, list_models, models_dir
-from vpp_service.matchers.onnx import BUILTIN_CARDS, OnnxMatcher, tensor_layout, to_tensor
-from vpp_service.settings import SettingsError
+from vpp_service.matchers.onnx import BUILTIN_CARDS, OnnxMatcher, OnnxOptions, tensor_layout, to_tensor
+from vpp_service.settings import SettingsError, from_mapping
 
 ENGINES = [
     pytest.param(
@@ -584,3 +584,26 @@ def test_networks_get_their_vpp_setting_where_the_user_sets_none(sad16):
     probe = build_matcher("onnx", {"model": str(sad16), "card": card()})
     assert _check_vpp_config(None, probe) == VPPConfig(**OnnxMatcher.vpp_defaults)  # run_evaluation(vpp_config=None)
     assert _check_vpp_config(None, build_matcher("sgbm")) == VPPConfig()
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"engine": "triton"}, r"matcher\.onnx\.url: got ''; expected the server's gRPC endpoint"),
+        ({"engine": "triton", "url": "no-port"}, r"matcher\.onnx\.url: got 'no-port'; expected host:port"),
+        ({"url": "h:1"}, r"matcher\.onnx\.url: got 'h:1'; expected '' unless engine is 'triton'"),
+        ({"engine": "triton", "url": "h:1", "device": "cuda"}, r"matcher\.onnx\.device: got 'cuda'; expected"),
+        ({"engine": "triton", "url": "h:1", "precision": "f16"}, r"matcher\.onnx\.precision: got 'f16'; expected"),
+        ({"in_flight": 2}, r"matcher\.onnx\.in_flight: got 2; expected 1 unless engine is 'triton'"),
+        ({"in_flight": 65}, r"matcher\.onnx\.in_flight: got 65; expected in \[1, 64\]"),
+        ({"timeout_ms": 0.5}, r"matcher\.onnx\.timeout_ms: got 0\.5; expected in \[1, 3600000\]"),
+        ({"threads": -1}, r"matcher\.onnx\.threads: got -1; expected >= 0"),
+        ({"max_disparity": 5000}, r"matcher\.onnx\.max_disparity: got 5000; expected in \[0, 4096\]"),
+    ],
+)
+def test_option_errors_name_the_key(options, message):
+    """The ONNX options' declared ranges and Triton-only rules, in the one message format."""
+    with pytest.raises(SettingsError, match=f"^{message}"):
+        from_mapping(OnnxOptions, options, "matcher.onnx")
+    ok = from_mapping(OnnxOptions, {"engine": "triton", "url": ["h:1", "h:2"], "in_flight": 4}, "matcher.onnx")
+    assert ok.urls == ("h:1", "h:2") and ok.max_disparity == 0
