@@ -193,7 +193,7 @@ def measure_scene(size: str, density: float, threads: Sequence[int], reps: int) 
     for pattern in PATTERNS:
         cfg = VPPConfig(pattern=pattern)
         for nt in threads:
-            run = partial(project, left, right, disp, cfg, num_threads=nt)
+            run = partial(project, left, right, disp, cfg, threads=nt)
             t = times_ms(run, reps)
             ms, mn = float(np.median(t)), float(t.min())
             rows.append(

@@ -77,7 +77,7 @@ def test_defaults_and_options_instance():
 @pytest.mark.parametrize(
     ("name", "opts", "match"),
     [
-        ("sgbm", {"foo": 1}, "matcher.sgbm.foo: unknown option"),
+        ("sgbm", {"foo": 1}, "matcher.sgbm.foo: got an unknown option; expected one of block_size, "),
         ("census-sgm", {"max_disparity": 0}, "max_disparity"),
         ("census-sgm", {"max_disparity": -5}, "max_disparity"),
         ("census-sgm", {"max_disparity": 12.5}, "max_disparity"),

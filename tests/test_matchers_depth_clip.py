@@ -98,9 +98,12 @@ def test_npy_and_png_agree_on_invalid_pixels_after_the_clip():
 @pytest.mark.parametrize(
     ("section", "match"),
     [
-        ({"max_depth_m": -1.0}, r"depth_clip\.max_depth_m|max_depth_m must be"),
+        ({"max_depth_m": -1.0}, r"depth_clip\.max_depth_m: got -1\.0; expected >= 0"),
         ({"min_depth_m": float("nan")}, "min_depth_m"),
-        ({"min_depth_m": 10.0, "max_depth_m": 5.0}, "must be > min_depth_m"),
+        (
+            {"min_depth_m": 10.0, "max_depth_m": 5.0},
+            r"depth_clip\.max_depth_m: got 5\.0; expected > min_depth_m \(10\.0\)",
+        ),
         ({"max_depth": 5.0}, r"depth_clip\.max_depth"),
     ],
 )

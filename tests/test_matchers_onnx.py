@@ -33,7 +33,7 @@ from vpp_service.matchers.model_card import (
 )
 from vpp_service.matchers.model_store import MODELS_ENV, list_models, models_dir
 from vpp_service.matchers.onnx import OnnxMatcher, OnnxOptions, builtin_cards, tensor_layout, to_tensor
-from vpp_service.settings import SettingsError
+from vpp_service.settings import SettingsError, from_mapping
 
 PSMNET_CARD = shipped_card("psmnet")
 
@@ -457,12 +457,18 @@ def test_card_file_beside_the_model_is_read(tmp_path):
 @pytest.mark.parametrize(
     ("keys", "match"),
     [
-        ({"colour": "yuv"}, r"matcher.onnx.card.colour: must be one of"),
-        ({"std": [1.0, 0.0, 1.0]}, "std must be finite and > 0"),
-        ({"mean": [0.1, 0.2]}, "mean must have 1 or 3 values"),
-        ({"input_size": [30, 64], "pad_multiple": 16}, "must be multiples of pad_multiple 16"),
-        ({"bogus": 1}, r"matcher.onnx.card.bogus: unknown option"),
-        ({"left_input": "x", "right_input": "x"}, "must differ"),
+        ({"colour": "yuv"}, r"matcher\.onnx\.card\.colour: got 'yuv'; expected one of 'rgb', 'bgr', 'gray'"),
+        ({"std": [1.0, 0.0, 1.0]}, r"matcher\.onnx\.card\.std\[1\]: got 0\.0; expected > 0"),
+        ({"mean": [0.1, 0.2]}, r"matcher\.onnx\.card\.mean: got \[0\.1, 0\.2\]; expected 1 or 3 values"),
+        (
+            {"input_size": [30, 64], "pad_multiple": 16},
+            r"card\.input_size: got \[30, 64\]; expected multiples of pad_multiple \(16\)",
+        ),
+        ({"bogus": 1}, r"matcher\.onnx\.card\.bogus: got an unknown option; expected one of colour, "),
+        (
+            {"left_input": "x", "right_input": "x"},
+            r"card\.right_input: got 'x'; expected a name other than left_input \('x'\)",
+        ),
     ],
 )
 def test_invalid_card_keys(sad16, keys, match):
@@ -473,7 +479,7 @@ def test_invalid_card_keys(sad16, keys, match):
 def test_card_file_errors_name_the_file(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("scale = 0\n")
-    with pytest.raises(SettingsError, match=r"card\[.*bad.toml\]: scale must be a finite non-zero number"):
+    with pytest.raises(SettingsError, match=r"card\[.*bad.toml\]\.scale: got 0\.0; expected a non-zero number"):
         read_card(bad)
     bad.write_text("scale = \n")
     with pytest.raises(SettingsError, match="invalid TOML"):
@@ -533,9 +539,12 @@ def test_too_large_max_disparity(sad16, tmp_path, monkeypatch):
 
 
 def test_engine_options(sad16):
-    with pytest.raises(SettingsError, match=r"matcher\.onnx\.device: must be one of"):
+    with pytest.raises(SettingsError, match=r"matcher\.onnx\.device: got 'tpu'; expected one of 'auto', 'cpu', 'cuda'"):
         build_matcher("onnx", {"model": str(sad16), "device": "tpu", "card": card()})
-    with pytest.raises(SettingsError, match="precision 'bf16' needs engine 'openvino'"):
+    with pytest.raises(
+        SettingsError,
+        match=r"matcher\.onnx\.precision: got 'bf16'; expected 'f32' with engine 'onnxruntime' \(bf16/f16 need ",
+    ):
         build_matcher("onnx", {"model": str(sad16), "engine": "onnxruntime", "precision": "bf16", "card": card()})
     with pytest.raises(ValueError, match="engine 'openvino' runs on CPU only"):
         choose("cuda", "openvino")
@@ -800,3 +809,26 @@ def test_networks_get_their_vpp_setting_where_the_user_sets_none(sad16):
     probe = build_matcher("onnx", {"model": str(sad16), "card": card()})
     assert _check_vpp_config(None, probe) == VPPConfig(**NETWORK_VPP)  # run_evaluation(vpp_config=None)
     assert _check_vpp_config(None, build_matcher("sgbm")) == VPPConfig()
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"engine": "triton"}, r"matcher\.onnx\.url: got ''; expected the server's gRPC endpoint"),
+        ({"engine": "triton", "url": "no-port"}, r"matcher\.onnx\.url: got 'no-port'; expected host:port"),
+        ({"url": "h:1"}, r"matcher\.onnx\.url: got 'h:1'; expected '' unless engine is 'triton'"),
+        ({"engine": "triton", "url": "h:1", "device": "cuda"}, r"matcher\.onnx\.device: got 'cuda'; expected"),
+        ({"engine": "triton", "url": "h:1", "precision": "f16"}, r"matcher\.onnx\.precision: got 'f16'; expected"),
+        ({"in_flight": 2}, r"matcher\.onnx\.in_flight: got 2; expected 1 unless engine is 'triton'"),
+        ({"in_flight": 65}, r"matcher\.onnx\.in_flight: got 65; expected in \[1, 64\]"),
+        ({"timeout_ms": 0.5}, r"matcher\.onnx\.timeout_ms: got 0\.5; expected in \[1, 3600000\]"),
+        ({"threads": -1}, r"matcher\.onnx\.threads: got -1; expected >= 0"),
+        ({"max_disparity": 5000}, r"matcher\.onnx\.max_disparity: got 5000; expected in \[0, 4096\]"),
+    ],
+)
+def test_option_errors_name_the_key(options, message):
+    """The ONNX options' declared ranges and Triton-only rules, in the one message format."""
+    with pytest.raises(SettingsError, match=f"^{message}"):
+        from_mapping(OnnxOptions, options, "matcher.onnx")
+    ok = from_mapping(OnnxOptions, {"engine": "triton", "url": ["h:1", "h:2"], "in_flight": 4}, "matcher.onnx")
+    assert ok.urls == ("h:1", "h:2") and ok.max_disparity == 0

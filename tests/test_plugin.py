@@ -54,7 +54,7 @@ def test_dataclass_errors_come_first_and_name_the_section():
     RangePlugin.checked.clear()
     with pytest.raises(SettingsError, match=r"^things\[0\]: lo must be >= 0"):
         RangePlugin.parse_options({"lo": -1}, "things[0]")
-    with pytest.raises(SettingsError, match=r"^things\[0\]\.size: unknown option"):
+    with pytest.raises(SettingsError, match=r"^things\[0\]\.size: got an unknown option; expected one of hi, lo$"):
         RangePlugin.parse_options({"size": 1}, "things[0]")
     assert RangePlugin.checked == []  # the hook sees only well-formed options
 

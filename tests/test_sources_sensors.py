@@ -148,7 +148,7 @@ def test_errors(frame):
     assert SENSORS.names() == ["lidar", "tof", "uniform"]
     with pytest.raises(ValueError, match="unknown sensor"):
         build_sensor("radar", {})
-    with pytest.raises(SettingsError, match=r"sensor\.uniform: density"):
+    with pytest.raises(SettingsError, match=r"^sensor\.uniform\.density: got 1\.5; expected in \(0, 1\]$"):
         build_sensor("uniform", {"density": 1.5})
     with pytest.raises(SettingsError, match=r"sensor\.lidar\.beam"):
         build_sensor("lidar", {"beam": 3})
@@ -278,10 +278,10 @@ def test_pose_presets_and_rotation():
 @pytest.mark.parametrize(
     ("opts", "match"),
     [
-        ({"pose": "velodyne"}, "pose: unknown preset"),
+        ({"pose": "velodyne"}, r"sensor\.lidar\.pose: got 'velodyne'; expected one of 'kitti', 'zero'"),
         ({"pose": [0.0, 1.0]}, "pose"),
         ({"pose": [0.0, float("nan"), 0.0]}, "pose"),
-        ({"rotation": [0.0, 0.0, 400.0]}, "rotation"),
+        ({"rotation": [0.0, 0.0, 400.0]}, r"rotation\[2\]: got 400\.0; expected in \[-180, 180\]"),
     ],
 )
 def test_pose_errors(opts, match):

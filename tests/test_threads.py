@@ -27,8 +27,8 @@ def test_resolve_threads_explicit_and_default(monkeypatch):
     ("value", "exc"), [(True, TypeError), (1.0, TypeError), ("2", TypeError), (0, ValueError), (-1, ValueError)]
 )
 def test_resolve_threads_rejects(value, exc):
-    with pytest.raises(exc, match="num_threads"):
-        resolve_threads(value, "num_threads")
+    with pytest.raises(exc, match="threads"):
+        resolve_threads(value, "threads")
 
 
 @pytest.mark.parametrize(("env", "expected"), [("4,2", 4), (" 5 ", 5), ("0", None), ("many", None), (None, None)])
@@ -51,10 +51,10 @@ def test_vpp_and_matchers_share_the_policy(monkeypatch):
 
     img = np.zeros((8, 12), np.uint8)
     disp = np.zeros((8, 12), np.float32)
-    with pytest.raises(ValueError, match="num_threads"):
-        project(img, img, disp, VPPConfig(), num_threads=0)
-    with pytest.raises(ValueError, match="num_threads"):
-        detect_occlusions(disp, num_threads=0)
+    with pytest.raises(ValueError, match="threads"):
+        project(img, img, disp, VPPConfig(), threads=0)
+    with pytest.raises(ValueError, match="threads"):
+        detect_occlusions(disp, threads=0)
     with pytest.raises(ValueError, match="threads"):
         census_sgm.census_transform(img, 0)  # 0 is not a count (None is the default)
     seen: list[object] = []
@@ -68,7 +68,7 @@ def test_vpp_and_matchers_share_the_policy(monkeypatch):
     census_sgm.census_transform(img)
     census_sgm.census_transform(img, 2)
     project(img, img, disp, VPPConfig())
-    project(img, img, disp, VPPConfig(), num_threads=2)
+    project(img, img, disp, VPPConfig(), threads=2)
     detect_occlusions(disp)
     assert seen == [None, 2, None, 2, None]
 

@@ -22,7 +22,7 @@ def test_matches_reference(seed, params):
     k = rng.random((H, W)) < 0.2
     disp[k] = rng.integers(1, W // 2 + 1, k.sum())
     disp[0, 0] = np.nan
-    occ = detect_occlusions(disp, num_threads=2, **params)
+    occ = detect_occlusions(disp, threads=2, **params)
     ref = ref_occlusions(disp, **{"window": (9, 7), "lam": 2.0, "gamma": 0.4375, "t": 1.0, **params})
     np.testing.assert_array_equal(occ, ref)
 
@@ -45,8 +45,8 @@ def test_flat_disparity_has_no_occlusion():
 def test_thread_count_invariant():
     rng = np.random.default_rng(0)
     disp = np.where(rng.random((200, 300)) < 0.1, rng.uniform(0.5, 100, (200, 300)), 0).astype(np.float32)
-    a = detect_occlusions(disp, num_threads=1)
-    b = detect_occlusions(disp, num_threads=2)
+    a = detect_occlusions(disp, threads=1)
+    b = detect_occlusions(disp, threads=2)
     np.testing.assert_array_equal(a, b)
     assert a.any()
 
@@ -104,7 +104,7 @@ def test_threshold_ties_match_reference(d0, lam, gamma, t, window):
             disp[y0, x0] = d0
             xn = x0 - int(np.floor(float(d0) + 0.5)) + dx + int(np.floor(float(dn) + 0.5))
             disp[y0 + dy, xn] = dn
-            occ = detect_occlusions(disp, window=window, lam=lam, gamma=gamma, t=t, num_threads=1)
+            occ = detect_occlusions(disp, window=window, lam=lam, gamma=gamma, t=t, threads=1)
             ref = ref_occlusions(disp, window=window, lam=lam, gamma=gamma, t=t)
             np.testing.assert_array_equal(occ, ref, err_msg=f"dx={dx} dy={dy} k={k}")
             assert ref[y0, x0] == ((float(dn) - float(d0)) - pen > t)

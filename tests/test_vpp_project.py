@@ -42,7 +42,7 @@ def test_reference_equality(build, i, cfg, shape, density):
     rng = np.random.default_rng(i)
     left, right, disp = make_case(rng, *shape, density)
     l0, r0 = left.copy(), right.copy()
-    res = project(left, right, disp, cfg, seed=i, num_threads=2)
+    res = project(left, right, disp, cfg, seed=i, threads=2)
     rl, rr, rocc = ref_project(left, right, disp, cfg, seed=i)
     assert np.array_equal(left, l0) and np.array_equal(right, r0), "inputs modified"
     assert res.left.shape == left.shape and res.left.dtype == np.uint8
@@ -59,7 +59,7 @@ def test_histogram_tables_both_builders_match_reference(build, shape, search):
     rng = np.random.default_rng(shape[1])
     left, right, disp = make_case(rng, *shape, 0.1)
     cfg = VPPConfig(pattern="histogram", search_width=search[0], search_height=search[1])
-    res = project(left, right, disp, cfg, seed=1, num_threads=2)
+    res = project(left, right, disp, cfg, seed=1, threads=2)
     rl, rr, _ = ref_project(left, right, disp, cfg, seed=1)
     np.testing.assert_array_equal(res.right, rr)
     np.testing.assert_array_equal(res.left, rl)
@@ -232,7 +232,7 @@ def test_patch_larger_than_image():
         (dict(config={"patch": 3}), TypeError, "config"),
         (dict(seed=-1), ValueError, "seed"),
         (dict(seed=1.5), TypeError, "seed"),
-        (dict(num_threads=0), ValueError, "num_threads"),
+        (dict(threads=0), ValueError, "threads"),
     ],
 )
 def test_bad_input(kwargs, exc, word):
@@ -240,7 +240,7 @@ def test_bad_input(kwargs, exc, word):
         left=np.zeros((4, 5), np.uint8), right=np.zeros((4, 5), np.uint8), disparity=np.zeros((4, 5), np.float32)
     )
     args.update(kwargs)
-    extra = {k: args.pop(k) for k in ("config", "seed", "num_threads") if k in args}
+    extra = {k: args.pop(k) for k in ("config", "seed", "threads") if k in args}
     with pytest.raises(exc, match=word):
         project(
             args["left"],
@@ -272,9 +272,9 @@ def det_case():
 )
 def test_thread_count_does_not_change_bytes(det_case, cfg):
     left, right, disp = det_case
-    a = project(left, right, disp, cfg, seed=3, num_threads=1)
-    b = project(left, right, disp, cfg, seed=3, num_threads=2)
-    c = project(left, right, disp, cfg, seed=3, num_threads=3)
+    a = project(left, right, disp, cfg, seed=3, threads=1)
+    b = project(left, right, disp, cfg, seed=3, threads=2)
+    c = project(left, right, disp, cfg, seed=3, threads=3)
     for x, y in ((a, b), (a, c)):
         assert x.left.tobytes() == y.left.tobytes() and x.right.tobytes() == y.right.tobytes()
         np.testing.assert_array_equal(x.occluded, y.occluded)

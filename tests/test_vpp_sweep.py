@@ -57,7 +57,7 @@ def test_sweep_matches_reference(build, i, nan_background):
     left, right, disp = case_arrays(i, shape, C, density, nan_background)
     rl, rr, rocc = ref_project(left, right, np.nan_to_num(disp, nan=0.0), cfg, seed=i)
     for nt in (1, 2, 3):
-        res = project(left, right, disp, cfg, seed=i, num_threads=nt)
+        res = project(left, right, disp, cfg, seed=i, threads=nt)
         np.testing.assert_array_equal(res.occluded, rocc if occ != "off" else False)
         np.testing.assert_array_equal(res.right, rr, err_msg=f"right, {nt} threads")
         np.testing.assert_array_equal(res.left, rl, err_msg=f"left, {nt} threads")
@@ -92,7 +92,7 @@ def test_detect_matches_reference_many_chunks(build, window, lam, gamma, t):
     disp[10:20, 30:50] = np.where(disp[10:20, 30:50] > 0, 70.0, 0)  # a near block: occludes
     ref = ref_occlusions(disp, window, lam, gamma, t)
     for nt in (1, 2, 3):
-        got = detect_occlusions(disp, window=window, lam=lam, gamma=gamma, t=t, num_threads=nt)
+        got = detect_occlusions(disp, window=window, lam=lam, gamma=gamma, t=t, threads=nt)
         np.testing.assert_array_equal(got, ref)
 
 
@@ -160,7 +160,7 @@ def test_pooled_buffers_are_reset_between_calls(build):
         )
         left, right, disp = case_arrays(i, shape, C, density, False)
         rl, rr, rocc = ref_project(left, right, disp, cfg, seed=i)
-        res = project(left, right, disp, cfg, seed=i, num_threads=2)
+        res = project(left, right, disp, cfg, seed=i, threads=2)
         np.testing.assert_array_equal(res.right, rr, err_msg=f"call {k} (case {i})")
         np.testing.assert_array_equal(res.left, rl, err_msg=f"call {k} (case {i})")
         np.testing.assert_array_equal(res.occluded, rocc if occ != "off" else False)
@@ -200,6 +200,6 @@ def test_paint_order_with_tied_and_crowded_disparities(build, kind):
         cfg = VPPConfig(occlusion=occ, alpha=0.7)
         rl, rr, _ = ref_project(left, right, disp, cfg, seed=3)
         for nt in (1, 2):
-            res = project(left, right, disp, cfg, seed=3, num_threads=nt)
+            res = project(left, right, disp, cfg, seed=3, threads=nt)
             np.testing.assert_array_equal(res.right, rr, err_msg=f"right, {occ}, {nt} threads")
             np.testing.assert_array_equal(res.left, rl, err_msg=f"left, {occ}, {nt} threads")

@@ -28,22 +28,22 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import ClassVar, TypedDict
+from typing import Annotated, ClassVar, TypedDict
 
 import numpy as np
 
-from vpp_service.matchers.confidence import apply_min_confidence, check_min_confidence, lr_confidence, right_view
+from vpp_service.matchers.confidence import apply_min_confidence, lr_confidence, right_view
 from vpp_service.matchers.holes import fill_holes
 from vpp_service.matchers.inputs import check_hints, check_pair
 from vpp_service.registry import Registry
-from vpp_service.settings import from_mapping
+from vpp_service.settings import Options, Range, from_mapping
 
 #: Registered matcher classes by name ("sgbm", "bm", "census-sgm", "onnx", "psmnet").
 MATCHERS: Registry[Matcher] = Registry("matcher")
 
 
 @dataclass(frozen=True)
-class MatcherOptions:
+class MatcherOptions(Options):
     """Options common to every matcher.
 
     Attributes
@@ -62,20 +62,9 @@ class MatcherOptions:
         than census-sgm, a second matching pass).
     """
 
-    max_disparity: int = 128
+    max_disparity: Annotated[int, Range(1, 4096)] = 128
     fill: bool = False
-    min_confidence: float = 0.0
-
-    def __post_init__(self) -> None:
-        if isinstance(self.max_disparity, bool) or not isinstance(self.max_disparity, int):
-            raise ValueError(f"max_disparity must be an integer, got {self.max_disparity!r}")
-        if self.max_disparity <= 0:
-            raise ValueError(f"max_disparity must be > 0, got {self.max_disparity}")
-        if self.max_disparity > 4096:
-            raise ValueError(f"max_disparity must be <= 4096, got {self.max_disparity}")
-        if not isinstance(self.fill, bool):
-            raise ValueError(f"fill must be a bool, got {self.fill!r}")
-        check_min_confidence(self.min_confidence)
+    min_confidence: Annotated[float, Range(0.0, 1.0)] = 0.0
 
 
 class DisparityRangeError(ValueError):

@@ -87,7 +87,7 @@ import threading
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import ModuleType
-from typing import TypedDict
+from typing import Annotated, TypedDict
 
 import numpy as np
 
@@ -97,6 +97,7 @@ from vpp_service.matchers.guided import modulate_cost
 from vpp_service.matchers.holes import GAP_STEP
 from vpp_service.matchers.inputs import check_array, check_disparity, check_hints, check_image, check_pair, to_gray
 from vpp_service.matchers.speckle import remove_speckles
+from vpp_service.settings import OneOf, Range
 from vpp_service.threads import resolve_threads
 from vpp_service.vpp import backend
 
@@ -403,50 +404,24 @@ class CensusSGMOptions(MatcherOptions):
         second thread gains little; set 2 (or 0) on a dedicated machine.
     """
 
-    paths: int = 8
-    p1: int = 11
-    p2_min: int = 17
-    p2_alpha: float = 0.5
-    p2_gamma: float = 35.0
-    uniqueness: float = 0.95
+    paths: Annotated[int, OneOf(4, 8)] = 8
+    p1: Annotated[int, Range(0, PENALTY_CAP)] = 11
+    p2_min: Annotated[int, Range(0, PENALTY_CAP)] = 17
+    p2_alpha: Annotated[float, Range(0.0)] = 0.5
+    p2_gamma: Annotated[float, Range()] = 35.0
+    uniqueness: Annotated[float, Range(0.0, 1.0, lo_open=True)] = 0.95
     subpixel: bool = True
     lr_check: bool = True
-    lr_tolerance: float = 1.0
-    border_margin: int = 2
-    gap_size: int = 4
+    lr_tolerance: Annotated[float, Range(0.0)] = 1.0
+    border_margin: Annotated[int, Range(0)] = 2
+    gap_size: Annotated[int, Range(0)] = 4
     median: bool = True
-    speckle_size: int = 200
-    speckle_diff: float = 2.0
-    guided_k: float = 10.0
-    guided_c: float = 1.0
-    confidence_peak: float = 1.0
-    threads: int = 1
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if self.paths not in (4, 8) or isinstance(self.paths, bool):
-            raise ValueError(f"paths must be 4 or 8, got {self.paths!r}")
-        _check_penalties(self.p1, self.p2_min, self.p2_alpha, self.p2_gamma)
-        if not 0 < self.uniqueness <= 1:
-            raise ValueError(f"uniqueness must be in (0, 1], got {self.uniqueness}")
-        if not (math.isfinite(self.lr_tolerance) and self.lr_tolerance >= 0):
-            raise ValueError(f"lr_tolerance must be a finite number >= 0, got {self.lr_tolerance}")
-        for name in ("border_margin", "gap_size"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
-        if isinstance(self.speckle_size, bool) or self.speckle_size < 0:
-            raise ValueError(f"speckle_size must be an integer >= 0, got {self.speckle_size!r}")
-        if not (math.isfinite(self.speckle_diff) and self.speckle_diff >= 0):
-            raise ValueError(f"speckle_diff must be a finite number >= 0, got {self.speckle_diff}")
-        for name in ("guided_k", "guided_c"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a finite number > 0, got {v}")
-        if not (math.isfinite(self.confidence_peak) and 0 < self.confidence_peak <= 1):
-            raise ValueError(f"confidence_peak must be in (0, 1], got {self.confidence_peak}")
-        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 0:
-            raise ValueError(f"threads must be an integer >= 0, got {self.threads!r}")
+    speckle_size: Annotated[int, Range(0)] = 200
+    speckle_diff: Annotated[float, Range(0.0)] = 2.0
+    guided_k: Annotated[float, Range(0.0, lo_open=True)] = 10.0
+    guided_c: Annotated[float, Range(0.0, lo_open=True)] = 1.0
+    confidence_peak: Annotated[float, Range(0.0, 1.0, lo_open=True)] = 1.0
+    threads: Annotated[int, Range(0)] = 1
 
 
 class StageParams(TypedDict):

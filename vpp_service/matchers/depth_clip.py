@@ -25,18 +25,20 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 
 from vpp_service.frame import Calibration
 from vpp_service.matchers.base import Matcher
+from vpp_service.settings import Options, Range, reject
 
 #: The smallest disparity (px) worth a depth unless ``max_depth_m`` says otherwise.
 MIN_DISPARITY_PX = 1.0
 
 
 @dataclass(frozen=True)
-class DepthClip:
+class DepthClip(Options):
     """``[depth_clip]``: the depth range of every output (see the module docstring).
 
     Attributes
@@ -47,16 +49,13 @@ class DepthClip:
         Farthest valid depth in metres; 0 (default): the depth of ``max(min_disparity, 1)`` px.
     """
 
-    min_depth_m: float = 0.0
-    max_depth_m: float = 0.0
+    min_depth_m: Annotated[float, Range(0.0)] = 0.0
+    max_depth_m: Annotated[float, Range(0.0)] = 0.0
 
-    def __post_init__(self) -> None:
-        for name in ("min_depth_m", "max_depth_m"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise ValueError(f"{name} must be a finite number >= 0 (0 = the default), got {v!r}")
+    def cross_check(self) -> None:
+        """A set ``max_depth_m`` lies beyond ``min_depth_m``."""
         if 0 < self.max_depth_m <= self.min_depth_m:
-            raise ValueError(f"max_depth_m ({self.max_depth_m}) must be > min_depth_m ({self.min_depth_m})")
+            raise reject("max_depth_m", self.max_depth_m, f"> min_depth_m ({self.min_depth_m}) or 0")
 
     def disparity_bounds(self, matcher: Matcher, calib: Calibration | None) -> tuple[float, float]:
         """``(d_lo, d_hi)`` in pixels for a frame matched by ``matcher`` with ``calib``.

@@ -29,11 +29,13 @@ import logging
 import math
 from collections import OrderedDict
 from dataclasses import dataclass, replace
+from typing import Annotated
 
 import numpy as np
 
 from vpp_service.frame import Calibration
 from vpp_service.matchers.base import Matcher
+from vpp_service.settings import MultipleOf, Options, Range
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +46,7 @@ SHRINK_GAP = 2 * STEP
 
 
 @dataclass(frozen=True)
-class AutoRangeOptions:
+class AutoRangeOptions(Options):
     """How ``max_disparity = "auto"`` picks the range (config ``[matcher.auto_range]``).
 
     Attributes
@@ -62,21 +64,10 @@ class AutoRangeOptions:
         range shrinks (default 30; >= 1).
     """
 
-    min_depth_m: float = 0.0
-    margin: int = 16
-    limit: int = 256
-    shrink_after: int = 30
-
-    def __post_init__(self) -> None:
-        m = self.min_depth_m
-        if isinstance(m, bool) or not isinstance(m, (int, float)) or not math.isfinite(m) or m < 0:
-            raise ValueError(f"min_depth_m must be a finite number >= 0 (0 = from the sparse points), got {m!r}")
-        for name, lo, hi in (("margin", 0, 4096), ("limit", STEP, 4096), ("shrink_after", 1, 1_000_000)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-                raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
-        if self.limit % STEP:
-            raise ValueError(f"limit must be a multiple of {STEP}, got {self.limit}")
+    min_depth_m: Annotated[float, Range(0.0)] = 0.0
+    margin: Annotated[int, Range(0, 4096)] = 16
+    limit: Annotated[int, Range(STEP, 4096), MultipleOf(STEP)] = 256
+    shrink_after: Annotated[int, Range(1, 1_000_000)] = 30
 
 
 def round_range(wanted: float, width: int, limit: int) -> int:

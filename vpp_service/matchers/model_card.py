@@ -49,17 +49,26 @@ file beside a model; :func:`shipped_card` reads a card of the package.
 
 from __future__ import annotations
 
-import math
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 
-from vpp_service.settings import SettingsError, from_mapping
+from vpp_service.settings import (
+    Each,
+    NonEmpty,
+    OptionError,
+    Options,
+    Range,
+    Satisfies,
+    SettingsError,
+    from_mapping,
+    reject,
+)
 from vpp_service.vpp import VPPConfig
 
 #: Layouts of the disparity output (batch 1).
@@ -73,13 +82,14 @@ DTYPES = ("float32", "float16")
 NETWORK_VPP: Mapping[str, object] = {"uniform_patch": True, "patch": 5, "alpha": 0.4, "occlusion": "fgd"}
 
 
-def _check_name(key: str, v: str) -> None:
-    if not isinstance(v, str) or not v.strip():
-        raise ValueError(f"{key} must be a non-empty graph tensor name, got {v!r}")
+#: A finite number other than 0 (a scale factor).
+_NON_ZERO = Satisfies(lambda v: v != 0, "a non-zero number")
+#: A graph tensor name, or "" (unset).
+_NAME = Satisfies(lambda v: v == "" or bool(v.strip()), "a graph tensor name (not blank)")
 
 
 @dataclass(frozen=True)
-class ModelCard:
+class ModelCard(Options):
     """How a stereo network is fed and read (see the module docstring for the TOML form).
 
     Attributes
@@ -146,97 +156,69 @@ class ModelCard:
     """
 
     name: str = ""
-    left_input: str = "left"
-    right_input: str = "right"
+    left_input: Annotated[str, NonEmpty()] = "left"
+    right_input: Annotated[str, NonEmpty()] = "right"
     output: str = ""
     colour: Literal["rgb", "bgr", "gray"] = "rgb"
-    scale: float = 1.0 / 255.0
-    mean: tuple[float, ...] = (0.0,)
-    std: tuple[float, ...] = (1.0,)
-    pad_multiple: int = 1
+    scale: Annotated[float, Range(), _NON_ZERO] = 1.0 / 255.0
+    mean: Annotated[tuple[float, ...], Each(Range())] = (0.0,)
+    std: Annotated[tuple[float, ...], Each(Range(0.0, lo_open=True))] = (1.0,)
+    pad_multiple: Annotated[int, Range(1, 1024)] = 1
     pad_rows: Literal["top", "bottom"] = "bottom"
     pad_cols: Literal["left", "right"] = "right"
-    min_size: tuple[int, ...] = ()
-    input_size: tuple[int, ...] = ()
+    min_size: Annotated[tuple[int, ...], Each(Range(1))] = ()
+    input_size: Annotated[tuple[int, ...], Each(Range(1, 16384))] = ()
     output_layout: Literal["1HW", "11HW", "HW"] = "1HW"
-    output_scale: float = 1.0
-    max_disparity: int = 192
-    concat_input: str = ""
+    output_scale: Annotated[float, Range(), _NON_ZERO] = 1.0
+    max_disparity: Annotated[int, Range(1, 4096)] = 192
+    concat_input: Annotated[str, _NAME] = ""
     extra_inputs: dict[str, Any] = field(default_factory=dict)
     dtype: Literal["float32", "float16"] = "float32"
-    output_stride: int = 1
+    output_stride: Annotated[int, Range(1, 64)] = 1
     model_file: str = ""
     howto: str = ""
     licence: str = ""
     provenance: str = ""
     vpp: dict[str, Any] = field(default_factory=lambda: dict(NETWORK_VPP))
 
-    def __post_init__(self) -> None:
-        _check_name("left_input", self.left_input)
-        _check_name("right_input", self.right_input)
+    def cross_check(self) -> None:
+        """Distinct inputs, one mean/std per channel (or one), sizes of two sides, fixed sizes padded."""
         if self.left_input == self.right_input:
-            raise ValueError(f"left_input and right_input must differ, both are {self.left_input!r}")
-        if self.colour not in ("rgb", "bgr", "gray"):
-            raise ValueError(f"colour must be 'rgb', 'bgr' or 'gray', got {self.colour!r}")
-        for key in ("scale", "output_scale"):
-            v = getattr(self, key)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v == 0:
-                raise ValueError(f"{key} must be a finite non-zero number, got {v!r}")
-        for key, positive in (("mean", False), ("std", True)):
-            vals = getattr(self, key)
-            if len(vals) not in (1, self.channels):
-                raise ValueError(f"{key} must have 1 or {self.channels} values (colour {self.colour}), got {len(vals)}")
-            if any(not math.isfinite(v) or (positive and v <= 0) for v in vals):
-                raise ValueError(f"{key} must be finite{' and > 0' if positive else ''}, got {list(vals)}")
-        _check_int("pad_multiple", self.pad_multiple, 1, 1024)
-        _check_int("max_disparity", self.max_disparity, 1, 4096)
+            raise reject("right_input", self.right_input, f"a name other than left_input ({self.left_input!r})")
+        for key in ("mean", "std"):
+            if len(getattr(self, key)) not in (1, self.channels):
+                raise reject(key, list(getattr(self, key)), f"1 or {self.channels} values (colour {self.colour})")
         for key in ("min_size", "input_size"):
-            size = getattr(self, key)
-            if size and (len(size) != 2 or any(isinstance(v, bool) or not isinstance(v, int) or v < 1 for v in size)):
-                raise ValueError(f"{key} must be [] or [H, W] with H, W >= 1, got {list(size)}")
+            if len(getattr(self, key)) not in (0, 2):
+                raise reject(key, list(getattr(self, key)), "[] or [H, W]")
         if self.input_size and self.min_size:
-            raise ValueError("min_size applies to a dynamic input size only; input_size fixes it")
-        if self.input_size:
-            if len(self.input_size) != 2:
-                raise ValueError(f"input_size must be [] (dynamic) or [H, W], got {list(self.input_size)}")
-            for v in self.input_size:
-                _check_int("input_size", v, 1, 16384)
-                if v % self.pad_multiple:
-                    raise ValueError(
-                        f"input_size {list(self.input_size)} must be multiples of pad_multiple {self.pad_multiple}"
-                    )
-        if self.output_layout not in OUTPUT_LAYOUTS:
-            raise ValueError(f"output_layout must be one of {list(OUTPUT_LAYOUTS)}, got {self.output_layout!r}")
+            raise reject("min_size", list(self.min_size), "[] when input_size fixes the size")
+        if any(v % self.pad_multiple for v in self.input_size):
+            raise reject("input_size", list(self.input_size), f"multiples of pad_multiple ({self.pad_multiple})")
         self._check_io()
         self._check_vpp()
 
     def _check_vpp(self) -> None:
-        """The ``[vpp]`` table: VPPConfig fields (a ValueError naming ``vpp.key``)."""
+        """The ``[vpp]`` table: VPPConfig fields (the error names ``vpp.key``)."""
         try:
             from_mapping(VPPConfig, self.vpp, "vpp")
         except SettingsError as exc:
-            raise ValueError(str(exc)) from None
+            raise SettingsError(str(exc)) from None
 
     def _check_io(self) -> None:
-        """The I/O keys beyond the two image inputs: concat_input, extra_inputs, dtype, output_stride."""
-        if self.concat_input:
-            _check_name("concat_input", self.concat_input)
-        if self.dtype not in DTYPES:
-            raise ValueError(f"dtype must be one of {list(DTYPES)}, got {self.dtype!r}")
-        _check_int("output_stride", self.output_stride, 1, 64)
+        """The I/O keys beyond the two image inputs: the output stride divides the size; extra inputs."""
         for v in self.input_size or (self.pad_multiple,):
             if v % self.output_stride:
-                raise ValueError(
-                    f"output_stride {self.output_stride} must divide the input size: "
-                    + (f"input_size {list(self.input_size)}" if self.input_size else f"pad_multiple {v}")
-                )
+                size = f"input_size {list(self.input_size)}" if self.input_size else f"pad_multiple {v}"
+                raise reject("output_stride", self.output_stride, f"a divisor of the input size ({size})")
         for name, value in self.extra_inputs.items():
-            _check_name("extra_inputs", name)
+            if not name.strip():
+                raise reject("extra_inputs", name, "graph tensor names (not blank)")
             if name in self.image_inputs:
-                raise ValueError(f"extra_inputs.{name}: is an image input of the card")
+                raise reject(f"extra_inputs.{name}", value, "a name that is not an image input of the card")
             a = np.asarray(value)
             if a.dtype.kind not in "iuf" or not np.isfinite(a).all():
-                raise ValueError(f"extra_inputs.{name}: must be a finite number or a list of them, got {value!r}")
+                raise reject(f"extra_inputs.{name}", value, "a finite number or a list of them")
 
     @property
     def image_inputs(self) -> tuple[str, ...]:
@@ -271,11 +253,6 @@ class ModelCard:
         return self.max_disparity * (width / self.input_size[1]) if self.fixed else float(self.max_disparity)
 
 
-def _check_int(key: str, v: object, lo: int, hi: int) -> None:
-    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-        raise ValueError(f"{key} must be an integer in [{lo}, {hi}], got {v!r}")
-
-
 def card_from_mapping(data: Any, section: str, base: ModelCard | None = None) -> ModelCard:
     """Validate a table of card keys into a :class:`ModelCard`.
 
@@ -295,7 +272,7 @@ def card_from_mapping(data: Any, section: str, base: ModelCard | None = None) ->
     """
     merged: dict[str, Any] = {} if base is None else {f.name: getattr(base, f.name) for f in fields(base)}
     if not isinstance(data, dict):
-        raise SettingsError(f"{section}: must be a table of card keys, got {type(data).__name__}")
+        raise OptionError(section, type(data).__name__, "a table of card keys")
     merged.update(data)
     return from_mapping(ModelCard, merged, section)
 

@@ -59,7 +59,7 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, ClassVar, Literal, cast
+from typing import Annotated, Any, ClassVar, Literal, cast
 
 import cv2
 import numpy as np
@@ -78,6 +78,7 @@ from vpp_service.matchers.model_card import (
 )
 from vpp_service.matchers.model_store import MODELS_ENV, find_model, models_dir
 from vpp_service.matchers.triton import TritonEngine, TritonSettings, metadata_mismatches, open_triton
+from vpp_service.settings import Each, NonEmpty, Range, Unique, reject
 from vpp_service.threads import resolve_threads
 
 
@@ -217,11 +218,6 @@ def from_output(raw: np.ndarray, card: ModelCard, layout: Layout, name: str = "n
     return out
 
 
-def _check_choice(name: str, v: object, allowed: tuple[str, ...]) -> None:
-    if v not in allowed:
-        raise ValueError(f"{name} must be one of {list(allowed)}, got {v!r}")
-
-
 @dataclass(frozen=True)
 class OnnxOptions(MatcherOptions):
     """Options of the ``onnx`` matcher (see the module docstring).
@@ -278,58 +274,44 @@ class OnnxOptions(MatcherOptions):
     device: Literal["auto", "cpu", "cuda"] = "auto"
     engine: Literal["auto", "openvino", "onnxruntime", "triton"] = "auto"
     precision: Literal["f32", "bf16", "f16"] = "f32"
-    providers: tuple[str, ...] = ()
+    providers: Annotated[tuple[str, ...], Each(NonEmpty()), Unique()] = ()
     provider_options: dict[str, Any] = field(default_factory=dict)
-    threads: int = 0
+    threads: Annotated[int, Range(0)] = 0
     url: str | tuple[str, ...] = ""
     model_version: str = ""
     ssl: bool = False
     root_certificates: str = ""
     private_key: str = ""
     certificate_chain: str = ""
-    timeout_ms: float = 30_000.0
-    retry_s: float = 30.0
-    in_flight: int = 1
+    timeout_ms: Annotated[float, Range(1.0, 3_600_000.0)] = 30_000.0
+    retry_s: Annotated[float, Range(0.0, 86_400.0)] = 30.0
+    in_flight: Annotated[int, Range(1, 64)] = 1
 
-    max_disparity: int = 0
+    #: 0: the network's range, set when the card is read.
+    max_disparity: Annotated[int, Range(0, 4096)] = 0
 
-    def __post_init__(self) -> None:
-        if self.max_disparity != 0:  # 0: the network's range, set when the card is read
-            super().__post_init__()
-        elif not isinstance(self.fill, bool):
-            raise ValueError(f"fill must be a bool, got {self.fill!r}")
-        for key in ("model", "card_file"):
-            if not isinstance(getattr(self, key), str):
-                raise ValueError(f"{key} must be a path (string), got {getattr(self, key)!r}")
-        if not isinstance(self.card, dict):
-            raise ValueError(f"card must be a table of card keys, got {type(self.card).__name__}")
-        _check_choice("device", self.device, ("auto", "cpu", "cuda"))
-        _check_choice("engine", self.engine, ("auto", "openvino", "onnxruntime", "triton"))
-        _check_choice("precision", self.precision, ("f32", "bf16", "f16"))
+    def cross_check(self) -> None:
+        """The precision the engine runs, and the Triton-only settings (see :meth:`_check_triton`)."""
+        super().cross_check()
         if self.engine == "onnxruntime" and self.precision != "f32":
-            raise ValueError(f"precision {self.precision!r} needs engine 'openvino' (ONNX Runtime runs f32)")
-        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 0:
-            raise ValueError(f"threads must be an integer >= 0 (0 = the default policy), got {self.threads!r}")
+            raise reject("precision", self.precision, "'f32' with engine 'onnxruntime' (bf16/f16 need 'openvino')")
         self._check_providers()
         self._check_triton()
 
     def _check_providers(self) -> None:
-        if not all(isinstance(p, str) and p.strip() for p in self.providers):
-            raise ValueError(f"providers must be a list of ONNX Runtime provider names, got {list(self.providers)}")
-        if len(set(self.providers)) != len(self.providers):
-            raise ValueError(f"providers must not repeat a provider, got {list(self.providers)}")
+        """Providers choose ONNX Runtime and the device; options only for listed providers, as tables."""
         if self.providers and (self.engine not in ("auto", "onnxruntime") or self.device != "auto"):
-            raise ValueError(
-                f"providers choose ONNX Runtime and the device: leave engine and device 'auto' "
-                f"(engine is {self.engine!r}, device {self.device!r})"
+            raise reject(
+                "providers",
+                list(self.providers),
+                f"none with engine {self.engine!r} / device {self.device!r} "
+                "(providers choose ONNX Runtime and the device: leave engine and device 'auto')",
             )
-        if not isinstance(self.provider_options, dict):
-            raise ValueError(f"provider_options must be a table of tables, got {type(self.provider_options).__name__}")
         for name, opts in self.provider_options.items():
             if name not in self.providers:
-                raise ValueError(f"provider_options.{name}: not among providers {list(self.providers)}")
+                raise reject(f"provider_options.{name}", opts, f"options of a listed provider {list(self.providers)}")
             if not isinstance(opts, dict):
-                raise ValueError(f"provider_options.{name} must be a table of options, got {opts!r}")
+                raise reject(f"provider_options.{name}", opts, "a table of options")
 
     @property
     def urls(self) -> tuple[str, ...]:
@@ -337,28 +319,20 @@ class OnnxOptions(MatcherOptions):
         return (self.url,) if isinstance(self.url, str) and self.url else tuple(u for u in self.url if u)
 
     def _check_triton(self) -> None:
-        for key in ("model_version", "root_certificates", "private_key", "certificate_chain"):
-            if not isinstance(getattr(self, key), str):
-                raise ValueError(f"{key} must be a string, got {getattr(self, key)!r}")
+        """``url`` host:port items, set with engine 'triton' only; the settings the server decides left alone."""
         for u in (self.url,) if isinstance(self.url, str) else self.url:
             if not isinstance(u, str) or (u and (":" not in u or " " in u)):
-                raise ValueError(f"url must be host:port (or a list of them), got {u!r}")
+                raise reject("url", u, "host:port (or a list of them)")
         if self.engine == "triton" and not self.urls:
-            raise ValueError("url: engine 'triton' needs the server's gRPC endpoint, host:port (or a list)")
+            raise reject("url", self.url, "the server's gRPC endpoint, host:port (or a list), with engine 'triton'")
         if self.engine != "triton" and self.urls:
-            raise ValueError(f"url is for engine 'triton' (engine is {self.engine!r})")
-        if self.engine == "triton" and (self.device == "cuda" or self.precision != "f32"):
-            raise ValueError("engine 'triton': the server decides device and precision (leave device, precision)")
-        for key, lo, hi in (("timeout_ms", 1.0, 3_600_000.0), ("retry_s", 0.0, 86_400.0)):
-            v = getattr(self, key)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= v <= hi:
-                raise ValueError(f"{key} must be a number in [{lo:g}, {hi:g}], got {v!r}")
-        if isinstance(self.in_flight, bool) or not isinstance(self.in_flight, int) or not 1 <= self.in_flight <= 64:
-            raise ValueError(f"in_flight must be an integer in [1, 64], got {self.in_flight!r}")
+            raise reject("url", self.url, f"'' unless engine is 'triton' (engine is {self.engine!r})")
+        if self.engine == "triton" and self.device == "cuda":
+            raise reject("device", self.device, "'auto' or 'cpu' with engine 'triton' (the server decides)")
+        if self.engine == "triton" and self.precision != "f32":
+            raise reject("precision", self.precision, "'f32' with engine 'triton' (the server decides)")
         if self.in_flight > 1 and self.engine != "triton":
-            raise ValueError("in_flight > 1 is for engine 'triton' (a local engine runs one frame at a time)")
-        if not isinstance(self.ssl, bool):
-            raise ValueError(f"ssl must be a bool, got {self.ssl!r}")
+            raise reject("in_flight", self.in_flight, "1 unless engine is 'triton' (a local engine runs one frame)")
 
 
 @MATCHERS.register("onnx")

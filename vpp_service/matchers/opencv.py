@@ -28,13 +28,14 @@ so RGB is converted with the usual luminance weights.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Annotated, Literal
 
 import cv2
 import numpy as np
 
 from vpp_service.matchers.base import MATCHERS, DisparityRangeError, Matcher, MatcherOptions, MatcherRuntime
 from vpp_service.matchers.inputs import to_gray
+from vpp_service.settings import Odd, Range, reject
 
 _SGBM_MODES = {
     "sgbm": cv2.STEREO_SGBM_MODE_SGBM,
@@ -47,23 +48,6 @@ _SGBM_MODES = {
 def opencv_num_disparities(max_disparity: int) -> int:
     """``max_disparity`` rounded up to a multiple of 16 (OpenCV's numDisparities)."""
     return int(-(-int(max_disparity) // 16) * 16)
-
-
-def _check_odd(name: str, v: int, lo: int, hi: int) -> None:
-    if isinstance(v, bool) or not isinstance(v, int) or v < lo or v > hi or v % 2 == 0:
-        raise ValueError(f"{name} must be an odd integer in [{lo}, {hi}], got {v!r}")
-
-
-def _check_int(name: str, v: int, lo: int, hi: int | None = None) -> None:
-    """Raise ValueError naming ``name`` unless ``v`` is an integer in ``[lo, hi]`` (``hi`` None: no upper bound)."""
-    if isinstance(v, bool) or not isinstance(v, int) or v < lo or (hi is not None and v > hi):
-        bounds = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
-        raise ValueError(f"{name} must be an integer {bounds}, got {v!r}")
-
-
-def _check_band(band: str) -> None:
-    if band not in ("constant", "replicate", "off"):
-        raise ValueError(f"left_band must be 'constant', 'replicate' or 'off', got {band!r}")
 
 
 def _to_float(raw: np.ndarray, min_disparity: int, pad: int = 0) -> np.ndarray:
@@ -136,29 +120,22 @@ class SGBMOptions(MatcherOptions):
     """
 
     mode: Literal["3way", "sgbm", "hh", "hh4"] = "3way"
-    block_size: int = 5
-    p1: int = 0
-    p2: int = 0
-    min_disparity: int = 0
-    uniqueness: int = 10
-    speckle_window: int = 100
-    speckle_range: int = 2
-    disp12_max_diff: int = 1
-    pre_filter_cap: int = 63
+    block_size: Annotated[int, Range(1, 11), Odd()] = 5
+    p1: Annotated[int, Range(0)] = 0
+    p2: Annotated[int, Range(0)] = 0
+    min_disparity: Annotated[int, Range(0)] = 0
+    uniqueness: Annotated[int, Range(0)] = 10
+    speckle_window: Annotated[int, Range(0)] = 100
+    speckle_range: Annotated[int, Range(0)] = 2
+    disp12_max_diff: Annotated[int, Range(-1)] = 1
+    pre_filter_cap: Annotated[int, Range(1, 63)] = 63
     left_band: Literal["constant", "replicate", "off"] = "replicate"
 
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        _check_band(self.left_band)
-        if self.mode not in _SGBM_MODES:
-            raise ValueError(f"mode must be one of {sorted(_SGBM_MODES)}, got {self.mode!r}")
-        _check_odd("block_size", self.block_size, 1, 11)
-        for name in ("p1", "p2", "min_disparity", "uniqueness", "speckle_window", "speckle_range"):
-            _check_int(name, getattr(self, name), 0)
+    def cross_check(self) -> None:
+        """``p2`` above ``p1`` once either is set."""
+        super().cross_check()
         if (self.p1 or self.p2) and not self.p2 > self.p1:
-            raise ValueError(f"p2 must be > p1, got p1={self.p1}, p2={self.p2}")
-        _check_int("disp12_max_diff", self.disp12_max_diff, -1)
-        _check_int("pre_filter_cap", self.pre_filter_cap, 1, 63)
+            raise reject("p2", self.p2, f"> p1 ({self.p1})")
 
 
 @MATCHERS.register("sgbm")
@@ -227,29 +204,17 @@ class BMOptions(MatcherOptions):
         As for ``sgbm`` (default ``"replicate"``).
     """
 
-    block_size: int = 15
+    block_size: Annotated[int, Range(5, 255), Odd()] = 15
     pre_filter: Literal["xsobel", "normalized"] = "xsobel"
-    pre_filter_size: int = 9
-    pre_filter_cap: int = 31
-    min_disparity: int = 0
-    uniqueness: int = 15
-    texture_threshold: int = 10
-    speckle_window: int = 100
-    speckle_range: int = 2
-    disp12_max_diff: int = 1
+    pre_filter_size: Annotated[int, Range(5, 255), Odd()] = 9
+    pre_filter_cap: Annotated[int, Range(1, 63)] = 31
+    min_disparity: Annotated[int, Range(0)] = 0
+    uniqueness: Annotated[int, Range(0)] = 15
+    texture_threshold: Annotated[int, Range(0)] = 10
+    speckle_window: Annotated[int, Range(0)] = 100
+    speckle_range: Annotated[int, Range(0)] = 2
+    disp12_max_diff: Annotated[int, Range(-1)] = 1
     left_band: Literal["constant", "replicate", "off"] = "replicate"
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        _check_band(self.left_band)
-        _check_odd("block_size", self.block_size, 5, 255)
-        _check_odd("pre_filter_size", self.pre_filter_size, 5, 255)
-        if self.pre_filter not in ("xsobel", "normalized"):
-            raise ValueError(f"pre_filter must be 'xsobel' or 'normalized', got {self.pre_filter!r}")
-        _check_int("pre_filter_cap", self.pre_filter_cap, 1, 63)
-        for name in ("min_disparity", "uniqueness", "texture_threshold", "speckle_window", "speckle_range"):
-            _check_int(name, getattr(self, name), 0)
-        _check_int("disp12_max_diff", self.disp12_max_diff, -1)
 
 
 @MATCHERS.register("bm")

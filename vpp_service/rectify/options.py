@@ -11,13 +11,15 @@ exits 2).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
 
 from vpp_service.rectify.camera_info import CameraInfo, read_camera_info, read_opencv_stereo
 from vpp_service.rectify.stereo import StereoRectifier, check_pair
+from vpp_service.settings import Options, Range, reject
 
 
 @dataclass(frozen=True)
-class RectifyOptions:
+class RectifyOptions(Options):
     """``[rectify]``: the rig's calibration.
 
     Attributes
@@ -36,15 +38,15 @@ class RectifyOptions:
     left: str = ""
     right: str = ""
     opencv: str = ""
-    alpha: float = 0.0
+    alpha: Annotated[float, Range(0.0, 1.0)] = 0.0
 
-    def __post_init__(self) -> None:
+    def cross_check(self) -> None:
+        """One calibration (camera_info pair or OpenCV file), read and checked: a bad one fails the config."""
         if self.opencv and (self.left or self.right):
-            raise ValueError("give either opencv or left + right, not both")
+            raise reject("opencv", self.opencv, "'' when left and right are given (one calibration, not both)")
         if not self.opencv and not (self.left and self.right):
-            raise ValueError("needs left and right (camera_info YAMLs) or opencv (a FileStorage stereo calibration)")
-        if not 0.0 <= self.alpha <= 1.0:
-            raise ValueError(f"alpha must be in [0, 1], got {self.alpha}")
+            missing = "left" if not self.left else "right"
+            raise reject(missing, getattr(self, missing), "a camera_info YAML (or opencv: a FileStorage calibration)")
         check_pair(*self.cameras())  # reads and checks the files: a bad calibration fails the config
 
     def cameras(self) -> tuple[CameraInfo, CameraInfo]:

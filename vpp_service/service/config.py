@@ -20,7 +20,7 @@ embedded default of ``vpp-service run`` with no arguments), applies overrides,
 and validates every section with :func:`vpp_service.settings.from_mapping` and
 each plugin's own ``parse_options`` (its ``Options`` plus its ``check_options``
 hook). Errors are :class:`~vpp_service.settings.SettingsError` naming the key
-(``source.rate_hz: must be a number ...``).
+(``source.rate_hz: got 'fast'; expected a number``).
 """
 
 from __future__ import annotations
@@ -33,12 +33,24 @@ import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, Literal, TypeVar
 
 from vpp_service.plugin import Plugin
 from vpp_service.queueing import Policy
 from vpp_service.registry import Registry
-from vpp_service.settings import SettingsError, from_mapping
+from vpp_service.settings import (
+    Each,
+    IsFile,
+    Matches,
+    NonEmpty,
+    OptionError,
+    Options,
+    Range,
+    Satisfies,
+    SettingsError,
+    from_mapping,
+    reject,
+)
 
 log = logging.getLogger(__name__)
 
@@ -76,8 +88,19 @@ def default_endpoint() -> str:
 SECTIONS = ("service", "zenoh", "source", "vpp", "matcher", "queues", "depth_filter", "depth_clip", "rectify", "sinks")
 
 
+def _check_prefix(prefix: str) -> None:
+    """Raise ValueError unless ``prefix`` makes valid Zenoh keys (:func:`~vpp_service.transport.wire.topic`)."""
+    from vpp_service.transport.wire import topic
+
+    topic(prefix, "rig0", "x")
+
+
+#: A Zenoh endpoint, ``proto/address``.
+_ENDPOINT = Satisfies(lambda ep: "/" in ep and bool(ep.split("/", 1)[1]), "an endpoint like 'tcp/HOST:PORT'")
+
+
 @dataclass(frozen=True)
-class ServiceSection:
+class ServiceSection(Options):
     """``[service]``: identity and run control.
 
     Attributes
@@ -120,45 +143,27 @@ class ServiceSection:
         network source (``zenoh``, ``ros2``: a long-running service), false otherwise (a one-shot run).
     """
 
-    rig: str = "rig0"
-    prefix: str = "vpp"
-    max_frames: int = 0
-    out: str = "vpp-run"
+    rig: Annotated[str, Matches(RIG_NAME.pattern, "1-64 of A-Z a-z 0-9 _ . - starting with a letter, digit or _")] = (
+        "rig0"
+    )
+    prefix: Annotated[str, Satisfies(_check_prefix, "a plain key expression (no *, $, #, ?, leading/trailing /)")] = (
+        "vpp"
+    )
+    max_frames: Annotated[int, Range(0)] = 0
+    out: Annotated[str, NonEmpty()] = "vpp-run"
     summary: bool = True
-    summary_period_s: float = 1.0
-    shutdown_timeout_s: float = 5.0
-    timing_window: int = 200
-    reject_log_period_s: float = 5.0
+    summary_period_s: Annotated[float, Range(0.0, 3600.0, lo_open=True)] = 1.0
+    shutdown_timeout_s: Annotated[float, Range(0.0, 3600.0, lo_open=True)] = 5.0
+    timing_window: Annotated[int, Range(1, 100000)] = 200
+    reject_log_period_s: Annotated[float, Range(0.0, 3600.0)] = 5.0
     seed: int = 0
     reuse_memory: bool = True
     overwrite: bool = False
     resume: bool | Literal["auto"] = "auto"
 
-    def __post_init__(self) -> None:
-        from vpp_service.transport.wire import topic
-
-        topic(self.prefix, self.rig, "x")  # validates both
-        if not isinstance(self.rig, str) or not RIG_NAME.fullmatch(self.rig):
-            raise ValueError(
-                f"rig must be 1-64 of A-Z a-z 0-9 _ . - starting with a letter, digit or _, got {self.rig[:80]!r}"
-                if isinstance(self.rig, str)
-                else f"rig must be a string, got {self.rig!r}"
-            )
-        if self.max_frames < 0:
-            raise ValueError(f"max_frames must be >= 0, got {self.max_frames}")
-        if not self.out:
-            raise ValueError("out: must be a folder name")
-        for name in ("summary_period_s", "shutdown_timeout_s"):
-            if not 0 < getattr(self, name) <= 3600:
-                raise ValueError(f"{name} must be in (0, 3600], got {getattr(self, name)}")
-        if not 0 <= self.reject_log_period_s <= 3600:
-            raise ValueError(f"reject_log_period_s must be in [0, 3600], got {self.reject_log_period_s}")
-        if not 1 <= self.timing_window <= 100000:
-            raise ValueError(f"timing_window must be in [1, 100000], got {self.timing_window}")
-
 
 @dataclass(frozen=True)
-class ZenohSection:
+class ZenohSection(Options):
     """``[zenoh]``: the service's Zenoh session.
 
     Attributes
@@ -183,27 +188,20 @@ class ZenohSection:
 
     enabled: bool = True
     mode: Literal["peer", "client", "router"] = "peer"
-    listen: list[str] = field(default_factory=lambda: [default_endpoint()])
-    connect: list[str] = field(default_factory=list)
+    listen: Annotated[list[str], Each(_ENDPOINT)] = field(default_factory=lambda: [default_endpoint()])
+    connect: Annotated[list[str], Each(_ENDPOINT)] = field(default_factory=list)
     multicast_scouting: bool = False
-    config_file: str = ""
-    max_message_mb: float = 64.0
+    config_file: Annotated[str, IsFile()] = ""
+    max_message_mb: Annotated[float, Range(0.0, 4096.0, lo_open=True)] = 64.0
 
-    def __post_init__(self) -> None:
-        for key in ("listen", "connect"):
-            for ep in getattr(self, key):
-                if "/" not in ep or not ep.split("/", 1)[1]:
-                    raise ValueError(f"{key}: endpoint must look like 'tcp/HOST:PORT', got {ep!r}")
+    def cross_check(self) -> None:
+        """A client connects somewhere."""
         if self.mode == "client" and not self.connect:
-            raise ValueError("connect: client mode needs at least one endpoint")
-        if self.config_file and not Path(self.config_file).is_file():
-            raise ValueError(f"config_file: no such file: {self.config_file}")
-        if not 0 < self.max_message_mb <= 4096:
-            raise ValueError(f"max_message_mb must be in (0, 4096], got {self.max_message_mb}")
+            raise reject("connect", self.connect, "at least one endpoint in client mode")
 
 
 @dataclass(frozen=True)
-class QueuesSection:
+class QueuesSection(Options):
     """``[queues]``: bounded queues between the pipeline stages.
 
     Attributes
@@ -220,15 +218,10 @@ class QueuesSection:
         policy also reaches the sinks that buffer (Zenoh, ROS 2, Rerun).
     """
 
-    input_size: int = 2
+    input_size: Annotated[int, Range(1, 10000)] = 2
     input_policy: Policy = "latest"
-    output_size: int = 4
+    output_size: Annotated[int, Range(1, 10000)] = 4
     output_policy: Policy = "latest"
-
-    def __post_init__(self) -> None:
-        for key in ("input_size", "output_size"):
-            if not 1 <= getattr(self, key) <= 10000:
-                raise ValueError(f"{key} must be in [1, 10000], got {getattr(self, key)}")
 
 
 @dataclass(frozen=True)
@@ -319,21 +312,23 @@ DEFAULT_CONFIG: dict[str, Any] = {
 def _table(d: Mapping[str, Any], key: str) -> Mapping[str, Any]:
     v = d.get(key, {})
     if not isinstance(v, Mapping):
-        raise SettingsError(f"{key}: must be a table, got {type(v).__name__}")
+        raise OptionError(key, type(v).__name__, "a table")
     return v
 
 
 def _plugin(d: object, section: str, name_key: str, registry: Registry[T], parse: ParseOptions) -> PluginSpec:
     if not isinstance(d, Mapping):
-        raise SettingsError(f"{section}: must be a table, got {type(d).__name__}")
+        raise OptionError(section, type(d).__name__, "a table")
     if name_key not in d:
-        raise SettingsError(f"{section}.{name_key}: missing; known: {', '.join(registry.names())}")
+        raise OptionError(
+            f"{section}.{name_key}", "nothing", f"a {registry.kind}: one of {', '.join(registry.names())}"
+        )
     name = d[name_key]
     if not isinstance(name, str):
-        raise SettingsError(f"{section}.{name_key}: must be a string, got {name!r}")
+        raise OptionError(f"{section}.{name_key}", repr(name), f"a {registry.kind} name (a string)")
     if name not in registry:
-        raise SettingsError(
-            f"{section}.{name_key}: unknown {registry.kind} {name!r}; known: {', '.join(registry.names())}"
+        raise OptionError(
+            f"{section}.{name_key}", f"unknown {registry.kind} {name!r}", "one of " + ", ".join(registry.names())
         )
     raw = {k: v for k, v in d.items() if k != name_key}
     return PluginSpec(name=name, options=parse(name, raw, section), raw=raw)
@@ -350,7 +345,7 @@ def _parse_vpp(d: Mapping[str, Any], defaults: Mapping[str, object]) -> VPPConfi
     raw = {**defaults, **d}
     enabled = raw.pop("enabled", True)
     if not isinstance(enabled, bool):
-        raise SettingsError(f"vpp.enabled: must be true or false, got {enabled!r}")
+        raise OptionError("vpp.enabled", repr(enabled), "true or false")
     from vpp_service.vpp import VPPConfig
 
     cfg = from_mapping(VPPConfig, raw, "vpp")
@@ -371,12 +366,14 @@ def _parse_matcher_range(raw: Mapping[str, Any], sec: str) -> tuple[dict[str, An
     auto_raw = options.pop("auto_range", None)
     if md == "auto":
         if auto_raw is not None and not isinstance(auto_raw, Mapping):
-            raise SettingsError(f"{sec}.auto_range: must be a table, got {type(auto_raw).__name__}")
+            raise OptionError(f"{sec}.auto_range", type(auto_raw).__name__, "a table")
         return options, from_mapping(AutoRangeOptions, auto_raw or {}, f"{sec}.auto_range")
     if isinstance(md, bool) or not isinstance(md, int):
-        raise SettingsError(f'{sec}.max_disparity: must be "auto" or an integer, got {md!r}')
+        raise OptionError(f"{sec}.max_disparity", repr(md), '"auto" or an integer')
     if auto_raw is not None:
-        raise SettingsError(f'{sec}.auto_range: only used with max_disparity = "auto" (max_disparity is {md})')
+        raise OptionError(
+            f"{sec}.auto_range", "a table", f'nothing unless max_disparity = "auto" (max_disparity is {md})'
+        )
     options["max_disparity"] = md
     return options, None
 
@@ -399,10 +396,10 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
     from vpp_service.sources import SOURCES, parse_source_options
 
     if not isinstance(data, Mapping):
-        raise SettingsError(f"config: must be a table, got {type(data).__name__}")
+        raise OptionError("config", type(data).__name__, "a table")
     unknown = sorted(set(data) - set(SECTIONS))
     if unknown:
-        raise SettingsError(f"{unknown[0]}: unknown section; known: {', '.join(SECTIONS)}")
+        raise OptionError(unknown[0], "an unknown section", "one of " + ", ".join(SECTIONS))
     service = from_mapping(ServiceSection, _table(data, "service"), "service")
     zen = from_mapping(ZenohSection, _table(data, "zenoh"), "zenoh")
     source = _plugin(data.get("source", {"type": "sim"}), "source", "type", SOURCES, parse_source_options)
@@ -437,7 +434,7 @@ def validate_config(data: Mapping[str, Any], out: str | None = None) -> ServiceC
         rectify = from_mapping(RectifyOptions, _table(data, "rectify"), "rectify")
     sinks_raw = data.get("sinks", [])
     if not isinstance(sinks_raw, list):
-        raise SettingsError(f"sinks: must be an array of tables ([[sinks]]), got {type(sinks_raw).__name__}")
+        raise OptionError("sinks", type(sinks_raw).__name__, "an array of tables ([[sinks]])")
     sinks: list[PluginSpec] = []
     out_dir = out or service.out
     for i, raw_sink in enumerate(sinks_raw):

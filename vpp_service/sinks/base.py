@@ -29,11 +29,12 @@ from __future__ import annotations
 from abc import abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from vpp_service.frame import FusionResult
 from vpp_service.plugin import Plugin, PluginContext, parse_plugin_options
 from vpp_service.registry import Registry
+from vpp_service.settings import Options, Range
 
 #: Registered sink classes by name ("zenoh", "rerun", "files").
 SINKS: Registry[Sink] = Registry("sink")
@@ -44,7 +45,7 @@ class SinkContext(PluginContext):
 
 
 @dataclass(frozen=True)
-class QueueSpec:
+class QueueSpec(Options):
     """How the pipeline buffers results for one sink (:meth:`Sink.queue_spec`).
 
     Attributes
@@ -57,14 +58,8 @@ class QueueSpec:
         drops the oldest result when full, counted; ``block`` waits).
     """
 
-    size: int | None = None
+    size: Annotated[int | None, Range(1)] = None
     policy: Literal["block"] | None = None
-
-    def __post_init__(self) -> None:
-        if self.size is not None and (isinstance(self.size, bool) or not isinstance(self.size, int) or self.size < 1):
-            raise ValueError(f"size must be an integer >= 1 or None, got {self.size!r}")
-        if self.policy not in (None, "block"):
-            raise ValueError(f"policy must be 'block' or None, got {self.policy!r}")
 
 
 class Sink(Plugin):

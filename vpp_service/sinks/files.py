@@ -47,17 +47,19 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated
 
 import cv2
 import numpy as np
 
 from vpp_service.datasets.pfm import write_pfm
 from vpp_service.frame import FusionResult
+from vpp_service.settings import Each, NonEmpty, OneOf, Options, Range, Satisfies, Unique
 from vpp_service.sinks.base import SINKS, SinkContext
 from vpp_service.sinks.colorize import colorize_disparity
-from vpp_service.sinks.folder import FolderSink, check_pattern, path_inside, write_atomic
+from vpp_service.sinks.folder import PATTERN_RULE, FolderSink, check_pattern, path_inside, write_atomic
 from vpp_service.sinks.ply import encode_ply
-from vpp_service.transport.backproject import DEFAULT_STRIDE, check_stride, depth_to_points
+from vpp_service.transport.backproject import DEFAULT_STRIDE, MAX_STRIDE, depth_to_points
 
 log = logging.getLogger(__name__)
 
@@ -67,7 +69,7 @@ _EXT = {"png16": ".png", "pfm": ".pfm", "npy": ".npy"}
 
 
 @dataclass(frozen=True)
-class FilesSinkOptions:
+class FilesSinkOptions(Options):
     """Options of the ``files`` sink.
 
     Attributes
@@ -103,33 +105,18 @@ class FilesSinkOptions:
         pixel; the default 4 keeps a 720p cloud under 57 600 points).
     """
 
-    dir: str
-    formats: tuple[str, ...] = ("png16",)
+    dir: Annotated[str, NonEmpty()]
+    formats: Annotated[tuple[str, ...], NonEmpty(), Unique(), Each(OneOf(*FORMATS))] = ("png16",)
     painted: bool = False
     depth: bool = False
     confidence: bool = False
-    pattern: str = "{rig}_{seq:06d}"
+    pattern: Annotated[str, Satisfies(check_pattern, PATTERN_RULE)] = "{rig}_{seq:06d}"
     overwrite: bool = False
     create_dir: bool = False
     preview: bool = False
-    preview_max_disparity: float = 0.0
+    preview_max_disparity: Annotated[float, Range(0.0)] = 0.0
     points: bool = False
-    points_stride: int = DEFAULT_STRIDE
-
-    def __post_init__(self) -> None:
-        check_stride(self.points_stride)
-        if not (self.preview_max_disparity >= 0 and np.isfinite(self.preview_max_disparity)):
-            raise ValueError(f"preview_max_disparity: must be a finite number >= 0, got {self.preview_max_disparity}")
-        if not self.dir.strip():
-            raise ValueError("dir: must not be empty")
-        if not self.formats:
-            raise ValueError(f"formats: must name at least one of {list(FORMATS)}")
-        for i, f in enumerate(self.formats):
-            if f not in FORMATS:
-                raise ValueError(f"formats[{i}]: must be one of {list(FORMATS)}, got {f!r}")
-        if len(set(self.formats)) != len(self.formats):
-            raise ValueError(f"formats: duplicate entries in {list(self.formats)}")
-        check_pattern(self.pattern)
+    points_stride: Annotated[int, Range(1, MAX_STRIDE)] = DEFAULT_STRIDE
 
 
 def _check_disparity(disparity: object) -> np.ndarray:

@@ -67,6 +67,10 @@ def path_inside(folder: Path, name: str) -> Path:
     return folder / name
 
 
+#: What :func:`check_pattern` accepts, in words (option help and errors).
+PATTERN_RULE = "a pattern over {rig}, {seq}, {stamp_ns}, {name} giving a plain, non-hidden file name"
+
+
 def check_pattern(pattern: str) -> None:
     """Validate a file-name pattern over :data:`PATTERN_FIELDS`.
 

@@ -48,11 +48,12 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 from vpp_service.frame import FusionResult
+from vpp_service.settings import NonEmpty, Options, Range, Satisfies
 from vpp_service.sinks.base import SINKS, SinkContext
-from vpp_service.sinks.folder import FolderSink, check_pattern, path_inside, write_atomic
+from vpp_service.sinks.folder import PATTERN_RULE, FolderSink, check_pattern, path_inside, write_atomic
 from vpp_service.transport import wire
 
 log = logging.getLogger(__name__)
@@ -64,7 +65,7 @@ EXTENSION = ".msgpack"
 
 
 @dataclass(frozen=True)
-class RecordSinkOptions:
+class RecordSinkOptions(Options):
     """Options of the ``record`` sink.
 
     Attributes
@@ -90,24 +91,13 @@ class RecordSinkOptions:
         e.g. ``"{rig}_{stamp_ns}"`` to record several runs into one folder.
     """
 
-    dir: str
+    dir: Annotated[str, NonEmpty()]
     create_dir: bool = False
     enc: Literal["raw", "png"] = "png"
-    max_frames: int = 0
-    max_bytes: int = 0
+    max_frames: Annotated[int, Range(0)] = 0
+    max_bytes: Annotated[int, Range(0)] = 0
     overwrite: bool = False
-    pattern: str = "{rig}_{seq:09d}"
-
-    def __post_init__(self) -> None:
-        if not self.dir.strip():
-            raise ValueError("dir: must not be empty")
-        if self.enc not in ENCODINGS:
-            raise ValueError(f"enc: must be one of {list(ENCODINGS)}, got {self.enc!r}")
-        if self.max_frames < 0:
-            raise ValueError(f"max_frames: must be >= 0 (0 = no limit), got {self.max_frames}")
-        if self.max_bytes < 0:
-            raise ValueError(f"max_bytes: must be >= 0 (0 = no limit), got {self.max_bytes}")
-        check_pattern(self.pattern)
+    pattern: Annotated[str, Satisfies(check_pattern, PATTERN_RULE)] = "{rig}_{seq:09d}"
 
 
 @SINKS.register("record")

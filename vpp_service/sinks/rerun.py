@@ -74,14 +74,15 @@ import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Annotated, Literal
 
 from vpp_service.frame import FusionResult
+from vpp_service.settings import Matches, NonEmpty, Options, Range, Satisfies, reject
 from vpp_service.sinks.base import SINKS, QueueSpec, Sink, SinkContext
 from vpp_service.sinks.rerun_log import ENTITY_RE, RerunLayout, RerunParts, depth_stride, parts_from_result
 from vpp_service.sinks.rerun_output import RerunOutput, reachable
 from vpp_service.sinks.rotation import rotated_paths
-from vpp_service.transport.backproject import DEFAULT_STRIDE, check_stride
+from vpp_service.transport.backproject import DEFAULT_STRIDE, MAX_STRIDE
 
 if TYPE_CHECKING:
     import rerun.blueprint as rrb
@@ -96,20 +97,23 @@ VIEWER_MAX_HZ = 15.0
 THROTTLE_BURST = 2.0
 
 
-def _range(value: list[float] | None, key: str) -> None:
-    if value is None:
-        return
-    if (
-        not isinstance(value, (list, tuple))
-        or len(value) != 2
-        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
-        or not value[1] > value[0]
-    ):
-        raise ValueError(f"{key}: must be [min, max] with finite min < max, got {value!r}")
+def _is_range(value: list[float]) -> bool:
+    """Whether ``value`` is ``[min, max]`` of finite numbers with ``min < max``."""
+    return (
+        isinstance(value, (list, tuple))
+        and len(value) == 2
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+        and value[1] > value[0]
+    )
+
+
+#: Markers of the rerun sink's options.
+_RANGE = Satisfies(_is_range, "[min, max] with finite min < max")
+_NAME = NonEmpty()
 
 
 @dataclass(frozen=True)
-class RerunSinkOptions:
+class RerunSinkOptions(Options):
     """Options of the ``rerun`` sink.
 
     Attributes
@@ -186,70 +190,35 @@ class RerunSinkOptions:
     """
 
     mode: Literal["save", "spawn", "connect", "serve"] = "save"
-    path: str = "vpp.rrd"
-    max_mb: float = 1000.0
-    max_files: int = 3
-    url: str | None = None
-    grpc_port: int = 9876
-    web_port: int = 0
-    bind: str = "127.0.0.1"
-    max_hz: float | None = None
-    memory_limit: str = "512MB"
-    queue_size: int = 2
+    path: Annotated[str, NonEmpty()] = "vpp.rrd"
+    max_mb: Annotated[float, Range(0.0)] = 1000.0
+    max_files: Annotated[int, Range(1)] = 3
+    url: Annotated[str | None, Matches(_URL_RE.pattern, "rerun+http://HOST:PORT/proxy")] = None
+    grpc_port: Annotated[int, Range(1, 65535)] = 9876
+    web_port: Annotated[int, Range(0, 65535)] = 0
+    bind: Annotated[str, Matches(r"\S+", "an IP address such as 127.0.0.1")] = "127.0.0.1"
+    max_hz: Annotated[float | None, Range(0.0)] = None
+    memory_limit: Annotated[str, Matches(_MEMORY_RE.pattern, "a size like '512MB', '2GiB' or '25%'")] = "512MB"
+    queue_size: Annotated[int, Range(1)] = 2
     log_painted: bool = True
-    jpeg_quality: int = 85
-    disparity_range: list[float] | None = None
-    depth_range: list[float] | None = None
+    jpeg_quality: Annotated[int, Range(0, 100)] = 85
+    disparity_range: Annotated[list[float] | None, _RANGE] = None
+    depth_range: Annotated[list[float] | None, _RANGE] = None
     sparse_points: bool = True
-    max_sparse_points: int = 5000
+    max_sparse_points: Annotated[int, Range(1)] = 5000
     point_cloud: bool = True
     confidence: bool = False
-    max_points: int = 200_000
+    max_points: Annotated[int, Range(1)] = 200_000
     points: bool = False
-    points_stride: int = DEFAULT_STRIDE
-    application_id: str | None = None
-    recording_id: str | None = None
+    points_stride: Annotated[int, Range(1, MAX_STRIDE)] = DEFAULT_STRIDE
+    application_id: Annotated[str | None, _NAME] = None
+    recording_id: Annotated[str | None, _NAME] = None
     analytics: bool = False
 
-    def __post_init__(self) -> None:
-        if not self.path.strip():
-            raise ValueError("path: must not be empty")
-        if not math.isfinite(self.max_mb) or self.max_mb < 0:
-            raise ValueError(f"max_mb: must be a finite number >= 0 (0 = no cap), got {self.max_mb}")
-        if self.max_files < 1:
-            raise ValueError(f"max_files: must be >= 1, got {self.max_files}")
-        self._check_network()
-        if self.max_hz is not None and (not math.isfinite(self.max_hz) or self.max_hz < 0):
-            raise ValueError(f"max_hz: must be a finite number >= 0 (0 = every frame), got {self.max_hz}")
-        if not _MEMORY_RE.match(self.memory_limit):
-            raise ValueError(f"memory_limit: must look like '512MB', '2GiB' or '25%', got {self.memory_limit!r}")
-        if self.queue_size < 1:
-            raise ValueError(f"queue_size: must be >= 1, got {self.queue_size}")
-        if not 0 <= self.jpeg_quality <= 100:
-            raise ValueError(f"jpeg_quality: must be in 0..100 (0 = uncompressed), got {self.jpeg_quality}")
-        _range(self.disparity_range, "disparity_range")
-        _range(self.depth_range, "depth_range")
-        if self.max_sparse_points < 1:
-            raise ValueError(f"max_sparse_points: must be >= 1, got {self.max_sparse_points}")
-        if self.max_points < 1:
-            raise ValueError(f"max_points: must be >= 1, got {self.max_points}")
-        check_stride(self.points_stride)
-        if self.application_id is not None and not self.application_id.strip():
-            raise ValueError("application_id: must not be empty when given")
-        if self.recording_id is not None and not self.recording_id.strip():
-            raise ValueError("recording_id: must not be empty when given")
-
-    def _check_network(self) -> None:
-        if self.url is not None and not _URL_RE.match(self.url):
-            raise ValueError(f"url: must look like rerun+http://HOST:PORT/proxy, got {self.url!r}")
-        if not 1 <= self.grpc_port <= 65535:
-            raise ValueError(f"grpc_port: must be in 1..65535, got {self.grpc_port}")
-        if not 0 <= self.web_port <= 65535:
-            raise ValueError(f"web_port: must be in 0..65535 (0 = off), got {self.web_port}")
+    def cross_check(self) -> None:
+        """The viewer's web port apart from its gRPC port."""
         if self.web_port and self.web_port == self.grpc_port:
-            raise ValueError(f"web_port: must differ from grpc_port ({self.grpc_port})")
-        if not self.bind.strip() or any(c.isspace() for c in self.bind):
-            raise ValueError(f"bind: must be an IP address such as 127.0.0.1, got {self.bind!r}")
+            raise reject("web_port", self.web_port, f"0 or a port other than grpc_port ({self.grpc_port})")
 
 
 @SINKS.register("rerun")

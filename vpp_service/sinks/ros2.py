@@ -43,11 +43,12 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 
 from vpp_service.frame import FusionResult
+from vpp_service.settings import Each, NonEmpty, OneOf, Options, Range, Satisfies, Unique, reject
 from vpp_service.sinks.base import SINKS, QueueSpec, Sink, SinkContext
 from vpp_service.timing import StageTimer
 from vpp_service.transport.backproject import depth_to_points
@@ -73,7 +74,7 @@ OUTPUTS: dict[str, tuple[str, str]] = {
 
 
 @dataclass(frozen=True)
-class Ros2OutputOptions:
+class Ros2OutputOptions(Options):
     """What the ROS 2 outputs hold: shared by the ``ros2`` sink and the ``rosbag2`` recorder.
 
     Attributes
@@ -101,33 +102,33 @@ class Ros2OutputOptions:
         Results buffered between the pipeline and the writing thread.
     """
 
-    namespace: str = "/stereo"
-    outputs: list[str] = field(default_factory=lambda: ["disparity"])
+    namespace: Annotated[str, Satisfies(keys.check_namespace, "a namespace like '/stereo' (letters, digits, _)")] = (
+        "/stereo"
+    )
+    outputs: Annotated[list[str], NonEmpty(), Unique(), Each(OneOf(*OUTPUTS))] = field(
+        default_factory=lambda: ["disparity"]
+    )
     topics: dict[str, str] = field(default_factory=dict)
     frame_id: str = "left_camera_optical_frame"
-    min_disparity: float = 0.0
-    max_disparity: float = 0.0
-    delta_d: float = 1.0 / 16.0
+    min_disparity: Annotated[float, Range()] = 0.0
+    max_disparity: Annotated[float, Range(0.0)] = 0.0
+    delta_d: Annotated[float, Range(0.0, 1.0, lo_open=True)] = 1.0 / 16.0
     invalid: rm.Invalid = "below_min"
     points2_layout: Literal["organized", "valid_only"] = "organized"
-    queue_size: int = 4
+    queue_size: Annotated[int, Range(1, 1000)] = 4
 
-    def __post_init__(self) -> None:
-        if not self.outputs or len(set(self.outputs)) != len(self.outputs):
-            raise ValueError("outputs: must list at least one output, without duplicates")
-        for name in [*self.outputs, *self.topics]:
+    def cross_check(self) -> None:
+        """``topics`` keys are outputs; every output's topic is a valid ROS name."""
+        for name in self.topics:
             if name not in OUTPUTS:
-                raise ValueError(f"outputs: unknown output {name!r}; known: {', '.join(OUTPUTS)}")
+                raise reject("topics", name, "keys among " + ", ".join(repr(o) for o in OUTPUTS))
         for name in self.outputs:
-            self.topic(name)  # validates the names
-        if not (np.isfinite(self.min_disparity) and np.isfinite(self.max_disparity) and self.max_disparity >= 0):
-            raise ValueError("min_disparity, max_disparity: must be finite, max_disparity >= 0")
-        if not 0 < self.delta_d <= 1:
-            raise ValueError(f"delta_d must be in (0, 1], got {self.delta_d}")
-        if not 1 <= self.queue_size <= 1000:
-            raise ValueError(f"queue_size must be in [1, 1000], got {self.queue_size}")
-        if self.points2_layout not in ("organized", "valid_only"):
-            raise ValueError(f"points2_layout must be 'organized' or 'valid_only', got {self.points2_layout!r}")
+            try:
+                self.topic(name)
+            except ValueError as exc:
+                raise reject(
+                    f"topics.{name}", self.topics.get(name, OUTPUTS[name][0]), f"a ROS topic name ({exc})"
+                ) from None
 
     def topic(self, output: str) -> str:
         """The fully-qualified topic of ``output``."""
@@ -152,17 +153,11 @@ class Ros2SinkOptions(Ros2OutputOptions):
         The subscribers' ROS 2 distribution: the type-hash segment of keys and tokens.
     """
 
-    domain_id: int = 0
-    node_name: str = "vpp_stereo"
+    domain_id: Annotated[int, Range(0, keys.MAX_DOMAIN_ID)] = 0
+    node_name: Annotated[str, Satisfies(keys.check_node_name, keys.NODE_NAME_RULE)] = "vpp_stereo"
     attachment: Layout = "current"
     lazy: bool = False
     ros_distro: keys.Distro = "jazzy"
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        keys.check_domain(self.domain_id)
-        keys.check_node_name(self.node_name)
-        keys.check_distro(self.ros_distro)
 
 
 class Ros2Encoder:

@@ -18,11 +18,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated
 
 from vpp_service.frame import FusionResult
+from vpp_service.settings import NonEmpty
 from vpp_service.sinks.base import SINKS, QueueSpec, Sink, SinkContext
 from vpp_service.sinks.ros2 import OUTPUTS, Ros2Encoder, Ros2OutputOptions
-from vpp_service.transport.ros2.bag import DISTRO_VERSIONS, BagWriter, RosDistro, Storage
+from vpp_service.transport.ros2.bag import BagWriter, RosDistro, Storage
 from vpp_service.transport.ros2.keys import DEFAULT_PUBLISHER
 from vpp_service.transport.ros2.messages import stamp_ns
 
@@ -42,16 +44,9 @@ class Rosbag2SinkOptions(Ros2OutputOptions):
         8 with Humble's QoS encoding) and its name in ``ros_distro``.
     """
 
-    path: str = ""
+    path: Annotated[str, NonEmpty()] = ""
     storage: Storage = "mcap"
     ros_distro: RosDistro = "jazzy"
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if not self.path:
-            raise ValueError("path: required (the bag folder to create)")
-        if self.ros_distro not in DISTRO_VERSIONS:
-            raise ValueError(f"ros_distro must be one of {', '.join(DISTRO_VERSIONS)}, got {self.ros_distro!r}")
 
 
 @SINKS.register("rosbag2")

@@ -35,13 +35,14 @@ from __future__ import annotations
 import contextlib
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from vpp_service.frame import FusionResult
+from vpp_service.settings import Each, NonEmpty, OneOf, Options, Range, Unique
 from vpp_service.sinks.base import SINKS, QueueSpec, Sink, SinkContext
 from vpp_service.timing import StageTimer
 from vpp_service.transport import wire
-from vpp_service.transport.backproject import DEFAULT_STRIDE, check_stride
+from vpp_service.transport.backproject import DEFAULT_STRIDE, MAX_STRIDE
 from vpp_service.transport.shm import ShmPutter
 
 if TYPE_CHECKING:
@@ -49,7 +50,7 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True)
-class ZenohSinkOptions:
+class ZenohSinkOptions(Options):
     """Options of the ``zenoh`` sink.
 
     Attributes
@@ -75,36 +76,17 @@ class ZenohSinkOptions:
         pixel; the default 4 keeps a 720p cloud under 57 600 points).
     """
 
-    outputs: list[str] = field(default_factory=lambda: ["disparity", "depth"])
-    on_request: list[str] = field(default_factory=lambda: ["left_vpp", "right_vpp", "sparse"])
+    outputs: Annotated[list[str], NonEmpty(), Unique(), Each(OneOf(*wire.OUTPUTS))] = field(
+        default_factory=lambda: ["disparity", "depth"]
+    )
+    on_request: Annotated[list[str], Unique(), Each(OneOf(*wire.OUTPUTS))] = field(
+        default_factory=lambda: ["left_vpp", "right_vpp", "sparse"]
+    )
     image_enc: Literal["raw", "png", "jpeg"] = "png"
-    queue_size: int = 4
-    shm_pool_mb: int = 64
+    queue_size: Annotated[int, Range(1)] = 4
+    shm_pool_mb: Annotated[int, Range(0, 4096)] = 64
     congestion_control: Literal["drop", "block"] = "drop"
-    points_stride: int = DEFAULT_STRIDE
-
-    def __post_init__(self) -> None:
-        check_stride(self.points_stride)
-        if not self.outputs:
-            raise ValueError("outputs: must list at least one output")
-        for name in self.outputs:
-            if name not in wire.OUTPUTS:
-                raise ValueError(f"outputs: unknown output {name!r}; known: {', '.join(wire.OUTPUTS)}")
-        if len(set(self.outputs)) != len(self.outputs):
-            raise ValueError("outputs: duplicates")
-        for name in self.on_request:
-            if name not in wire.OUTPUTS:
-                raise ValueError(f"on_request: unknown output {name!r}; known: {', '.join(wire.OUTPUTS)}")
-        if len(set(self.on_request)) != len(self.on_request):
-            raise ValueError("on_request: duplicates")
-        if (
-            isinstance(self.shm_pool_mb, bool)
-            or not isinstance(self.shm_pool_mb, int)
-            or not 0 <= self.shm_pool_mb <= 4096
-        ):
-            raise ValueError(f"shm_pool_mb: must be an int in [0, 4096], got {self.shm_pool_mb!r}")
-        if self.queue_size < 1:
-            raise ValueError(f"queue_size must be >= 1, got {self.queue_size}")
+    points_stride: Annotated[int, Range(1, MAX_STRIDE)] = DEFAULT_STRIDE
 
 
 def _matching(pub: zenoh.Publisher) -> bool:

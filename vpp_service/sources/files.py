@@ -31,9 +31,10 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Annotated, Literal
 
 from vpp_service.frame import StereoFrame
+from vpp_service.settings import NonEmpty, Options, Range
 from vpp_service.sources.base import SOURCES, Emit, Pacer, Reject, Source, SourceContext
 from vpp_service.sources.sim import build_sensor_or_none, check_sensor_input, scale_frame
 from vpp_service.transport import wire
@@ -44,7 +45,7 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True)
-class FilesSourceOptions:
+class FilesSourceOptions(Options):
     """Options of the ``files`` source.
 
     Attributes
@@ -71,26 +72,16 @@ class FilesSourceOptions:
         Base sensor seed (``seed + seq`` per frame).
     """
 
-    root: str = ""
+    root: Annotated[str, NonEmpty()] = ""
     format: Literal["dataset", "msgpack"] = "dataset"
     dataset: str = "auto"
-    rate_hz: float = 0.0
+    rate_hz: Annotated[float, Range(0.0, 10000.0)] = 0.0
     loop: bool = False
-    count: int = 0
-    scale: float = 1.0
+    count: Annotated[int, Range(0)] = 0
+    scale: Annotated[float, Range(0.0, 1.0, lo_open=True)] = 1.0
     sensor: str = "uniform"
     sensor_options: dict[str, object] = field(default_factory=lambda: {"density": 0.05})
     seed: int = 0
-
-    def __post_init__(self) -> None:
-        if not self.root:
-            raise ValueError("root: required (dataset folder or folder of .msgpack frames)")
-        if not 0 <= self.rate_hz <= 10000:
-            raise ValueError(f"rate_hz must be in [0, 10000], got {self.rate_hz}")
-        if self.count < 0:
-            raise ValueError(f"count must be >= 0, got {self.count}")
-        if not 0 < self.scale <= 1:
-            raise ValueError(f"scale must be in (0, 1], got {self.scale}")
 
 
 @SOURCES.register("files")

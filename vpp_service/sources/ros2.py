@@ -33,9 +33,10 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 from vpp_service.frame import StereoFrame
+from vpp_service.settings import Range, Satisfies
 from vpp_service.sources.base import SOURCES, Reject, SourceContext
 from vpp_service.sources.network import NetworkSource, Refused
 from vpp_service.sources.ros2_assembler import TF_ROLE, StereoAssembler, StereoTopics
@@ -65,21 +66,11 @@ class Ros2SourceOptions(StereoTopics):
         The graph's ROS 2 distribution (the type-hash segment of the subscriber tokens).
     """
 
-    domain_id: int = 0
-    node_name: str = "vpp_stereo_input"
-    ring_size: int = 4
-    poll_s: float = 0.02
+    domain_id: Annotated[int, Range(0, keys.MAX_DOMAIN_ID)] = 0
+    node_name: Annotated[str, Satisfies(keys.check_node_name, keys.NODE_NAME_RULE)] = "vpp_stereo_input"
+    ring_size: Annotated[int, Range(1, 1000)] = 4
+    poll_s: Annotated[float, Range(0.0, 1.0, lo_open=True)] = 0.02
     ros_distro: keys.Distro = "jazzy"
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        keys.check_domain(self.domain_id)
-        keys.check_node_name(self.node_name)
-        keys.check_distro(self.ros_distro)
-        if not 1 <= self.ring_size <= 1000:
-            raise ValueError(f"ring_size must be in [1, 1000], got {self.ring_size}")
-        if not 0 < self.poll_s <= 1:
-            raise ValueError(f"poll_s must be in (0, 1], got {self.poll_s}")
 
 
 @SOURCES.register("ros2")

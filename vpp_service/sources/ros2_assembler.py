@@ -60,13 +60,14 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal, cast
+from typing import Annotated, Literal, cast
 
 import numpy as np
 
 from vpp_service.frame import StereoFrame
 from vpp_service.rectify import CalibrationError, CameraInfo, StereoRectifier
 from vpp_service.rectify.camera_info import DistortionModel
+from vpp_service.settings import Options, Range, Satisfies, reject
 from vpp_service.transport.ros2 import keys
 from vpp_service.transport.ros2 import messages as rm
 from vpp_service.transport.ros2.cloud import check_extrinsic, cloud_to_depth
@@ -96,8 +97,13 @@ _ROLE_TYPES = {
 }
 
 
+def _extrinsic(matrix: list[list[float]]) -> None:
+    """Raise ValueError unless ``matrix`` is a rigid 4 x 4 transform (:func:`check_extrinsic`)."""
+    check_extrinsic(np.asarray(matrix, dtype=np.float64))
+
+
 @dataclass(frozen=True)
-class StereoTopics:
+class StereoTopics(Options):
     """Topic names (relative to the namespace unless absolute) and how frames are assembled.
 
     Attributes
@@ -144,7 +150,9 @@ class StereoTopics:
         Larger clouds are refused before conversion.
     """
 
-    namespace: str = "/stereo"
+    namespace: Annotated[str, Satisfies(keys.check_namespace, "a namespace like '/stereo' (letters, digits, _)")] = (
+        "/stereo"
+    )
     left_image: str = "left/image_rect"
     left_info: str = "left/camera_info"
     right_image: str = "right/image_rect"
@@ -153,32 +161,25 @@ class StereoTopics:
     transport: Transport = "raw"
     depth_topic: str = "points"
     depth_type: DepthType = "cloud"
-    lidar_to_left: list[list[float]] | None = None
+    lidar_to_left: Annotated[list[list[float]] | None, Satisfies(_extrinsic, "a finite 4 x 4 rigid transform")] = None
     tf_topic: str = "/tf_static"
     sync: Literal["exact", "approximate"] = "exact"
-    sync_queue_size: int = 5
-    sync_tolerance_ms: float = 10.0
-    depth_tolerance_ms: float = 50.0
-    depth_wait_ms: float = 100.0
-    max_message_mb: float = rm.Limits.max_bytes / (1024 * 1024)
-    max_pixels: int = rm.Limits.max_pixels
-    max_points: int = rm.Limits.max_points
+    sync_queue_size: Annotated[int, Range(1, 1000)] = 5
+    sync_tolerance_ms: Annotated[float, Range(0.0, 60_000.0)] = 10.0
+    depth_tolerance_ms: Annotated[float, Range(0.0, 60_000.0)] = 50.0
+    depth_wait_ms: Annotated[float, Range(0.0, 60_000.0)] = 100.0
+    max_message_mb: Annotated[float, Range(0.0, 4096.0, lo_open=True)] = rm.Limits.max_bytes / (1024 * 1024)
+    max_pixels: Annotated[int, Range(1, 1_000_000_000)] = rm.Limits.max_pixels
+    max_points: Annotated[int, Range(1, 1_000_000_000)] = rm.Limits.max_points
 
-    def __post_init__(self) -> None:
+    def cross_check(self) -> None:
+        """Every role's topic is a valid ROS name under ``namespace``."""
         for role in ROLES:
-            self.topic(role)  # validates the names
-        if self.lidar_to_left is not None:
-            check_extrinsic(np.asarray(self.lidar_to_left, dtype=np.float64))
-        if not 1 <= self.sync_queue_size <= 1000:
-            raise ValueError(f"sync_queue_size must be in [1, 1000], got {self.sync_queue_size}")
-        for name in ("sync_tolerance_ms", "depth_tolerance_ms", "depth_wait_ms"):
-            if not 0 <= getattr(self, name) <= 60_000:
-                raise ValueError(f"{name} must be in [0, 60000], got {getattr(self, name)}")
-        if not 0 < self.max_message_mb <= 4096:
-            raise ValueError(f"max_message_mb must be in (0, 4096], got {self.max_message_mb}")
-        for name in ("max_pixels", "max_points"):
-            if not 1 <= getattr(self, name) <= 1_000_000_000:
-                raise ValueError(f"{name} must be in [1, 1e9], got {getattr(self, name)}")
+            try:
+                self.topic(role)
+            except ValueError as exc:
+                key = {"depth": "depth_topic"}.get(role, role)
+                raise reject(key, getattr(self, key), f"a ROS topic name ({exc})") from None
 
     def topic(self, role: str) -> str:
         """The fully-qualified topic of ``role``."""

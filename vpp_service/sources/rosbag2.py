@@ -22,8 +22,10 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Annotated
 
 from vpp_service.frame import StereoFrame
+from vpp_service.settings import NonEmpty, Range
 from vpp_service.sources.base import SOURCES, Emit, Reject, Source, SourceContext
 from vpp_service.sources.ros2_assembler import StereoAssembler, StereoTopics
 from vpp_service.transport.ros2.bag import check_bag_path, read_bag
@@ -47,19 +49,10 @@ class Rosbag2SourceOptions(StereoTopics):
         Frames to emit in total; 0 = no cap.
     """
 
-    path: str = ""
-    rate: float = 1.0
+    path: Annotated[str, NonEmpty()] = ""
+    rate: Annotated[float, Range(0.0, 1000.0)] = 1.0
     loop: bool = False
-    count: int = 0
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if not self.path:
-            raise ValueError("path: required (a bag folder, .db3 or .mcap file)")
-        if not 0 <= self.rate <= 1000:
-            raise ValueError(f"rate must be in [0, 1000], got {self.rate}")
-        if self.count < 0:
-            raise ValueError(f"count must be >= 0, got {self.count}")
+    count: Annotated[int, Range(0)] = 0
 
 
 @SOURCES.register("rosbag2")

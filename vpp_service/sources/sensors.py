@@ -48,13 +48,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import ClassVar, Generic, TypeVar
+from typing import Annotated, ClassVar, Generic, TypeVar
 
 import numpy as np
 
 from vpp_service.frame import StereoFrame
 from vpp_service.registry import Registry
-from vpp_service.settings import from_mapping
+from vpp_service.settings import Each, Options, Range, from_mapping, reject
 from vpp_service.sources.lidar_view import render_lidar_depth, rotation_matrix
 from vpp_service.vpp.see_through import LIDAR_LIKE
 
@@ -73,23 +73,20 @@ LIDAR_POSES: dict[str, tuple[float, float, float]] = {
 SENSORS: Registry[Sensor[NominalGeometry]] = Registry("sensor")
 
 
-def _positive(name: str, v: float) -> None:
-    if not np.isfinite(v) or v <= 0:
-        raise ValueError(f"{name}: must be a finite number > 0, got {v!r}")
+#: Markers of the sensors' options: a finite number > 0, >= 0, or a probability in [0, 1).
+_POSITIVE = Range(0.0, lo_open=True)
+_NON_NEGATIVE = Range(0.0)
+_PROBABILITY = Range(0.0, 1.0, hi_open=True)
 
 
-def _non_negative(name: str, v: float) -> None:
-    if not np.isfinite(v) or v < 0:
-        raise ValueError(f"{name}: must be a finite number >= 0, got {v!r}")
-
-
-def _probability(name: str, v: float) -> None:
-    if not np.isfinite(v) or not 0 <= v < 1:
-        raise ValueError(f"{name}: must be in [0, 1), got {v!r}")
+def _check_range(min_range: float, max_range: float) -> None:
+    """Raise the OptionError of a ``max_range`` not beyond ``min_range``."""
+    if max_range <= min_range:
+        raise reject("max_range", max_range, f"> min_range ({min_range})")
 
 
 @dataclass(frozen=True)
-class NominalGeometry:
+class NominalGeometry(Options):
     """Options every sensor shares: the geometry assumed for uncalibrated frames.
 
     Attributes
@@ -100,12 +97,8 @@ class NominalGeometry:
         Baseline (m) assumed when the frame has no calibration. Default 0.1.
     """
 
-    nominal_f: float = 1000.0
-    nominal_baseline: float = 0.1
-
-    def __post_init__(self) -> None:
-        _positive("nominal_f", self.nominal_f)
-        _positive("nominal_baseline", self.nominal_baseline)
+    nominal_f: Annotated[float, _POSITIVE] = 1000.0
+    nominal_baseline: Annotated[float, _POSITIVE] = 0.1
 
 
 #: The options dataclass of one sensor class (covariant: a ``Sensor[LidarSensor.Options]`` is a
@@ -253,14 +246,8 @@ class UniformSensor(Sensor["UniformSensor.Options"]):
             Used for ``sensor_depth`` only when the frame has no calibration (it is then not written).
         """
 
-        density: float = 0.05
-        noise_px: float = 0.0
-
-        def __post_init__(self) -> None:
-            if not np.isfinite(self.density) or not 0 < self.density <= 1:
-                raise ValueError(f"density: must be in (0, 1], got {self.density!r}")
-            _non_negative("noise_px", self.noise_px)
-            super().__post_init__()
+        density: Annotated[float, Range(0.0, 1.0, lo_open=True)] = 0.05
+        noise_px: Annotated[float, _NON_NEGATIVE] = 0.0
 
     def simulate(self, frame: StereoFrame, seed: int = 0) -> StereoFrame:
         """Sample ``density`` of the valid ground-truth pixels (see :meth:`Sensor.simulate`)."""
@@ -316,41 +303,28 @@ class LidarSensor(Sensor["LidarSensor.Options"]):
             Focal length (px) and baseline (m) assumed for uncalibrated frames.
         """
 
-        beams: int = 64
-        fov_up: float = 2.0
-        fov_down: float = -24.8
-        azimuth_step: float = 0.2
-        min_range: float = 0.5
-        max_range: float = 120.0
-        dropout: float = 0.0
-        noise_m: float = 0.0
+        beams: Annotated[int, Range(1)] = 64
+        fov_up: Annotated[float, Range(-90.0, 90.0, lo_open=True, hi_open=True)] = 2.0
+        fov_down: Annotated[float, Range(-90.0, 90.0, lo_open=True, hi_open=True)] = -24.8
+        azimuth_step: Annotated[float, Range(0.0, 10.0, lo_open=True)] = 0.2
+        min_range: Annotated[float, _NON_NEGATIVE] = 0.5
+        max_range: Annotated[float, _POSITIVE] = 120.0
+        dropout: Annotated[float, _PROBABILITY] = 0.0
+        noise_m: Annotated[float, _NON_NEGATIVE] = 0.0
         pose: str | tuple[float, float, float] = (0.0, 0.0, 0.0)
-        rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        rotation: Annotated[tuple[float, float, float], Each(Range(-180.0, 180.0))] = (0.0, 0.0, 0.0)
         zbuffer: bool = False
 
-        def __post_init__(self) -> None:
+        def cross_check(self) -> None:
+            """A known pose preset or a translation within 100 m; ``fov_down`` below ``fov_up``; the range."""
             if isinstance(self.pose, str):
                 if self.pose not in LIDAR_POSES:
-                    raise ValueError(f"pose: unknown preset {self.pose!r}; known: {', '.join(sorted(LIDAR_POSES))}")
+                    raise reject("pose", self.pose, "one of " + ", ".join(repr(p) for p in sorted(LIDAR_POSES)))
             elif len(self.pose) != 3 or not all(np.isfinite(v) and abs(v) <= 100 for v in self.pose):
-                raise ValueError(f"pose: must be [tx, ty, tz] in metres (|t| <= 100), got {self.pose!r}")
-            if len(self.rotation) != 3 or not all(np.isfinite(v) and abs(v) <= 180 for v in self.rotation):
-                raise ValueError(f"rotation: must be [rx, ry, rz] in degrees (|r| <= 180), got {self.rotation!r}")
-            if self.beams < 1:
-                raise ValueError(f"beams: must be >= 1, got {self.beams}")
-            if not (-90 < self.fov_down < self.fov_up < 90):
-                raise ValueError(
-                    f"fov_up/fov_down: need -90 < fov_down < fov_up < 90, got {self.fov_down}, {self.fov_up}"
-                )
-            if not np.isfinite(self.azimuth_step) or not 0 < self.azimuth_step <= 10:
-                raise ValueError(f"azimuth_step: must be in (0, 10] degrees, got {self.azimuth_step!r}")
-            _non_negative("min_range", self.min_range)
-            _positive("max_range", self.max_range)
-            if self.max_range <= self.min_range:
-                raise ValueError(f"max_range: must exceed min_range ({self.min_range}), got {self.max_range}")
-            _probability("dropout", self.dropout)
-            _non_negative("noise_m", self.noise_m)
-            super().__post_init__()
+                raise reject("pose", self.pose, "[tx, ty, tz] in metres (|t| <= 100) or a preset name")
+            if not self.fov_down < self.fov_up:
+                raise reject("fov_down", self.fov_down, f"< fov_up ({self.fov_up})")
+            _check_range(self.min_range, self.max_range)
 
     def translation(self) -> np.ndarray:
         """The LiDAR origin in the left camera frame (metres), the preset's values for a named ``pose``."""
@@ -479,23 +453,16 @@ class ToFSensor(Sensor["ToFSensor.Options"]):
             Focal length (px) and baseline (m) assumed for uncalibrated frames.
         """
 
-        grid_w: int = 80
-        grid_h: int = 60
-        min_range: float = 0.1
-        max_range: float = 8.0
-        noise_k: float = 0.0
-        dropout: float = 0.0
+        grid_w: Annotated[int, Range(1)] = 80
+        grid_h: Annotated[int, Range(1)] = 60
+        min_range: Annotated[float, _NON_NEGATIVE] = 0.1
+        max_range: Annotated[float, _POSITIVE] = 8.0
+        noise_k: Annotated[float, _NON_NEGATIVE] = 0.0
+        dropout: Annotated[float, _PROBABILITY] = 0.0
 
-        def __post_init__(self) -> None:
-            if self.grid_w < 1 or self.grid_h < 1:
-                raise ValueError(f"grid_w/grid_h: must be >= 1, got {self.grid_w} x {self.grid_h}")
-            _non_negative("min_range", self.min_range)
-            _positive("max_range", self.max_range)
-            if self.max_range <= self.min_range:
-                raise ValueError(f"max_range: must exceed min_range ({self.min_range}), got {self.max_range}")
-            _non_negative("noise_k", self.noise_k)
-            _probability("dropout", self.dropout)
-            super().__post_init__()
+        def cross_check(self) -> None:
+            """``max_range`` beyond ``min_range``."""
+            _check_range(self.min_range, self.max_range)
 
     def simulate(self, frame: StereoFrame, seed: int = 0) -> StereoFrame:
         """Measure the depth at the centres of the ``grid_w`` x ``grid_h`` cells (see :meth:`Sensor.simulate`)."""

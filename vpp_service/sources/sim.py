@@ -24,14 +24,14 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import cv2
 import numpy as np
 
 from vpp_service.datasets.skimage_scene import MOTORCYCLE_CALIB, motorcycle, motorcycle_arrays
 from vpp_service.frame import Calibration, StereoFrame
-from vpp_service.settings import SettingsError
+from vpp_service.settings import OptionError, Options, Range, reject
 from vpp_service.sources.base import SOURCES, Emit, Pacer, Reject, Source, SourceContext
 
 if TYPE_CHECKING:
@@ -134,7 +134,7 @@ def motorcycle_frame(scale: float = 1.0) -> StereoFrame:
 
 
 @dataclass(frozen=True)
-class SimSourceOptions:
+class SimSourceOptions(Options):
     """Options of the ``sim`` source.
 
     Attributes
@@ -163,22 +163,17 @@ class SimSourceOptions:
     scene_options: dict[str, Any] = field(default_factory=dict)
     dataset: str = "auto"
     root: str = ""
-    scale: float = 1.0
+    scale: Annotated[float, Range(0.0, 1.0, lo_open=True)] = 1.0
     sensor: str = "uniform"
     sensor_options: dict[str, object] = field(default_factory=lambda: {"density": 0.05})
-    rate_hz: float = 10.0
-    count: int = 0
+    rate_hz: Annotated[float, Range(0.0, 10000.0)] = 10.0
+    count: Annotated[int, Range(0)] = 0
     seed: int = 0
 
-    def __post_init__(self) -> None:
-        if not 0 < self.scale <= 1:
-            raise ValueError(f"scale must be in (0, 1], got {self.scale}")
-        if not 0 <= self.rate_hz <= 10000:
-            raise ValueError(f"rate_hz must be in [0, 10000], got {self.rate_hz}")
-        if self.count < 0:
-            raise ValueError(f"count must be >= 0, got {self.count}")
+    def cross_check(self) -> None:
+        """A dataset scene names its folder."""
         if self.scene == "dataset" and not self.root:
-            raise ValueError("root: required when scene = 'dataset'")
+            raise reject("root", self.root, "a dataset folder when scene = 'dataset'")
 
 
 def check_sensor_input(dataset: str, root: str, sensor: str, section: str, *, own_sparse: bool) -> None:
@@ -240,13 +235,19 @@ class SimSource(Source):
 
         Raises
         ------
-        SettingsError
-            ``<section>.sensor_options: ...`` (unknown sensor or invalid option).
+        OptionError
+            ``<section>.sensor: ...`` (unknown sensor) or ``<section>.sensor_options.<key>: ...``.
         """
+        from vpp_service.sources.sensors import SENSORS
+
+        if options.sensor != "none" and options.sensor not in SENSORS:
+            known = ", ".join(repr(n) for n in [*SENSORS.names(), "none"])
+            raise OptionError(f"{section}.sensor", repr(options.sensor), f"one of {known}")
         try:
             build_sensor_or_none(options.sensor, dict(options.sensor_options))
-        except ValueError as exc:
-            raise SettingsError(f"{section}.sensor_options: {exc}") from None
+        except OptionError as exc:  # name the key under this section, not the sensor's own
+            key = exc.key.removeprefix(f"sensor.{options.sensor}.")
+            raise OptionError(f"{section}.sensor_options.{key}", exc.got, exc.expected) from None
 
     @classmethod
     def check_paths(cls, options: SimSourceOptions, section: str, created_dirs: frozenset[Path] = frozenset()) -> None:

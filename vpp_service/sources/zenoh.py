@@ -47,9 +47,10 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import partial
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from vpp_service.frame import StereoFrame
+from vpp_service.settings import Options, Range, reject
 from vpp_service.sources.base import SOURCES, Reject, SourceContext
 from vpp_service.sources.network import NetworkSource, Refused
 from vpp_service.transport import wire
@@ -60,7 +61,7 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True)
-class ZenohSourceOptions:
+class ZenohSourceOptions(Options):
     """Options of the ``zenoh`` source.
 
     Attributes
@@ -99,34 +100,23 @@ class ZenohSourceOptions:
     topics: Literal["frame", "separate"] = "frame"
     with_depth: bool = True
     sync: Literal["exact", "approximate"] = "exact"
-    sync_queue_size: int = 10
-    sync_threshold_ms: float = 20.0
-    ring_size: int = 4
+    sync_queue_size: Annotated[int, Range(1)] = 10
+    sync_threshold_ms: Annotated[float, Range(0.0)] = 20.0
+    ring_size: Annotated[int, Range(1)] = 4
     ring_sizes: dict[str, int] = field(default_factory=dict)
-    max_message_mb: float = 64.0
-    max_pixels: int = wire.DEFAULT_LIMITS.max_pixels
-    poll_s: float = 0.05
+    max_message_mb: Annotated[float, Range(0.0, 4096.0, lo_open=True)] = 64.0
+    max_pixels: Annotated[int, Range(1, 1 << 28)] = wire.DEFAULT_LIMITS.max_pixels
+    poll_s: Annotated[float, Range(0.0, 1.0, lo_open=True)] = 0.05
 
-    def __post_init__(self) -> None:
-        if self.sync_queue_size < 1:
-            raise ValueError(f"sync_queue_size must be >= 1, got {self.sync_queue_size}")
-        if not self.sync_threshold_ms >= 0:
-            raise ValueError(f"sync_threshold_ms must be >= 0, got {self.sync_threshold_ms}")
-        if self.ring_size < 1:
-            raise ValueError(f"ring_size must be >= 1, got {self.ring_size}")
+    def cross_check(self) -> None:
+        """``ring_sizes``: known topics, sizes >= 1, with ``topics = "separate"`` only."""
         for part, n in self.ring_sizes.items():
             if part not in ("left", "right", "depth"):
-                raise ValueError(f"ring_sizes: unknown topic {part!r}; known: depth, left, right")
+                raise reject("ring_sizes", part, "keys among 'depth', 'left', 'right'")
             if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-                raise ValueError(f"ring_sizes.{part} must be an int >= 1, got {n!r}")
+                raise reject(f"ring_sizes.{part}", n, ">= 1 (an integer)")
         if self.ring_sizes and self.topics != "separate":
-            raise ValueError('ring_sizes: only for topics = "separate" (use ring_size)')
-        if not 0 < self.max_message_mb <= 4096:
-            raise ValueError(f"max_message_mb must be in (0, 4096], got {self.max_message_mb}")
-        if isinstance(self.max_pixels, bool) or not 1 <= self.max_pixels <= 1 << 28:
-            raise ValueError(f"max_pixels must be in [1, {1 << 28}], got {self.max_pixels}")
-        if not 0 < self.poll_s <= 1:
-            raise ValueError(f"poll_s must be in (0, 1], got {self.poll_s}")
+            raise reject("ring_sizes", self.ring_sizes, '{} unless topics = "separate" (use ring_size)')
 
 
 @dataclass(frozen=True)

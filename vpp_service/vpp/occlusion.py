@@ -25,7 +25,7 @@ def detect_occlusions(
     lam: float | np.floating = 2.0,
     gamma: float | np.floating = 0.4375,
     t: float | np.floating = 1.0,
-    num_threads: int | None = None,
+    threads: int | None = None,
 ) -> np.ndarray:
     """Classify the sparse points of a disparity map as occluded in the right view.
 
@@ -42,7 +42,7 @@ def detect_occlusions(
         1).  They are validated as the ``occ_window_x``, ``occ_window_y``,
         ``occ_lambda``, ``occ_gamma`` and ``occ_t`` fields of
         :class:`VPPConfig`.
-    num_threads : int or None
+    threads : int or None
         OpenMP threads (None: all cores).  The result does not depend on it.
 
     Returns
@@ -56,7 +56,7 @@ def detect_occlusions(
     lam, gamma, t = (v.item() if isinstance(v, np.generic) else v for v in (lam, gamma, t))
     config = VPPConfig(occ_window_x=rx, occ_window_y=ry, occ_lambda=lam, occ_gamma=gamma, occ_t=t)
     disp = as_disparity("disparity", disparity)
-    nt = resolve_threads(num_threads, "num_threads")
+    nt = resolve_threads(threads, "threads")
     occ = np.empty(disp.shape, dtype=bool)  # every row is written by the kernel
     backend.sweep.occlusions(disp, occ.view(np.uint8), kernel_params(config), nt)
     return occ

@@ -11,7 +11,7 @@ written once, as code: ``tests/vpp_reference.py`` (the literal reference the
 kernel matches byte for byte); ``docs/algorithm.md`` explains them.
 
 Inputs are never modified; non-contiguous inputs are copied.  Results are
-byte-identical for any ``num_threads``.
+byte-identical for any ``threads``.
 """
 
 from __future__ import annotations
@@ -91,7 +91,7 @@ def project(
     config: VPPConfig | None = None,
     *,
     seed: int = 0,
-    num_threads: int | None = None,
+    threads: int | None = None,
 ) -> VPPResult:
     """Paint a virtual pattern on a rectified pair at the sparse correspondences.
 
@@ -106,7 +106,7 @@ def project(
         The variant (default: pattern (vi), 3x3, alpha 0.4, FGD).
     seed : int
         Seed of the random pattern, in ``[0, 2**64)``.
-    num_threads : int or None
+    threads : int or None
         OpenMP threads (None: all cores); the output does not depend on it.
 
     Returns
@@ -118,7 +118,7 @@ def project(
     if not isinstance(config, VPPConfig):
         raise TypeError(f"config must be a VPPConfig, got {type(config).__name__}")
     seed = check_seed(seed)
-    nt = resolve_threads(num_threads, "num_threads")
+    nt = resolve_threads(threads, "threads")
     L = as_image("left", left)
     R = as_image("right", right)
     if L.shape != R.shape:

@@ -38,10 +38,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from types import ModuleType
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 
+from vpp_service.settings import Odd, Options, Range
 from vpp_service.vpp import _see_through as portable
 from vpp_service.vpp import backend
 from vpp_service.vpp._validate import as_disparity
@@ -142,7 +143,7 @@ def filter_see_through(
 
 
 @dataclass(frozen=True)
-class DepthFilter:
+class DepthFilter(Options):
     """Which frames' sparse points are filtered before VPP, and how (the ``[depth_filter]`` settings).
 
     Attributes
@@ -160,18 +161,10 @@ class DepthFilter:
     """
 
     mode: Literal["auto", "see-through", "none"] = "auto"
-    window_w: int = DEFAULT_WINDOW_W
-    window_h: int = DEFAULT_WINDOW_H
-    margin: float = DEFAULT_MARGIN
-    min_gap: float = DEFAULT_MIN_GAP
-
-    def __post_init__(self) -> None:
-        if self.mode not in FILTER_MODES:
-            raise ValueError(f"mode: must be one of {', '.join(FILTER_MODES)}, got {self.mode!r}")
-        _check_window("window_w", self.window_w)
-        _check_window("window_h", self.window_h)
-        _check_non_negative("margin", self.margin)
-        _check_non_negative("min_gap", self.min_gap)
+    window_w: Annotated[int, Range(1, 1001), Odd()] = DEFAULT_WINDOW_W
+    window_h: Annotated[int, Range(1, 1001), Odd()] = DEFAULT_WINDOW_H
+    margin: Annotated[float, Range(0.0)] = DEFAULT_MARGIN
+    min_gap: Annotated[float, Range(0.0)] = DEFAULT_MIN_GAP
 
     def applies(self, meta: dict[str, object]) -> bool:
         """Whether a frame with this ``meta`` is filtered (see ``mode``)."""

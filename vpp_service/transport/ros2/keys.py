@@ -18,9 +18,11 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Literal, get_args
+from typing import Annotated, Literal, get_args
 
 import xxhash
+
+from vpp_service.settings import Options, Range
 
 #: The message types this transport reads or writes, by their ROS name.
 IMAGE = "sensor_msgs/msg/Image"
@@ -49,6 +51,9 @@ DISTROS: tuple[str, ...] = get_args(Distro)
 
 #: Largest ROS domain id (the DDS port arithmetic limit every rmw accepts).
 MAX_DOMAIN_ID = 232
+
+#: What :func:`check_node_name` accepts, in words (option help and errors).
+NODE_NAME_RULE = "one token of letters, digits and _ (a ROS node name)"
 
 _NAME_RE = re.compile(r"^(/[A-Za-z_][A-Za-z0-9_]*)+$")
 _TOKEN_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -200,7 +205,7 @@ RMW_ZENOH_DEFAULT_DEPTH = 42
 
 
 @dataclass(frozen=True)
-class Qos:
+class Qos(Options):
     """The QoS fields ``rmw_zenoh`` writes into a liveliness token.
 
     Deadline, lifespan and liveliness are always rmw_zenoh's defaults (infinite, automatic).
@@ -220,14 +225,7 @@ class Qos:
     reliability: Literal[1, 2] = 1
     durability: Literal[1, 2] = 2
     history: Literal[1, 2] = 1
-    depth: int = 10
-
-    def __post_init__(self) -> None:
-        for name in ("reliability", "durability", "history"):
-            if getattr(self, name) not in (1, 2):
-                raise ValueError(f"{name} must be 1 or 2, got {getattr(self, name)!r}")
-        if isinstance(self.depth, bool) or not isinstance(self.depth, int) or not 0 <= self.depth <= 1_000_000:
-            raise ValueError(f"depth must be an integer in [0, 1000000], got {self.depth!r}")
+    depth: Annotated[int, Range(0, 1_000_000)] = 10
 
     def token(self) -> str:
         """The token's QoS chunk as rmw_zenoh writes it: fields equal to its defaults left empty.

@@ -26,12 +26,13 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal, TypeVar
+from typing import TYPE_CHECKING, Annotated, Literal, TypeVar
 
 import cv2
 import numpy as np
 
 from vpp_service.frame import Calibration
+from vpp_service.settings import Options, Range
 from vpp_service.transport import encoded_image
 from vpp_service.transport.ros2.errors import Ros2Error
 from vpp_service.transport.ros2.keys import (
@@ -126,7 +127,7 @@ def __getattr__(name: str) -> type:
 
 
 @dataclass(frozen=True)
-class Limits:
+class Limits(Options):
     """Bounds checked before a message costs anything.
 
     Attributes
@@ -141,15 +142,9 @@ class Limits:
         then fill the byte cap).
     """
 
-    max_bytes: int = DEFAULT_LIMITS.max_message_bytes
-    max_pixels: int = DEFAULT_LIMITS.max_pixels
-    max_points: int = 4 * 1024 * 1024
-
-    def __post_init__(self) -> None:
-        for name in ("max_bytes", "max_pixels", "max_points"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
+    max_bytes: Annotated[int, Range(1)] = DEFAULT_LIMITS.max_message_bytes
+    max_pixels: Annotated[int, Range(1)] = DEFAULT_LIMITS.max_pixels
+    max_points: Annotated[int, Range(1)] = 4 * 1024 * 1024
 
 
 def message_class(ros_type: str) -> type:
