@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from helpers.census_sgm_reference import ref_aggregate, ref_census, ref_confidence, ref_hamming, ref_match
+from helpers.frames import noisy_shifted_pair
 from vpp_service.matchers import build_matcher
 from vpp_service.matchers.confidence import LR_SPAN, apply_min_confidence, lr_confidence, right_view
 from vpp_service.matchers.guided import modulate_cost
@@ -20,13 +21,7 @@ SHIFT = 5
 
 
 def pair(seed: int, h: int = H, w: int = W, shift: int = SHIFT) -> tuple[np.ndarray, np.ndarray]:
-    """Smoothed noise and a copy shifted by ``shift`` (right(x - shift) = left(x), plus noise)."""
-    rng = np.random.default_rng(seed)
-    base = rng.integers(0, 256, (h, w + shift)).astype(np.float64)
-    base = (base + np.roll(base, 1, 1) + np.roll(base, 1, 0)) / 3
-    left = np.clip(base[:, :w] + rng.normal(0, 4, (h, w)), 0, 255).astype(np.uint8)
-    right = np.clip(base[:, shift:] + rng.normal(0, 4, (h, w)), 0, 255).astype(np.uint8)
-    return left, right
+    return noisy_shifted_pair(seed, h, w, shift)
 
 
 def ref_volume(left: np.ndarray, right: np.ndarray, d: int, **opts: float) -> np.ndarray:

@@ -18,6 +18,7 @@ import pytest
 
 pytest.importorskip("onnx", reason="the tiny test networks are built with the onnx package (the 'test' extra)")
 
+from helpers.frames import shifted_pair
 from helpers.shared_data import need_shared
 from helpers.tiny_networks import echo, nan_output, sad_stereo, sad_stereo_io
 from vpp_service.matchers import MATCHERS, build_matcher
@@ -44,15 +45,6 @@ ENGINES = [
     )
     for name, module in (("openvino", "openvino"), ("onnxruntime", "onnxruntime"))
 ]
-
-
-def shifted_pair(h: int, w: int, shift: int, seed: int = 0, channels: int = 3) -> tuple[np.ndarray, np.ndarray]:
-    """Random texture; ``right(x - shift) = left(x)`` exactly (the left view's disparity is ``shift``)."""
-    rng = np.random.default_rng(seed)
-    tex = rng.integers(0, 256, (h, w + shift, channels), dtype=np.uint8)
-    if channels == 1:
-        tex = tex[:, :, 0]
-    return np.ascontiguousarray(tex[:, :w]), np.ascontiguousarray(tex[:, shift:])
 
 
 @pytest.fixture(scope="module")

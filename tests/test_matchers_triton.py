@@ -15,30 +15,24 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers.frames import shifted_pair
 from helpers.shared_data import need_shared
+from helpers.sinks import CollectSink as Collect
 from helpers.tiny_networks import sad_stereo
 from helpers.triton_server import TritonServer, server_venv, write_model
 from helpers.zenoh_loopback import free_port
 from vpp_service.cli import EXIT_STARTUP, main
-from vpp_service.frame import FusionResult
 from vpp_service.fusion import Fusion
 from vpp_service.matchers import build_matcher
 from vpp_service.matchers.model_card import shipped_card
 from vpp_service.matchers.triton import ServerUnavailable
 from vpp_service.service.pipeline import Pipeline
-from vpp_service.sinks.base import Sink, SinkContext
 from vpp_service.sources.base import SourceContext, build_source
 
 D = 16
 CARD = {"name": "sad16", "max_disparity": D}
 IO = {"left": (1, 3, None, None), "right": (1, 3, None, None)}
 OUT = {"disparity": (1, None, None)}
-
-
-def shifted_pair(h: int, w: int, shift: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    tex = rng.integers(0, 256, (h, w + shift, 3), dtype=np.uint8)
-    return np.ascontiguousarray(tex[:, :w]), np.ascontiguousarray(tex[:, shift:])
 
 
 @pytest.fixture(scope="module")
@@ -175,20 +169,6 @@ def test_a_server_that_comes_up_late_is_waited_for(tmp_path, repo):
 
 
 # ---- frames in flight: order, exactly once, a server killed mid-stream ----
-
-
-class Collect(Sink):
-    Options = None
-
-    def __init__(self) -> None:
-        super().__init__(None, SinkContext())
-        self.results: list[FusionResult] = []
-
-    def write(self, result: FusionResult) -> None:
-        self.results.append(result)
-
-    def close(self, timeout: float = 5.0) -> None:
-        pass
 
 
 def stream(n: int):

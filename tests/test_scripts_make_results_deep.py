@@ -2,22 +2,16 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 from types import ModuleType
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+from helpers.scripts import load_script
 
 
 @pytest.fixture
 def mr() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("make_results", REPO / "scripts" / "make_results.py")
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("make_results")
 
 
 def _row(dataset: str, matcher: str, method: str, bad2: float, scene: str = "s") -> dict:

@@ -10,6 +10,7 @@ import time
 import numpy as np
 import pytest
 
+from helpers.sinks import CollectSink
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.metrics import answered_metrics, compute_metrics
 from vpp_service.queueing import QueueWorker
@@ -23,7 +24,6 @@ from vpp_service.service.ledger import (
     summary_line,
 )
 from vpp_service.service.pipeline import Pipeline
-from vpp_service.sinks.base import Sink, SinkContext
 from vpp_service.sources.base import Source, SourceContext
 
 FRAME = StereoFrame(np.zeros((4, 6, 3), np.uint8), np.zeros((4, 6, 3), np.uint8), rig="rig0")
@@ -31,19 +31,6 @@ FRAME = StereoFrame(np.zeros((4, 6, 3), np.uint8), np.zeros((4, 6, 3), np.uint8)
 
 def result(frame: StereoFrame = FRAME, **kw) -> FusionResult:
     return FusionResult(frame=frame, disparity=np.zeros(frame.shape, np.float32), **kw)
-
-
-class CollectSink(Sink):
-    """A real Sink that keeps every result it is given."""
-
-    Options = None
-
-    def __init__(self) -> None:
-        super().__init__(None, SinkContext())
-        self.results: list[FusionResult] = []
-
-    def write(self, result: FusionResult) -> None:
-        self.results.append(result)
 
 
 class ListSource(Source):

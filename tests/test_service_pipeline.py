@@ -11,34 +11,17 @@ import pytest
 import zenoh
 
 from helpers.frames import make_frame
+from helpers.sinks import CollectSink
 from helpers.zenoh_loopback import zenoh_test_config
 from vpp_service.frame import FusionResult, StereoFrame
 from vpp_service.fusion import Fusion, score
 from vpp_service.matchers import fill_holes
 from vpp_service.metrics import answered_metrics, compute_metrics
 from vpp_service.service.pipeline import Pipeline
-from vpp_service.sinks.base import QueueSpec, Sink, SinkContext
+from vpp_service.sinks.base import QueueSpec
 from vpp_service.sources.base import Source, SourceContext, build_source
 from vpp_service.timing import StageTimer
 from vpp_service.transport import wire
-
-
-class CollectSink(Sink):
-    """A real Sink implementation that keeps every result it is given."""
-
-    Options = None
-
-    def __init__(self) -> None:
-        super().__init__(None, SinkContext())
-        self.results: list[FusionResult] = []
-        self.closed = False
-
-    def write(self, result: FusionResult) -> None:
-        self.results.append(result)
-        self._counters["written"] += 1
-
-    def close(self, timeout: float = 5.0) -> None:
-        self.closed = True
 
 
 class SlowProcess:

@@ -34,3 +34,22 @@ def make_frame(h: int = 6, w: int = 8, c: int = 3, seed: int = 0, depth: str = "
         seq=7,
         stamp_ns=123456789,
     )
+
+
+def shifted_pair(h: int, w: int, shift: int, seed: int = 0, channels: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Random texture; ``right(x - shift) = left(x)`` exactly (the left view's disparity is ``shift``)."""
+    rng = np.random.default_rng(seed)
+    tex = rng.integers(0, 256, (h, w + shift, channels), dtype=np.uint8)
+    if channels == 1:
+        tex = tex[:, :, 0]
+    return np.ascontiguousarray(tex[:, :w]), np.ascontiguousarray(tex[:, shift:])
+
+
+def noisy_shifted_pair(seed: int, h: int, w: int, shift: int) -> tuple[np.ndarray, np.ndarray]:
+    """Smoothed gray noise and a copy shifted by ``shift`` (right(x - shift) = left(x), plus noise)."""
+    rng = np.random.default_rng(seed)
+    base = rng.integers(0, 256, (h, w + shift)).astype(np.float64)
+    base = (base + np.roll(base, 1, 1) + np.roll(base, 1, 0)) / 3
+    left = np.clip(base[:, :w] + rng.normal(0, 4, (h, w)), 0, 255).astype(np.uint8)
+    right = np.clip(base[:, shift:] + rng.normal(0, 4, (h, w)), 0, 255).astype(np.uint8)
+    return left, right
