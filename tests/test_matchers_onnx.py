@@ -305,13 +305,31 @@ def test_card_io_and_graph_disagree(tmp_path, net, keys, match):
 @pytest.mark.parametrize(
     ("keys", "match"),
     [
-        ({"dtype": "int8"}, r"dtype: must be one of \['float32', 'float16'\], got 'int8'"),
-        ({"output_stride": 0}, r"output_stride must be an integer in \[1, 64\], got 0"),
-        ({"output_stride": 3, "pad_multiple": 16}, r"output_stride 3 must divide the input size: pad_multiple 16"),
-        ({"extra_inputs": {"left": 1}}, r"extra_inputs.left: is an image input of the card"),
-        ({"extra_inputs": {"iters": "many"}}, r"extra_inputs.iters: must be a finite number or a list of them"),
-        ({"vpp": {"alpha": 2.0}}, r"matcher\.onnx\.card: vpp.*alpha.*2\.0"),
-        ({"vpp": {"bogus": 1}}, r"matcher.onnx.card: vpp.bogus: unknown option"),
+        ({"dtype": "int8"}, r"^matcher\.onnx\.card\.dtype: got 'int8'; expected one of 'float32', 'float16'$"),
+        ({"output_stride": 0}, r"^matcher\.onnx\.card\.output_stride: got 0; expected in \[1, 64\]$"),
+        (
+            {"output_stride": 3, "pad_multiple": 16},
+            (
+                r"^matcher\.onnx\.card\.output_stride: got 3; "
+                r"expected a divisor of the input size \(pad_multiple 16\)$"
+            ),
+        ),
+        (
+            {"extra_inputs": {"left": 1}},
+            (
+                r"^matcher\.onnx\.card\.extra_inputs\.left: got 1; "
+                r"expected a name that is not an image input of the card$"
+            ),
+        ),
+        (
+            {"extra_inputs": {"iters": "many"}},
+            (
+                r"^matcher\.onnx\.card\.extra_inputs\.iters: got 'many'; "
+                r"expected a finite number or a list of them$"
+            ),
+        ),
+        ({"vpp": {"alpha": 2.0}}, r"^matcher\.onnx\.card\.vpp\.alpha: got 2\.0; expected in \[0, 1\]$"),
+        ({"vpp": {"bogus": 1}}, r"^matcher\.onnx\.card\.vpp\.bogus: got an unknown option; expected one of "),
     ],
 )
 def test_invalid_card_io_and_vpp_keys(sad16, keys, match):
@@ -604,22 +622,33 @@ def test_a_provider_onnx_runtime_lacks_names_the_ones_it_has(sad16):
 @pytest.mark.parametrize(
     ("keys", "match"),
     [
-        ({"providers": ["CPUExecutionProvider"], "engine": "openvino"}, r"providers choose ONNX Runtime and the dev"),
-        ({"providers": ["CUDAExecutionProvider"], "device": "cuda"}, r"providers choose .*device 'cuda'\)"),
-        ({"providers": ["CPUExecutionProvider", "CPUExecutionProvider"]}, r"providers must not repeat a provider"),
-        ({"providers": [""]}, r"providers must be a list of ONNX Runtime provider names"),
+        (
+            {"providers": ["CPUExecutionProvider"], "engine": "openvino"},
+            r"providers: got \['CPUExecutionProvider'\]; expected none with engine 'openvino' / device 'auto' "
+            r"\(providers choose ONNX Runtime and the device",
+        ),
+        (
+            {"providers": ["CUDAExecutionProvider"], "device": "cuda"},
+            r"providers: got \['CUDAExecutionProvider'\]; expected none with engine 'auto' / device 'cuda'",
+        ),
+        (
+            {"providers": ["CPUExecutionProvider", "CPUExecutionProvider"]},
+            r"providers: got \('CPUExecutionProvider', 'CPUExecutionProvider'\); expected no duplicate items",
+        ),
+        ({"providers": [""]}, r"providers\[0\]: got ''; expected a non-empty value"),
         (
             {"providers": ["CPUExecutionProvider"], "provider_options": {"CUDAExecutionProvider": {}}},
-            r"provider_options\.CUDAExecutionProvider: not among providers \['CPUExecutionProvider'\]",
+            r"provider_options\.CUDAExecutionProvider: got \{\}; "
+            r"expected options of a listed provider \['CPUExecutionProvider'\]",
         ),
         (
             {"providers": ["CPUExecutionProvider"], "provider_options": {"CPUExecutionProvider": 3}},
-            r"provider_options\.CPUExecutionProvider must be a table of options, got 3",
+            r"provider_options\.CPUExecutionProvider: got 3; expected a table of options",
         ),
     ],
 )
 def test_provider_options_are_checked(sad16, keys, match):
-    with pytest.raises(SettingsError, match=r"^matcher\.onnx: " + match):
+    with pytest.raises(SettingsError, match=r"^matcher\.onnx\." + match):
         build_matcher("onnx", {"model": str(sad16), "card": card(), **keys})
 
 

@@ -17,7 +17,7 @@ import pytest
 
 from helpers.frames import shifted_pair
 from helpers.shared_data import need_shared
-from helpers.sinks import CollectSink as Collect
+from helpers.sinks import CollectSink
 from helpers.tiny_networks import sad_stereo
 from helpers.triton_server import TritonServer, server_venv, write_model
 from helpers.zenoh_loopback import free_port
@@ -180,7 +180,7 @@ def stream(n: int):
 
 
 def run_stream(matcher, n: int, in_flight: int, during=None) -> tuple[Pipeline, list[int]]:
-    sink = Collect()
+    sink = CollectSink()
     pipe = Pipeline(
         stream(n),
         Fusion(matcher, None, depth=False),
@@ -216,7 +216,7 @@ def test_two_servers_answer_every_frame_once_in_order(servers, sad16):
 def test_a_stop_that_times_out_counts_the_frames_left_on_the_server(servers):
     """Frames on the server when a stop gives up waiting: lost under ``shutdown``, once; late answers ignored."""
     m = remote(servers[0].url, "sad16_stuck", in_flight=4, max_disparity=D, timeout_ms=20_000)
-    sink = Collect()
+    sink = CollectSink()
     pipe = Pipeline(stream(12), Fusion(m, None, depth=False), [sink], input_size=2, in_flight=4)
     pipe.start()
     assert pipe.source.finished.wait(30)
@@ -226,7 +226,7 @@ def test_a_stop_that_times_out_counts_the_frames_left_on_the_server(servers):
     pipe.stop(0.5)  # the server holds each answer 1 s: the stop cannot wait for them
     st = pipe.status()
     c, d = st["counters"], st["dropped"]
-    assert c["received"] == 12 and c["errors"] == 0 and d["sink.Collect"] == 0
+    assert c["received"] == 12 and c["errors"] == 0 and d["sink.CollectSink"] == 0
     assert d["shutdown"] >= 4  # the frames on the server
     assert c["published"] + d["shutdown"] + d["input_queue"] == c["received"]  # every frame once
     assert [r.frame.seq for r in sink.results] == list(range(c["published"]))

@@ -200,10 +200,7 @@ class ModelCard(Options):
 
     def _check_vpp(self) -> None:
         """The ``[vpp]`` table: VPPConfig fields (the error names ``vpp.key``)."""
-        try:
-            from_mapping(VPPConfig, self.vpp, "vpp")
-        except SettingsError as exc:
-            raise SettingsError(str(exc)) from None
+        from_mapping(VPPConfig, self.vpp, "vpp")
 
     def _check_io(self) -> None:
         """The I/O keys beyond the two image inputs: the output stride divides the size; extra inputs."""
