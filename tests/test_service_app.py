@@ -35,6 +35,14 @@ def config(sinks: list[dict]) -> dict:
     return data
 
 
+def built_pipeline(tmp_path, sinks: list[dict]):
+    """The pipeline of ``config(sinks)``, built, not opened (a files sink's ``dir`` put under ``tmp_path``)."""
+    for s in sinks:
+        if "dir" in s:
+            s["dir"] = str(tmp_path / s["dir"])
+    return build_pipeline(validate_config(config(sinks)), session=None)
+
+
 @pytest.mark.parametrize(
     ("sinks", "depth"),
     [
@@ -47,10 +55,7 @@ def config(sinks: list[dict]) -> dict:
     ],
 )
 def test_metric_depth_only_when_a_sink_reads_it(tmp_path, sinks, depth):
-    for s in sinks:
-        if "dir" in s:
-            s["dir"] = str(tmp_path / s["dir"])
-    pipe = build_pipeline(validate_config(config(sinks)), session=None)  # built, not opened
+    pipe = built_pipeline(tmp_path, sinks)
     assert pipe.process.depth is depth
     assert [type(s).__name__ for s in pipe.sinks] == [f"{s['type'].capitalize()}Sink" for s in sinks]
 
@@ -146,10 +151,7 @@ def test_healthy_run_exits_0(tmp_path):
     ],
 )
 def test_confidence_only_when_a_sink_reads_it(tmp_path, sinks, confidence):
-    for s in sinks:
-        if "dir" in s:
-            s["dir"] = str(tmp_path / s["dir"])
-    pipe = build_pipeline(validate_config(config(sinks)), session=None)  # built, not opened
+    pipe = built_pipeline(tmp_path, sinks)
     assert pipe.process.confidence is confidence
 
 

@@ -36,43 +36,9 @@ PYTRITON = "nvidia-pytriton==0.7.0"
 VENV_KEY = "pytriton-0.7.0-np1-ort-1"
 VENV_ENV = "VPP_TEST_TRITON_VENV"
 
-_MODEL_PY = '''\
-"""Runs the ONNX file named in config.pbtxt with ONNX Runtime (a stand-in for Triton's onnxruntime backend)."""
-import json
-import time
-
-import numpy as np
-import onnxruntime as ort
-import triton_python_backend_utils as pb_utils
-
-
-class TritonPythonModel:
-    def initialize(self, args):
-        cfg = json.loads(args["model_config"])
-        params = {k: v["string_value"] for k, v in cfg.get("parameters", {}).items()}
-        so = ort.SessionOptions()
-        so.intra_op_num_threads = int(params.get("threads", "1"))
-        so.inter_op_num_threads = 1
-        self.session = ort.InferenceSession(params["onnx"], so, providers=["CPUExecutionProvider"])
-        self.inputs = [t["name"] for t in cfg["input"]]
-        self.outputs = [t["name"] for t in cfg["output"]]
-        self.mode = params.get("mode", "")
-        self.delay = float(params.get("delay_ms", "0")) / 1e3
-
-    def execute(self, requests):
-        responses = []
-        for request in requests:
-            feeds = {n: pb_utils.get_input_tensor_by_name(request, n).as_numpy() for n in self.inputs}
-            outs = self.session.run(self.outputs, feeds)
-            time.sleep(self.delay)
-            if self.mode == "wrong_shape":
-                outs = [o[..., :-1] for o in outs]
-            tensors = [
-                pb_utils.Tensor(n, np.ascontiguousarray(o, dtype=np.float32)) for n, o in zip(self.outputs, outs)
-            ]
-            responses.append(pb_utils.InferenceResponse(output_tensors=tensors))
-        return responses
-'''
+#: The server-side model.py: it runs in the server's own venv (numpy<2, onnxruntime, Triton's
+#: triton_python_backend_utils), never in the tests' interpreter, so it is kept as a template file.
+_MODEL_PY = Path(__file__).with_name("triton_model.py.in")
 
 
 def venv_dir() -> Path:
@@ -154,7 +120,7 @@ def write_model(
     """
     folder = repo / name
     (folder / "1").mkdir(parents=True, exist_ok=True)
-    (folder / "1" / "model.py").write_text(_MODEL_PY)
+    (folder / "1" / "model.py").write_text(_MODEL_PY.read_text())
     tensors = lambda spec: ",\n".join(  # noqa: E731
         f'  {{ name: "{n}" data_type: {dtype} dims: {_dims(s)} }}' for n, s in spec.items()
     )
